@@ -1,0 +1,41 @@
+"""A small frozen-dataclass pytree helper (static fields are metadata, the rest are leaves).
+
+Like ``mjx._src.dataclasses`` and ``flax.struct``: a field declared with
+``static_field()`` is part of the tree's structure (hashable, never traced:
+grid sizes, flags); every other field is a leaf that can be traced, vmapped and
+differentiated.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, TypeVar
+
+import jax
+
+T = TypeVar("T")
+
+
+def static_field(**kwargs: Any) -> Any:
+    """A dataclass field that is pytree metadata (static under jit)."""
+    metadata = dict(kwargs.pop("metadata", {}))
+    metadata["static"] = True
+    return dataclasses.field(metadata=metadata, **kwargs)
+
+
+def pytree_dataclass(cls: type[T]) -> type[T]:
+    """Turn ``cls`` into a frozen dataclass registered as a JAX pytree.
+
+    Adds ``replace(**changes)``, returning a copy with some fields changed.
+    """
+    cls = dataclasses.dataclass(frozen=True)(cls)
+    fields = dataclasses.fields(cls)
+    meta = [f.name for f in fields if f.metadata.get("static", False)]
+    data = [f.name for f in fields if not f.metadata.get("static", False)]
+    jax.tree_util.register_dataclass(cls, data_fields=data, meta_fields=meta)
+
+    def replace(self: T, **changes: Any) -> T:
+        return dataclasses.replace(self, **changes)
+
+    cls.replace = replace  # type: ignore[attr-defined]
+    return cls
