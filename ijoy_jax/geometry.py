@@ -81,22 +81,24 @@ class ColumnSpans(NamedTuple):
     overflow: jax.Array
 
 
-def polygon_column_spans(corners: jax.Array, res, num_columns: int) -> ColumnSpans:
+def polygon_column_spans(corners: jax.Array, res, num_columns: int, ix0=None) -> ColumnSpans:
     """Exact per-column row spans of the cells whose interior a convex polygon overlaps.
 
     Args:
       corners: (V, 2) vertices of a convex polygon in map coordinates (metres
         from the grid origin), in order around the polygon.
       res: grid resolution (metres per cell), scalar.
-      num_columns: static window width K in columns, starting at the column
-        that holds the polygon's smallest x.
+      num_columns: static window width K in columns.
+      ix0: first column of the window; default the column that holds the
+        polygon's smallest x.
 
     Returns:
       ColumnSpans with (K,) arrays.
     """
     px, py = corners[:, 0], corners[:, 1]
     xmin, xmax = jnp.min(px), jnp.max(px)
-    ix0 = jnp.floor(xmin / res).astype(jnp.int32)
+    ix_first = jnp.floor(xmin / res).astype(jnp.int32)
+    ix0 = ix_first if ix0 is None else jnp.asarray(ix0, jnp.int32)
     ix_last = (jnp.ceil(xmax / res) - 1).astype(jnp.int32)
     k = jnp.arange(num_columns, dtype=jnp.int32)
     ix = ix0 + k
@@ -130,13 +132,14 @@ def polygon_column_spans(corners: jax.Array, res, num_columns: int) -> ColumnSpa
     j0 = jnp.floor(jnp.where(touched, ylo, 0.0) / res).astype(jnp.int32)
     j1 = (jnp.ceil(jnp.where(touched, yhi, 0.0) / res) - 1).astype(jnp.int32)
     touched = touched & (j1 >= j0)
-    overflow = (ix_last - ix0 + 1) > num_columns
+    overflow = (ix_first < ix0) | ((ix_last - ix0 + 1) > num_columns)
     return ColumnSpans(ix=ix, j0=j0, j1=j1, touched=touched, overflow=overflow)
 
 
-def rect_column_spans(cx, cy, theta, half_length, half_width, res, num_columns: int) -> ColumnSpans:
+def rect_column_spans(cx, cy, theta, half_length, half_width, res, num_columns: int, ix0=None) -> ColumnSpans:
     """:func:`polygon_column_spans` of a rotated rectangle (map coordinates, metres)."""
-    return polygon_column_spans(rect_corners(cx, cy, theta, half_length, half_width), res, num_columns)
+    corners = rect_corners(cx, cy, theta, half_length, half_width)
+    return polygon_column_spans(corners, res, num_columns, ix0)
 
 
 def spans_mask(spans: ColumnSpans, iy0, num_rows: int) -> jax.Array:

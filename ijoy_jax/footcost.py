@@ -1,0 +1,407 @@
+"""FootCost: how well a terrain location serves as a foothold, plus the cost of the action.
+
+2D (occupancy grid): a step is valid iff every cell touched by the footprint
+grown by the safety margin is free and inside the map (exact coverage, see
+:mod:`ijoy_jax.geometry`); FootCost is then the action's cost, else +inf.
+
+2.5D (height map): additionally a plane is fitted to the heights of the cells
+the footprint touches, and slope, roughness, largest bump, step height from
+the stance foothold, and the safety band (cells touched only by the grown
+footprint) are scored against :class:`ijoy_jax.robots.TerrainMetrics`: beyond
+a limit the cost is +inf, below it ``weight * metric`` is added. With
+``swing_from`` given, terrain in the swing corridor (the foot-wide rectangle
+between the start and end foot centres) higher than the action's clearance
+above the higher of the two footholds invalidates the step.
+
+FootCost is never negative and invalid is +inf, never a large finite number:
+the paper's early-exit rule for the ordered search relies on both.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from ijoy_jax import geometry
+from ijoy_jax.robots import Robot, side_actions
+from ijoy_jax.terrain import Terrain
+
+
+class FootCostTerms(NamedTuple):
+    """FootCost of N candidate steps, as a total and as named terms (all (N,) float32).
+
+    Cost terms (cost units; +inf marks the term that rejected a step):
+      total: sum of the terms below; +inf iff the step is invalid.
+      action: the action's own cost.
+      obstacle: 0, or +inf if the grown footprint touches an obstacle or
+        leaves the map.
+      slope, roughness, bump, step, band: ``weight * metric``, or +inf beyond
+        the metric's limit (0 on 2D terrains).
+      swing_path: 0, or +inf if the swing corridor is too high (or leaves the
+        map) for the action's clearance.
+      unsupported: 0, or +inf if the pose is not finite or the footprint,
+        margin or swing is larger than the robot's static windows cover.
+    Raw metrics (for plots and tests):
+      slope_angle (rad), roughness_m, bump_m, step_height_m (signed, up is
+      positive), band_m, path_height_m (corridor height above the higher
+      foothold; -inf if no check), foot_height_m (plane height at the foot
+      centre), action_index (int32, the action whose cost/limits were used).
+    """
+
+    total: jax.Array
+    action: jax.Array
+    obstacle: jax.Array
+    slope: jax.Array
+    roughness: jax.Array
+    bump: jax.Array
+    step: jax.Array
+    band: jax.Array
+    swing_path: jax.Array
+    unsupported: jax.Array
+    slope_angle: jax.Array
+    roughness_m: jax.Array
+    bump_m: jax.Array
+    step_height_m: jax.Array
+    band_m: jax.Array
+    path_height_m: jax.Array
+    foot_height_m: jax.Array
+    action_index: jax.Array
+
+
+class TerrainIndex(NamedTuple):
+    """Per-terrain tables that make FootCost O(columns) per candidate.
+
+    obstacles_before: (nx, ny + 1) int32, number of obstacle cells in column
+      ix with row index < j (prefix counts along y).
+    height_max: (levels, nx, ny) float32 sparse table; ``height_max[k, ix, j]``
+      is the largest height in rows ``j .. j + 2**k - 1`` of column ix.
+    height_padded: (nx + 2P, ny + 2P) float32 heights, edge-padded by P cells.
+    pad: P (static).
+    """
+
+    obstacles_before: jax.Array
+    height_max: jax.Array
+    height_padded: jax.Array
+    pad: int
+
+
+def window_cells(radius: float, resolution: float) -> int:
+    """Columns (and rows) a window needs to hold any shape of half-diagonal ``radius``."""
+    return int(math.ceil(2.0 * radius / resolution - 1e-9)) + 1
+
+
+def index_terrain(terrain: Terrain, robot: Robot) -> TerrainIndex:
+    """Build the :class:`TerrainIndex` of a terrain (once per terrain, reused across steps)."""
+    occ = (~terrain.free).astype(jnp.int32)
+    before = jnp.concatenate([jnp.zeros(occ.shape[:-1] + (1,), jnp.int32), jnp.cumsum(occ, axis=-1)], -1)
+    h = terrain.height
+    ny = h.shape[-1]
+    levels = [h]
+    span = 1
+    while 2 * span <= ny:
+        prev = levels[-1]
+        shifted = jnp.concatenate([prev[:, span:], jnp.full((h.shape[0], span), -jnp.inf, h.dtype)], axis=1)
+        levels.append(jnp.maximum(prev, shifted))
+        span *= 2
+    pad = window_cells(robot.max_radius, terrain.resolution)
+    padded = jnp.pad(h, pad, mode="edge")
+    return TerrainIndex(before, jnp.stack(levels), padded, pad)
+
+
+def _column_has_obstacle(index: TerrainIndex, spans: geometry.ColumnSpans, shape) -> jax.Array:
+    """(K,) bool: touched columns holding an obstacle cell or leaving the map."""
+    nx, ny = shape
+    ix = jnp.clip(spans.ix, 0, nx - 1)
+    j0 = jnp.clip(spans.j0, 0, ny)
+    j1 = jnp.clip(spans.j1 + 1, 0, ny)
+    count = index.obstacles_before[ix, j1] - index.obstacles_before[ix, j0]
+    off_map = (spans.ix < 0) | (spans.ix >= nx) | (spans.j0 < 0) | (spans.j1 >= ny)
+    return spans.touched & (off_map | (count > 0))
+
+
+def _column_max_height(index: TerrainIndex, spans: geometry.ColumnSpans, shape) -> tuple[jax.Array, jax.Array]:
+    """Largest height over the touched cells, and whether any touched cell is off the map."""
+    nx, ny = shape
+    ix = jnp.clip(spans.ix, 0, nx - 1)
+    j0 = jnp.clip(spans.j0, 0, ny - 1)
+    j1 = jnp.clip(spans.j1, 0, ny - 1)
+    length = jnp.maximum(j1 - j0 + 1, 1)
+    k = 31 - lax.clz(length)  # floor(log2(length))
+    k = jnp.minimum(k, index.height_max.shape[0] - 1)
+    hi = jnp.maximum(index.height_max[k, ix, j0], index.height_max[k, ix, j1 - (1 << k) + 1])
+    off_map = (spans.ix < 0) | (spans.ix >= nx) | (spans.j0 < 0) | (spans.j1 >= ny)
+    return jnp.max(jnp.where(spans.touched, hi, -jnp.inf)), jnp.any(spans.touched & off_map)
+
+
+class _Plane(NamedTuple):
+    height: jax.Array  # plane height at the foot centre (m)
+    slope: jax.Array  # angle from horizontal (rad)
+    roughness: jax.Array  # mean |residual| under the foot (m)
+    bump: jax.Array  # largest residual under the foot (m)
+    band: jax.Array  # largest |residual| in the safety band (m)
+
+
+def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> _Plane:
+    """Least-squares plane under the footprint at ``pose`` (world) and the metrics around it."""
+    res = terrain.resolution
+    k = index.pad
+    cx = pose[0] - terrain.origin[0]
+    cy = pose[1] - terrain.origin[1]
+    hl, hw = 0.5 * robot.foot_length, 0.5 * robot.foot_width
+    grown = geometry.rect_column_spans(cx, cy, pose[2], hl + robot.margin, hw + robot.margin, res, k)
+    foot = geometry.rect_column_spans(cx, cy, pose[2], hl, hw, res, k, ix0=grown.ix[0])
+    iy0 = jnp.min(jnp.where(grown.touched, grown.j0, jnp.iinfo(jnp.int32).max))
+    iy0 = jnp.where(jnp.any(grown.touched), iy0, 0)
+    nx, ny = terrain.shape
+    sx = jnp.clip(grown.ix[0] + k, 0, nx + k)
+    sy = jnp.clip(iy0 + k, 0, ny + k)
+    window = lax.dynamic_slice(index.height_padded, (sx, sy), (k, k))
+    m_foot = geometry.spans_mask(foot, iy0, k).astype(window.dtype)
+    m_band = geometry.spans_mask(grown, iy0, k) & (m_foot == 0)
+    u = ((grown.ix[:, None] + 0.5) * res - cx) * jnp.ones((1, k))
+    v = ((iy0 + jnp.arange(k)[None, :] + 0.5) * res - cy) * jnp.ones((k, 1))
+    # Heights relative to the window's mean under the foot, for float32 conditioning.
+    n = jnp.maximum(jnp.sum(m_foot), 1.0)
+    h_ref = jnp.sum(m_foot * window) / n
+    hrel = window - h_ref
+    su, sv = jnp.sum(m_foot * u), jnp.sum(m_foot * v)
+    suu, svv, suv = jnp.sum(m_foot * u * u), jnp.sum(m_foot * v * v), jnp.sum(m_foot * u * v)
+    ridge = 1e-6 * n * res * res  # keeps a one-column footprint well-posed (slope -> 0)
+    A = jnp.array([[n, su, sv], [su, suu + ridge, suv], [sv, suv, svv + ridge]])
+    rhs = jnp.array([jnp.sum(m_foot * hrel), jnp.sum(m_foot * u * hrel), jnp.sum(m_foot * v * hrel)])
+    a, b, c = jnp.linalg.solve(A, rhs)
+    resid = hrel - (a + b * u + c * v)
+    slope = jnp.arctan(jnp.sqrt(b * b + c * c))
+    roughness = jnp.sum(m_foot * jnp.abs(resid)) / n
+    bump = jnp.maximum(jnp.max(jnp.where(m_foot > 0, resid, -jnp.inf)), 0.0)
+    band = jnp.max(jnp.where(m_band, jnp.abs(resid), 0.0))
+    ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(c)
+    z = jnp.float32(0.0)
+    return _Plane(
+        height=jnp.where(ok, a + h_ref, h_ref),
+        slope=jnp.where(ok, slope, z),
+        roughness=jnp.where(ok, roughness, z),
+        bump=jnp.where(ok, bump, z),
+        band=jnp.where(ok, band, z),
+    )
+
+
+def _limit(weight, metric, limit):
+    return jnp.where(metric > limit, jnp.inf, weight * metric)
+
+
+def _inf_if(flag):
+    return jnp.where(flag, jnp.inf, 0.0).astype(jnp.float32)
+
+
+def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, step, action_index) -> FootCostTerms:
+    """FootCost terms of one candidate step (world pose (3,)) executing ``action_index``."""
+    res = terrain.resolution
+    k = index.pad
+    finite = jnp.all(jnp.isfinite(step))
+    step = jnp.where(finite, step, 0.0)
+    cx = step[0] - terrain.origin[0]
+    cy = step[1] - terrain.origin[1]
+    hl = 0.5 * robot.foot_length + robot.margin
+    hw = 0.5 * robot.foot_width + robot.margin
+    grown = geometry.rect_column_spans(cx, cy, step[2], hl, hw, res, k)
+    too_big = (jnp.hypot(hl, hw) > robot.max_radius) | grown.overflow
+    blocked = jnp.any(_column_has_obstacle(index, grown, terrain.shape))
+    metrics = robot.metrics
+    zero = jnp.float32(0.0)
+    neg_inf = jnp.float32(-jnp.inf)
+    if terrain.has_height:
+        plane = _plane_metrics(terrain, index, robot, step)
+        dh = plane.height - stance_plane.height
+        slope = _limit(metrics.slope_weight, plane.slope, metrics.slope_limit)
+        rough = _limit(metrics.roughness_weight, plane.roughness, metrics.roughness_limit)
+        bump = _limit(metrics.bump_weight, plane.bump, metrics.bump_limit)
+        stepc = _limit(metrics.step_weight, jnp.abs(dh), robot.max_step_height[action_index])
+        band = _limit(metrics.band_weight, plane.band, metrics.band_limit)
+        raw = (plane.slope, plane.roughness, plane.bump, dh, plane.band, plane.height)
+    else:
+        slope = rough = bump = stepc = band = zero
+        raw = (zero, zero, zero, zero, zero, zero)
+    path_height = neg_inf
+    path_bad = jnp.bool_(False)
+    if terrain.has_height and swing_from is not None:
+        kp = window_cells(0.5 * robot.max_swing, res)
+        sx = swing_from[0] - terrain.origin[0]
+        sy = swing_from[1] - terrain.origin[1]
+        dx, dy = cx - sx, cy - sy
+        length = jnp.sqrt(dx * dx + dy * dy)
+        theta = jnp.arctan2(jnp.where(length > 0, dy, 0.0), jnp.where(length > 0, dx, 1.0))
+        corridor = geometry.rect_column_spans(
+            0.5 * (cx + sx), 0.5 * (cy + sy), theta, 0.5 * length, 0.5 * robot.foot_width, res, kp
+        )
+        top, off_map = _column_max_height(index, corridor, terrain.shape)
+        path_height = top - jnp.maximum(start_plane.height, raw[5])
+        path_bad = off_map | (path_height > robot.clearance[action_index])
+        too_big = too_big | corridor.overflow | (length + robot.foot_width > robot.max_swing)
+    action = robot.action_cost[action_index]
+    obstacle = _inf_if(blocked)
+    swing = _inf_if(path_bad)
+    unsupported = _inf_if(too_big | ~finite)
+    total = action + obstacle + slope + rough + bump + stepc + band + swing + unsupported
+    return FootCostTerms(
+        total=total,
+        action=action,
+        obstacle=obstacle,
+        slope=slope,
+        roughness=rough,
+        bump=bump,
+        step=stepc,
+        band=band,
+        swing_path=swing,
+        unsupported=unsupported,
+        slope_angle=raw[0],
+        roughness_m=raw[1],
+        bump_m=raw[2],
+        step_height_m=raw[3],
+        band_m=raw[4],
+        path_height_m=path_height,
+        foot_height_m=raw[5],
+        action_index=jnp.asarray(action_index, jnp.int32),
+    )
+
+
+def nearest_actions(robot: Robot, stance, stance_side, steps) -> jax.Array:
+    """(N,) int32 index of the action of S nearest each world step (dist metric of the paper).
+
+    dist = |translation| + rotation_weight * |rotation| in the stance frame,
+    against the swing side's (mirrored) action set.
+    """
+    rel = geometry.relative(stance, steps)  # (N, 3)
+    acts = side_actions(robot, -_side_sign(stance_side))
+    d = rel[:, None, :] - acts[None, :, :]
+    dist = jnp.hypot(d[..., 0], d[..., 1]) + robot.rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
+    return jnp.argmin(dist, axis=1).astype(jnp.int32)
+
+
+def _side_sign(side) -> jax.Array:
+    return jnp.where(jnp.asarray(side) >= 0, 1.0, -1.0).astype(jnp.float32)
+
+
+def foot_cost_terms_indexed(
+    terrain: Terrain,
+    index: TerrainIndex,
+    robot: Robot,
+    stance: jax.Array,
+    stance_side,
+    steps: jax.Array,
+    swing_from: jax.Array | None = None,
+    action_index: jax.Array | None = None,
+) -> FootCostTerms:
+    """:func:`foot_cost_terms` with a prebuilt :class:`TerrainIndex` (jit-friendly core).
+
+    Use it when one terrain is queried many times (the selector and rollout do).
+    """
+    steps = jnp.asarray(steps, jnp.float32).reshape(-1, 3)
+    stance = jnp.asarray(stance, jnp.float32)
+    if action_index is None:
+        action_index = nearest_actions(robot, stance, stance_side, steps)
+    action_index = jnp.broadcast_to(jnp.asarray(action_index, jnp.int32), steps.shape[:1])
+    stance_plane = start_plane = None
+    if terrain.has_height:
+        stance_plane = _plane_metrics(terrain, index, robot, stance)
+        if swing_from is not None:
+            swing_from = jnp.asarray(swing_from, jnp.float32)
+            start_plane = _plane_metrics(terrain, index, robot, swing_from)
+
+    def one(step, a):
+        return _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, step, a)
+
+    return jax.vmap(one)(steps, action_index)
+
+
+def _validate(terrain, robot, stance, stance_side, steps, swing_from):
+    if not isinstance(terrain, Terrain):
+        raise TypeError(f"terrain must be an ijoy_jax.Terrain, got {type(terrain).__name__}")
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot must be an ijoy_jax.robots.Robot, got {type(robot).__name__}")
+    if terrain.free.ndim != 2:
+        raise ValueError(
+            f"foot_cost takes one terrain (free of shape (nx, ny)), got {terrain.free.shape}; vmap over batches"
+        )
+    for name, value, shape in (("stance", stance, (3,)), ("swing_from", swing_from, (3,))):
+        if value is None:
+            continue
+        if np.shape(value) != shape:
+            raise ValueError(f"{name} must have shape {shape}, got {np.shape(value)}")
+        if not isinstance(value, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(value))):
+            raise ValueError(f"{name} must be finite, got {np.asarray(value).tolist()}")
+    s = np.shape(steps)
+    if len(s) != 2 or s[1] != 3:
+        raise ValueError(f"steps must have shape (N, 3) of (x, y, theta) world poses, got {s}")
+    if not isinstance(stance_side, jax.core.Tracer):
+        side = np.asarray(stance_side)
+        if side.shape != () or float(side) not in (-1.0, 1.0):
+            raise ValueError(f"stance_side must be +1 (left stance foot) or -1 (right), got {stance_side!r}")
+
+
+@jax.jit
+def _foot_cost_terms_jit(terrain, robot, stance, stance_side, steps, swing_from, action_index):
+    index = index_terrain(terrain, robot)
+    return foot_cost_terms_indexed(terrain, index, robot, stance, stance_side, steps, swing_from, action_index)
+
+
+def foot_cost_terms(
+    terrain: Terrain,
+    robot: Robot,
+    stance,
+    stance_side,
+    steps,
+    swing_from=None,
+    action_index=None,
+) -> FootCostTerms:
+    """FootCost of candidate swing-foot poses, with every named term and raw metric.
+
+    Args:
+      terrain: one :class:`~ijoy_jax.Terrain` (vmap for batches).
+      robot: a :class:`~ijoy_jax.robots.Robot`.
+      stance: (3,) world pose (x, y, theta) of the stance foot (m, rad).
+      stance_side: +1 for a left stance foot, -1 for a right one (the swing
+        foot is the other one; its actions are mirrored accordingly).
+      steps: (N, 3) candidate world poses of the swing foot centre; the
+        footprint's length runs along the foot's own x axis.
+      swing_from: (3,) current world pose of the swing foot, for the swing-path
+        check (2.5D only); None: no path check.
+      action_index: (N,) int indices into the action set: whose cost,
+        clearance and height limit apply to each step. None: the nearest
+        action of S to each step in the stance frame (:func:`nearest_actions`).
+
+    Returns:
+      :class:`FootCostTerms` of (N,) arrays.
+
+    Raises:
+      ValueError / TypeError on wrong shapes, non-finite poses or a stance_side
+      that is not +-1 (checked when called outside jit; under jit a
+      non-finite step gets +inf in the ``unsupported`` term).
+    """
+    _validate(terrain, robot, stance, stance_side, steps, swing_from)
+    side = _side_sign(stance_side)
+    return _foot_cost_terms_jit(terrain, robot, stance, side, steps, swing_from, action_index)
+
+
+def foot_cost(terrain, robot, stance, stance_side, steps, swing_from=None, action_index=None) -> jax.Array:
+    """(N,) FootCost of candidate swing-foot poses: +inf where invalid, else >= 0.
+
+    Same arguments as :func:`foot_cost_terms`, which also returns the named
+    terms. Jit- and vmap-able (over terrains, poses and robot parameters).
+
+    Example:
+      >>> import numpy as np, ijoy_jax as ij
+      >>> free = np.ones((100, 100), bool); free[60:, :] = False  # obstacle beyond x = 1.2 m
+      >>> terrain = ij.terrain.from_arrays(None, free, resolution=0.02)
+      >>> robot = ij.robots.hrp2(margin=0.02)
+      >>> stance = np.array([0.8, 1.0, 0.0])                       # right foot
+      >>> steps = np.array([[0.8, 1.19, 0.0], [1.15, 1.19, 0.0]])  # in place; into the obstacle
+      >>> ij.foot_cost(terrain, robot, stance, -1, steps)
+      Array([ 0., inf], dtype=float32)
+    """
+    return foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, action_index).total

@@ -1,0 +1,351 @@
+"""Robot models: footprint, safety margin, step timing and the action set S.
+
+An action is a displacement ``(dx, dy, dtheta)`` of the swing foot relative to
+the stance foot, in the stance foot's frame (metres, radians). ``Robot.actions``
+holds the LEFT swing foot's set relative to a RIGHT stance foot; the right
+foot's set is its mirror ``(dx, -dy, -dtheta)`` (:func:`side_actions`).
+
+Every number a user may sweep or tune is a traced leaf of :class:`Robot` (and
+its :class:`TerrainMetrics`), so changing it never recompiles and it can be
+vmapped over or differentiated. Only the action-set size (an array shape) and
+two window sizes that bound the footprint (``max_radius``, ``max_swing``;
+Python floats) are static.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ijoy_jax._struct import pytree_dataclass, static_field
+
+LEFT = 1
+RIGHT = -1
+
+
+@pytree_dataclass
+class TerrainMetrics:
+    """Weights and hard limits of the 2.5D terrain metrics (traced leaves, scalars).
+
+    The metrics follow the biped planner the paper cites (Chestnutt et al.
+    2003): a plane is fitted (least squares) to the heights of the cells under
+    the foot, and
+      slope      angle of that plane from horizontal (rad),
+      roughness  mean absolute deviation of those cells from the plane (m),
+      bump       largest height of a cell above the plane (m),
+      step       |height change| from the stance foot's plane to this one (m);
+                 its limit is per action (``Robot.max_step_height``),
+      band       largest |deviation| from the plane in the safety band, the
+                 cells touched by the footprint grown by the margin but not
+                 by the footprint itself: catches edges and drop-offs (m).
+    A metric beyond its limit makes the cost +inf; otherwise its term is
+    ``weight * metric``. Weights are cost units per radian or per metre.
+    """
+
+    slope_weight: jax.Array
+    slope_limit: jax.Array
+    roughness_weight: jax.Array
+    roughness_limit: jax.Array
+    bump_weight: jax.Array
+    bump_limit: jax.Array
+    step_weight: jax.Array
+    band_weight: jax.Array
+    band_limit: jax.Array
+
+
+def default_metrics(
+    slope_weight=0.5,
+    slope_limit=math.radians(20.0),
+    roughness_weight=20.0,
+    roughness_limit=0.01,
+    bump_weight=10.0,
+    bump_limit=0.02,
+    step_weight=1.0,
+    band_weight=5.0,
+    band_limit=0.03,
+) -> TerrainMetrics:
+    """Default metric weights and limits (float32 scalars); any may be overridden."""
+    vals = dict(locals())
+    for k, v in vals.items():
+        _check_scalar(k, v, nonneg=True)
+    return TerrainMetrics(**{k: jnp.asarray(v, jnp.float32) for k, v in vals.items()})
+
+
+@pytree_dataclass
+class Robot:
+    """A robot model and its joystick parameters (the paper's footprint and S).
+
+    Leaves (traced; scalars unless noted; metres, radians, seconds):
+      foot_length: footprint length along the foot's own x axis.
+      foot_width: footprint width.
+      margin: safety margin; validity uses the footprint grown by it on every
+        side, a ``(length + 2 margin) x (width + 2 margin)`` rectangle.
+      step_time: duration of one step, the Delta t of p_next = p0 + Delta t * j.
+      p0: (3,) step-in-place action of the LEFT swing foot (dx, dy, dtheta).
+      actions: (N, 3) the action set S of the LEFT swing foot (dx, dy, dtheta).
+      action_cost: (N,) cost of taking each action (>= 0; part of FootCost).
+      clearance: (N,) swing-path clearance of each action: terrain between
+        the start and end footholds higher than this above the higher of the
+        two makes the step invalid.
+      max_step_height: (N,) allowed |height change| from the stance foothold.
+      metrics: TerrainMetrics weights and limits.
+      w: weight of dist against FootCost, cost(p) = FootCost + w dist(p, p_next).
+      rotation_weight: dist = |translation| + rotation_weight * |rotation|
+        (cost units per radian before w); large, so the commanded rotation is
+        preferred whenever such a step is valid.
+    Static:
+      max_radius: largest half-diagonal of the grown footprint the fixed-size
+        windows cover (m); a larger footprint or margin is flagged invalid.
+      max_swing: longest swing-path segment the path window covers (m).
+    """
+
+    foot_length: jax.Array
+    foot_width: jax.Array
+    margin: jax.Array
+    step_time: jax.Array
+    p0: jax.Array
+    actions: jax.Array
+    action_cost: jax.Array
+    clearance: jax.Array
+    max_step_height: jax.Array
+    metrics: TerrainMetrics
+    w: jax.Array
+    rotation_weight: jax.Array
+    max_radius: float = static_field()
+    max_swing: float = static_field()
+
+    @property
+    def num_actions(self) -> int:
+        """Size N of the action set (static)."""
+        return self.actions.shape[-2]
+
+
+def _is_concrete(x) -> bool:
+    return not isinstance(x, jax.core.Tracer)
+
+
+def _check_scalar(name, value, positive=False, nonneg=False):
+    if not _is_concrete(value):
+        return
+    v = np.asarray(value, np.float64)
+    if v.shape != ():
+        raise ValueError(f"{name} must be a scalar, got shape {v.shape}")
+    if not np.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {float(v)}")
+    if positive and v <= 0:
+        raise ValueError(f"{name} must be > 0, got {float(v)}")
+    if nonneg and v < 0:
+        raise ValueError(f"{name} must be >= 0, got {float(v)}")
+
+
+def footprints_overlap(actions, foot_length: float, foot_width: float) -> np.ndarray:
+    """(N,) bool: does the swing footprint of each action overlap the stance footprint?
+
+    Separating-axis test of two rectangles (interiors; touching is no overlap),
+    in NumPy float64. The stance foot is at the origin with angle 0.
+    """
+    a = np.asarray(actions, np.float64).reshape(-1, 3)
+
+    def corners(x, y, t):
+        c, s = np.cos(t)[:, None], np.sin(t)[:, None]
+        lx = np.array([1, -1, -1, 1]) * foot_length / 2
+        ly = np.array([1, 1, -1, -1]) * foot_width / 2
+        return np.stack([x[:, None] + c * lx - s * ly, y[:, None] + s * lx + c * ly], -1)
+
+    swing = corners(a[:, 0], a[:, 1], a[:, 2])  # (N, 4, 2)
+    stance = np.broadcast_to(corners(np.zeros(1), np.zeros(1), np.zeros(1)), swing.shape)
+    separated = np.zeros(len(a), bool)
+    for poly in (stance, swing):
+        for i in range(4):
+            e = poly[:, (i + 1) % 4] - poly[:, i]
+            n = np.stack([-e[:, 1], e[:, 0]], -1)[:, None, :]
+            pa, pb = np.sum(stance * n, -1), np.sum(swing * n, -1)
+            separated |= (pa.max(1) <= pb.min(1)) | (pb.max(1) <= pa.min(1))
+    return ~separated
+
+
+def make_robot(
+    actions,
+    *,
+    foot_length: float,
+    foot_width: float,
+    margin: float,
+    step_time: float,
+    p0=None,
+    action_cost=0.0,
+    clearance=0.10,
+    max_step_height=0.10,
+    metrics: TerrainMetrics | None = None,
+    w: float = 1.0,
+    rotation_weight: float = 100.0,
+    max_margin: float | None = None,
+) -> Robot:
+    """Build and validate a :class:`Robot` from an action set.
+
+    Args:
+      actions: (N, 3) LEFT swing-foot actions (dx, dy, dtheta) relative to a
+        right stance foot; N >= 1; no action may make the footprints overlap.
+      foot_length, foot_width: footprint size (m), > 0.
+      margin: safety margin (m), >= 0.
+      step_time: seconds per step, > 0.
+      p0: (3,) step-in-place action; default: the action with dx = dtheta = 0
+        and the smallest dy, or the action nearest (0, 0.19, 0) if none.
+      action_cost, clearance, max_step_height: scalars or (N,) arrays (>= 0).
+      metrics: TerrainMetrics; default :func:`default_metrics`.
+      w: weight of dist (>= 0). rotation_weight: see :class:`Robot` (>= 0).
+      max_margin: largest margin the static windows must cover (m); default
+        ``max(margin, 0.10)``, the paper's whole 2-10 cm range, so a margin
+        sweep never recompiles.
+
+    Raises:
+      ValueError: empty or malformed action set, overlapping footprints,
+        non-positive sizes or times, negative costs, NaN/inf anywhere.
+    """
+    acts = np.asarray(actions, np.float64)
+    if acts.ndim != 2 or acts.shape[1] != 3:
+        raise ValueError(f"actions must have shape (N, 3), got {acts.shape}")
+    if acts.shape[0] == 0:
+        raise ValueError("the action set is empty")
+    if not np.all(np.isfinite(acts)):
+        raise ValueError("actions must be finite (no NaN or inf)")
+    _check_scalar("foot_length", foot_length, positive=True)
+    _check_scalar("foot_width", foot_width, positive=True)
+    _check_scalar("margin", margin, nonneg=True)
+    _check_scalar("step_time", step_time, positive=True)
+    _check_scalar("w", w, nonneg=True)
+    _check_scalar("rotation_weight", rotation_weight, nonneg=True)
+    bad = footprints_overlap(acts, float(foot_length), float(foot_width))
+    if bad.any():
+        raise ValueError(
+            f"{int(bad.sum())} action(s) make the swing and stance footprints overlap, "
+            f"e.g. action {acts[np.argmax(bad)].tolist()}"
+        )
+    n = acts.shape[0]
+
+    def per_action(name, v):
+        arr = np.broadcast_to(np.asarray(v, np.float64), (n,)) if np.ndim(v) == 0 else np.asarray(v, np.float64)
+        if arr.shape != (n,):
+            raise ValueError(f"{name} must be a scalar or have shape ({n},), got {arr.shape}")
+        if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            raise ValueError(f"{name} must be finite and >= 0")
+        return jnp.asarray(arr, jnp.float32)
+
+    if p0 is None:
+        in_place = np.flatnonzero((np.abs(acts[:, 0]) < 1e-9) & (np.abs(acts[:, 2]) < 1e-9))
+        if in_place.size:
+            p0 = acts[in_place[np.argmin(acts[in_place, 1])]]
+        else:
+            p0 = acts[np.argmin(np.linalg.norm(acts - [0.0, 0.19, 0.0], axis=1))]
+    p0 = np.asarray(p0, np.float64)
+    if p0.shape != (3,) or not np.all(np.isfinite(p0)):
+        raise ValueError(f"p0 must be a finite (3,) array, got {p0!r}")
+    mm = max(float(margin), 0.10) if max_margin is None else float(max_margin)
+    if mm < float(margin):
+        raise ValueError(f"max_margin ({mm}) must be >= margin ({margin})")
+    max_radius = 0.5 * math.hypot(float(foot_length) + 2 * mm, float(foot_width) + 2 * mm)
+    reach = float(np.max(np.hypot(acts[:, 0], acts[:, 1])))
+    max_swing = 2.0 * reach + float(foot_width)
+    f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
+    return Robot(
+        foot_length=f32(foot_length),
+        foot_width=f32(foot_width),
+        margin=f32(margin),
+        step_time=f32(step_time),
+        p0=f32(p0),
+        actions=f32(acts),
+        action_cost=per_action("action_cost", action_cost),
+        clearance=per_action("clearance", clearance),
+        max_step_height=per_action("max_step_height", max_step_height),
+        metrics=default_metrics() if metrics is None else metrics,
+        w=f32(w),
+        rotation_weight=f32(rotation_weight),
+        max_radius=max_radius,
+        max_swing=max_swing,
+    )
+
+
+def lattice_actions(
+    counts: tuple[int, int, int],
+    dx_range=(-0.20, 0.20),
+    dy_range=(0.19, 0.33),
+    dtheta_range=(-math.radians(20.0), math.radians(20.0)),
+    drop_corners: bool = True,
+) -> np.ndarray:
+    """A lattice of actions: ``counts = (n_dx, n_dy, n_dtheta)`` evenly spaced values per range.
+
+    With ``drop_corners`` the 8 corners of the (dx, dy, dtheta) box (largest
+    step, extreme width and extreme rotation all at once) are left out: they
+    lie outside a leg's reach. Ordered by dx, then dy, then dtheta.
+
+    Returns:
+      (M, 3) float64 array, M = n_dx n_dy n_dtheta (- 8 with drop_corners).
+    """
+    axes = [np.linspace(lo, hi, n) if n > 1 else np.array([0.5 * (lo + hi)])
+            for (lo, hi), n in zip((dx_range, dy_range, dtheta_range), counts, strict=True)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    if drop_corners and min(counts) > 1:
+        corner = np.ones(len(grid), bool)
+        for k, ax in enumerate(axes):
+            corner &= np.isclose(grid[:, k], ax[0]) | np.isclose(grid[:, k], ax[-1])
+        grid = grid[~corner]
+    return grid
+
+
+def density_counts(density: float) -> tuple[int, int, int]:
+    """Lattice counts for an action-set density; density 1 gives HRP-2's (9, 8, 7) -> 496 actions.
+
+    dx and dtheta counts stay odd so that straight steps (dx = 0, dtheta = 0)
+    stay in the set. Sizes: density 0.1 -> 10, 0.25 -> 19, 0.5 -> 117,
+    1 -> 496, 2 -> 3307, 3 -> 10442 actions.
+    """
+    if not np.isfinite(density) or density <= 0:
+        raise ValueError(f"density must be a positive finite number, got {density!r}")
+    n_dx = 1 + 2 * max(1, round(4 * density))
+    n_dy = 1 + max(1, round(7 * density))
+    n_dt = 1 + 2 * max(1, round(3 * density))
+    return n_dx, n_dy, n_dt
+
+
+def hrp2(margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
+    """The paper's HRP-2: footprint 24.2 x 13 cm, 496 actions per foot.
+
+    Actions: dx in [-20, 20] cm (9 values, 5 cm apart), dy in [19, 33] cm from
+    the stance foot (8 values, 2 cm apart), dtheta in [-20, 20] deg (7 values),
+    less the 8 corners of that box: 9 x 8 x 7 - 8 = 496. ``density`` scales the
+    lattice (:func:`density_counts`) over the same ranges, for action-set size
+    sweeps. Step time 0.8 s; step in place p0 = (0, 0.19 m, 0). Safety margin:
+    the paper used 2 cm (motion capture), 5 cm (vision) and 10 cm (real robot).
+
+    Args:
+      margin: safety margin (m).
+      density: action-set density (1.0 -> 496 actions).
+      **overrides: any other :func:`make_robot` keyword (w, rotation_weight,
+        step_time, action_cost, clearance, max_step_height, metrics, ...).
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> robot = ij.robots.hrp2(margin=0.05)
+      >>> robot.actions.shape
+      (496, 3)
+    """
+    kwargs = dict(foot_length=0.242, foot_width=0.13, margin=margin, step_time=0.8, p0=(0.0, 0.19, 0.0))
+    kwargs.update(overrides)
+    return make_robot(lattice_actions(density_counts(density)), **kwargs)
+
+
+def side_actions(robot: Robot, swing_side) -> jax.Array:
+    """(N, 3) actions of the swing foot on ``swing_side`` (+1 left, -1 right).
+
+    Left: ``robot.actions``; right: their mirror (dx, -dy, -dtheta).
+    """
+    sign = jnp.asarray(swing_side, jnp.float32)
+    return robot.actions * jnp.stack([jnp.ones_like(sign), sign, sign])
+
+
+def side_p0(robot: Robot, swing_side) -> jax.Array:
+    """(3,) step-in-place action for the swing foot on ``swing_side`` (+1 left, -1 right)."""
+    sign = jnp.asarray(swing_side, jnp.float32)
+    return robot.p0 * jnp.stack([jnp.ones_like(sign), sign, sign])

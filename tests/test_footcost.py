@@ -1,0 +1,302 @@
+"""FootCost against brute-force references, symmetries, limits, and jit behaviour."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import ijoy_jax as ij
+from ijoy_jax import footcost
+from reference import foot_metrics, rect_touches_cells
+
+RES = 0.02
+ROBOT = ij.robots.hrp2(margin=0.02)
+L, W = 0.242, 0.13
+# float32 poses carry ~1e-7 m of rounding: a cell overlapped by a sliver thinner
+# than this may go either way; anything clearer must be decided exactly.
+SLIVER = 1e-5
+
+
+def _flat2d(shape=(40, 40)):
+    return ij.terrain.flat(shape, RES)
+
+
+def test_single_cell_obstacle_exact_at_many_poses():
+    """2D validity equals a brute-force geometric check of the grown footprint, cell by cell."""
+    rng = np.random.default_rng(0)
+    shape = (40, 40)
+    n_terrains, n_poses = 40, 60
+    cells = rng.integers(14, 26, size=(n_terrains, 2))
+    frees = np.ones((n_terrains,) + shape, bool)
+    frees[np.arange(n_terrains), cells[:, 0], cells[:, 1]] = False
+    terrains = jax.vmap(lambda f: ij.terrain.Terrain(jnp.zeros(shape), f, jnp.zeros(2), RES, False))(
+        jnp.asarray(frees))
+    poses = np.column_stack([rng.uniform(0.25, 0.55, (n_terrains * n_poses, 2)),
+                             rng.uniform(-np.pi, np.pi, n_terrains * n_poses)]).reshape(n_terrains, n_poses, 3)
+    stance = jnp.array([0.1, 0.1, 0.0])
+    cost = jax.jit(jax.vmap(lambda t, s: ij.foot_cost(t, ROBOT, stance, -1, s, action_index=0)))(
+        terrains, jnp.asarray(poses, jnp.float32))
+    cost = np.asarray(cost)
+    hl, hw = L / 2 + 0.02, W / 2 + 0.02
+    ambiguous = 0
+    for t in range(n_terrains):
+        for p in range(n_poses):
+            x, y, th = poses[t, p]
+            inner = rect_touches_cells(x, y, th, hl - SLIVER, hw - SLIVER, RES, shape)[tuple(cells[t])]
+            outer = rect_touches_cells(x, y, th, hl + SLIVER, hw + SLIVER, RES, shape)[tuple(cells[t])]
+            if inner:
+                assert np.isinf(cost[t, p]), (t, p)
+            elif not outer:
+                assert cost[t, p] == 0.0, (t, p)
+            else:
+                ambiguous += 1
+    assert ambiguous <= 3
+    assert 0.2 < np.mean(np.isinf(cost)) < 0.8  # the poses really probe the obstacle
+
+
+def test_off_map_counts_as_obstacle():
+    t = _flat2d((40, 40))
+    stance = jnp.array([0.4, 0.4, 0.0])
+    # Grown half-length 0.141: a foot centred 0.14 m from the edge is inside, 0.145 m is not... and beyond.
+    steps = jnp.array([[0.142, 0.4, 0.0], [0.14, 0.4, 0.0], [-0.3, 0.4, 0.0], [0.4, 0.79, 0.0], [0.4, 0.1, 0.0]])
+    c = np.asarray(ij.foot_cost(t, ROBOT, stance, -1, steps, action_index=0))
+    np.testing.assert_array_equal(np.isinf(c), [False, True, True, True, False])
+
+
+def _rot90(terrain):
+    nx, ny = terrain.shape
+    ox, oy = np.asarray(terrain.origin)
+    return ij.terrain.from_arrays(np.rot90(np.asarray(terrain.height)) if terrain.has_height else None,
+                                  np.rot90(np.asarray(terrain.free)), terrain.resolution,
+                                  (-(oy + ny * terrain.resolution), ox))
+
+
+def _rot_pose(p):
+    p = np.asarray(p, np.float64)
+    return np.stack([-p[..., 1], p[..., 0], p[..., 2] + np.pi / 2], -1)
+
+
+def _mirror(terrain):
+    nx, ny = terrain.shape
+    ox, oy = np.asarray(terrain.origin)
+    return ij.terrain.from_arrays(np.asarray(terrain.height)[:, ::-1] if terrain.has_height else None,
+                                  np.asarray(terrain.free)[:, ::-1], terrain.resolution,
+                                  (ox, -(oy + ny * terrain.resolution)))
+
+
+def _mirror_pose(p):
+    p = np.asarray(p, np.float64)
+    return np.stack([p[..., 0], -p[..., 1], -p[..., 2]], -1)
+
+
+def _rough_terrain(seed, has_height=True, shape=(50, 60)):
+    rng = np.random.default_rng(seed)
+    h = 0.002 * rng.standard_normal(shape)
+    h[20:35, 25:40] += 0.04  # a low platform
+    h += 0.05 * np.linspace(0, 1, shape[0])[:, None]  # a gentle ramp
+    free = rng.random(shape) > 0.002
+    return ij.terrain.from_arrays(h if has_height else None, free, RES, (0.3, -0.2))
+
+
+@pytest.mark.parametrize("has_height", [False, True])
+def test_invariant_under_rotation_by_90_degrees(has_height):
+    t = _rough_terrain(1, has_height)
+    stance = np.array([0.8, 0.35, 0.3])
+    steps = np.asarray(ij.action_steps(ROBOT, stance, -1))
+    swing_from = np.array([0.6, 0.18, 0.25])
+    kw = dict(swing_from=swing_from, action_index=np.arange(496))
+    a = ij.foot_cost_terms(t, ROBOT, stance, -1, steps, **kw)
+    kw["swing_from"] = _rot_pose(swing_from)
+    b = ij.foot_cost_terms(_rot90(t), ROBOT, _rot_pose(stance), -1, _rot_pose(steps), **kw)
+    _assert_same_costs(a, b)
+
+
+@pytest.mark.parametrize("has_height", [False, True])
+def test_left_right_mirror_symmetry(has_height):
+    t = _rough_terrain(2, has_height)
+    stance = np.array([0.8, 0.35, 0.3])  # a right stance foot; the left foot swings
+    steps = np.asarray(ij.action_steps(ROBOT, stance, -1))
+    swing_from = np.array([0.6, 0.18, 0.25])
+    a = ij.foot_cost_terms(t, ROBOT, stance, -1, steps, swing_from=swing_from, action_index=np.arange(496))
+    m_steps = _mirror_pose(steps)
+    np.testing.assert_allclose(m_steps, ij.action_steps(ROBOT, _mirror_pose(stance), +1), atol=1e-5)
+    b = ij.foot_cost_terms(_mirror(t), ROBOT, _mirror_pose(stance), +1, m_steps,
+                           swing_from=_mirror_pose(swing_from), action_index=np.arange(496))
+    _assert_same_costs(a, b)
+
+
+def _assert_same_costs(a, b):
+    ta, tb = np.asarray(a.total), np.asarray(b.total)
+    # Transformed float32 poses differ by ~1e-7 m; a cell decision may flip only
+    # for a sliver-thin overlap, which these fixed poses do not produce.
+    np.testing.assert_array_equal(np.isinf(ta), np.isinf(tb))
+    assert 0 < np.isinf(ta).sum() < len(ta)
+    np.testing.assert_allclose(ta[np.isfinite(ta)], tb[np.isfinite(tb)], rtol=1e-4, atol=1e-5)
+
+
+def test_height_metrics_match_numpy_reference():
+    rng = np.random.default_rng(5)
+    shape = (50, 50)
+    xs = np.arange(shape[0])[:, None] * RES
+    h = 0.1 * xs * 0.3 + 0.003 * rng.standard_normal(shape) + np.zeros(shape)
+    h[30:, 28:] += 0.015
+    t = ij.terrain.from_arrays(h, None, RES)
+    n = 150
+    poses = np.column_stack([rng.uniform(0.35, 0.65, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+    stance = np.array([0.5, 0.3, 0.0])
+    terms = ij.foot_cost_terms(t, ROBOT, stance, -1, poses, action_index=np.zeros(n, int))
+    ref_stance = foot_metrics(h, RES, (0, 0), stance, L, W, 0.02)
+    checked = 0
+    for i, p in enumerate(poses):
+        hl, hw = L / 2, W / 2
+        amb = False
+        for a, b in ((hl, hw), (hl + 0.02, hw + 0.02)):
+            amb |= np.any(rect_touches_cells(*p, a - SLIVER, b - SLIVER, RES, shape)
+                          != rect_touches_cells(*p, a + SLIVER, b + SLIVER, RES, shape))
+        if amb:
+            continue
+        ref = foot_metrics(h, RES, (0, 0), p, L, W, 0.02)
+        # float32 least squares on heights <= 0.1 m over ~100 cells: ~1e-6 m errors.
+        assert float(terms.foot_height_m[i]) == pytest.approx(ref["height"], abs=2e-5)
+        assert float(terms.slope_angle[i]) == pytest.approx(ref["slope"], abs=2e-4)
+        assert float(terms.roughness_m[i]) == pytest.approx(ref["roughness"], abs=2e-5)
+        assert float(terms.bump_m[i]) == pytest.approx(ref["bump"], abs=2e-5)
+        assert float(terms.band_m[i]) == pytest.approx(ref["band"], abs=2e-5)
+        assert float(terms.step_height_m[i]) == pytest.approx(ref["height"] - ref_stance["height"], abs=3e-5)
+        checked += 1
+    assert checked > 0.9 * n
+
+
+def test_slope_of_a_ramp_and_its_limit():
+    alpha = math.radians(12.0)
+    xs = (np.arange(60) + 0.5) * RES
+    h = np.tan(alpha) * xs[:, None] * np.ones((1, 60))
+    t = ij.terrain.from_arrays(h, None, RES)
+    pose = np.array([[0.6, 0.6, 0.4]])
+    terms = ij.foot_cost_terms(t, ROBOT, pose[0], -1, pose, action_index=[0])
+    assert float(terms.slope_angle[0]) == pytest.approx(alpha, abs=1e-4)
+    assert float(terms.roughness_m[0]) < 1e-5
+    assert float(terms.slope[0]) == pytest.approx(0.5 * alpha, rel=1e-3)  # default weight 0.5 / rad
+    steep = ROBOT.replace(metrics=ROBOT.metrics.replace(slope_limit=jnp.float32(math.radians(10))))
+    assert np.isinf(ij.foot_cost_terms(t, steep, pose[0], -1, pose, action_index=[0]).slope[0])
+
+
+def test_step_height_term_and_per_action_limit():
+    h = np.zeros((60, 60))
+    h[30:, :] = 0.05
+    t = ij.terrain.from_arrays(h, None, RES)
+    stance = np.array([0.3, 0.6, 0.0])
+    onto = np.array([[0.9, 0.6, 0.0]])
+    terms = ij.foot_cost_terms(t, ROBOT, stance, -1, onto, action_index=[0])
+    assert float(terms.step_height_m[0]) == pytest.approx(0.05, abs=1e-6)
+    assert float(terms.total[0]) == pytest.approx(0.05, abs=1e-5)  # step weight 1 / m, all else zero
+    low = ROBOT.replace(max_step_height=jnp.full(496, 0.04, jnp.float32))
+    assert np.isinf(ij.foot_cost_terms(t, low, stance, -1, onto, action_index=[0]).step[0])
+    # Near the edge the safety band sees the 5 cm drop: invalid by the band, not by the obstacle flag.
+    edge = np.array([[0.6 + 0.121 + 0.01, 0.6, 0.0]])
+    e = ij.foot_cost_terms(t, ROBOT, stance, -1, edge, action_index=[0])
+    assert np.isinf(e.band[0]) and e.obstacle[0] == 0 and float(e.band_m[0]) == pytest.approx(0.05, abs=1e-6)
+
+
+@pytest.mark.parametrize("bar, valid", [(0.08, True), (0.12, False)])
+def test_swing_path_clearance(bar, valid):
+    h = np.zeros((60, 60))
+    h[29:31, :] = bar  # a 4 cm wide bar across the map at x = 0.58..0.62
+    t = ij.terrain.from_arrays(h, None, RES)
+    stance = np.array([0.6, 0.5, 0.0])
+    start, end = np.array([0.42, 0.69, 0.0]), np.array([[0.78, 0.69, 0.0]])
+    terms = ij.foot_cost_terms(t, ROBOT, stance, -1, end, swing_from=start, action_index=[0])
+    assert float(terms.path_height_m[0]) == pytest.approx(bar, abs=1e-6)
+    assert np.isinf(terms.swing_path[0]) != valid
+    # Without the start pose there is no path check.
+    assert ij.foot_cost_terms(t, ROBOT, stance, -1, end, action_index=[0]).swing_path[0] == 0
+
+
+def test_action_cost_is_added_and_nearest_action_is_used():
+    robot = ij.robots.hrp2(action_cost=np.linspace(0, 1, 496))
+    t = ij.terrain.flat((60, 60), RES)
+    stance = jnp.array([0.6, 0.5, 0.2])
+    steps = ij.action_steps(robot, stance, -1)
+    c = ij.foot_cost(t, robot, stance, -1, steps[::37])  # no action_index: nearest action
+    np.testing.assert_allclose(np.asarray(c), np.linspace(0, 1, 496)[::37], rtol=1e-6)
+
+
+@given(st.integers(0, 2**31 - 1), st.floats(0.0, 0.1))
+def test_never_negative_and_inf_means_invalid(seed, margin):
+    rng = np.random.default_rng(seed)
+    h = 0.02 * rng.standard_normal((30, 30)).cumsum(0).cumsum(1) / 30
+    t = ij.terrain.from_arrays(h, rng.random((30, 30)) > 0.05, RES)
+    robot = ROBOT.replace(margin=jnp.float32(margin))
+    poses = np.column_stack([rng.uniform(-0.1, 0.7, (32, 2)), rng.uniform(-4, 4, 32)])
+    terms = ij.foot_cost_terms(t, robot, np.array([0.3, 0.3, 0.0]), 1, poses,
+                               swing_from=np.array([0.3, 0.1, 0.0]))
+    total = np.asarray(terms.total)
+    assert not np.isnan(total).any() and (total >= 0).all()
+    finite_terms = np.stack([np.asarray(getattr(terms, k)) for k in
+                             ("action", "obstacle", "slope", "roughness", "bump", "step", "band",
+                              "swing_path", "unsupported")])
+    np.testing.assert_array_equal(np.isinf(total), np.isinf(finite_terms).any(0))
+    assert np.all(total[np.isfinite(total)] < 1e3)  # valid costs are small; invalid is inf, not "big"
+
+
+def test_unsupported_margin_and_nan_pose_are_flagged_inside_jit():
+    t = ij.terrain.flat((60, 60), RES, has_height=True)
+    too_wide = ROBOT.replace(margin=jnp.float32(0.2))  # beyond the 10 cm the windows were built for
+    steps = jnp.array([[0.6, 0.6, 0.0], [jnp.nan, 0.6, 0.0]])
+    f = jax.jit(lambda r, s: ij.foot_cost_terms(t, r, jnp.array([0.6, 0.4, 0.0]), -1, s, action_index=[0, 0]))
+    a = f(ROBOT, steps)
+    assert float(a.total[0]) == 0.0 and np.isinf(a.unsupported[1]) and not np.isnan(np.asarray(a.total)).any()
+    b = f(too_wide, steps)
+    assert np.isinf(b.unsupported).all()
+
+
+def test_bad_input_at_the_boundary():
+    t = ij.terrain.flat((20, 20), RES)
+    with pytest.raises(ValueError, match="stance_side"):
+        ij.foot_cost(t, ROBOT, [0.2, 0.2, 0.0], 0, [[0.2, 0.4, 0.0]])
+    with pytest.raises(ValueError, match="steps must have shape"):
+        ij.foot_cost(t, ROBOT, [0.2, 0.2, 0.0], 1, [0.2, 0.4, 0.0])
+    with pytest.raises(ValueError, match="stance must be finite"):
+        ij.foot_cost(t, ROBOT, [0.2, np.nan, 0.0], 1, [[0.2, 0.4, 0.0]])
+    with pytest.raises(TypeError, match="Terrain"):
+        ij.foot_cost(np.zeros((3, 3)), ROBOT, [0.2, 0.2, 0.0], 1, [[0.2, 0.4, 0.0]])
+
+
+def test_no_recompile_when_parameters_or_terrain_values_change():
+    t = _rough_terrain(3)
+    stance = np.array([0.8, 0.35, 0.0])
+    steps = np.asarray(ij.action_steps(ROBOT, stance, -1))
+    kw = dict(swing_from=np.array([0.6, 0.18, 0.0]), action_index=np.arange(496))
+    ij.foot_cost(t, ROBOT, stance, -1, steps, **kw)
+    n = footcost._foot_cost_terms_jit._cache_size()
+    variants = [
+        ROBOT.replace(margin=jnp.float32(0.05)),
+        ROBOT.replace(w=jnp.float32(3.0), rotation_weight=jnp.float32(5.0)),
+        ROBOT.replace(foot_length=jnp.float32(0.2), step_time=jnp.float32(0.6)),
+        ROBOT.replace(metrics=ROBOT.metrics.replace(bump_limit=jnp.float32(0.05))),
+    ]
+    for r in variants:
+        ij.foot_cost(t, r, stance, -1, steps, **kw)
+    ij.foot_cost(t.replace(height=t.height * 2), ROBOT, stance + 0.01, 1, steps, **kw)
+    assert footcost._foot_cost_terms_jit._cache_size() == n
+
+
+def test_vmaps_over_terrains_and_robot_parameters():
+    ts = [_rough_terrain(s) for s in range(3)]
+    batch = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *ts)
+    margins = jnp.array([0.02, 0.05, 0.10])
+    robots = jax.vmap(lambda m: ROBOT.replace(margin=m))(margins)
+    stance = jnp.array([0.8, 0.35, 0.0])
+    steps = ij.action_steps(ROBOT, stance, -1)
+    f = jax.vmap(lambda t, r: ij.foot_cost(t, r, stance, -1, steps, action_index=jnp.arange(496)))
+    out = f(batch, robots)
+    for i in range(3):
+        ref = ij.foot_cost(ts[i], ROBOT.replace(margin=margins[i]), stance, -1, steps, action_index=np.arange(496))
+        np.testing.assert_array_equal(np.asarray(out[i]), np.asarray(ref))
+    # A larger margin never makes an invalid step valid (monotone in the margin on this terrain).
+    inf = np.isinf(np.asarray(f(jax.tree_util.tree_map(lambda x: jnp.stack([x[0]] * 3), batch), robots)))
+    assert (inf[0] <= inf[1]).all() and (inf[1] <= inf[2]).all() and inf[2].sum() > inf[0].sum()

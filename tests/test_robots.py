@@ -1,0 +1,98 @@
+"""Robot models and action sets."""
+
+import math
+
+import jax
+import numpy as np
+import pytest
+
+import ijoy_jax as ij
+from ijoy_jax import robots
+
+
+def test_hrp2_matches_the_paper():
+    r = ij.robots.hrp2(margin=0.05)
+    a = np.asarray(r.actions, np.float64)
+    assert a.shape == (496, 3)
+    assert np.abs(a[:, 0]).max() == pytest.approx(0.20) and a[:, 0].min() == pytest.approx(-0.20)
+    assert a[:, 1].min() == pytest.approx(0.19) and a[:, 1].max() == pytest.approx(0.33)
+    assert np.abs(a[:, 2]).max() == pytest.approx(math.radians(20), rel=1e-6)
+    assert float(r.foot_length) == pytest.approx(0.242) and float(r.foot_width) == pytest.approx(0.13)
+    assert float(r.margin) == pytest.approx(0.05)
+    assert len(np.unique(a.round(6), axis=0)) == 496
+    assert not robots.footprints_overlap(a, 0.242, 0.13).any()
+    # Step in place is an action, straight steps (dtheta = 0) exist at every dx.
+    assert np.any(np.all(np.isclose(a, np.asarray(r.p0)), axis=1))
+    assert set(np.round(a[np.isclose(a[:, 2], 0)][:, 0], 3)) == set(np.round(np.linspace(-0.2, 0.2, 9), 3))
+
+
+@pytest.mark.parametrize("margin", [0.02, 0.05, 0.10])
+def test_paper_margins_fit_the_default_window(margin):
+    r = ij.robots.hrp2(margin=margin)
+    assert 0.5 * math.hypot(0.242 + 2 * margin, 0.13 + 2 * margin) <= r.max_radius + 1e-12
+
+
+def test_mirroring():
+    r = ij.robots.hrp2()
+    left, right = np.asarray(robots.side_actions(r, 1)), np.asarray(robots.side_actions(r, -1))
+    np.testing.assert_allclose(right, left * [1, -1, -1])
+    np.testing.assert_allclose(np.asarray(robots.side_p0(r, -1)), np.asarray(r.p0) * [1, -1, -1])
+
+
+@pytest.mark.parametrize("density, size", [(0.1, 10), (0.25, 19), (0.5, 117), (1.0, 496), (2.0, 3307)])
+def test_density_sweeps_size_over_the_same_ranges(density, size):
+    a = np.asarray(ij.robots.hrp2(density=density).actions)
+    assert a.shape == (size, 3)
+    np.testing.assert_allclose([a[:, 0].min(), a[:, 0].max(), a[:, 1].min(), a[:, 1].max()],
+                               [-0.2, 0.2, 0.19, 0.33], atol=1e-6)
+    np.testing.assert_allclose(np.abs(a[:, 2]).max(), math.radians(20), rtol=1e-6)
+    assert np.any(np.all(np.isclose(a, [0, 0.19, 0], atol=1e-7), axis=1)), "p0 must stay in S"
+
+
+def test_footprint_overlap_reference():
+    # Side by side 13 cm wide feet: overlap iff centres closer than 13 cm.
+    assert robots.footprints_overlap([[0, 0.12, 0]], 0.242, 0.13)[0]
+    assert not robots.footprints_overlap([[0, 0.13, 0]], 0.242, 0.13)[0]
+    assert robots.footprints_overlap([[0.2, 0.0, 0]], 0.242, 0.13)[0]
+    assert not robots.footprints_overlap([[0.25, 0.0, 0]], 0.242, 0.13)[0]
+
+
+@pytest.mark.parametrize(
+    "actions, kwargs, match",
+    [
+        (np.zeros((0, 3)), {}, "empty"),
+        (np.zeros((4, 2)), {}, "shape"),
+        ([[0.0, 0.2, np.nan]], {}, "finite"),
+        ([[0.0, 0.05, 0.0]], {}, "overlap"),
+        ([[0.0, 0.2, 0.0]], dict(foot_length=0.0), "foot_length"),
+        ([[0.0, 0.2, 0.0]], dict(foot_width=-0.1), "foot_width"),
+        ([[0.0, 0.2, 0.0]], dict(margin=-0.01), "margin"),
+        ([[0.0, 0.2, 0.0]], dict(step_time=0.0), "step_time"),
+        ([[0.0, 0.2, 0.0]], dict(w=float("inf")), "w must be finite"),
+        ([[0.0, 0.2, 0.0]], dict(action_cost=-1.0), "action_cost"),
+        ([[0.0, 0.2, 0.0]], dict(clearance=[0.1, 0.1]), "clearance"),
+        ([[0.0, 0.2, 0.0]], dict(margin=0.2, max_margin=0.1), "max_margin"),
+    ],
+)
+def test_make_robot_rejects_bad_input(actions, kwargs, match):
+    base = dict(foot_length=0.242, foot_width=0.13, margin=0.02, step_time=0.8)
+    base.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        robots.make_robot(actions, **base)
+
+
+def test_metrics_reject_negative_or_nan():
+    with pytest.raises(ValueError, match="slope_limit"):
+        robots.default_metrics(slope_limit=-0.1)
+    with pytest.raises(ValueError, match="bump_weight"):
+        robots.default_metrics(bump_weight=float("nan"))
+
+
+def test_robot_is_a_pytree_with_static_sizes():
+    r = ij.robots.hrp2()
+    leaves, treedef = jax.tree_util.tree_flatten(r)
+    assert all(hasattr(x, "shape") for x in leaves)
+    r2 = jax.tree_util.tree_unflatten(treedef, leaves)
+    assert r2.max_radius == r.max_radius and r2.num_actions == 496
+    stacked = jax.tree_util.tree_map(lambda *x: np.stack(x), r, r.replace(margin=r.margin * 2))
+    assert stacked.margin.shape == (2,)
