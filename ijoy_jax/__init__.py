@@ -10,11 +10,15 @@ Public API:
   robots.hrp2 / make_robot / lattice_actions         footprint and action set S
   foot_cost, foot_cost_terms                         FootCost of candidate steps
   action_steps                                       world poses of every action
+  select_step, StepChoice, make_targets              the next foothold for a command
+  rollout, Trajectory, perfect_walker, Walker        the control loop (Algorithm 1)
 """
 
-from ijoy_jax import footcost, geometry, robots, scene, terrain
+from ijoy_jax import control, footcost, geometry, plot, robots, scene, select, terrain
+from ijoy_jax.control import Trajectory, Walker, perfect_walker, rollout
 from ijoy_jax.footcost import FootCostTerms, foot_cost, foot_cost_terms
 from ijoy_jax.robots import LEFT, RIGHT, Robot, TerrainMetrics
+from ijoy_jax.select import StepChoice, make_targets, select_step
 from ijoy_jax.steps import action_steps
 from ijoy_jax.terrain import Terrain
 
@@ -25,14 +29,23 @@ __all__ = [
     "RIGHT",
     "FootCostTerms",
     "Robot",
+    "StepChoice",
     "Terrain",
     "TerrainMetrics",
+    "Trajectory",
+    "Walker",
     "action_steps",
+    "control",
     "foot_cost",
     "foot_cost_terms",
     "footcost",
     "geometry",
+    "make_targets",
+    "perfect_walker",
     "robots",
+    "rollout",
     "scene",
+    "select",
+    "select_step",
     "terrain",
 ]

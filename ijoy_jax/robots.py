@@ -100,6 +100,8 @@ class Robot:
       max_radius: largest half-diagonal of the grown footprint the fixed-size
         windows cover (m); a larger footprint or margin is flagged invalid.
       max_swing: longest swing-path segment the path window covers (m).
+      target_grid: the lattice of the paper's target set F, ``(lo, step,
+        counts)`` per axis (:func:`target_lattice`).
     """
 
     foot_length: jax.Array
@@ -116,6 +118,7 @@ class Robot:
     rotation_weight: jax.Array
     max_radius: float = static_field()
     max_swing: float = static_field()
+    target_grid: tuple = static_field()
 
     @property
     def num_actions(self) -> int:
@@ -264,7 +267,27 @@ def make_robot(
         rotation_weight=f32(rotation_weight),
         max_radius=max_radius,
         max_swing=max_swing,
+        target_grid=target_lattice(acts),
     )
+
+
+def target_lattice(actions, refine: int = 2) -> tuple[tuple, tuple, tuple]:
+    """Lattice ``(lo, step, counts)`` (3-tuples) of the paper's target set F for an action set.
+
+    Spans the bounding box of the actions extended by one action spacing on
+    each side, with ``refine`` points per action spacing along each axis
+    (spacing = smallest gap between distinct values of that coordinate).
+    """
+    acts = np.asarray(actions, np.float64)
+    lo, step, counts = [], [], []
+    for k in range(3):
+        vals = np.unique(np.round(acts[:, k], 7))
+        spacing = float(np.min(np.diff(vals))) if len(vals) > 1 else (0.05 if k < 2 else math.radians(5.0))
+        a, b = float(vals[0]) - spacing, float(vals[-1]) + spacing
+        lo.append(a)
+        step.append(spacing / refine)
+        counts.append(2 * refine + refine * int(round((vals[-1] - vals[0]) / spacing)) + 1)
+    return tuple(lo), tuple(step), tuple(counts)
 
 
 def lattice_actions(

@@ -1,0 +1,266 @@
+"""The joystick control loop (the paper's Algorithm 1) as one scanned, jit-able rollout.
+
+Each iteration: GetJoystickCommand (from a schedule), ComputeStanceLocation
+(the walker's future stance: where the robot will stand when it can next
+change its trajectory), ComputeTargetLocation (p_next), GetNextStep (the
+selector), then SendRobotCmd or StopWalking. The terrain is fixed over a
+rollout (GetEnvironment), and its index is built once, outside the scan.
+
+The robot that executes the steps is a :class:`Walker`: three pure functions
+over a state pytree. :func:`perfect_walker` is the paper's simulated robot
+(every step executed exactly); a physically simulated robot implements the
+same three functions, and the selector is untouched.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from ijoy_jax import geometry
+from ijoy_jax.footcost import _validate, foot_cost_terms_indexed, index_terrain
+from ijoy_jax.robots import LEFT, Robot
+from ijoy_jax.select import METHODS, ideal_step, make_targets, select_step_indexed
+from ijoy_jax.terrain import Terrain
+
+class StanceInfo(NamedTuple):
+    """What the selector needs from the robot for the next decision."""
+
+    stance: jax.Array  # (3,) world pose of the (future) stance foot
+    stance_side: jax.Array  # () +1 left, -1 right
+    swing_from: jax.Array  # (3,) world pose the swing foot starts from
+
+class Walker(NamedTuple):
+    """A robot that executes footsteps (optax-style: a tuple of pure functions).
+
+    init(start (2, 3), first_swing ()) -> state
+    stance(state) -> StanceInfo              (ComputeStanceLocation)
+    execute(state, pose (3,), go ()) -> state (SendRobotCmd if go else StopWalking,
+                                               then WaitForNextStep)
+    feet(state) -> (2, 3) world poses, row 0 left, row 1 right.
+    """
+
+    init: Callable[[jax.Array, jax.Array], Any]
+    stance: Callable[[Any], StanceInfo]
+    execute: Callable[[Any, jax.Array, jax.Array], Any]
+    feet: Callable[[Any], jax.Array]
+
+class _PerfectState(NamedTuple):
+    feet: jax.Array  # (2, 3) row 0 left, row 1 right
+    swing: jax.Array  # () +1 if the left foot swings next
+
+def perfect_walker() -> Walker:
+    """The paper's simulated robot: each commanded step lands exactly where it was sent."""
+
+    def init(start, first_swing):
+        return _PerfectState(jnp.asarray(start, jnp.float32), jnp.asarray(first_swing, jnp.float32))
+
+    def stance(s):
+        left_swings = s.swing > 0
+        st = jnp.where(left_swings, s.feet[1], s.feet[0])
+        sw = jnp.where(left_swings, s.feet[0], s.feet[1])
+        return StanceInfo(st, -s.swing, sw)
+
+    def execute(s, pose, go):
+        row = jnp.where(s.swing > 0, 0, 1)
+        feet = jnp.where(go, s.feet.at[row].set(pose), s.feet)
+        return _PerfectState(feet, jnp.where(go, -s.swing, s.swing))
+
+    return Walker(init, stance, execute, lambda s: s.feet)
+
+class Trajectory(NamedTuple):
+    """One rollout of the control loop (T = num_steps; vmapped rollouts add axes).
+
+    Per step (T,) unless noted:
+      footsteps: (T, 3) world pose of the swing foot after the step (the
+        foothold put down; its old pose on steps not taken).
+      sides: +1 if the left foot was the swing foot, -1 the right.
+      valid: the chosen foothold is valid (FootCost < inf).
+      taken: a step was executed (False once stopped).
+      stopped: the robot has stopped walking (no valid step; it stays stopped).
+      cost: the selector's cost of the choice (+inf if none).
+      index: action index (-1 if none).
+      target: (T, 3) world pose the choice was scored against.
+      command_ok: False where the command had NaN/inf (treated as zero).
+      in_place: the step taken was the step-in-place action p0.
+      on_obstacle: the foothold taken overlaps an obstacle cell or leaves the
+        map (footprint without margin); 0 for the intelligent joystick.
+      along, across: displacement of the feet's midpoint (m) along and across
+        the commanded direction (world frame at the decision; 0 for a zero
+        command).
+      deviation: |achieved - p_next| of the swing foot in the stance frame (m).
+      rotation_deviation: |wrap(achieved - p_next)| rotation (rad).
+      evaluated: actions whose FootCost was computed.
+    feet: (2, 3) final foot poses (row 0 left).
+    """
+
+    footsteps: jax.Array
+    sides: jax.Array
+    valid: jax.Array
+    taken: jax.Array
+    stopped: jax.Array
+    cost: jax.Array
+    index: jax.Array
+    target: jax.Array
+    command_ok: jax.Array
+    in_place: jax.Array
+    on_obstacle: jax.Array
+    along: jax.Array
+    across: jax.Array
+    deviation: jax.Array
+    rotation_deviation: jax.Array
+    evaluated: jax.Array
+    feet: jax.Array
+
+    def summary(self) -> dict[str, jax.Array]:
+        """Per-rollout totals: steps taken, in place, stopped, footholds on obstacles, distances (m)."""
+        taken = self.taken
+        return {
+            "steps_taken": jnp.sum(taken, axis=-1),
+            "steps_in_place": jnp.sum(self.in_place & taken, axis=-1),
+            "stopped": jnp.any(self.stopped, axis=-1),
+            "footholds_on_obstacles": jnp.sum(self.on_obstacle & taken, axis=-1),
+            "distance_along": jnp.sum(self.along, axis=-1),
+            "distance_across": jnp.sum(self.across, axis=-1),
+            "mean_deviation": jnp.sum(self.deviation * taken, axis=-1) / jnp.maximum(jnp.sum(taken, axis=-1), 1),
+        }
+
+def rollout_core(
+    terrain: Terrain,
+    robot: Robot,
+    start,
+    commands,
+    num_steps: int,
+    method: str = "exhaustive",
+    first_swing=LEFT,
+    walker: Walker | None = None,
+    swing_path: bool = True,
+    quantize: bool = True,
+) -> Trajectory:
+    """The rollout without input checks or its own jit (call it inside your jit/vmap)."""
+    walker = perfect_walker() if walker is None else walker
+    index = index_terrain(terrain, robot)
+    targets = make_targets(robot)
+    clear = robot.replace(margin=jnp.zeros_like(robot.margin))
+    commands = jnp.asarray(commands, jnp.float32)
+    if commands.ndim == 1:
+        commands = jnp.broadcast_to(commands, (num_steps, 3))
+    state0 = walker.init(jnp.asarray(start, jnp.float32), jnp.asarray(first_swing, jnp.float32))
+
+    def step(carry, command):
+        state, stopped = carry
+        info = walker.stance(state)
+        choice = select_step_indexed(
+            terrain, index, robot, targets, info.stance, info.stance_side, command, method,
+            info.swing_from if swing_path else None, quantize,
+        )
+        go = ~stopped & (choice.valid | (method == "naive"))
+        now_stopped = stopped | ~go
+        before = walker.feet(state)
+        new_state = walker.execute(state, choice.pose, go)
+        after = walker.feet(new_state)
+        swing_row = jnp.where(info.stance_side > 0, 1, 0)
+        landed = after[swing_row]
+        on_obs = foot_cost_terms_indexed(terrain, index, clear, info.stance, info.stance_side, landed[None],
+                                         None, jnp.zeros(1, jnp.int32)).obstacle[0] > 0
+        # Command-following metrics in the stance foot's frame at decision time.
+        p_next, _ = ideal_step(robot, info.stance_side, command)
+        achieved = geometry.relative(info.stance, landed)
+        err = achieved - p_next
+        cmd = jnp.where(jnp.all(jnp.isfinite(command)), command, 0.0)
+        c, s = jnp.cos(info.stance[2]), jnp.sin(info.stance[2])
+        dir_world = jnp.array([c * cmd[0] - s * cmd[1], s * cmd[0] + c * cmd[1]])
+        norm = jnp.sqrt(jnp.sum(dir_world**2))
+        unit = jnp.where(norm > 0, dir_world / jnp.where(norm > 0, norm, 1.0), 0.0)
+        move = jnp.mean(after[:, :2], axis=0) - jnp.mean(before[:, :2], axis=0)
+        record = dict(
+            footsteps=landed,
+            sides=-info.stance_side.astype(jnp.int32),
+            valid=choice.valid,
+            taken=go,
+            stopped=now_stopped,
+            cost=choice.cost,
+            index=choice.index,
+            target=choice.target,
+            command_ok=choice.command_ok,
+            in_place=go & (choice.index >= 0) & jnp.all(
+                jnp.abs(robot.actions[jnp.maximum(choice.index, 0)] - robot.p0) < 1e-6),
+            on_obstacle=go & on_obs,
+            along=jnp.dot(move, unit),
+            across=unit[0] * move[1] - unit[1] * move[0],
+            deviation=jnp.where(go, jnp.hypot(err[0], err[1]), 0.0),
+            rotation_deviation=jnp.where(go, jnp.abs(geometry.wrap_angle(err[2])), 0.0),
+            evaluated=choice.evaluated,
+        )
+        return (new_state, now_stopped), record
+
+    (state, _), rec = lax.scan(step, (state0, jnp.bool_(False)), commands[:num_steps])
+    return Trajectory(feet=walker.feet(state), **rec)
+
+_rollout_jit = jax.jit(rollout_core, static_argnames=("num_steps", "method", "walker", "swing_path", "quantize"))
+
+def rollout(
+    terrain: Terrain,
+    robot: Robot,
+    start,
+    commands,
+    num_steps: int,
+    method: str = "exhaustive",
+    *,
+    first_swing: int = LEFT,
+    walker: Walker | None = None,
+    swing_path: bool = True,
+    quantize: bool = True,
+) -> Trajectory:
+    """Walk the robot with the joystick for ``num_steps`` steps (Algorithm 1), jitted as one scan.
+
+    Args:
+      terrain: one Terrain (vmap over a batch of terrains).
+      robot: the robot model (its leaves may be batched with vmap).
+      start: (2, 3) world poses of the feet, row 0 left, row 1 right (m, rad).
+      commands: (3,) one command (xdot m/s, ydot m/s, thetadot rad/s, in the
+        stance foot's frame) held throughout, or (num_steps, 3) one per step.
+      num_steps: number of decisions (static).
+      method: "exhaustive", "ordered" (same steps) or "naive" (the
+        conventional joystick: always steps to the action nearest p_next).
+      first_swing: +1 if the left foot swings first (default), -1 the right.
+      walker: the robot executing the steps; default :func:`perfect_walker`.
+      swing_path: check the swing corridor on 2.5D terrains.
+      quantize: score against F's nearest target (the paper) or p_next.
+
+    Returns:
+      :class:`Trajectory`. Once no valid step exists the robot stops and
+      stays stopped (``stopped``), as Algorithm 1 stops walking.
+
+    Example:
+      >>> import numpy as np, ijoy_jax as ij
+      >>> terrain = ij.terrain.flat((150, 100), 0.02)
+      >>> robot = ij.robots.hrp2()
+      >>> start = np.array([[0.3, 1.095, 0.0], [0.3, 0.905, 0.0]])
+      >>> traj = ij.rollout(terrain, robot, start, [0.25, 0.0, 0.0], num_steps=6)
+      >>> round(float(traj.summary()["distance_along"]), 2)   # 0.1 + 5 * 0.2 m
+      1.1
+    """
+    _validate(terrain, robot, np.zeros(3), 1, np.zeros((1, 3)), None)
+    if np.shape(start) != (2, 3):
+        raise ValueError(f"start must have shape (2, 3) (left foot, right foot), got {np.shape(start)}")
+    if not isinstance(start, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(start))):
+        raise ValueError("start must be finite")
+    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
+        raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
+    cs = np.shape(commands)
+    if cs not in ((3,), (num_steps, 3)):
+        raise ValueError(f"commands must have shape (3,) or ({num_steps}, 3), got {cs}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if first_swing not in (LEFT, -LEFT):
+        raise ValueError(f"first_swing must be +1 (left) or -1 (right), got {first_swing!r}")
+    return _rollout_jit(terrain, robot, start, commands, int(num_steps), method, first_swing, walker,
+                        swing_path, quantize)
+
+rollout_batched = functools.partial(jax.vmap, rollout_core)

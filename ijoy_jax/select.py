@@ -1,0 +1,316 @@
+"""Step selection: the best valid step of S for a joystick command (paper section IV.B).
+
+cost(p) = FootCost(p, e) + w * dist(p, target), with
+dist(p, q) = |p_xy - q_xy| + rotation_weight * |wrap(p_theta - q_theta)|
+measured in the stance foot's frame. The ideal step is p_next = p0 + dt * j for
+the joystick command j = (xdot, ydot, thetadot) in the robot's (stance foot's)
+frame; the paper quantises it to the nearest f_i of a precomputed target set F
+(:class:`Targets`, a lattice), and both selectors score against that f_i by
+default so their ``.cost`` agree.
+
+Selectors (same step on the same inputs):
+  "exhaustive": FootCost of every action in parallel, then the argmin.
+  "ordered":    the paper's algorithm: walk L_i (the actions sorted by dist
+                to f_i, precomputed) in chunks, keeping the best so far, and
+                stop once best <= w * dist(next action, f_i): FootCost >= 0,
+                so nothing later can win. In 2D, with zero action costs, this
+                stops at the first valid step.
+  "naive":      the conventional joystick of the paper's Fig. 3: the action
+                nearest the target, whatever the terrain (``pose`` and
+                ``index`` are that action; ``valid`` says whether its
+                foothold is actually valid).
+
+Ties break the same way in every method: lowest cost, then lowest dist to the
+target, then lowest action index (L_i is sorted by (dist, index)). Costs that
+differ only by float rounding may be decided differently by the two methods.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from ijoy_jax import geometry
+from ijoy_jax._struct import pytree_dataclass, static_field
+from ijoy_jax.footcost import TerrainIndex, _side_sign, foot_cost_terms_indexed, index_terrain
+from ijoy_jax.robots import Robot, side_actions, side_p0
+from ijoy_jax.terrain import Terrain
+
+METHODS = ("exhaustive", "ordered", "naive")
+
+
+@pytree_dataclass
+class Targets:
+    """The paper's precomputed target set F and the ordered lists L_i.
+
+    F is a lattice over (dx, dy, dtheta) of the LEFT swing foot (the right
+    foot uses the mirror image). Static: ``lo``, ``step``, ``counts`` (tuples
+    of 3). Leaves:
+      order: (|F|, N) int32, L_i: action indices sorted by (dist to f_i, index).
+      dist: (|F|, N) float32, dist(action, f_i) for every pair (same numbers
+        in every method, so costs agree bit for bit).
+    """
+
+    order: jax.Array
+    dist: jax.Array
+    lo: tuple = static_field()
+    step: tuple = static_field()
+    counts: tuple = static_field()
+
+    def points(self) -> jax.Array:
+        """(|F|, 3) the target footsteps f_i (left swing foot, stance frame)."""
+        axes = [lo + st * jnp.arange(n, dtype=jnp.float32) for lo, st, n in zip(self.lo, self.step, self.counts,
+                                                                                strict=True)]
+        return jnp.stack(jnp.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+
+    def point(self, i) -> jax.Array:
+        """(3,) the target footstep f_i of flat index ``i``."""
+        k2 = i % self.counts[2]
+        k1 = (i // self.counts[2]) % self.counts[1]
+        k0 = i // (self.counts[1] * self.counts[2])
+        return jnp.stack([lo + st * k.astype(jnp.float32)
+                          for lo, st, k in zip(self.lo, self.step, (k0, k1, k2), strict=True)])
+
+    def nearest(self, rel_left: jax.Array) -> jax.Array:
+        """Index of the f_i nearest a left-foot target (3,): rounding per axis, clamped to F.
+
+        Per-axis rounding minimises every |component| of the difference, so it
+        minimises dist for any weights.
+        """
+        idx = []
+        for k in range(3):
+            i = jnp.round((rel_left[k] - self.lo[k]) / self.step[k])
+            idx.append(jnp.clip(i, 0, self.counts[k] - 1).astype(jnp.int32))
+        return (idx[0] * self.counts[1] + idx[1]) * self.counts[2] + idx[2]
+
+
+def dist(a: jax.Array, b: jax.Array, rotation_weight) -> jax.Array:
+    """Paper's dist between poses in one frame: |dxy| + rotation_weight * |wrap(dtheta)|."""
+    d = a - b
+    return jnp.hypot(d[..., 0], d[..., 1]) + rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
+
+
+def make_targets(robot: Robot) -> Targets:
+    """Build F and the ordered lists L_i for a robot (traceable: jit/vmap over the robot's leaves).
+
+    F is the lattice ``robot.target_grid`` (static, from
+    :func:`ijoy_jax.robots.target_lattice`): the bounding box of S extended by
+    one action spacing on each side (commands beyond S's reach map to its
+    edge), two points per action spacing along each axis. L_i depends on
+    ``robot.actions`` and ``robot.rotation_weight``: rebuild it when they
+    change (:func:`select_step` and the rollout build it when not given one).
+    """
+    lo, step, counts = robot.target_grid
+    return _targets_for(robot, lo, step, counts)
+
+
+def _targets_for(robot: Robot, lo, step, counts) -> Targets:
+    shell = Targets(order=jnp.zeros((0, 0), jnp.int32), dist=jnp.zeros((0, 0)), lo=lo, step=step, counts=counts)
+    pts = shell.points()
+    d = dist(robot.actions[None, :, :], pts[:, None, :], robot.rotation_weight)  # (|F|, N)
+    order = jnp.lexsort((jnp.broadcast_to(jnp.arange(d.shape[1]), d.shape), d), axis=-1).astype(jnp.int32)
+    return shell.replace(order=order, dist=d.astype(jnp.float32))
+
+
+class StepChoice(NamedTuple):
+    """Result of :func:`select_step` (one decision; vmapped calls add leading axes).
+
+    pose: (3,) world pose of the chosen swing foot (the step-in-place pose
+      when no step is valid, so it is never NaN).
+    valid: () bool, False when no valid step exists: the caller stops walking.
+    cost: () float32, FootCost + w * dist of the choice (+inf if not valid).
+    index: () int32 index into the action set (-1 when not valid).
+    target: (3,) world pose the choice was scored against (f_i, or p_next).
+    command_ok: () bool, False if the command had NaN/inf (treated as zero).
+    evaluated: () int32 number of actions whose FootCost was computed.
+    """
+
+    pose: jax.Array
+    valid: jax.Array
+    cost: jax.Array
+    index: jax.Array
+    target: jax.Array
+    command_ok: jax.Array
+    evaluated: jax.Array
+
+
+def ideal_step(robot: Robot, stance_side, command) -> tuple[jax.Array, jax.Array]:
+    """p_next = p0 + step_time * command in the stance frame, and whether the command was finite.
+
+    A command with NaN/inf is replaced by zero (step in place) and flagged.
+    """
+    command = jnp.asarray(command, jnp.float32)
+    ok = jnp.all(jnp.isfinite(command))
+    command = jnp.where(ok, command, 0.0)
+    swing = -_side_sign(stance_side)
+    return side_p0(robot, swing) + robot.step_time * command, ok
+
+
+def _mirror(swing_side, rel):
+    return rel * jnp.stack([jnp.ones_like(swing_side), swing_side, swing_side])
+
+
+def select_step_indexed(
+    terrain: Terrain,
+    index: TerrainIndex,
+    robot: Robot,
+    targets: Targets,
+    stance,
+    stance_side,
+    command,
+    method: str = "exhaustive",
+    swing_from=None,
+    quantize: bool = True,
+    chunk: int = 32,
+) -> StepChoice:
+    """:func:`select_step` with a prebuilt terrain index and target set (the jit-friendly core)."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    stance = jnp.asarray(stance, jnp.float32)
+    side = _side_sign(stance_side)
+    swing = -side
+    p_next, ok = ideal_step(robot, side, command)
+    fi = targets.nearest(_mirror(swing, p_next))  # F is stored for the left foot
+    n = robot.num_actions
+    if quantize or method == "ordered":
+        target_rel = _mirror(swing, targets.point(fi))
+        dists = targets.dist[fi]
+    else:
+        target_rel = p_next
+        dists = dist(side_actions(robot, swing), p_next, robot.rotation_weight)
+    steps = geometry.compose(stance, side_actions(robot, swing))  # (N, 3)
+
+    def terms_of(idx):
+        return foot_cost_terms_indexed(terrain, index, robot, stance, side, steps[idx], swing_from, idx).total
+
+    if method == "naive":
+        best = jnp.argmin(dists).astype(jnp.int32)  # lowest dist, then lowest index
+        fc = terms_of(best[None])[0]
+        cost = fc + robot.w * dists[best]
+        valid = jnp.isfinite(cost)
+        evaluated = jnp.int32(1)
+    elif method == "exhaustive":
+        cost_all = terms_of(jnp.arange(n, dtype=jnp.int32)) + robot.w * dists
+        best = _lexmin(cost_all, dists)
+        cost = cost_all[best]
+        valid = jnp.isfinite(cost)
+        evaluated = jnp.int32(n)
+    else:
+        best, cost, evaluated = _ordered(terms_of, targets.order[fi], dists, robot.w, n, chunk)
+        valid = jnp.isfinite(cost)
+    in_place = geometry.compose(stance, side_p0(robot, swing))
+    # The naive joystick steps to its action whatever the terrain; the others
+    # report no step (index -1, the step-in-place pose) when none is valid.
+    chosen = valid | (method == "naive")
+    return StepChoice(
+        pose=jnp.where(chosen, steps[best], in_place),
+        valid=valid,
+        cost=jnp.where(valid, cost, jnp.inf),
+        index=jnp.where(chosen, best, -1).astype(jnp.int32),
+        target=geometry.compose(stance, target_rel),
+        command_ok=ok,
+        evaluated=evaluated,
+    )
+
+
+def _lexmin(cost, dists):
+    """Index of the lowest cost, ties by lowest dist, then lowest index."""
+    is_min = cost == jnp.min(cost)
+    d = jnp.where(is_min, dists, jnp.inf)
+    return jnp.argmin(d).astype(jnp.int32)  # argmin returns the first of equal values
+
+
+def _ordered(terms_of, order, dists, w, n, chunk):
+    """The paper's ordered traversal of L_i, a chunk of actions at a time."""
+    chunk = min(chunk, n)
+    num_chunks = -(-n // chunk)
+    pad = num_chunks * chunk - n
+    order = jnp.concatenate([order, jnp.full((pad,), order[-1], jnp.int32)])
+    d_sorted = jnp.concatenate([dists[order[:n]], jnp.full((pad,), jnp.inf)])
+
+    def cond(state):
+        k, best_cost, _ = state
+        nxt = jnp.minimum(k * chunk, n - 1)
+        # Stop once the best so far cannot be beaten by anything not yet seen.
+        done = (k > 0) & (best_cost <= w * d_sorted[nxt])
+        return (k < num_chunks) & ~done
+
+    def body(state):
+        k, best_cost, best_pos = state
+        pos = k * chunk + jnp.arange(chunk)
+        idx = lax.dynamic_slice(order, (k * chunk,), (chunk,))
+        c = terms_of(idx) + w * lax.dynamic_slice(d_sorted, (k * chunk,), (chunk,))
+        c = jnp.where(pos < n, c, jnp.inf)
+        j = jnp.argmin(c)  # first in L_i order among equal costs
+        better = c[j] < best_cost
+        return k + 1, jnp.where(better, c[j], best_cost), jnp.where(better, pos[j], best_pos)
+
+    k, best_cost, best_pos = lax.while_loop(cond, body, (jnp.int32(0), jnp.float32(jnp.inf), jnp.int32(0)))
+    return order[best_pos], best_cost, jnp.minimum(k * chunk, n).astype(jnp.int32)
+
+
+def select_step(
+    terrain: Terrain,
+    robot: Robot,
+    stance,
+    stance_side,
+    command,
+    method: str = "exhaustive",
+    *,
+    swing_from=None,
+    quantize: bool = True,
+    targets: Targets | None = None,
+    chunk: int = 32,
+) -> StepChoice:
+    """Choose the next swing-foot placement for a joystick command.
+
+    Args:
+      terrain: one Terrain (vmap for batches).
+      robot: the robot model; ``robot.w`` and ``robot.rotation_weight`` weigh dist.
+      stance: (3,) world pose of the stance foot (m, rad).
+      stance_side: +1 if the stance foot is the left one (the right foot
+        swings), -1 if it is the right one.
+      command: (3,) joystick command (xdot m/s, ydot m/s, thetadot rad/s) in
+        the stance foot's frame. NaN/inf: treated as zero and flagged.
+      method: "exhaustive", "ordered" (the paper's search) or "naive".
+      swing_from: (3,) current world pose of the swing foot, for the swing-path
+        check on 2.5D terrains (None: no check).
+      quantize: score against the nearest f_i of F (default, as the paper);
+        False scores the exhaustive/naive methods against p_next itself.
+      targets: a prebuilt :func:`make_targets` (F and L_i); built if None.
+      chunk: actions per chunk of the ordered search (static).
+
+    Returns:
+      :class:`StepChoice`.
+
+    Example:
+      >>> import numpy as np, ijoy_jax as ij
+      >>> free = np.ones((100, 100), bool); free[55:, :] = False      # wall at x = 1.1 m
+      >>> terrain = ij.terrain.from_arrays(None, free, 0.02)
+      >>> robot = ij.robots.hrp2(margin=0.02)
+      >>> c = ij.select_step(terrain, robot, [0.8, 1.0, 0.0], -1, [0.25, 0.0, 0.0])
+      >>> bool(c.valid), round(float(c.pose[0]), 2)   # as far forward as the wall allows
+      (True, 0.9)
+    """
+    from ijoy_jax.footcost import _validate
+
+    _validate(terrain, robot, stance, stance_side, np.zeros((1, 3)), swing_from)
+    if np.shape(command) != (3,):
+        raise ValueError(f"command must have shape (3,) (xdot, ydot, thetadot), got {np.shape(command)}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if targets is None:
+        targets = make_targets(robot)
+    return _select_jit(terrain, robot, targets, stance, stance_side, command, swing_from, method, quantize, chunk)
+
+
+@functools.partial(jax.jit, static_argnames=("method", "quantize", "chunk"))
+def _select_jit(terrain, robot, targets, stance, stance_side, command, swing_from, method, quantize, chunk):
+    index = index_terrain(terrain, robot)
+    return select_step_indexed(terrain, index, robot, targets, stance, stance_side, command, method,
+                               swing_from, quantize, chunk)
