@@ -28,6 +28,7 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
+from ijoy_jax._struct import pytree_dataclass, static_field
 from ijoy_jax.robots import Robot, side_actions
 from ijoy_jax.terrain import Terrain
 
@@ -73,7 +74,8 @@ class FootCostTerms(NamedTuple):
     action_index: jax.Array
 
 
-class TerrainIndex(NamedTuple):
+@pytree_dataclass
+class TerrainIndex:
     """Per-terrain tables that make FootCost O(columns) per candidate.
 
     obstacles_before: (nx, ny + 1) int32, number of obstacle cells in column
@@ -87,7 +89,7 @@ class TerrainIndex(NamedTuple):
     obstacles_before: jax.Array
     height_max: jax.Array
     height_padded: jax.Array
-    pad: int
+    pad: int = static_field()
 
 
 def window_cells(radius: float, resolution: float) -> int:

@@ -1,0 +1,149 @@
+"""A plain NumPy implementation of FootCost and of the paper's ordered step search.
+
+Written independently of the JAX code (cell coverage by a separating-axis
+test over a bounding box, planes by ``numpy.linalg.lstsq``, the ordered list
+walked one action at a time with the paper's stopping rule), it serves two
+purposes: the reference the tests compare the JAX selectors against, and the
+baseline the benchmarks report their speed-up over. float64 throughout.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def _touched(x, y, th, hl, hw, res, origin, shape):
+    """Cells (ix, iy arrays) whose interior a rotated rectangle overlaps, and whether it leaves the map."""
+    c, s = math.cos(th), math.sin(th)
+    P = np.array([[x + c * a * hl - s * b * hw, y + s * a * hl + c * b * hw]
+                  for a, b in ((1, 1), (-1, 1), (-1, -1), (1, -1))])
+    lo = np.floor((P.min(0) - origin) / res).astype(int)
+    hi = np.ceil((P.max(0) - origin) / res).astype(int) - 1
+    ix, iy = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
+    ix, iy = ix.ravel(), iy.ravel()
+    xl, yl = origin[0] + ix * res, origin[1] + iy * res
+    xh, yh = xl + res, yl + res
+    sep = (xh <= P[:, 0].min()) | (xl >= P[:, 0].max()) | (yh <= P[:, 1].min()) | (yl >= P[:, 1].max())
+    for ax in ((c, s), (-s, c)):
+        proj = P @ np.array(ax)
+        corners = np.stack([xl * ax[0] + yl * ax[1], xh * ax[0] + yl * ax[1],
+                            xl * ax[0] + yh * ax[1], xh * ax[0] + yh * ax[1]])
+        sep |= (corners.max(0) <= proj.min()) | (corners.min(0) >= proj.max())
+    ix, iy = ix[~sep], iy[~sep]
+    off = (ix < 0) | (iy < 0) | (ix >= shape[0]) | (iy >= shape[1])
+    return ix[~off], iy[~off], bool(off.any())
+
+
+class NumpyFootCost:
+    """FootCost of one candidate at a time, from NumPy copies of a terrain and robot."""
+
+    def __init__(self, terrain, robot):
+        t = terrain.to_numpy()
+        self.height = t["height"].astype(np.float64)
+        self.free = t["free"]
+        self.res = t["resolution"]
+        self.origin = t["origin"].astype(np.float64)
+        self.has_height = t["has_height"]
+        g = lambda v: np.asarray(v, np.float64)  # noqa: E731
+        self.L, self.W, self.m = float(robot.foot_length), float(robot.foot_width), float(robot.margin)
+        self.p0 = g(robot.p0)
+        self.dt = float(robot.step_time)
+        self.actions = g(robot.actions)
+        self.action_cost = g(robot.action_cost)
+        self.clearance = g(robot.clearance)
+        self.max_dh = g(robot.max_step_height)
+        self.w, self.rw = float(robot.w), float(robot.rotation_weight)
+        self.metrics = {k: float(v) for k, v in vars(robot.metrics).items()}
+
+    def plane(self, pose):
+        """(height at the centre, slope, roughness, bump, band) of the footprint at ``pose``."""
+        args = (self.res, self.origin, self.height.shape)
+        fx, fy, _ = _touched(pose[0], pose[1], pose[2], self.L / 2, self.W / 2, *args)
+        gx, gy, _ = _touched(pose[0], pose[1], pose[2], self.L / 2 + self.m, self.W / 2 + self.m, *args)
+        u = self.origin[0] + (fx + 0.5) * self.res - pose[0]
+        v = self.origin[1] + (fy + 0.5) * self.res - pose[1]
+        h = self.height[fx, fy]
+        A = np.stack([np.ones_like(u), u, v], 1)
+        coef = np.linalg.lstsq(A, h, rcond=None)[0]
+        r = h - A @ coef
+        foot = set(zip(fx.tolist(), fy.tolist(), strict=True))
+        band = [(a, b) for a, b in zip(gx.tolist(), gy.tolist(), strict=True) if (a, b) not in foot]
+        band_dev = 0.0
+        if band:
+            bx, by = np.array(band).T
+            bu = self.origin[0] + (bx + 0.5) * self.res - pose[0]
+            bv = self.origin[1] + (by + 0.5) * self.res - pose[1]
+            band_dev = float(np.abs(self.height[bx, by] - coef[0] - coef[1] * bu - coef[2] * bv).max())
+        return coef[0], math.atan(math.hypot(coef[1], coef[2])), float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev
+
+    def cost(self, stance_h, start_h, swing_from, pose, a):
+        """FootCost of the swing foot at ``pose`` executing action ``a`` (+inf if invalid)."""
+        gx, gy, off = _touched(pose[0], pose[1], pose[2], self.L / 2 + self.m, self.W / 2 + self.m,
+                               self.res, self.origin, self.free.shape)
+        if off or not self.free[gx, gy].all():
+            return math.inf
+        total = self.action_cost[a]
+        if not self.has_height:
+            return total
+        m = self.metrics
+        hgt, slope, rough, bump, band = self.plane(pose)
+        for val, wt, lim in ((slope, m["slope_weight"], m["slope_limit"]),
+                             (rough, m["roughness_weight"], m["roughness_limit"]),
+                             (bump, m["bump_weight"], m["bump_limit"]),
+                             (abs(hgt - stance_h), m["step_weight"], self.max_dh[a]),
+                             (band, m["band_weight"], m["band_limit"])):
+            if val > lim:
+                return math.inf
+            total += wt * val
+        if swing_from is not None:
+            d = np.hypot(pose[0] - swing_from[0], pose[1] - swing_from[1])
+            th = math.atan2(pose[1] - swing_from[1], pose[0] - swing_from[0]) if d > 0 else 0.0
+            cx, cy, off = _touched(0.5 * (pose[0] + swing_from[0]), 0.5 * (pose[1] + swing_from[1]), th, d / 2,
+                                   self.W / 2, self.res, self.origin, self.free.shape)
+            if off:
+                return math.inf
+            if cx.size and self.height[cx, cy].max() - max(start_h, hgt) > self.clearance[a]:
+                return math.inf
+        return total
+
+
+def _compose(base, rel):
+    c, s = math.cos(base[2]), math.sin(base[2])
+    return np.array([base[0] + c * rel[0] - s * rel[1], base[1] + s * rel[0] + c * rel[1], base[2] + rel[2]])
+
+
+def ordered_select(fc: NumpyFootCost, targets, stance, stance_side, command, swing_from=None):
+    """The paper's search in NumPy: (index, cost, evaluated); index -1 if no valid step.
+
+    ``targets`` is a :class:`ijoy_jax.select.Targets` (its lattice and L_i
+    are reused; the walk itself is plain Python).
+    """
+    swing = -1.0 if stance_side > 0 else 1.0
+    mirror = np.array([1.0, swing, swing])
+    command = np.asarray(command, np.float64)
+    if not np.all(np.isfinite(command)):
+        command = np.zeros(3)
+    p_next = fc.p0 * mirror + fc.dt * command
+    left = p_next * mirror
+    idx = [int(np.clip(np.round((left[k] - targets.lo[k]) / targets.step[k]), 0, targets.counts[k] - 1))
+           for k in range(3)]
+    fi = (idx[0] * targets.counts[1] + idx[1]) * targets.counts[2] + idx[2]
+    order = np.asarray(targets.order[fi])
+    dist = np.asarray(targets.dist[fi], np.float64)
+    stance = np.asarray(stance, np.float64)
+    stance_h = start_h = 0.0
+    if fc.has_height:
+        stance_h = fc.plane(stance)[0]
+        if swing_from is not None:
+            start_h = fc.plane(swing_from)[0]
+    best, best_cost, n = -1, math.inf, len(order)
+    for j, a in enumerate(order):
+        pose = _compose(stance, fc.actions[a] * mirror)
+        c = fc.cost(stance_h, start_h, swing_from, pose, a) + fc.w * dist[a]
+        if c < best_cost:
+            best, best_cost = int(a), c
+        if j + 1 < n and best_cost <= fc.w * dist[order[j + 1]]:
+            return best, best_cost, j + 1
+    return best, best_cost, n

@@ -1,0 +1,214 @@
+"""Step selection: exhaustive vs the paper's ordered search vs a NumPy reference, and edge cases."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ijoy_jax as ij
+from ijoy_jax import select
+from ijoy_jax.numpy_ref import NumpyFootCost, ordered_select
+
+RES = 0.02
+ROBOT = ij.robots.hrp2(margin=0.02)
+TARGETS = ij.make_targets(ROBOT)
+SHAPE = (48, 48)
+# Two actions whose costs differ by less than float32 rounding of the sums
+# involved may be ranked differently by differently fused computations.
+TIE = 1e-5
+
+
+def _random_terrains(seed, n, has_height):
+    rng = np.random.default_rng(seed)
+    free = rng.random((n,) + SHAPE) > rng.uniform(0.0, 0.03, (n, 1, 1))
+    # a few walls and blocks so that some queries have no valid step at all
+    for k in range(n):
+        if rng.random() < 0.3:
+            a, b = rng.integers(0, SHAPE[0] - 8, 2)
+            free[k, a:a + rng.integers(2, 30), b:b + rng.integers(2, 30)] = False
+    height = np.zeros((n,) + SHAPE, np.float32)
+    if has_height:
+        ramp = rng.uniform(-0.2, 0.2, (n, 1, 1)) * np.arange(SHAPE[0])[None, :, None] * RES
+        steps = 0.03 * (np.arange(SHAPE[1])[None, None, :] > rng.integers(10, 40, (n, 1, 1)))
+        height = (ramp + steps + 0.002 * rng.standard_normal((n,) + SHAPE)).astype(np.float32)
+    return ij.Terrain(jnp.asarray(height), jnp.asarray(free), jnp.zeros((n, 2)), RES, has_height)
+
+
+def _random_queries(seed, n):
+    rng = np.random.default_rng(seed)
+    stance = np.column_stack([rng.uniform(0.35, 0.6, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+    side = rng.choice([-1, 1], n)
+    command = np.column_stack([rng.uniform(-0.3, 0.3, n), rng.uniform(-0.2, 0.2, n), rng.uniform(-0.5, 0.5, n)])
+    # swing foot somewhere behind-beside the stance foot (what a previous step would leave)
+    rel = np.column_stack([rng.uniform(-0.2, 0.2, n), -side * rng.uniform(0.19, 0.33, n), rng.uniform(-0.3, 0.3, n)])
+    c, s = np.cos(stance[:, 2]), np.sin(stance[:, 2])
+    swing_from = np.column_stack([stance[:, 0] + c * rel[:, 0] - s * rel[:, 1],
+                                  stance[:, 1] + s * rel[:, 0] + c * rel[:, 1], stance[:, 2] + rel[:, 2]])
+    return [jnp.asarray(a, jnp.float32) for a in (stance, side, command, swing_from)]
+
+
+def _batched(method, with_path):
+    def one(t, st, sd, cmd, sw):
+        return ij.select_step(t, ROBOT, st, sd, cmd, method, swing_from=sw if with_path else None,
+                              targets=TARGETS)
+
+    # lax.map in vmapped chunks: 2.5D windows of thousands of decisions at once would not fit in memory.
+    return jax.jit(lambda *args: jax.lax.map(lambda a: one(*a), args, batch_size=128))
+
+
+def _agree(a, b):
+    ia, ib = np.asarray(a.index), np.asarray(b.index)
+    ca, cb = np.asarray(a.cost), np.asarray(b.cost)
+    np.testing.assert_array_equal(np.asarray(a.valid), np.asarray(b.valid))
+    np.testing.assert_array_equal(np.isinf(ca), np.isinf(cb))
+    fin = np.isfinite(ca)
+    np.testing.assert_allclose(ca[fin], cb[fin], rtol=TIE, atol=TIE)
+    differ = ia != ib
+    # Different indices only where the two costs tie to rounding.
+    assert np.all(np.abs(ca[differ & fin] - cb[differ & fin]) <= TIE)
+    return differ.mean()
+
+
+@pytest.mark.parametrize("has_height", [False, True])
+def test_ordered_equals_exhaustive_on_thousands_of_random_queries(has_height):
+    n_t, n_q = (32, 64) if not has_height else (32, 32)  # 2048 (2D) + 1024 (2.5D) decisions
+    terrains = _random_terrains(1 + has_height, n_t, has_height)
+    queries = _random_queries(3 + has_height, n_t * n_q)
+    rep = jax.tree_util.tree_map(lambda x: jnp.repeat(x, n_q, axis=0), terrains)
+    ex = _batched("exhaustive", has_height)(rep, *queries)
+    od = _batched("ordered", has_height)(rep, *queries)
+    assert _agree(ex, od) < 0.01
+    valid = np.asarray(ex.valid)
+    assert 0.02 < 1 - valid.mean() < 0.6, "the random set must contain both valid and blocked queries"
+    # The early exit really happens: the ordered search evaluates fewer actions on average.
+    assert np.asarray(od.evaluated).mean() < 0.6 * ROBOT.num_actions
+    assert np.all(np.asarray(ex.evaluated) == ROBOT.num_actions)
+
+
+@pytest.mark.parametrize("has_height", [False, True])
+def test_matches_numpy_reference_of_the_papers_algorithm(has_height):
+    terrains = _random_terrains(7 + has_height, 6, has_height)
+    stance, side, command, swing_from = _random_queries(9, 60)
+    got = _batched("ordered", has_height)(
+        jax.tree_util.tree_map(lambda x: jnp.repeat(x, 10, axis=0), terrains), stance, side, command, swing_from)
+    for q in range(60):
+        t = jax.tree_util.tree_map(lambda x, q=q: x[q // 10], terrains)
+        ref_i, ref_c, _ = ordered_select(NumpyFootCost(t, ROBOT), TARGETS, np.asarray(stance[q], np.float64),
+                                         int(side[q]), np.asarray(command[q]),
+                                         np.asarray(swing_from[q], np.float64) if has_height else None)
+        assert bool(got.valid[q]) == (ref_i >= 0), q
+        if ref_i >= 0:
+            # float32 JAX vs float64 NumPy: costs to 1e-4; the index agrees unless costs tie to that.
+            assert float(got.cost[q]) == pytest.approx(ref_c, abs=1e-4), q
+            assert int(got.index[q]) == ref_i or abs(float(got.cost[q]) - ref_c) < 1e-4, q
+
+
+def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost():
+    terrains = _random_terrains(11, 1, True)
+    t = jax.tree_util.tree_map(lambda x: x[0], terrains)
+    stance, side, command, swing_from = _random_queries(12, 20)
+    for q in range(20):
+        ch = ij.select_step(t, ROBOT, stance[q], side[q], command[q], swing_from=swing_from[q], quantize=False)
+        steps = ij.action_steps(ROBOT, stance[q], side[q])
+        fc = np.asarray(ij.foot_cost(t, ROBOT, stance[q], side[q], steps, swing_from=swing_from[q],
+                                     action_index=np.arange(496)), np.float64)
+        p_next = np.asarray(ROBOT.p0) * [1, -float(side[q]), -float(side[q])] + 0.8 * np.asarray(command[q])
+        rel = np.asarray(ij.geometry.relative(stance[q], steps), np.float64)
+        d = np.hypot(*(rel[:, :2] - p_next[:2]).T) + 100 * np.abs((rel[:, 2] - p_next[2] + np.pi) % (2 * np.pi) - np.pi)
+        total = fc + d
+        if np.isinf(total).all():
+            assert not bool(ch.valid) and int(ch.index) == -1
+            continue
+        assert float(ch.cost) == pytest.approx(total.min(), rel=1e-5, abs=1e-5)
+        assert total[int(ch.index)] <= total.min() + 1e-5
+
+
+def test_no_valid_step_is_explicit_and_finite():
+    t = ij.terrain.from_arrays(None, np.zeros(SHAPE, bool), RES)  # all obstacle
+    for method in select.METHODS:
+        ch = ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], method)
+        assert not bool(ch.valid) and np.isinf(float(ch.cost))
+        assert np.all(np.isfinite(np.asarray(ch.pose)))
+        if method != "naive":
+            assert int(ch.index) == -1
+            # the reported pose is stepping in place, never NaN
+            np.testing.assert_allclose(np.asarray(ch.pose), [0.5, 0.69, 0.0], atol=1e-6)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_command_means_step_in_place_and_is_flagged(bad):
+    t = ij.terrain.flat(SHAPE, RES)
+    ch = ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.2, bad, 0.0])
+    ref = ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.0, 0.0, 0.0])
+    assert not bool(ch.command_ok) and bool(ref.command_ok)
+    np.testing.assert_array_equal(np.asarray(ch.pose), np.asarray(ref.pose))
+    np.testing.assert_allclose(np.asarray(ch.pose), [0.5, 0.69, 0.0], atol=1e-6)  # p0: in place
+
+
+def test_commanded_rotation_is_preferred_when_valid():
+    """A step with the commanded rotation beats any closer step with another rotation."""
+    free = np.ones(SHAPE, bool)
+    t = ij.terrain.from_arrays(None, free, RES)
+    stance = np.array([0.4, 0.4, 0.0])
+    dth = math.radians(20.0) / 3  # one lattice rotation
+    ch = ij.select_step(t, ROBOT, stance, -1, [0.25, 0.0, dth / 0.8])
+    assert float(ch.pose[2]) == pytest.approx(dth, abs=1e-5)
+    # Block every step with that rotation except far ones: still the commanded rotation wins.
+    steps = np.asarray(ij.action_steps(ROBOT, stance, -1))
+    rot_ok = np.isclose(steps[:, 2], dth, atol=1e-5)
+    fc = np.asarray(ij.foot_cost(t, ROBOT, stance, -1, steps, action_index=np.arange(496)))
+    assert np.all(fc[rot_ok] == 0)
+    # Wall in front of the forward steps: the chosen step keeps the rotation, moving less far.
+    free2 = free.copy()
+    free2[int(0.62 / RES):, :] = False
+    t2 = ij.terrain.from_arrays(None, free2, RES)
+    ch2 = ij.select_step(t2, ROBOT, stance, -1, [0.25, 0.0, dth / 0.8])
+    assert bool(ch2.valid) and float(ch2.pose[2]) == pytest.approx(dth, abs=1e-5)
+    assert float(ch2.pose[0]) < float(ch.pose[0])
+
+
+def test_quantize_scores_against_f_or_p_next():
+    t = ij.terrain.flat(SHAPE, RES)
+    cmd = np.array([0.113, 0.031, 0.0])
+    q = ij.select_step(t, ROBOT, [0.4, 0.4, 0.0], -1, cmd)
+    p = ij.select_step(t, ROBOT, [0.4, 0.4, 0.0], -1, cmd, quantize=False)
+    p_next = np.array([0.4, 0.4 + 0.19, 0.0]) + 0.8 * cmd
+    np.testing.assert_allclose(np.asarray(p.target), p_next, atol=1e-6)
+    f = np.asarray(q.target)
+    # f_i is on the lattice (half an action spacing) and within half a spacing of p_next
+    assert abs(f[0] - p_next[0]) <= 0.0125 + 1e-6 and abs(f[1] - p_next[1]) <= 0.005 + 1e-6
+    assert float(q.cost) == pytest.approx(float(np.hypot(*(np.asarray(q.pose)[:2] - f[:2]))), abs=1e-6)
+
+
+def test_naive_takes_the_nearest_action_whatever_the_terrain():
+    free = np.ones(SHAPE, bool)
+    free[int(0.55 / RES):int(0.7 / RES), :] = False
+    t = ij.terrain.from_arrays(None, free, RES)
+    ch = ij.select_step(t, ROBOT, [0.4, 0.4, 0.0], -1, [0.25, 0.0, 0.0], "naive")
+    np.testing.assert_allclose(np.asarray(ch.pose), [0.6, 0.59, 0.0], atol=1e-6)
+    assert not bool(ch.valid) and int(ch.index) >= 0
+
+
+def test_no_recompile_across_parameters_and_commands():
+    t = _random_terrains(5, 1, True)
+    t = jax.tree_util.tree_map(lambda x: x[0], t)
+    args = ([0.5, 0.5, 0.1], 1)
+    ij.select_step(t, ROBOT, *args, [0.1, 0.0, 0.0], targets=TARGETS)
+    n = select._select_jit._cache_size()
+    for r, cmd in [(ROBOT.replace(w=jnp.float32(5.0)), [0.2, 0.1, 0.0]),
+                   (ROBOT.replace(margin=jnp.float32(0.1)), [0.0, 0.0, 0.3]),
+                   (ROBOT.replace(step_time=jnp.float32(0.5)), [np.nan, 0.0, 0.0])]:
+        ij.select_step(t, r, *args, cmd, targets=TARGETS)
+    assert select._select_jit._cache_size() == n
+
+
+def test_bad_input_at_the_boundary():
+    t = ij.terrain.flat(SHAPE, RES)
+    with pytest.raises(ValueError, match="method"):
+        ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.1, 0.0, 0.0], method="astar")
+    with pytest.raises(ValueError, match="command"):
+        ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.1, 0.0])
+    with pytest.raises(ValueError, match="stance_side"):
+        ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], 2, [0.1, 0.0, 0.0])
