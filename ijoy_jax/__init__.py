@@ -7,6 +7,7 @@ the left foot and -1 for the right.
 Public API:
   Terrain, terrain.from_arrays / from_image / flat   the environment e
   scene.rasterize                                    posed boxes/cylinders -> map
+  generators.FAMILIES / generate / batch             procedural terrains (jit/vmap)
   robots.hrp2 / make_robot / lattice_actions         footprint and action set S
   foot_cost, foot_cost_terms                         FootCost of candidate steps
   action_steps                                       world poses of every action
@@ -14,7 +15,7 @@ Public API:
   rollout, Trajectory, perfect_walker, Walker        the control loop (Algorithm 1)
 """
 
-from ijoy_jax import control, footcost, geometry, plot, robots, scene, select, terrain
+from ijoy_jax import control, footcost, generators, geometry, plot, robots, scene, select, terrain
 from ijoy_jax.control import Trajectory, Walker, perfect_walker, rollout
 from ijoy_jax.footcost import FootCostTerms, foot_cost, foot_cost_terms
 from ijoy_jax.robots import LEFT, RIGHT, Robot, TerrainMetrics
@@ -39,6 +40,7 @@ __all__ = [
     "foot_cost",
     "foot_cost_terms",
     "footcost",
+    "generators",
     "geometry",
     "make_targets",
     "perfect_walker",

@@ -25,7 +25,7 @@ from jax import lax
 from ijoy_jax import geometry
 from ijoy_jax.footcost import _validate, foot_cost_terms_indexed, index_terrain
 from ijoy_jax.robots import LEFT, Robot
-from ijoy_jax.select import METHODS, ideal_step, make_targets, select_step_indexed
+from ijoy_jax.select import METHODS, Targets, ideal_step, make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain
 
 class StanceInfo(NamedTuple):
@@ -141,11 +141,16 @@ def rollout_core(
     walker: Walker | None = None,
     swing_path: bool = True,
     quantize: bool = True,
+    targets: Targets | None = None,
 ) -> Trajectory:
-    """The rollout without input checks or its own jit (call it inside your jit/vmap)."""
+    """The rollout without input checks or its own jit (call it inside your jit/vmap).
+
+    ``targets`` (:func:`ijoy_jax.make_targets`) may be prebuilt once per robot;
+    by default it is built inside, which costs a sort of |F| x N entries.
+    """
     walker = perfect_walker() if walker is None else walker
     index = index_terrain(terrain, robot)
-    targets = make_targets(robot)
+    targets = make_targets(robot) if targets is None else targets
     clear = robot.replace(margin=jnp.zeros_like(robot.margin))
     commands = jnp.asarray(commands, jnp.float32)
     if commands.ndim == 1:
@@ -216,6 +221,7 @@ def rollout(
     walker: Walker | None = None,
     swing_path: bool = True,
     quantize: bool = True,
+    targets: Targets | None = None,
 ) -> Trajectory:
     """Walk the robot with the joystick for ``num_steps`` steps (Algorithm 1), jitted as one scan.
 
@@ -232,6 +238,8 @@ def rollout(
       walker: the robot executing the steps; default :func:`perfect_walker`.
       swing_path: check the swing corridor on 2.5D terrains.
       quantize: score against F's nearest target (the paper) or p_next.
+      targets: prebuilt :func:`ijoy_jax.make_targets` of this robot (F and
+        L_i); built inside the jitted rollout when None.
 
     Returns:
       :class:`Trajectory`. Once no valid step exists the robot stops and
@@ -261,6 +269,6 @@ def rollout(
     if first_swing not in (LEFT, -LEFT):
         raise ValueError(f"first_swing must be +1 (left) or -1 (right), got {first_swing!r}")
     return _rollout_jit(terrain, robot, start, commands, int(num_steps), method, first_swing, walker,
-                        swing_path, quantize)
+                        swing_path, quantize, targets)
 
 rollout_batched = functools.partial(jax.vmap, rollout_core)

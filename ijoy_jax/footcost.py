@@ -148,6 +148,22 @@ class _Plane(NamedTuple):
     band: jax.Array  # largest |residual| in the safety band (m)
 
 
+def _solve3(a00, a01, a02, a11, a12, a22, r0, r1, r2):
+    """Solve the symmetric 3x3 system [[a00 a01 a02] [a01 a11 a12] [a02 a12 a22]] x = r (Cramer's rule).
+
+    Cheaper than a batched LU for millions of tiny systems; a singular
+    system gives non-finite values, which the caller replaces.
+    """
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    x0 = (r0 * c00 + r1 * c01 + r2 * c02) / det
+    x1 = (r0 * c01 + r1 * (a00 * a22 - a02 * a02) + r2 * (a01 * a02 - a00 * a12)) / det
+    x2 = (r0 * c02 + r1 * (a01 * a02 - a00 * a12) + r2 * (a00 * a11 - a01 * a01)) / det
+    return x0, x1, x2
+
+
 def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> _Plane:
     """Least-squares plane under the footprint at ``pose`` (world) and the metrics around it."""
     res = terrain.resolution
@@ -165,18 +181,18 @@ def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: ja
     window = lax.dynamic_slice(index.height_padded, (sx, sy), (k, k))
     m_foot = geometry.spans_mask(foot, iy0, k).astype(window.dtype)
     m_band = geometry.spans_mask(grown, iy0, k) & (m_foot == 0)
-    u = ((grown.ix[:, None] + 0.5) * res - cx) * jnp.ones((1, k))
-    v = ((iy0 + jnp.arange(k)[None, :] + 0.5) * res - cy) * jnp.ones((k, 1))
-    # Heights relative to the window's mean under the foot, for float32 conditioning.
+    u = ((grown.ix + 0.5) * res - cx)[:, None]  # (K, 1) cell centres relative to the foot centre
+    v = ((iy0 + jnp.arange(k) + 0.5) * res - cy)[None, :]  # (1, K)
+    # Heights relative to the mean under the foot, for float32 conditioning.
     n = jnp.maximum(jnp.sum(m_foot), 1.0)
     h_ref = jnp.sum(m_foot * window) / n
     hrel = window - h_ref
+    mh = m_foot * hrel
     su, sv = jnp.sum(m_foot * u), jnp.sum(m_foot * v)
-    suu, svv, suv = jnp.sum(m_foot * u * u), jnp.sum(m_foot * v * v), jnp.sum(m_foot * u * v)
+    suu, svv, suv = jnp.sum(m_foot * (u * u)), jnp.sum(m_foot * (v * v)), jnp.sum(m_foot * (u * v))
+    sh, suh, svh = jnp.sum(mh), jnp.sum(mh * u), jnp.sum(mh * v)
     ridge = 1e-6 * n * res * res  # keeps a one-column footprint well-posed (slope -> 0)
-    A = jnp.array([[n, su, sv], [su, suu + ridge, suv], [sv, suv, svv + ridge]])
-    rhs = jnp.array([jnp.sum(m_foot * hrel), jnp.sum(m_foot * u * hrel), jnp.sum(m_foot * v * hrel)])
-    a, b, c = jnp.linalg.solve(A, rhs)
+    a, b, c = _solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
     resid = hrel - (a + b * u + c * v)
     slope = jnp.arctan(jnp.sqrt(b * b + c * c))
     roughness = jnp.sum(m_foot * jnp.abs(resid)) / n

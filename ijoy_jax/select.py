@@ -113,7 +113,7 @@ def _targets_for(robot: Robot, lo, step, counts) -> Targets:
     shell = Targets(order=jnp.zeros((0, 0), jnp.int32), dist=jnp.zeros((0, 0)), lo=lo, step=step, counts=counts)
     pts = shell.points()
     d = dist(robot.actions[None, :, :], pts[:, None, :], robot.rotation_weight)  # (|F|, N)
-    order = jnp.lexsort((jnp.broadcast_to(jnp.arange(d.shape[1]), d.shape), d), axis=-1).astype(jnp.int32)
+    order = jnp.argsort(d, axis=-1, stable=True).astype(jnp.int32)  # ties: lower index first
     return shell.replace(order=order, dist=d.astype(jnp.float32))
 
 

@@ -1,0 +1,165 @@
+"""Benchmarks behind ``ijoy bench NAME`` (results go to BENCHMARKS.md by hand).
+
+Each row reports compile time and steady-state run time separately (median
+of repeated calls after ``block_until_ready``), the throughput, and XLA's own
+FLOP and byte counts per decision for the roofline. Everything runs on the
+default JAX device, so the same command measures the CPU here and a GPU on
+the lent machine.
+
+  footcost  candidate foothold evaluations per second (HRP-2, 2 cm grid, 2D and 2.5D)
+  select    full decisions per second (exhaustive and ordered, 2.5D with swing path),
+            closed-loop rollout steps per second, and the NumPy implementation
+            of the paper's algorithm in the same run, for the ratio.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import ijoy_jax as ij
+from ijoy_jax import footcost, select
+from ijoy_jax.control import rollout_core
+
+GRID = (200, 200)  # 4 m x 4 m
+RES = 0.02
+
+
+def _terrain(has_height: bool, seed: int = 0) -> ij.Terrain:
+    rng = np.random.default_rng(seed)
+    free = rng.random(GRID) > 0.002
+    h = None
+    if has_height:
+        x = np.arange(GRID[0])[:, None] * RES
+        h = (0.03 * np.sin(2.0 * x) + 0.002 * rng.standard_normal(GRID)).astype(np.float32)
+    return ij.terrain.from_arrays(h, free, RES)
+
+
+def _queries(n: int, seed: int = 1):
+    rng = np.random.default_rng(seed)
+    stance = np.column_stack([rng.uniform(1.0, 3.0, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+    command = np.column_stack([rng.uniform(-0.25, 0.25, n), rng.uniform(-0.15, 0.15, n), rng.uniform(-0.4, 0.4, n)])
+    c, s = np.cos(stance[:, 2]), np.sin(stance[:, 2])
+    rel = np.column_stack([rng.uniform(-0.2, 0.2, n), -rng.uniform(0.19, 0.33, n)])  # left swing foot behind
+    swing = np.column_stack([stance[:, 0] + c * rel[:, 0] - s * rel[:, 1], stance[:, 1] + s * rel[:, 0] + c * rel[:, 1],
+                             stance[:, 2]])
+    f = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
+    return f(stance), f(command), f(swing)
+
+
+def _time(fn, *args, repeats: int = 10, min_seconds: float = 0.5):
+    t0 = time.perf_counter()
+    compiled = fn.lower(*args).compile()
+    compile_s = time.perf_counter() - t0
+    jax.block_until_ready(compiled(*args))
+    times = []
+    start = time.perf_counter()
+    while len(times) < repeats or (time.perf_counter() - start < min_seconds and len(times) < 1000):
+        t0 = time.perf_counter()
+        jax.block_until_ready(compiled(*args))
+        times.append(time.perf_counter() - t0)
+    cost = compiled.cost_analysis()
+    cost = cost[0] if isinstance(cost, (list, tuple)) else cost
+    cost = cost or {}
+    return compile_s, float(np.median(times)), float(cost.get("flops", np.nan)), float(cost.get("bytes accessed", np.nan))
+
+
+def _env() -> dict:
+    dev = jax.devices()[0]
+    return {"device": getattr(dev, "device_kind", str(dev)), "platform": dev.platform, "jax": jax.__version__,
+            "cpu": platform.processor() or platform.machine(), "date": time.strftime("%Y-%m-%d")}
+
+
+def _emit(rows: list, row: dict) -> None:
+    rows.append(row)
+    print(json.dumps(row), flush=True)
+
+
+def _batched(one, chunk: int):
+    """Map ``one`` over a batch in vmapped chunks of ``chunk`` (bounded memory for huge batches)."""
+
+    def run(*args):
+        n = args[0].shape[0]
+        if n <= chunk:
+            return jax.vmap(one)(*args)
+        return jax.lax.map(lambda a: one(*a), args, batch_size=chunk)
+
+    return jax.jit(run)
+
+
+def bench_footcost(rows, quick: bool, chunk: int):
+    robot = ij.robots.hrp2(margin=0.02)
+    n_act = robot.num_actions
+    sizes = [1, 16] if quick else [1, 16, 256, 2048, 16384]
+    for has_height in (False, True):
+        terrain = _terrain(has_height)
+        index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
+
+        def one(stance, swing, terrain=terrain, index=index):
+            steps = ij.action_steps(robot, stance, -1)
+            return footcost.foot_cost_terms_indexed(terrain, index, robot, stance, -1, steps, swing,
+                                                    jnp.arange(n_act)).total
+
+        f = _batched(one, chunk)
+        for b in sizes:
+            stance, _, swing = _queries(b)
+            comp, run, flops, nbytes = _time(f, stance, swing)
+            _emit(rows, dict(_env(), bench="footcost", terrain="2.5D" if has_height else "2D", batch=b,
+                             candidates=b * n_act, compile_s=round(comp, 3), run_s=run,
+                             evals_per_s=b * n_act / run, flops_per_eval=flops / (b * n_act),
+                             bytes_per_eval=nbytes / (b * n_act)))
+
+
+def bench_select(rows, quick: bool, chunk: int):
+    robot = ij.robots.hrp2(margin=0.02)
+    targets = ij.make_targets(robot)
+    terrain = _terrain(True)
+    index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
+    sizes = [1, 16] if quick else [1, 16, 256, 4096, 32768]
+    for method in ("exhaustive", "ordered"):
+        def one(stance, command, swing, method=method):
+            c = select.select_step_indexed(terrain, index, robot, targets, stance, -1, command, method, swing)
+            return c.index, c.cost
+
+        f = _batched(one, chunk)
+        for b in sizes:
+            stance, command, swing = _queries(b)
+            comp, run, flops, nbytes = _time(f, stance, command, swing)
+            _emit(rows, dict(_env(), bench="select", method=method, terrain="2.5D", batch=b, compile_s=round(comp, 3),
+                             run_s=run, decisions_per_s=b / run, us_per_decision=1e6 * run / b,
+                             flops_per_decision=flops / b, bytes_per_decision=nbytes / b))
+    # Closed loop: B robots walking 16 steps on the same 2.5D terrain.
+    steps = 16
+    for b in ([1, 8] if quick else [1, 64, 1024]):
+        starts = jnp.asarray(np.stack([[[1.0, 1.0 + 0.095 + 0.01 * (k % 50), 0.0], [1.0, 1.0 - 0.095 + 0.01 * (k % 50), 0.0]]
+                                       for k in range(b)]), jnp.float32)
+        cmd = jnp.array([0.2, 0.0, 0.1], jnp.float32)
+        f = jax.jit(jax.vmap(lambda s: rollout_core(terrain, robot, s, cmd, steps, "ordered",
+                                                    targets=targets).footsteps))
+        comp, run, _, _ = _time(f, starts, repeats=3, min_seconds=0.2)
+        _emit(rows, dict(_env(), bench="rollout", method="ordered", terrain="2.5D", batch=b, steps=steps,
+                         compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
+    # The paper's algorithm in plain NumPy, same terrain and queries, one decision at a time.
+    from ijoy_jax.numpy_ref import NumpyFootCost, ordered_select
+
+    ref = NumpyFootCost(terrain, robot)
+    n = 5 if quick else 20
+    stance, command, swing = (np.asarray(a, np.float64) for a in _queries(n))
+    t0 = time.perf_counter()
+    for q in range(n):
+        ordered_select(ref, targets, stance[q], -1, command[q], swing[q])
+    run = (time.perf_counter() - t0) / n
+    _emit(rows, dict(_env(), bench="select", method="numpy-ordered", terrain="2.5D", batch=1, run_s=run,
+                     decisions_per_s=1.0 / run, us_per_decision=1e6 * run))
+
+
+def run(name: str, quick: bool = False, chunk: int = 1024) -> list:
+    """Run benchmark ``name`` ("footcost" or "select"); print and return JSON rows."""
+    rows: list = []
+    {"footcost": bench_footcost, "select": bench_select}[name](rows, quick, chunk)
+    return rows
