@@ -52,14 +52,17 @@ def _queries(n: int, seed: int = 1):
     return f(stance), f(command), f(swing)
 
 
-def _time(fn, *args, repeats: int = 10, min_seconds: float = 0.5):
+def _time(fn, *args, repeats: int = 10, min_seconds: float = 0.5, max_seconds: float = 8.0):
     t0 = time.perf_counter()
     compiled = fn.lower(*args).compile()
     compile_s = time.perf_counter() - t0
     jax.block_until_ready(compiled(*args))
     times = []
     start = time.perf_counter()
-    while len(times) < repeats or (time.perf_counter() - start < min_seconds and len(times) < 1000):
+    while len(times) < 2 or (
+        time.perf_counter() - start < max_seconds
+        and (len(times) < repeats or (time.perf_counter() - start < min_seconds and len(times) < 1000))
+    ):
         t0 = time.perf_counter()
         jax.block_until_ready(compiled(*args))
         times.append(time.perf_counter() - t0)
@@ -67,6 +70,10 @@ def _time(fn, *args, repeats: int = 10, min_seconds: float = 0.5):
     cost = cost[0] if isinstance(cost, (list, tuple)) else cost
     cost = cost or {}
     return compile_s, float(np.median(times)), float(cost.get("flops", np.nan)), float(cost.get("bytes accessed", np.nan))
+
+
+def _cpu() -> bool:
+    return jax.devices()[0].platform == "cpu"
 
 
 def _env() -> dict:
@@ -95,7 +102,7 @@ def _batched(one, chunk: int):
 def bench_footcost(rows, quick: bool, chunk: int):
     robot = ij.robots.hrp2(margin=0.02)
     n_act = robot.num_actions
-    sizes = [1, 16] if quick else [1, 16, 256, 2048, 16384]
+    sizes = [1, 16] if quick else ([1, 16, 256, 2048] if _cpu() else [1, 16, 256, 2048, 16384, 65536])
     for has_height in (False, True):
         terrain = _terrain(has_height)
         index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
@@ -120,7 +127,7 @@ def bench_select(rows, quick: bool, chunk: int):
     targets = ij.make_targets(robot)
     terrain = _terrain(True)
     index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
-    sizes = [1, 16] if quick else [1, 16, 256, 4096, 32768]
+    sizes = [1, 16] if quick else ([1, 16, 256, 1024] if _cpu() else [1, 16, 256, 4096, 32768])
     for method in ("exhaustive", "ordered"):
         def one(stance, command, swing, method=method):
             c = select.select_step_indexed(terrain, index, robot, targets, stance, -1, command, method, swing)
@@ -135,7 +142,7 @@ def bench_select(rows, quick: bool, chunk: int):
                              flops_per_decision=flops / b, bytes_per_decision=nbytes / b))
     # Closed loop: B robots walking 16 steps on the same 2.5D terrain.
     steps = 16
-    for b in ([1, 8] if quick else [1, 64, 1024]):
+    for b in ([1, 8] if quick else ([1, 64] if _cpu() else [1, 64, 1024, 8192])):
         starts = jnp.asarray(np.stack([[[1.0, 1.0 + 0.095 + 0.01 * (k % 50), 0.0], [1.0, 1.0 - 0.095 + 0.01 * (k % 50), 0.0]]
                                        for k in range(b)]), jnp.float32)
         cmd = jnp.array([0.2, 0.0, 0.1], jnp.float32)
@@ -158,8 +165,49 @@ def bench_select(rows, quick: bool, chunk: int):
                      decisions_per_s=1.0 / run, us_per_decision=1e6 * run))
 
 
-def run(name: str, quick: bool = False, chunk: int = 1024) -> list:
-    """Run benchmark ``name`` ("footcost" or "select"); print and return JSON rows."""
+def check(rows, quick: bool, chunk: int, path: str | None = None):
+    """Decisions on a fixed set of queries (2D and 2.5D, both methods), for comparing devices.
+
+    Saves ``index``/``cost`` arrays to ``path`` (npz) if it does not exist,
+    else compares against it and reports the number of differing decisions.
+    """
+    import os
+
+    robot = ij.robots.hrp2(margin=0.02)
+    targets = ij.make_targets(robot)
+    out = {}
+    for has_height in (False, True):
+        terrain = _terrain(has_height, seed=3)
+        index = footcost.index_terrain(terrain, robot)
+        stance, command, swing = _queries(256 if quick else 2048, seed=4)
+        for method in ("exhaustive", "ordered"):
+            def one(st, cmd, sw, method=method, terrain=terrain, index=index):
+                c = select.select_step_indexed(terrain, index, robot, targets, st, -1, cmd, method, sw)
+                return c.index, c.cost
+
+            i, c = _batched(one, chunk)(stance, command, swing)
+            key = f"{'25d' if has_height else '2d'}_{method}"
+            out[key + "_index"], out[key + "_cost"] = np.asarray(i), np.asarray(c)
+    if path and os.path.exists(path):
+        ref = np.load(path)
+        for k in sorted(out):
+            if k.endswith("_index"):
+                c, rc = out[k.replace("index", "cost")], ref[k.replace("index", "cost")]
+                fin = np.isfinite(rc)
+                _emit(rows, dict(_env(), bench="check", case=k[:-6], decisions=len(out[k]),
+                                 index_differs=int(np.sum(out[k] != ref[k])),
+                                 validity_differs=int(np.sum(np.isfinite(c) != fin)),
+                                 max_cost_diff=float(np.max(np.abs(c[fin] - rc[fin]), initial=0.0))))
+    elif path:
+        np.savez(path, **out)
+        _emit(rows, dict(_env(), bench="check", saved=path))
+
+
+def run(name: str, quick: bool = False, chunk: int = 1024, path: str | None = None) -> list:
+    """Run benchmark ``name`` ("footcost", "select" or "check"); print and return JSON rows."""
     rows: list = []
-    {"footcost": bench_footcost, "select": bench_select}[name](rows, quick, chunk)
+    if name == "check":
+        check(rows, quick, chunk, path)
+    else:
+        {"footcost": bench_footcost, "select": bench_select}[name](rows, quick, chunk)
     return rows
