@@ -44,6 +44,7 @@ __all__ = [
     "geometry",
     "make_targets",
     "perfect_walker",
+    "plot",
     "robots",
     "rollout",
     "scene",

@@ -69,7 +69,8 @@ def _time(fn, *args, repeats: int = 10, min_seconds: float = 0.5, max_seconds: f
     cost = compiled.cost_analysis()
     cost = cost[0] if isinstance(cost, (list, tuple)) else cost
     cost = cost or {}
-    return compile_s, float(np.median(times)), float(cost.get("flops", np.nan)), float(cost.get("bytes accessed", np.nan))
+    flops, nbytes = float(cost.get("flops", np.nan)), float(cost.get("bytes accessed", np.nan))
+    return compile_s, float(np.median(times)), flops, nbytes
 
 
 def _cpu() -> bool:
@@ -142,10 +143,11 @@ def bench_select(rows, quick: bool, chunk: int):
                              flops_per_decision=flops / b, bytes_per_decision=nbytes / b))
     # Closed loop: B robots walking 16 steps on the same 2.5D terrain.
     steps = 16
+    cmd = jnp.array([0.2, 0.0, 0.1], jnp.float32)
     for b in ([1, 8] if quick else ([1, 64] if _cpu() else [1, 64, 1024, 8192])):
-        starts = jnp.asarray(np.stack([[[1.0, 1.0 + 0.095 + 0.01 * (k % 50), 0.0], [1.0, 1.0 - 0.095 + 0.01 * (k % 50), 0.0]]
-                                       for k in range(b)]), jnp.float32)
-        cmd = jnp.array([0.2, 0.0, 0.1], jnp.float32)
+        y = 1.0 + 0.01 * (np.arange(b) % 50)
+        starts = jnp.asarray(np.stack([np.column_stack([np.ones(b), y + 0.095, np.zeros(b)]),
+                                       np.column_stack([np.ones(b), y - 0.095, np.zeros(b)])], axis=1), jnp.float32)
         f = jax.jit(jax.vmap(lambda s: rollout_core(terrain, robot, s, cmd, steps, "ordered",
                                                     targets=targets).footsteps))
         comp, run, _, _ = _time(f, starts, repeats=3, min_seconds=0.2)

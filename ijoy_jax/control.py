@@ -15,7 +15,8 @@ same three functions, and the selector is untouched.
 from __future__ import annotations
 
 import functools
-from typing import Any, Callable, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -27,6 +28,7 @@ from ijoy_jax.footcost import _validate, foot_cost_terms_indexed, index_terrain
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import METHODS, Targets, ideal_step, make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain
+
 
 class StanceInfo(NamedTuple):
     """What the selector needs from the robot for the next decision."""

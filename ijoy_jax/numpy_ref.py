@@ -76,7 +76,8 @@ class NumpyFootCost:
             bu = self.origin[0] + (bx + 0.5) * self.res - pose[0]
             bv = self.origin[1] + (by + 0.5) * self.res - pose[1]
             band_dev = float(np.abs(self.height[bx, by] - coef[0] - coef[1] * bu - coef[2] * bv).max())
-        return coef[0], math.atan(math.hypot(coef[1], coef[2])), float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev
+        slope = math.atan(math.hypot(coef[1], coef[2]))
+        return coef[0], slope, float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev
 
     def cost(self, stance_h, start_h, swing_from, pose, a):
         """FootCost of the swing foot at ``pose`` executing action ``a`` (+inf if invalid)."""

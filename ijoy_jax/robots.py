@@ -283,8 +283,7 @@ def target_lattice(actions, refine: int = 2) -> tuple[tuple, tuple, tuple]:
     for k in range(3):
         vals = np.unique(np.round(acts[:, k], 7))
         spacing = float(np.min(np.diff(vals))) if len(vals) > 1 else (0.05 if k < 2 else math.radians(5.0))
-        a, b = float(vals[0]) - spacing, float(vals[-1]) + spacing
-        lo.append(a)
+        lo.append(float(vals[0]) - spacing)
         step.append(spacing / refine)
         counts.append(2 * refine + refine * int(round((vals[-1] - vals[0]) / spacing)) + 1)
     return tuple(lo), tuple(step), tuple(counts)

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import footcost
+
 from reference import foot_metrics, rect_touches_cells
 
 RES = 0.02

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import ijoy_jax as ij
+
 from reference import disc_touches_cells, rect_touches_cells
 
 
