@@ -1,0 +1,130 @@
+"""The control loop (Algorithm 1): rollout mechanics, metrics, batching and the Walker interface."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ijoy_jax as ij
+from ijoy_jax import control
+
+RES = 0.02
+ROBOT = ij.robots.hrp2(margin=0.02)
+START = np.array([[0.3, 0.695, 0.0], [0.3, 0.505, 0.0]])  # left, right: 19 cm apart
+SHAPE = (120, 60)  # 2.4 m x 1.2 m
+STEPS = 8
+
+
+def test_flat_forward_walk_is_exact():
+    t = ij.terrain.flat(SHAPE, RES)
+    traj = ij.rollout(t, ROBOT, START, [0.25, 0.0, 0.0], STEPS)
+    fs = np.asarray(traj.footsteps)
+    # Full speed: each swing foot lands 0.2 m ahead of the stance foot, alternating from the left.
+    np.testing.assert_array_equal(np.asarray(traj.sides), [1, -1] * (STEPS // 2))
+    np.testing.assert_allclose(fs[:, 0], 0.3 + 0.2 * np.arange(1, STEPS + 1), atol=1e-5)
+    np.testing.assert_allclose(fs[:, 1], [0.695, 0.505] * (STEPS // 2), atol=1e-5)
+    s = {k: float(v) for k, v in traj.summary().items()}
+    assert s["steps_taken"] == STEPS and s["footholds_on_obstacles"] == 0 and s["stopped"] == 0
+    assert s["distance_along"] == pytest.approx(0.1 + 0.2 * (STEPS - 1), abs=1e-5)
+    assert s["distance_across"] == pytest.approx(0.0, abs=1e-6) and s["mean_deviation"] < 1e-5
+    np.testing.assert_allclose(np.asarray(traj.feet), fs[-2:][::1], atol=1e-6)
+
+
+def test_zero_command_steps_in_place():
+    t = ij.terrain.flat(SHAPE, RES)
+    traj = ij.rollout(t, ROBOT, START, [0.0, 0.0, 0.0], STEPS)
+    assert bool(np.all(traj.in_place)) and float(traj.summary()["distance_along"]) == 0.0
+    np.testing.assert_allclose(np.asarray(traj.feet), START, atol=1e-6)
+
+
+def test_right_foot_first_and_command_schedule():
+    t = ij.terrain.flat(SHAPE, RES)
+    cmds = np.zeros((STEPS, 3))
+    cmds[4:, 0] = 0.25  # stand, then walk
+    traj = ij.rollout(t, ROBOT, START, cmds, STEPS, first_swing=-1)
+    np.testing.assert_array_equal(np.asarray(traj.sides), [-1, 1] * (STEPS // 2))
+    assert bool(np.all(traj.in_place[:4])) and not bool(np.any(traj.in_place[4:]))
+
+
+def test_stops_for_good_when_no_step_is_valid():
+    # Boxed in: obstacles everywhere but a patch around the feet, too small for any step.
+    boxed = np.zeros(SHAPE, bool)
+    boxed[10:21, 22:40] = True
+    tb = ij.terrain.from_arrays(None, boxed, RES)
+    traj = ij.rollout(tb, ROBOT, START, [0.25, 0.0, 0.0], STEPS)
+    assert not bool(traj.valid[0]) and bool(np.all(traj.stopped)) and not bool(np.any(traj.taken))
+    np.testing.assert_allclose(np.asarray(traj.feet), START)  # nothing moved
+    assert np.all(np.isfinite(np.asarray(traj.footsteps)))
+    assert np.all(np.asarray(traj.index) == -1)
+
+
+def test_nan_command_is_flagged_and_treated_as_no_command():
+    t = ij.terrain.flat(SHAPE, RES)
+    cmds = np.tile([0.25, 0.0, 0.0], (STEPS, 1))
+    cmds[2] = [np.nan, 0.0, 0.0]
+    traj = ij.rollout(t, ROBOT, START, cmds, STEPS)
+    ok = np.asarray(traj.command_ok)
+    assert not ok[2] and ok[[0, 1, 3]].all() and bool(traj.in_place[2])
+    assert np.all(np.isfinite(np.asarray(traj.footsteps)))
+
+
+def test_vmaps_over_terrains_commands_starts_and_robot_parameters():
+    rng = np.random.default_rng(0)
+    n = 4
+    frees = rng.random((n,) + SHAPE) > 0.01
+    frees[:, 10:20, 20:40] = True  # the start area is clear
+    terrains = jax.vmap(lambda f: ij.Terrain(jnp.zeros(SHAPE), f, jnp.zeros(2), RES, False))(jnp.asarray(frees))
+    commands = jnp.asarray(rng.uniform([0.0, -0.1, -0.2], [0.25, 0.1, 0.2], (n, 3)), jnp.float32)
+    starts = jnp.asarray(START[None] + rng.uniform(-0.02, 0.02, (n, 1, 3)) * [1, 1, 0], jnp.float32)
+    robots = jax.vmap(lambda w, m: ROBOT.replace(w=w, margin=m))(jnp.array([0.5, 1.0, 2.0, 4.0]),
+                                                                  jnp.array([0.02, 0.03, 0.04, 0.05]))
+    f = jax.jit(jax.vmap(lambda t, r, s, c: control.rollout_core(t, r, s, c, STEPS)))
+    batch = f(terrains, robots, starts, commands)
+    for i in range(n):
+        one = ij.rollout(jax.tree_util.tree_map(lambda x, i=i: x[i], terrains),
+                         jax.tree_util.tree_map(lambda x, i=i: x[i], robots), starts[i], commands[i], STEPS)
+        np.testing.assert_array_equal(np.asarray(batch.index[i]), np.asarray(one.index))
+        np.testing.assert_allclose(np.asarray(batch.footsteps[i]), np.asarray(one.footsteps), atol=1e-6)
+    assert int(np.sum(batch.on_obstacle)) == 0
+
+
+def test_rollout_does_not_recompile_for_new_values():
+    t = ij.terrain.flat(SHAPE, RES)
+    ij.rollout(t, ROBOT, START, [0.25, 0.0, 0.0], STEPS)
+    n = control._rollout_jit._cache_size()
+    ij.rollout(t.replace(free=t.free.at[110, 30].set(False)), ROBOT.replace(w=jnp.float32(2.0)),
+               START + 0.01, [0.1, 0.05, 0.1], STEPS)
+    assert control._rollout_jit._cache_size() == n
+
+
+def test_custom_walker_replaces_the_robot_without_touching_the_selector():
+    """A walker that lands every step 3 cm short: the loop decides from where the foot really is."""
+    base = control.perfect_walker()
+
+    def execute(state, pose, go):
+        stance = base.stance(state).stance
+        rel = ij.geometry.relative(stance, pose)
+        short = ij.geometry.compose(stance, rel - jnp.array([0.03, 0.0, 0.0]))
+        return base.execute(state, short, go)
+
+    walker = control.Walker(base.init, base.stance, execute, base.feet)
+    t = ij.terrain.flat(SHAPE, RES)
+    traj = ij.rollout(t, ROBOT, START, [0.25, 0.0, 0.0], 4, walker=walker)
+    fs = np.asarray(traj.footsteps)
+    # Each step lands 0.17 m ahead of the (real) stance foot: 0.47, 0.64, 0.81, 0.98.
+    np.testing.assert_allclose(fs[:, 0], [0.47, 0.64, 0.81, 0.98], atol=1e-5)
+    np.testing.assert_allclose(np.asarray(traj.deviation), 0.03, atol=1e-5)
+
+
+def test_bad_input_at_the_boundary():
+    t = ij.terrain.flat(SHAPE, RES)
+    with pytest.raises(ValueError, match="start"):
+        ij.rollout(t, ROBOT, START[0], [0.1, 0, 0], 3)
+    with pytest.raises(ValueError, match="commands"):
+        ij.rollout(t, ROBOT, START, np.zeros((2, 3)), 3)
+    with pytest.raises(ValueError, match="num_steps"):
+        ij.rollout(t, ROBOT, START, [0.1, 0, 0], 0)
+    with pytest.raises(ValueError, match="first_swing"):
+        ij.rollout(t, ROBOT, START, [0.1, 0, 0], 3, first_swing=0)
+    with pytest.raises(ValueError, match="start must be finite"):
+        ij.rollout(t, ROBOT, START * np.nan, [0.1, 0, 0], 3)
