@@ -128,3 +128,17 @@ def test_bad_input_at_the_boundary():
         ij.rollout(t, ROBOT, START, [0.1, 0, 0], 3, first_swing=0)
     with pytest.raises(ValueError, match="start must be finite"):
         ij.rollout(t, ROBOT, START * np.nan, [0.1, 0, 0], 3)
+
+
+def test_marking_time_with_staggered_feet_counts_as_stationary():
+    """A 12 cm block in the right lane: the feet end up alternating between two footholds."""
+    free = np.ones((200, 100), bool)
+    free[50:56, :50] = False
+    t = ij.terrain.from_arrays(None, free, RES)
+    start = np.array([[0.3, 1.095, 0.0], [0.3, 0.905, 0.0]])
+    traj = ij.rollout(t, ROBOT, start, [0.25, 0.0, 0.0], 16)
+    s = traj.summary()
+    assert int(s["steps_stationary"]) >= 8 and int(s["footholds_on_obstacles"]) == 0
+    fs = np.asarray(traj.footsteps)
+    np.testing.assert_allclose(fs[-1], fs[-3], atol=1e-6)  # the same foothold again and again
+    assert fs[:, 0].max() < 1.0 + 1e-6  # never past the block
