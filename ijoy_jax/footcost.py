@@ -181,19 +181,24 @@ def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: ja
     window = lax.dynamic_slice(index.height_padded, (sx, sy), (k, k))
     m_foot = geometry.spans_mask(foot, iy0, k).astype(window.dtype)
     m_band = geometry.spans_mask(grown, iy0, k) & (m_foot == 0)
-    u = ((grown.ix + 0.5) * res - cx)[:, None]  # (K, 1) cell centres relative to the foot centre
-    v = ((iy0 + jnp.arange(k) + 0.5) * res - cy)[None, :]  # (1, K)
-    # Heights relative to the mean under the foot, for float32 conditioning.
-    n = jnp.maximum(jnp.sum(m_foot), 1.0)
-    h_ref = jnp.sum(m_foot * window) / n
+    u = (grown.ix + 0.5) * res - cx  # (K,) column centres relative to the foot centre
+    v = (iy0 + jnp.arange(k) + 0.5) * res - cy  # (K,) row centres
+    # Heights relative to the cell under the foot centre, for float32 conditioning.
+    ic = jnp.clip(jnp.floor(cx / res).astype(jnp.int32) - grown.ix[0], 0, k - 1)
+    jc = jnp.clip(jnp.floor(cy / res).astype(jnp.int32) - iy0, 0, k - 1)
+    h_ref = window[ic, jc]
     hrel = window - h_ref
+    # Column sums first (one pass over the window), then O(K) sums over columns.
     mh = m_foot * hrel
-    su, sv = jnp.sum(m_foot * u), jnp.sum(m_foot * v)
-    suu, svv, suv = jnp.sum(m_foot * (u * u)), jnp.sum(m_foot * (v * v)), jnp.sum(m_foot * (u * v))
-    sh, suh, svh = jnp.sum(mh), jnp.sum(mh * u), jnp.sum(mh * v)
+    c0, c1 = jnp.sum(m_foot, axis=1), jnp.sum(mh, axis=1)
+    cv, cvv, cvh = m_foot @ v, m_foot @ (v * v), mh @ v
+    n = jnp.maximum(jnp.sum(c0), 1.0)
+    su, sv = jnp.dot(c0, u), jnp.sum(cv)
+    suu, svv, suv = jnp.dot(c0, u * u), jnp.sum(cvv), jnp.dot(cv, u)
+    sh, suh, svh = jnp.sum(c1), jnp.dot(c1, u), jnp.sum(cvh)
     ridge = 1e-6 * n * res * res  # keeps a one-column footprint well-posed (slope -> 0)
     a, b, c = _solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
-    resid = hrel - (a + b * u + c * v)
+    resid = hrel - (a + b * u[:, None] + c * v[None, :])
     slope = jnp.arctan(jnp.sqrt(b * b + c * c))
     roughness = jnp.sum(m_foot * jnp.abs(resid)) / n
     bump = jnp.maximum(jnp.max(jnp.where(m_foot > 0, resid, -jnp.inf)), 0.0)
