@@ -13,9 +13,10 @@ Public API:
   action_steps                                       world poses of every action
   select_step, StepChoice, make_targets              the next foothold for a command
   rollout, Trajectory, perfect_walker, Walker        the control loop (Algorithm 1)
+  haptics                                            the ALDURO force-feedback joystick
 """
 
-from ijoy_jax import control, footcost, generators, geometry, plot, robots, scene, select, terrain
+from ijoy_jax import control, footcost, generators, geometry, haptics, plot, robots, scene, select, terrain
 from ijoy_jax.control import Trajectory, Walker, perfect_walker, rollout
 from ijoy_jax.footcost import FootCostTerms, foot_cost, foot_cost_terms
 from ijoy_jax.robots import LEFT, RIGHT, Robot, TerrainMetrics
@@ -42,6 +43,7 @@ __all__ = [
     "footcost",
     "generators",
     "geometry",
+    "haptics",
     "make_targets",
     "perfect_walker",
     "plot",
