@@ -75,7 +75,7 @@ import numpy as np
 
 from ijoy_jax import scene
 from ijoy_jax._struct import pytree_dataclass
-from ijoy_jax.terrain import Terrain
+from ijoy_jax.terrain import Terrain, grid_spec
 
 __all__ = [
     "FAMILIES",
@@ -406,14 +406,7 @@ def _grid(shape, resolution, origin, has_height) -> _Grid:
         raise ValueError(f"shape must be two integers (nx, ny), got {shape!r}") from None
     if nx < 1 or ny < 1:
         raise ValueError(f"shape must be positive, got {shape!r}")
-    res = float(resolution)
-    if not np.isfinite(res) or res <= 0.0:
-        raise ValueError(f"resolution must be a positive finite number of metres, got {resolution!r}")
-    origin = jnp.asarray(origin, jnp.float32)
-    if origin.shape != (2,):
-        raise ValueError(f"origin must have shape (2,), got {origin.shape}")
-    if not isinstance(origin, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(origin))):
-        raise ValueError("origin must be finite")
+    res, origin = grid_spec(resolution, origin)
     return _Grid((nx, ny), res, origin, bool(has_height))
 
 

@@ -77,6 +77,18 @@ def _check_finite(name: str, value: Any) -> None:
         raise ValueError(f"{name} must be finite (no NaN or inf)")
 
 
+def grid_spec(resolution, origin) -> tuple[float, jax.Array]:
+    """Validate a grid's resolution (> 0, finite, metres) and origin ((2,), finite); return them typed."""
+    res = float(resolution)
+    if not np.isfinite(res) or res <= 0.0:
+        raise ValueError(f"resolution must be a positive finite number of metres, got {resolution!r}")
+    origin = jnp.asarray(origin, jnp.float32)
+    if origin.shape != (2,):
+        raise ValueError(f"origin must have shape (2,), got {origin.shape}")
+    _check_finite("origin", origin)
+    return res, origin
+
+
 def from_arrays(height, free=None, resolution: float = 0.02, origin=(0.0, 0.0)) -> Terrain:
     """Build a :class:`Terrain` from arrays indexed ``[ix, iy]``.
 
@@ -104,13 +116,7 @@ def from_arrays(height, free=None, resolution: float = 0.02, origin=(0.0, 0.0)) 
     """
     if height is None and free is None:
         raise ValueError("from_arrays needs height, free, or both")
-    res = float(resolution)
-    if not np.isfinite(res) or res <= 0.0:
-        raise ValueError(f"resolution must be a positive finite number of metres, got {resolution!r}")
-    origin = jnp.asarray(origin, jnp.float32)
-    if origin.shape != (2,):
-        raise ValueError(f"origin must have shape (2,), got {origin.shape}")
-    _check_finite("origin", origin)
+    res, origin = grid_spec(resolution, origin)
     has_height = height is not None
     if has_height:
         height = jnp.asarray(height, jnp.float32)
