@@ -86,6 +86,8 @@ class Trajectory(NamedTuple):
       taken: a step was executed (False once stopped).
       stopped: the robot has stopped walking (no valid step; it stays stopped).
       cost: the selector's cost of the choice (+inf if none).
+      foot_cost: its FootCost part (action cost + terrain terms; +inf if the
+        chosen foothold is invalid): how good the ground under the foot is.
       index: action index (-1 if none).
       target: (T, 3) world pose the choice was scored against.
       command_ok: False where the command had NaN/inf (treated as zero).
@@ -109,6 +111,7 @@ class Trajectory(NamedTuple):
     taken: jax.Array
     stopped: jax.Array
     cost: jax.Array
+    foot_cost: jax.Array
     index: jax.Array
     target: jax.Array
     command_ok: jax.Array
@@ -123,7 +126,8 @@ class Trajectory(NamedTuple):
     feet: jax.Array
 
     def summary(self) -> dict[str, jax.Array]:
-        """Per-rollout totals: steps taken, in place, stopped, footholds on obstacles, distances (m)."""
+        """Per-rollout totals: steps taken, in place, stopped, footholds on obstacles, distances (m),
+        mean deviation from p_next (m) and mean FootCost of the valid footholds taken."""
         taken = self.taken
         return {
             "steps_taken": jnp.sum(taken, axis=-1),
@@ -134,6 +138,8 @@ class Trajectory(NamedTuple):
             "distance_along": jnp.sum(self.along, axis=-1),
             "distance_across": jnp.sum(self.across, axis=-1),
             "mean_deviation": jnp.sum(self.deviation * taken, axis=-1) / jnp.maximum(jnp.sum(taken, axis=-1), 1),
+            "mean_foot_cost": jnp.sum(jnp.where(taken & self.valid, self.foot_cost, 0.0), axis=-1)
+            / jnp.maximum(jnp.sum(taken & self.valid, axis=-1), 1),
         }
 
 def rollout_core(
@@ -196,6 +202,7 @@ def rollout_core(
             taken=go,
             stopped=now_stopped,
             cost=choice.cost,
+            foot_cost=choice.foot_cost,
             index=choice.index,
             target=choice.target,
             command_ok=choice.command_ok,

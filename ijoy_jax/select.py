@@ -124,6 +124,8 @@ class StepChoice(NamedTuple):
       when no step is valid, so it is never NaN).
     valid: () bool, False when no valid step exists: the caller stops walking.
     cost: () float32, FootCost + w * dist of the choice (+inf if not valid).
+    foot_cost: () float32, the FootCost part of ``cost`` (action cost plus
+      terrain terms; +inf if the foothold is invalid).
     index: () int32 index into the action set (-1 when not valid).
     target: (3,) world pose the choice was scored against (f_i, or p_next).
     command_ok: () bool, False if the command had NaN/inf (treated as zero).
@@ -133,6 +135,7 @@ class StepChoice(NamedTuple):
     pose: jax.Array
     valid: jax.Array
     cost: jax.Array
+    foot_cost: jax.Array
     index: jax.Array
     target: jax.Array
     command_ok: jax.Array
@@ -195,13 +198,14 @@ def select_step_indexed(
         valid = jnp.isfinite(cost)
         evaluated = jnp.int32(1)
     elif method == "exhaustive":
-        cost_all = terms_of(jnp.arange(n, dtype=jnp.int32)) + robot.w * dists
+        fc_all = terms_of(jnp.arange(n, dtype=jnp.int32))
+        cost_all = fc_all + robot.w * dists
         best = _lexmin(cost_all, dists)
-        cost = cost_all[best]
+        cost, fc = cost_all[best], fc_all[best]
         valid = jnp.isfinite(cost)
         evaluated = jnp.int32(n)
     else:
-        best, cost, evaluated = _ordered(terms_of, targets.order[fi], dists, robot.w, n, chunk)
+        best, cost, fc, evaluated = _ordered(terms_of, targets.order[fi], dists, robot.w, n, chunk)
         valid = jnp.isfinite(cost)
     in_place = geometry.compose(stance, side_p0(robot, swing))
     # The naive joystick steps to its action whatever the terrain; the others
@@ -211,6 +215,7 @@ def select_step_indexed(
         pose=jnp.where(chosen, steps[best], in_place),
         valid=valid,
         cost=jnp.where(valid, cost, jnp.inf),
+        foot_cost=jnp.where(valid, fc, jnp.inf),
         index=jnp.where(chosen, best, -1).astype(jnp.int32),
         target=geometry.compose(stance, target_rel),
         command_ok=ok,
@@ -234,24 +239,27 @@ def _ordered(terms_of, order, dists, w, n, chunk):
     d_sorted = jnp.concatenate([dists[order[:n]], jnp.full((pad,), jnp.inf)])
 
     def cond(state):
-        k, best_cost, _ = state
+        k, best_cost, _, _ = state
         nxt = jnp.minimum(k * chunk, n - 1)
         # Stop once the best so far cannot be beaten by anything not yet seen.
         done = (k > 0) & (best_cost <= w * d_sorted[nxt])
         return (k < num_chunks) & ~done
 
     def body(state):
-        k, best_cost, best_pos = state
+        k, best_cost, best_fc, best_pos = state
         pos = k * chunk + jnp.arange(chunk)
         idx = lax.dynamic_slice(order, (k * chunk,), (chunk,))
-        c = terms_of(idx) + w * lax.dynamic_slice(d_sorted, (k * chunk,), (chunk,))
+        fc = terms_of(idx)
+        c = fc + w * lax.dynamic_slice(d_sorted, (k * chunk,), (chunk,))
         c = jnp.where(pos < n, c, jnp.inf)
         j = jnp.argmin(c)  # first in L_i order among equal costs
         better = c[j] < best_cost
-        return k + 1, jnp.where(better, c[j], best_cost), jnp.where(better, pos[j], best_pos)
+        return (k + 1, jnp.where(better, c[j], best_cost), jnp.where(better, fc[j], best_fc),
+                jnp.where(better, pos[j], best_pos))
 
-    k, best_cost, best_pos = lax.while_loop(cond, body, (jnp.int32(0), jnp.float32(jnp.inf), jnp.int32(0)))
-    return order[best_pos], best_cost, jnp.minimum(k * chunk, n).astype(jnp.int32)
+    init = (jnp.int32(0), jnp.float32(jnp.inf), jnp.float32(jnp.inf), jnp.int32(0))
+    k, best_cost, best_fc, best_pos = lax.while_loop(cond, body, init)
+    return order[best_pos], best_cost, best_fc, jnp.minimum(k * chunk, n).astype(jnp.int32)
 
 
 def select_step(

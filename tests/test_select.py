@@ -65,6 +65,9 @@ def _agree(a, b):
     np.testing.assert_array_equal(np.isinf(ca), np.isinf(cb))
     fin = np.isfinite(ca)
     np.testing.assert_allclose(ca[fin], cb[fin], rtol=TIE, atol=TIE)
+    fa, fb = np.asarray(a.foot_cost), np.asarray(b.foot_cost)
+    same = (ia == ib) & fin
+    np.testing.assert_allclose(fa[same], fb[same], rtol=TIE, atol=TIE)
     differ = ia != ib
     # Different indices only where the two costs tie to rounding.
     assert np.all(np.abs(ca[differ & fin] - cb[differ & fin]) <= TIE)
@@ -123,6 +126,7 @@ def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost():
             continue
         assert float(ch.cost) == pytest.approx(total.min(), rel=1e-5, abs=1e-5)
         assert total[int(ch.index)] <= total.min() + 1e-5
+        assert float(ch.foot_cost) == pytest.approx(fc[int(ch.index)], rel=1e-5, abs=1e-6)
 
 
 def test_no_valid_step_is_explicit_and_finite():
