@@ -22,7 +22,26 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--ref", default=None, help="npz of reference decisions for 'check'")
     bench.add_argument("--quick", action="store_true", help="small sizes, for a smoke test")
     bench.add_argument("--json", default=None, help="also write the results to this file")
+    sweep = sub.add_parser("sweep", help="run a sweep declared in TOML, or summarise a finished one",
+                           description="Sweeps over robot/selector parameters, terrains and commands "
+                                       "(schema: ijoy_jax/sweep/config.py; examples in sweeps/).")
+    sweep_sub = sweep.add_subparsers(dest="sweep_command", required=True)
+    srun = sweep_sub.add_parser("run", help="run or resume a sweep; results as parquet parts in --out")
+    srun.add_argument("file", help="sweep file (TOML), e.g. sweeps/w_sweep.toml")
+    srun.add_argument("--out", default=None,
+                      help="output folder; an existing one from the same file and options is resumed "
+                           "(default: results/<sweep name>)")
+    srun.add_argument("--chunk", type=int, default=None,
+                      help="scenarios per jitted call; memory grows with it (default: 32)")
+    srun.add_argument("--max-scenarios", type=int, default=None,
+                      help="run only the first N scenarios (smoke tests; part of the resume plan)")
+    ssum = sweep_sub.add_parser("summarize", help="print per-cell means with 95%% CIs and write a plot PNG")
+    ssum.add_argument("dir", help="a sweep's output folder")
+    ssum.add_argument("--png", default=None, help="plot to write (default: DIR/summary.png)")
+    ssum.add_argument("--x", default=None, help="parameter on the plot's x axis (default: the most varied)")
     args = parser.parse_args(argv)
+    if args.command == "sweep":
+        return _sweep(args)
     if args.command == "demo":
         from ijoy_jax import demo as demo_mod
 
@@ -38,6 +57,46 @@ def main(argv: list[str] | None = None) -> int:
                 json.dump(rows, f, indent=2)
         return 0
     return 2
+
+
+def _sweep(args) -> int:
+    """``ijoy sweep run`` / ``ijoy sweep summarize``; bad sweep files exit with status 2 and one message."""
+    from pathlib import Path
+
+    from ijoy_jax import sweep
+
+    if args.sweep_command == "run":
+        try:
+            cfg = sweep.load_config(args.file)
+        except sweep.SweepConfigError as e:
+            print(f"ijoy sweep: error: {e}", file=sys.stderr)
+            return 2
+        chunk = sweep.DEFAULT_CHUNK if args.chunk is None else args.chunk
+        try:
+            stats = sweep.run(cfg, args.out, chunk_size=chunk, max_scenarios=args.max_scenarios)
+        except ValueError as e:
+            print(f"ijoy sweep: error: {e}", file=sys.stderr)
+            return 2
+        print(json.dumps({"out": str(stats.out), "scenarios": stats.scenarios, "computed": stats.computed,
+                          "chunks": stats.chunks, "skipped_chunks": stats.skipped, "compiles": stats.compiles,
+                          "first_chunk_s": stats.first_chunk_s, "run_s": round(stats.run_s, 3)}, indent=2))
+        return 0
+    import pandas as pd
+
+    agg = sweep.load_aggregates(args.dir)
+    show = [c for c in agg.columns if c.startswith(("robot.", "terrain.")) or c == "n"]
+    table = agg[show].copy()
+    for m in ("distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles"):
+        unit = sweep.UNITS[m]
+        table[f"{m} ({unit})"] = [f"{a:.3g} +- {b:.2g}" for a, b in zip(agg[f"{m}.mean"], agg[f"{m}.ci95"],
+                                                                        strict=True)]
+    with pd.option_context("display.width", 200, "display.max_columns", 50):
+        print(table.to_string(index=False))
+    png = args.png or str(Path(args.dir) / "summary.png")
+    name = json.loads((Path(args.dir) / "manifest.json").read_text()).get("name", "")
+    sweep.plot(agg, png, x=args.x, title=name)
+    print(f"plot: {png}")
+    return 0
 
 
 if __name__ == "__main__":

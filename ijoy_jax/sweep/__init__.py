@@ -1,0 +1,50 @@
+"""Sweeps: declare a grid or random samples of scenarios in TOML, run them batched and resumable, load the results.
+
+  load_config / parse_config / SweepConfig / SweepConfigError   the TOML schema, validated before compute
+  cells / scenarios                                              the expansion into cells and scenarios
+  run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks, parquet parts, resume
+  load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table, 95% CIs, plot
+
+Example:
+  >>> from ijoy_jax import sweep
+  >>> cfg = sweep.load_config("sweeps/w_sweep.toml")  # doctest: +SKIP
+  >>> sweep.run(cfg, "results/w_sweep")  # doctest: +SKIP
+  >>> sweep.load_aggregates("results/w_sweep")  # doctest: +SKIP
+
+Command line: ``ijoy sweep run FILE`` and ``ijoy sweep summarize DIR``.
+"""
+
+from ijoy_jax.sweep.config import (
+    COMMAND_KEYS,
+    ROBOT_DEFAULTS,
+    SweepConfig,
+    SweepConfigError,
+    cells,
+    load_config,
+    parse_config,
+    scenarios,
+)
+from ijoy_jax.sweep.execute import DEFAULT_CHUNK, RunStats, run, trace_count
+from ijoy_jax.sweep.results import METRICS, UNITS, aggregate, load, load_aggregates, plot, t_quantile
+
+__all__ = [
+    "COMMAND_KEYS",
+    "DEFAULT_CHUNK",
+    "METRICS",
+    "ROBOT_DEFAULTS",
+    "UNITS",
+    "RunStats",
+    "SweepConfig",
+    "SweepConfigError",
+    "aggregate",
+    "cells",
+    "load",
+    "load_aggregates",
+    "load_config",
+    "parse_config",
+    "plot",
+    "run",
+    "scenarios",
+    "t_quantile",
+    "trace_count",
+]

@@ -1,0 +1,531 @@
+"""Sweep declarations: the TOML schema, its validation, and the expansion into cells and scenarios.
+
+A sweep file has these tables (every key optional unless noted; units in brackets):
+
+.. code-block:: toml
+
+    [sweep]
+    name = "w_sweep"              # names the default output folder
+    description = "..."
+    seed = 0                      # terrains, commands and random cells derive from it
+    scenarios_per_cell = 16       # replicates of every cell (terrain seed = replicate index)
+    num_steps = 16                # decisions per rollout
+    method = "exhaustive"         # "exhaustive", "ordered" or "naive"
+    random_samples = 0            # cells drawn from [random] (crossed with the grid)
+
+    [robot]                       # fixed robot values (HRP-2's defaults otherwise)
+    margin = 0.02                 # [m]
+    metrics.slope_weight = 0.5    # any TerrainMetrics field
+
+    [terrain]
+    family = "obstacles"          # a name in ijoy_jax.generators.FAMILIES
+    shape = [150, 100]            # cells along x and y (static)
+    resolution = 0.02             # [m] (static)
+    has_height = false            # 2D occupancy grid or 2.5D height map (static)
+    max_count = 16                # object slots of the object families (static)
+
+    [terrain.params]              # fixed values of the family's parameter pytree
+    count = 12
+
+    [command]                     # joystick command per scenario: a number or [lo, hi] uniform
+    vx = 0.25                     # [m/s] forward, in the stance foot's frame
+    vy = [-0.05, 0.05]            # [m/s] left
+    wz = 0.0                      # [rad/s] counter-clockwise
+
+    [grid]                        # cartesian product of value lists
+    "robot.w" = [0.0, 0.5, 1, 2, 4]
+    "robot.density" = [0.5, 1.0]  # the one shape-changing axis: one compile per value
+
+    [random]                      # uniform [lo, hi] per random cell (not density)
+    "robot.margin" = [0.0, 0.1]
+
+Parameter names are ``robot.<name>`` (``w``, ``rotation_weight``, ``margin``,
+``step_time``, ``foot_length``, ``foot_width``, ``density``,
+``metrics.<TerrainMetrics field>``) and ``terrain.<field of the family's
+parameter class>``. In ``[grid]`` and ``[random]`` they may be written quoted
+(``"robot.w" = [...]``) or as nested tables (``[grid.robot] w = [...]``).
+
+A *cell* is one combination of grid values (times one random sample); each cell
+runs ``scenarios_per_cell`` scenarios, replicate ``r`` of every cell on the same
+terrain (seed ``r``) with the same command draw: paired comparisons across cells.
+
+Everything is checked by :func:`load_config` before any compute; a problem
+raises :class:`SweepConfigError` naming the file, the key and the reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from ijoy_jax import generators
+from ijoy_jax.select import METHODS
+
+__all__ = [
+    "COMMAND_KEYS",
+    "ROBOT_DEFAULTS",
+    "SweepConfig",
+    "SweepConfigError",
+    "cells",
+    "load_config",
+    "parse_config",
+    "scenarios",
+]
+
+# HRP-2's values (ijoy_jax.robots.hrp2 and default_metrics); tests check they agree.
+ROBOT_DEFAULTS: Mapping[str, float] = MappingProxyType(
+    {
+        "w": 1.0,
+        "rotation_weight": 100.0,
+        "margin": 0.02,
+        "step_time": 0.8,
+        "foot_length": 0.242,
+        "foot_width": 0.13,
+        "density": 1.0,
+        "metrics.slope_weight": 0.5,
+        "metrics.slope_limit": math.radians(20.0),
+        "metrics.roughness_weight": 20.0,
+        "metrics.roughness_limit": 0.01,
+        "metrics.bump_weight": 10.0,
+        "metrics.bump_limit": 0.02,
+        "metrics.step_weight": 1.0,
+        "metrics.band_weight": 5.0,
+        "metrics.band_limit": 0.03,
+    }
+)
+"""Every sweepable robot parameter and its default (m, s, rad, cost units)."""
+
+# Lower bounds: (bound, strict). Every robot parameter is >= 0; sizes and times > 0.
+_POSITIVE = {"step_time", "foot_length", "foot_width", "density"}
+# Largest margin the sweep accepts (m): the static footprint window grows with it.
+_MAX_MARGIN = 0.5
+
+COMMAND_KEYS = ("vx", "vy", "wz")
+"""Joystick command components: forward (m/s), left (m/s), turn (rad/s), in the stance foot's frame."""
+
+_SECTIONS = ("sweep", "robot", "terrain", "command", "grid", "random")
+_SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps", "method", "random_samples")
+_TERRAIN_KEYS = ("family", "shape", "resolution", "has_height", "max_count", "params")
+# Terrain parameters that are counts (ints, clipped by the generator to max_count).
+_COUNT_FIELDS = ("count", "num_steps")
+
+
+class SweepConfigError(ValueError):
+    """A sweep file is malformed: the message names the file, the key and the reason."""
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SweepConfig:
+    """A validated sweep (see the module docstring for the TOML schema).
+
+    Fields:
+      name: sweep name (default: the file's stem).
+      description: free text.
+      seed: base seed (int).
+      scenarios_per_cell: replicates per cell (>= 1).
+      num_steps: decisions per rollout (>= 1; static).
+      method: selector, one of :data:`ijoy_jax.select.METHODS` (static).
+      random_samples: random cells drawn from ``random`` (0: none).
+      family: terrain family name; shape (nx, ny) cells; resolution (m);
+        has_height; max_count (static object slots, None: the family's default).
+      robot: fixed robot values, ``{name: float}`` (names as in :data:`ROBOT_DEFAULTS`).
+      terrain_params: fixed terrain parameters, ``{field: number}``.
+      command: ``{component: (lo, hi)}``, lo == hi for a fixed value (m/s, rad/s).
+      grid: ``{"robot.x" | "terrain.x": (values...)}``.
+      random: ``{"robot.x" | "terrain.x": (lo, hi)}``.
+      source: the file it came from; text: the file's text (saved with the results).
+    """
+
+    name: str
+    description: str = ""
+    seed: int = 0
+    scenarios_per_cell: int = 8
+    num_steps: int = 16
+    method: str = "exhaustive"
+    random_samples: int = 0
+    family: str = "obstacles"
+    shape: tuple[int, int] = (150, 100)
+    resolution: float = 0.02
+    has_height: bool = False
+    max_count: int | None = None
+    robot: Mapping[str, float] = dataclasses.field(default_factory=dict)
+    terrain_params: Mapping[str, float] = dataclasses.field(default_factory=dict)
+    command: Mapping[str, tuple[float, float]] = dataclasses.field(
+        default_factory=lambda: {"vx": (0.25, 0.25), "vy": (0.0, 0.0), "wz": (0.0, 0.0)})
+    grid: Mapping[str, tuple] = dataclasses.field(default_factory=dict)
+    random: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
+    source: str = "<string>"
+    text: str = ""
+
+    @property
+    def params_class(self) -> type:
+        """The terrain family's parameter pytree class."""
+        return generators.FAMILIES[self.family].params
+
+    @property
+    def static_max_count(self) -> int | None:
+        """Object slots passed to the generator (None for families without them)."""
+        fam = generators.FAMILIES[self.family]
+        if fam.max_count is None:
+            return None
+        return fam.max_count if self.max_count is None else self.max_count
+
+    @property
+    def swept(self) -> tuple[str, ...]:
+        """Parameter names that vary across cells (grid keys, then random keys)."""
+        return tuple(self.grid) + tuple(self.random)
+
+    @property
+    def num_cells(self) -> int:
+        """Number of cells: product of the grid sizes times max(1, random_samples)."""
+        n = math.prod(len(v) for v in self.grid.values())
+        return n * (max(1, self.random_samples) if self.random else 1)
+
+    @property
+    def num_scenarios(self) -> int:
+        """Number of scenarios: cells times scenarios_per_cell."""
+        return self.num_cells * self.scenarios_per_cell
+
+
+# --------------------------------------------------------------------------- validation helpers
+
+
+class _Checker:
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, key: str, reason: str):
+        raise SweepConfigError(f"{self.source}: {key}: {reason}")
+
+    def table(self, key: str, value) -> dict:
+        if not isinstance(value, dict):
+            self.fail(key, f"must be a table, got {type(value).__name__} {value!r}")
+        return value
+
+    def unknown(self, key_prefix: str, table: dict, known) -> None:
+        for k in table:
+            if k not in known:
+                self.fail(f"{key_prefix}{k}", f"unknown key; known keys: {', '.join(known)}")
+
+    def number(self, key: str, value) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(key, f"must be a number, got {type(value).__name__} {value!r}")
+        if not math.isfinite(value):
+            self.fail(key, f"must be finite, got {value!r}")
+        return float(value)
+
+    def integer(self, key: str, value, lo: int | None = None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            self.fail(key, f"must be an integer, got {type(value).__name__} {value!r}")
+        if lo is not None and value < lo:
+            self.fail(key, f"must be >= {lo}, got {value}")
+        return int(value)
+
+    def string(self, key: str, value, choices=None) -> str:
+        if not isinstance(value, str):
+            self.fail(key, f"must be a string, got {type(value).__name__} {value!r}")
+        if choices is not None and value not in choices:
+            self.fail(key, f"must be one of {', '.join(choices)}, got {value!r}")
+        return value
+
+    def range(self, key: str, value) -> tuple[float, float]:
+        if not isinstance(value, list) or len(value) != 2:
+            self.fail(key, f"must be a range [lo, hi] of two numbers, got {value!r}")
+        lo, hi = self.number(f"{key}[0]", value[0]), self.number(f"{key}[1]", value[1])
+        if lo > hi:
+            self.fail(key, f"impossible range: lo ({lo}) > hi ({hi})")
+        return lo, hi
+
+
+def _flatten(table: dict, prefix: str = "") -> dict:
+    """{"robot": {"w": [..]}} -> {"robot.w": [..]} (dotted TOML keys and nested tables are the same)."""
+    out = {}
+    for k, v in table.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def _robot_value(chk: _Checker, key: str, name: str, value) -> float:
+    """Check one robot parameter value (``name`` as in ROBOT_DEFAULTS)."""
+    v = chk.number(key, value)
+    if name in _POSITIVE and v <= 0:
+        chk.fail(key, f"must be > 0, got {v}")
+    if v < 0:
+        chk.fail(key, f"must be >= 0, got {v}")
+    if name == "margin" and v > _MAX_MARGIN:
+        chk.fail(key, f"must be <= {_MAX_MARGIN} m, got {v}")
+    return v
+
+
+def _terrain_value(chk: _Checker, key: str, name: str, value, max_count: int | None):
+    """Check one terrain parameter value (``name`` a field of the family's parameter class)."""
+    if name in _COUNT_FIELDS:
+        v = chk.integer(key, value, lo=0)
+        if max_count is not None and v > max_count:
+            chk.fail(key, f"{v} exceeds [terrain] max_count = {max_count} (raise max_count)")
+        return v
+    v = chk.number(key, value)
+    if name == "start_radius" and v < 0:
+        chk.fail(key, f"must be >= 0, got {v}")
+    if name.endswith(("_min", "_max")) or name in ("size", "spacing", "width", "run", "length"):
+        if name not in ("yaw_min", "yaw_max") and v < 0:
+            chk.fail(key, f"must be >= 0, got {v}")
+    return v
+
+
+def parse_config(text: str, source: str = "<string>") -> SweepConfig:
+    """Parse and validate a sweep from TOML text (see the module docstring).
+
+    Args:
+      text: the TOML text.
+      source: file name used in error messages.
+
+    Returns:
+      :class:`SweepConfig`.
+
+    Raises:
+      SweepConfigError: malformed TOML, unknown keys, wrong types, impossible
+        ranges or unknown names; the message reads ``"<source>: <key>: <reason>"``.
+
+    Example:
+      >>> cfg = parse_config('[grid]\\n"robot.w" = [0.5, 1.0]\\n[sweep]\\nscenarios_per_cell = 2\\n')
+      >>> cfg.num_cells, cfg.num_scenarios
+      (2, 4)
+    """
+    chk = _Checker(source)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SweepConfigError(f"{source}: <toml>: {e}") from None
+    chk.unknown("", raw, _SECTIONS)
+    kw: dict[str, Any] = {"name": Path(source).stem if source != "<string>" else "sweep", "source": source,
+                          "text": text}
+
+    sweep = chk.table("sweep", raw.get("sweep", {}))
+    chk.unknown("sweep.", sweep, _SWEEP_KEYS)
+    for k in ("name", "description"):
+        if k in sweep:
+            kw[k] = chk.string(f"sweep.{k}", sweep[k])
+    if "name" in kw and not kw["name"].replace("-", "_").replace(".", "_").isidentifier():
+        chk.fail("sweep.name", f"must be letters, digits, '_', '-' or '.', got {kw['name']!r}")
+    if "seed" in sweep:
+        kw["seed"] = chk.integer("sweep.seed", sweep["seed"], lo=0)
+    for k in ("scenarios_per_cell", "num_steps"):
+        if k in sweep:
+            kw[k] = chk.integer(f"sweep.{k}", sweep[k], lo=1)
+    if "random_samples" in sweep:
+        kw["random_samples"] = chk.integer("sweep.random_samples", sweep["random_samples"], lo=0)
+    if "method" in sweep:
+        kw["method"] = chk.string("sweep.method", sweep["method"], METHODS)
+
+    terrain = chk.table("terrain", raw.get("terrain", {}))
+    chk.unknown("terrain.", terrain, _TERRAIN_KEYS)
+    family = chk.string("terrain.family", terrain.get("family", "obstacles"), tuple(generators.FAMILIES))
+    kw["family"] = family
+    if "shape" in terrain:
+        s = terrain["shape"]
+        if not isinstance(s, list) or len(s) != 2:
+            chk.fail("terrain.shape", f"must be [nx, ny], got {s!r}")
+        kw["shape"] = (chk.integer("terrain.shape[0]", s[0], lo=8), chk.integer("terrain.shape[1]", s[1], lo=8))
+    if "resolution" in terrain:
+        r = chk.number("terrain.resolution", terrain["resolution"])
+        if r <= 0:
+            chk.fail("terrain.resolution", f"must be > 0 m, got {r}")
+        kw["resolution"] = r
+    if "has_height" in terrain:
+        if not isinstance(terrain["has_height"], bool):
+            chk.fail("terrain.has_height", f"must be true or false, got {terrain['has_height']!r}")
+        kw["has_height"] = terrain["has_height"]
+    fam = generators.FAMILIES[family]
+    if "max_count" in terrain:
+        if fam.max_count is None:
+            chk.fail("terrain.max_count", f"family {family!r} has no object slots")
+        kw["max_count"] = chk.integer("terrain.max_count", terrain["max_count"], lo=0)
+    max_count = kw.get("max_count", fam.max_count)
+    fields = tuple(f.name for f in dataclasses.fields(fam.params))
+    tparams = chk.table("terrain.params", terrain.get("params", {}))
+    chk.unknown("terrain.params.", tparams, fields)
+    kw["terrain_params"] = {k: _terrain_value(chk, f"terrain.params.{k}", k, v, max_count) for k, v in tparams.items()}
+
+    robot = _flatten(chk.table("robot", raw.get("robot", {})))
+    chk.unknown("robot.", robot, tuple(ROBOT_DEFAULTS))
+    kw["robot"] = {k: _robot_value(chk, f"robot.{k}", k, v) for k, v in robot.items()}
+
+    command = chk.table("command", raw.get("command", {}))
+    chk.unknown("command.", command, COMMAND_KEYS)
+    cmd = {"vx": (0.25, 0.25), "vy": (0.0, 0.0), "wz": (0.0, 0.0)}
+    for k, v in command.items():
+        cmd[k] = chk.range(f"command.{k}", v) if isinstance(v, list) else (chk.number(f"command.{k}", v),) * 2
+    kw["command"] = cmd
+
+    def param(dotted: str, key: str, value):
+        """Validate one swept value of the parameter ``dotted`` ("robot.x" or "terrain.x"), reported as ``key``."""
+        head, _, name = dotted.partition(".")
+        if head == "robot":
+            return _robot_value(chk, key, name, value)
+        return _terrain_value(chk, key, name, value, max_count)
+
+    def check_name(section: str, key: str) -> None:
+        head, _, name = key.partition(".")
+        known = tuple(f"robot.{k}" for k in ROBOT_DEFAULTS) + tuple(f"terrain.{k}" for k in fields)
+        if key not in known:
+            chk.fail(f"{section}.{key}", f"unknown parameter; known: {', '.join(known)}")
+        if (head == "robot" and name in kw["robot"]) or (head == "terrain" and name in kw["terrain_params"]):
+            chk.fail(f"{section}.{key}", f"also set as a fixed value in [{head}]; set it in one place")
+
+    grid = _flatten(chk.table("grid", raw.get("grid", {})))
+    out_grid = {}
+    for k, values in grid.items():
+        check_name("grid", k)
+        if not isinstance(values, list) or not values:
+            chk.fail(f"grid.{k}", f"must be a non-empty list of values, got {values!r}")
+        vals = tuple(param(k, f"grid.{k}[{i}]", v) for i, v in enumerate(values))
+        if len(set(vals)) != len(vals):
+            chk.fail(f"grid.{k}", f"repeated values in {list(vals)}")
+        out_grid[k] = vals
+    kw["grid"] = out_grid
+
+    rand = _flatten(chk.table("random", raw.get("random", {})))
+    out_rand = {}
+    for k, rng in rand.items():
+        check_name("random", k)
+        if k in out_grid:
+            chk.fail(f"random.{k}", "also in [grid]; sweep it in one place")
+        if k == "robot.density":
+            chk.fail(f"random.{k}", "density changes array shapes (one compile per value): sweep it in [grid]")
+        if k.partition(".")[2] in _COUNT_FIELDS:
+            chk.fail(f"random.{k}", "counts are integers: sweep them in [grid]")
+        lo, hi = chk.range(f"random.{k}", rng)
+        out_rand[k] = (param(k, f"random.{k}[0]", lo), param(k, f"random.{k}[1]", hi))
+    kw["random"] = out_rand
+    if out_rand and kw.get("random_samples", 0) < 1:
+        chk.fail("sweep.random_samples", "must be >= 1 when [random] is given")
+    if not out_rand and kw.get("random_samples", 0) > 0:
+        chk.fail("sweep.random_samples", "is set but [random] is empty")
+
+    cfg = SweepConfig(**kw)
+    # Cross-field checks on every cell's resolved values, still before any compute.
+    for _, row in cells(cfg).iterrows():
+        for lo_name in fields:
+            if lo_name.endswith("_min"):
+                hi_name = lo_name[:-4] + "_max"
+                lo_v, hi_v = _terrain_of(cfg, row, lo_name), _terrain_of(cfg, row, hi_name)
+                if lo_v > hi_v:
+                    chk.fail(f"terrain.params.{lo_name}", f"impossible range: {lo_name} ({lo_v}) > {hi_name} ({hi_v})")
+    return cfg
+
+
+def load_config(path) -> SweepConfig:
+    """Read and validate a sweep file (see :func:`parse_config`).
+
+    Raises:
+      SweepConfigError: the file cannot be read, or is malformed (file, key, reason).
+    """
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as e:
+        raise SweepConfigError(f"{p}: <file>: cannot read: {e.strerror}") from None
+    return parse_config(text, str(p))
+
+
+# --------------------------------------------------------------------------- expansion
+
+
+def _terrain_of(cfg: SweepConfig, row, name: str):
+    key = f"terrain.{name}"
+    if key in row:
+        return row[key]
+    if name in cfg.terrain_params:
+        return cfg.terrain_params[name]
+    return getattr(cfg.params_class(), name)
+
+
+def cells(cfg: SweepConfig):
+    """The sweep's cells: one row per cell, columns ``cell`` and each swept parameter.
+
+    Grid values are crossed (first grid key slowest); random cells draw each
+    ``[random]`` key uniformly from ``np.random.default_rng([seed, 1])``, and
+    every grid cell is crossed with every random draw.
+
+    Returns:
+      pandas.DataFrame with ``cfg.num_cells`` rows.
+    """
+    import pandas as pd
+
+    keys = list(cfg.grid)
+    combos = list(itertools.product(*(cfg.grid[k] for k in keys))) if keys else [()]
+    rows = [dict(zip(keys, c, strict=True)) for c in combos]
+    if cfg.random:
+        rng = np.random.default_rng([cfg.seed, 1])
+        draws = [{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in cfg.random.items()}
+                 for _ in range(cfg.random_samples)]
+        rows = [{**r, **d} for r in rows for d in draws]
+    df = pd.DataFrame(rows, index=range(len(rows)))
+    df.insert(0, "cell", np.arange(len(rows), dtype=np.int64))
+    return df
+
+
+def scenarios(cfg: SweepConfig, max_scenarios: int | None = None):
+    """Every scenario of the sweep with all its parameters resolved (host only, no JAX).
+
+    Scenario ``cell * scenarios_per_cell + replicate``; its terrain key is
+    ``fold_in(key(seed), replicate)`` and its command is drawn per replicate
+    from ``np.random.default_rng([seed, 2, replicate])``, so replicate r is the
+    same terrain and command in every cell.
+
+    Columns: ``scenario``, ``cell``, ``replicate``, ``robot.<name>`` (all of
+    :data:`ROBOT_DEFAULTS`), ``terrain.<field>`` (all of the family's
+    parameters), ``command.vx`` (m/s), ``command.vy`` (m/s), ``command.wz`` (rad/s).
+
+    Args:
+      cfg: the sweep.
+      max_scenarios: keep only the first this many scenarios (None: all).
+
+    Returns:
+      pandas.DataFrame, one row per scenario, ordered by ``scenario``.
+    """
+    import pandas as pd
+
+    c = cells(cfg)
+    n_rep = cfg.scenarios_per_cell
+    cmd = np.zeros((n_rep, 3))
+    for r in range(n_rep):
+        rng = np.random.default_rng([cfg.seed, 2, r])
+        cmd[r] = [rng.uniform(*cfg.command[k]) for k in COMMAND_KEYS]
+    cell_idx = np.repeat(c["cell"].to_numpy(), n_rep)
+    rep = np.tile(np.arange(n_rep), len(c))
+    cols: dict[str, Any] = {"scenario": np.arange(len(cell_idx), dtype=np.int64), "cell": cell_idx,
+                            "replicate": rep.astype(np.int64)}
+    for name, default in ROBOT_DEFAULTS.items():
+        key = f"robot.{name}"
+        if key in c:
+            cols[key] = c[key].to_numpy(np.float64)[cell_idx]
+        else:
+            cols[key] = np.full(len(cell_idx), float(cfg.robot.get(name, default)))
+    defaults = cfg.params_class()
+    for f in dataclasses.fields(cfg.params_class):
+        key = f"terrain.{f.name}"
+        is_int = f.name in _COUNT_FIELDS
+        if key in c:
+            v = c[key].to_numpy()[cell_idx]
+        else:
+            v = np.full(len(cell_idx), cfg.terrain_params.get(f.name, getattr(defaults, f.name)))
+        cols[key] = v.astype(np.int64 if is_int else np.float64)
+    for j, k in enumerate(COMMAND_KEYS):
+        cols[f"command.{k}"] = cmd[rep, j]
+    df = pd.DataFrame(cols)
+    if max_scenarios is not None:
+        df = df.iloc[: int(max_scenarios)].copy()
+    return df

@@ -1,0 +1,344 @@
+"""Running a sweep: scenarios batched with jit + vmap in chunks, written as they complete, resumable.
+
+Layout of an output folder::
+
+    DIR/sweep.toml              the sweep file's text, as run
+    DIR/manifest.json           sweep text, plan, package versions, device, git commit, timings
+    DIR/parts/part-00000.parquet  one file per completed chunk (written atomically)
+    DIR/aggregates.parquet      per-cell means and 95% confidence intervals (when complete)
+
+Execution. Scenarios are grouped by action-set density (the only parameter
+that changes an array shape) and each group is cut into chunks of
+``chunk_size`` scenarios; a group's last chunk is padded (the padding rows are
+computed and dropped) so every chunk of a group has one shape. One chunk is
+one call of a jitted ``vmap`` over scenarios of: generate the terrain (its
+family's parameters are traced per scenario), ``robot.replace`` with the
+scenario's traced leaves (w, rotation weight, margin, step time, footprint,
+metric weights), the start stance from the terrain's start zone, and
+:func:`ijoy_jax.control.rollout_core` with the scenario's command, returning
+:meth:`ijoy_jax.Trajectory.summary`.
+
+Compiles (measured by :func:`trace_count`, tested): parameter values never
+recompile; each density value compiles once (its action-set size is a shape;
+no padding of action sets). Static too: the terrain family, grid shape,
+resolution, 2D/2.5D flag, ``num_steps``, ``method`` and the chunk shape
+``min(chunk_size, scenarios of that density)``. When ``robot.rotation_weight``
+is not swept, the targets F and L_i are built once per density outside the
+jit and shared by every scenario; when it is, each scenario sorts its own
+(|F| x N entries), a different compiled function.
+
+Progress: one line per chunk on stderr (scenarios done, scenarios/s over
+compiled chunks, ETA); ``first_chunk_s`` in the manifest holds each density's
+first chunk time, which includes its compile.
+
+Resume. The chunk plan is a pure function of the sweep file, ``chunk_size``
+and ``max_scenarios`` and is saved in the manifest. Each finished chunk is
+written to a temporary file and renamed (atomic on POSIX), so after a kill a
+part file is either complete or absent; a rerun on the same folder skips the
+chunks whose part exists and computes the rest. Nothing is lost or duplicated.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from importlib import metadata
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ijoy_jax import generators, robots
+from ijoy_jax.control import rollout_core
+from ijoy_jax.select import make_targets
+from ijoy_jax.sweep.config import (
+    COMMAND_KEYS,
+    ROBOT_DEFAULTS,
+    SweepConfig,
+    SweepConfigError,
+    load_config,
+    scenarios,
+)
+
+__all__ = ["DEFAULT_CHUNK", "RunStats", "run", "trace_count"]
+
+DEFAULT_CHUNK = 32
+"""Scenarios per chunk by default: large enough to amortise dispatch, small enough to resume often."""
+
+_PART = "part-{:05d}.parquet"
+_TRACES = {"count": 0}
+
+
+def trace_count() -> int:
+    """How many times the chunk function has been traced (compiled) in this process."""
+    return _TRACES["count"]
+
+
+class _Static(NamedTuple):
+    """Everything about a chunk that is static under jit (hashable)."""
+
+    family: str
+    shape: tuple[int, int]
+    resolution: float
+    has_height: bool
+    max_count: int | None
+    num_steps: int
+    method: str
+
+
+_METRIC_NAMES = tuple(k.partition(".")[2] for k in ROBOT_DEFAULTS if k.startswith("metrics."))
+_LEAF_NAMES = tuple(k for k in ROBOT_DEFAULTS if not k.startswith("metrics.") and k != "density")
+
+
+def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_vals, terrain_vals, command):
+    """One scenario: terrain, robot, start and rollout; returns the trajectory's summary (scalars)."""
+    fam = generators.FAMILIES[static.family]
+    params = fam.params(**terrain_vals)
+    kw = {} if static.max_count is None else {"max_count": static.max_count}
+    terrain = fam.generator(jax.random.fold_in(key, seed), params, shape=static.shape,
+                            resolution=static.resolution, has_height=static.has_height, **kw)
+    metrics = base.metrics.replace(**{m: robot_vals[f"metrics.{m}"] for m in _METRIC_NAMES})
+    robot = base.replace(metrics=metrics, **{k: robot_vals[k] for k in _LEAF_NAMES})
+    centre = generators.start_point(params, shape=static.shape, resolution=static.resolution)
+    half = 0.5 * base.p0[1]  # feet side by side at the step-in-place width, facing +x
+    start = jnp.stack([jnp.stack([centre[0], centre[1] + half, 0.0]), jnp.stack([centre[0], centre[1] - half, 0.0])])
+    traj = rollout_core(terrain, robot, start, command, static.num_steps, static.method, targets=targets)
+    return traj.summary()
+
+
+def _chunk(static: _Static, base, targets, key, seeds, robot_vals, terrain_vals, commands):
+    _TRACES["count"] += 1  # runs once per trace: counts compiles
+    fn = lambda s, r, t, c: _scenario(static, base, targets, key, s, r, t, c)  # noqa: E731
+    return jax.vmap(fn)(seeds, robot_vals, terrain_vals, commands)
+
+
+_run_chunk = jax.jit(_chunk, static_argnames=("static",))
+
+
+@dataclasses.dataclass
+class RunStats:
+    """What :func:`run` did (seconds are wall time).
+
+    Fields:
+      out: the output folder.
+      scenarios: scenarios in the plan; computed: scenarios computed by this
+        call (skipped chunks excluded); chunks, skipped: chunk counts.
+      compiles: traces of the chunk function during this call.
+      first_chunk_s: per density, wall time of its first chunk (includes compile).
+      run_s: total wall time of this call.
+    """
+
+    out: Path
+    scenarios: int = 0
+    computed: int = 0
+    chunks: int = 0
+    skipped: int = 0
+    compiles: int = 0
+    first_chunk_s: dict = dataclasses.field(default_factory=dict)
+    run_s: float = 0.0
+
+
+def _base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
+    """The density's robot with static windows covering the sweep's largest footprint and margin.
+
+    Raises SweepConfigError when the largest footprint makes an action overlap the stance foot.
+    """
+    fl = float(table["robot.foot_length"].max())
+    fw = float(table["robot.foot_width"].max())
+    mm = max(float(table["robot.margin"].max()), 0.10)
+    try:
+        return robots.hrp2(margin=0.0, density=density, foot_length=fl, foot_width=fw, max_margin=mm)
+    except ValueError as e:
+        raise SweepConfigError(f"{cfg.source}: robot.foot_length/robot.foot_width: a {fl} x {fw} m footprint "
+                               f"does not fit HRP-2's action set at density {density}: {e}") from None
+
+
+def _versions() -> dict:
+    out = {"python": platform.python_version()}
+    for pkg in ("ijoy_jax", "jax", "jaxlib", "numpy", "pandas", "pyarrow"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def _git_commit() -> str | None:
+    try:
+        here = Path(__file__).resolve().parent
+        r = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)
+        dirty = subprocess.run(["git", "status", "--porcelain"], cwd=here, capture_output=True, text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if r.returncode != 0:
+        return None
+    return r.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
+
+
+def _write_json(path: Path, obj) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=2, default=str))
+    os.replace(tmp, path)
+
+
+def _plan(cfg: SweepConfig, table, chunk_size: int) -> list[tuple[int, float, np.ndarray]]:
+    """Chunks as (chunk id, density, scenario ids), by density in order of first appearance."""
+    plan = []
+    dens = table["robot.density"].to_numpy()
+    for d in dict.fromkeys(dens.tolist()):
+        ids = table["scenario"].to_numpy()[dens == d]
+        for i in range(0, len(ids), chunk_size):
+            plan.append((len(plan), float(d), ids[i : i + chunk_size]))
+    return plan
+
+
+def _progress(done: int, total: int, rate: float, chunk: int, nchunks: int) -> None:
+    eta = (total - done) / rate if rate > 0 else float("nan")
+    line = (f"[ijoy sweep] {done}/{total} scenarios  chunk {chunk}/{nchunks}  "
+            f"{rate:.1f} scenarios/s  ETA {eta:.0f} s")
+    end = "\r" if sys.stderr.isatty() and done < total else "\n"
+    print(line.ljust(78), end=end, file=sys.stderr, flush=True)
+
+
+def run(
+    sweep,
+    out=None,
+    *,
+    chunk_size: int = DEFAULT_CHUNK,
+    max_scenarios: int | None = None,
+    progress: bool = True,
+) -> RunStats:
+    """Run (or resume) a sweep and write its results (see the module docstring for the layout).
+
+    Args:
+      sweep: a sweep file path or a :class:`SweepConfig`.
+      out: output folder (default ``results/<name>``); an existing folder
+        from the same sweep file and options is resumed.
+      chunk_size: scenarios per jitted call (>= 1); memory grows linearly with it.
+      max_scenarios: run only the first this many scenarios (smoke tests).
+      progress: print a progress line (scenarios/s, ETA) to stderr.
+
+    Returns:
+      :class:`RunStats`.
+
+    Raises:
+      SweepConfigError: a bad sweep file (before any compute).
+      ValueError: ``out`` holds results of a different sweep or chunk plan.
+
+    Example:
+      >>> from ijoy_jax import sweep
+      >>> stats = sweep.run("sweeps/w_sweep.toml", "/tmp/w", max_scenarios=4, progress=False)  # doctest: +SKIP
+      >>> sweep.load("/tmp/w").shape[0]  # doctest: +SKIP
+      4
+    """
+    t_start = time.perf_counter()
+    cfg = sweep if isinstance(sweep, SweepConfig) else load_config(sweep)
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
+        raise ValueError(f"chunk_size must be a positive int, got {chunk_size!r}")
+    if max_scenarios is not None and (not isinstance(max_scenarios, int) or max_scenarios < 1):
+        raise ValueError(f"max_scenarios must be a positive int, got {max_scenarios!r}")
+    out = Path(out) if out is not None else Path("results") / cfg.name
+    table = scenarios(cfg, max_scenarios)
+    plan = _plan(cfg, table, chunk_size)
+    plan_key = {"chunk_size": chunk_size, "max_scenarios": max_scenarios, "scenarios": len(table),
+                "chunks": len(plan)}
+
+    # Host-side robots per density (cheap, no compile): footprint problems surface before any output.
+    bases = {d: _base_robot(cfg, table, d) for d in dict.fromkeys(p[1] for p in plan)}
+    parts = out / "parts"
+    manifest_path = out / "manifest.json"
+    if manifest_path.exists():
+        old = json.loads(manifest_path.read_text())
+        if old.get("sweep_text") != cfg.text or old.get("plan") != plan_key:
+            raise ValueError(f"{out} holds results of a different sweep or chunk plan "
+                             f"({old.get('plan')} vs {plan_key}); choose another --out or delete it")
+        manifest = old
+    else:
+        manifest = {"sweep_file": cfg.source, "sweep_text": cfg.text, "name": cfg.name, "plan": plan_key,
+                    "versions": _versions(), "git_commit": _git_commit(), "sessions": []}
+    parts.mkdir(parents=True, exist_ok=True)
+    (out / "sweep.toml").write_text(cfg.text)
+    session: dict[str, Any] = {"started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                               "device": str(jax.devices()[0]), "backend": jax.default_backend(),
+                               "device_count": jax.device_count()}
+    manifest["sessions"].append(session)
+    _write_json(manifest_path, manifest)
+
+    stats = RunStats(out=out, scenarios=len(table), chunks=len(plan))
+    static = _Static(cfg.family, cfg.shape, cfg.resolution, cfg.has_height, cfg.static_max_count,
+                     cfg.num_steps, cfg.method)
+    key = jax.random.key(cfg.seed)
+    rw_swept = table["robot.rotation_weight"].nunique() > 1
+    robot_cols = [f"robot.{k}" for k in ROBOT_DEFAULTS if k != "density"]
+    terrain_cols = [c for c in table.columns if c.startswith("terrain.")]
+    todo = [p for p in plan if not (parts / _PART.format(p[0])).exists()]
+    stats.skipped = len(plan) - len(todo)
+    done_before = int(sum(len(p[2]) for p in plan if (parts / _PART.format(p[0])).exists()))
+    by_id = table.set_index("scenario", drop=False)
+    traces0 = trace_count()
+    targets_of: dict[float, Any] = {}
+    computed = steady_n = 0
+    steady_s = 0.0
+    for chunk_id, density, ids in todo:
+        t0 = time.perf_counter()
+        base = bases[density]
+        if density not in targets_of:
+            targets_of[density] = None if rw_swept else make_targets(base.replace(
+                rotation_weight=jnp.float32(table["robot.rotation_weight"].iloc[0])))
+        targets = targets_of[density]
+        rows = by_id.loc[ids]
+        n = len(rows)
+        size = min(chunk_size, int((table["robot.density"] == density).sum()))
+        pad = np.concatenate([np.arange(n), np.full(size - n, n - 1)])  # repeat the last row
+
+        def col(name, dtype, rows=rows, pad=pad):
+            return jnp.asarray(rows[name].to_numpy()[pad], dtype)
+
+        robot_vals = {c.partition(".")[2]: col(c, jnp.float32) for c in robot_cols}
+        terrain_vals = {c.partition(".")[2]: col(c, jnp.int32 if rows[c].dtype.kind == "i" else jnp.float32)
+                        for c in terrain_cols}
+        commands = jnp.stack([col(f"command.{k}", jnp.float32) for k in COMMAND_KEYS], axis=-1)
+        seeds = col("replicate", jnp.int32)
+        summary = _run_chunk(static, base, targets, key, seeds, robot_vals, terrain_vals, commands)
+        summary = jax.device_get(jax.block_until_ready(summary))
+        result = rows.reset_index(drop=True).copy()
+        for k, v in summary.items():
+            result[k] = np.asarray(v)[:n]
+        result.insert(1, "chunk", chunk_id)
+        path = parts / _PART.format(chunk_id)
+        tmp = path.with_name(path.name + ".tmp")
+        result.to_parquet(tmp, index=False)
+        os.replace(tmp, path)
+        dt = time.perf_counter() - t0
+        if density not in stats.first_chunk_s:
+            stats.first_chunk_s[density] = dt  # includes the compile
+        else:
+            steady_n, steady_s = steady_n + n, steady_s + dt
+        computed += n
+        if progress:
+            # Rate over compiled chunks only (the first chunk of a density includes its compile).
+            rate = steady_n / steady_s if steady_n else n / dt
+            _progress(done_before + computed, len(table), rate, chunk_id + 1, len(plan))
+    stats.computed = computed
+    stats.compiles = trace_count() - traces0
+    stats.run_s = time.perf_counter() - t_start
+
+    complete = all((parts / _PART.format(p[0])).exists() for p in plan)
+    if complete:
+        from ijoy_jax.sweep.results import aggregate, load
+
+        aggregate(load(out), cfg.swept).to_parquet(out / "aggregates.parquet", index=False)
+    session.update(finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), run_s=stats.run_s,
+                   computed=computed, skipped_chunks=stats.skipped, compiles=stats.compiles,
+                   first_chunk_s={str(k): v for k, v in stats.first_chunk_s.items()}, complete=complete)
+    _write_json(manifest_path, manifest)
+    if progress and not todo:
+        print(f"[ijoy sweep] {out}: all {len(plan)} chunks already done", file=sys.stderr)
+    return stats

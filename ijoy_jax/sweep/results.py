@@ -1,0 +1,187 @@
+"""Sweep results: the tidy per-scenario table, per-cell aggregates with 95% confidence intervals, a plot.
+
+Per-scenario table (:func:`load`): one row per scenario with its parameters
+(``robot.*``, ``terrain.*``, ``command.*``), ids (``scenario``, ``cell``,
+``replicate``, ``chunk``) and the metrics of :meth:`ijoy_jax.Trajectory.summary`
+(:data:`METRICS`, units in :data:`UNITS`).
+
+Aggregates (:func:`aggregate`): per cell and metric, ``mean``, ``std``
+(sample, ddof 1), ``n``, ``sem = std / sqrt(n)`` and the half-width
+``ci95 = t_{0.975, n-1} * sem`` of a two-sided 95% Student-t interval for the
+mean (``mean +- ci95``; NaN for n < 2). Boolean metrics (``stopped``) are
+averaged as fractions. The t quantile comes from a table (n - 1 <= 30) and a
+Cornish-Fisher expansion beyond (:func:`t_quantile`; no SciPy needed).
+Scenarios of a replicate share terrain and command across cells (paired), so
+differences between cells are estimated more precisely than these marginal
+intervals suggest.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["METRICS", "UNITS", "aggregate", "load", "load_aggregates", "plot", "t_quantile"]
+
+METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
+           "distance_along", "distance_across", "mean_deviation", "mean_foot_cost")
+"""Rollout metrics (:meth:`ijoy_jax.Trajectory.summary`) in every results table."""
+
+UNITS = {
+    "steps_taken": "steps", "steps_in_place": "steps", "steps_stationary": "steps", "stopped": "fraction",
+    "footholds_on_obstacles": "footholds", "distance_along": "m", "distance_across": "m",
+    "mean_deviation": "m", "mean_foot_cost": "cost units", "robot.w": "cost units per m", "robot.rotation_weight": "cost units per rad",
+    "robot.margin": "m", "robot.step_time": "s", "robot.foot_length": "m", "robot.foot_width": "m",
+    "robot.density": "x HRP-2's 496 actions", "command.vx": "m/s", "command.vy": "m/s", "command.wz": "rad/s",
+}
+"""Units of metrics and parameters, for tables and axis labels."""
+
+_NORMAL_975 = 1.959963984540054
+
+
+# t_{0.975, df} for df = 1..30 (scipy.stats.t.ppf, 6 decimals); the expansion below is used beyond.
+_T975 = (12.706205, 4.302653, 3.182446, 2.776445, 2.570582, 2.446912, 2.364624, 2.306004, 2.262157, 2.228139,
+         2.200985, 2.178813, 2.160369, 2.144787, 2.131450, 2.119905, 2.109816, 2.100922, 2.093024, 2.085963,
+         2.079614, 2.073873, 2.068658, 2.063899, 2.059539, 2.055529, 2.051831, 2.048407, 2.045230, 2.042272)
+
+
+def t_quantile(df: int) -> float:
+    """Two-sided 95% Student-t quantile ``t_{0.975, df}`` (df >= 1; NaN below).
+
+    A table for df <= 30 (6 decimals), a 4-term Cornish-Fisher expansion in
+    1/df beyond (error < 1e-7 there), so no SciPy is needed.
+
+    Example:
+      >>> round(t_quantile(9), 3)
+      2.262
+    """
+    if df < 1:
+        return math.nan
+    if df <= len(_T975):
+        return _T975[df - 1]
+    z, v = _NORMAL_975, float(df)
+    return (z + (z**3 + z) / (4 * v) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * v**2)
+            + (3 * z**7 + 19 * z**5 + 17 * z**3 - 15 * z) / (384 * v**3)
+            + (79 * z**9 + 776 * z**7 + 1482 * z**5 - 1920 * z**3 - 945 * z) / (92160 * v**4))
+
+
+def load(path):
+    """The per-scenario table of a sweep folder, in one call.
+
+    Args:
+      path: the sweep's output folder (``ijoy sweep run --out``).
+
+    Returns:
+      pandas.DataFrame, one row per completed scenario, sorted by ``scenario``
+      (a partial sweep gives its completed chunks).
+
+    Example:
+      >>> from ijoy_jax import sweep
+      >>> df = sweep.load("results/w_sweep")  # doctest: +SKIP
+      >>> df.groupby("robot.w")["distance_along"].mean()  # doctest: +SKIP
+    """
+    import pandas as pd
+
+    parts = sorted((Path(path) / "parts").glob("part-*.parquet"))
+    if not parts:
+        raise FileNotFoundError(f"no result parts under {Path(path) / 'parts'}")
+    df = pd.concat([pd.read_parquet(p) for p in parts], ignore_index=True)
+    return df.sort_values("scenario", kind="stable").reset_index(drop=True)
+
+
+def _swept(path) -> tuple[str, ...]:
+    from ijoy_jax.sweep.config import parse_config
+
+    man = json.loads((Path(path) / "manifest.json").read_text())
+    return parse_config(man["sweep_text"], man.get("sweep_file", "<manifest>")).swept
+
+
+def aggregate(df, by=None):
+    """Per-cell aggregates with 95% confidence intervals (see the module docstring).
+
+    Args:
+      df: a per-scenario table (:func:`load`).
+      by: parameter columns to keep alongside ``cell`` (default: every
+        ``robot.*``/``terrain.*`` column that varies).
+
+    Returns:
+      pandas.DataFrame, one row per cell: ``cell``, the ``by`` columns, and
+      for each metric m ``m.mean``, ``m.std``, ``m.sem``, ``m.ci95``; ``n``.
+    """
+    import pandas as pd
+
+    if by is None:
+        by = [c for c in df.columns if c.startswith(("robot.", "terrain.")) and df[c].nunique() > 1]
+    rows = []
+    for cell, g in df.groupby("cell", sort=True):
+        row = {"cell": cell, **{c: g[c].iloc[0] for c in by}, "n": len(g)}
+        t = t_quantile(len(g) - 1)
+        for m in METRICS:
+            x = g[m].to_numpy(np.float64)
+            std = float(np.std(x, ddof=1)) if len(x) > 1 else math.nan
+            sem = std / math.sqrt(len(x))
+            row.update({f"{m}.mean": float(np.mean(x)), f"{m}.std": std, f"{m}.sem": sem, f"{m}.ci95": t * sem})
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def load_aggregates(path):
+    """The per-cell aggregates of a sweep folder (computed from its parts; written when complete)."""
+    return aggregate(load(path), list(_swept(path)))
+
+
+def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_foot_cost", "steps_in_place",
+                                     "steps_stationary", "footholds_on_obstacles"), title: str = ""):
+    """Plot aggregates against one swept parameter, one panel per metric, with 95% CI error bars.
+
+    Args:
+      agg: :func:`aggregate` output.
+      out: PNG path.
+      x: the parameter on the x axis (default: the swept column with most values).
+      metrics: the metrics to plot (one panel each).
+      title: figure title.
+
+    Other swept columns become one line each (legend). A robot parameter's
+    library default (:data:`ijoy_jax.sweep.ROBOT_DEFAULTS`) is marked by a
+    dashed line; values spanning 20x or more get a symlog axis. Returns ``out``.
+    """
+    import matplotlib
+
+    from ijoy_jax.sweep.config import ROBOT_DEFAULTS
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    params = [c for c in agg.columns if c.startswith(("robot.", "terrain."))]
+    if x is None:
+        x = max(params, key=lambda c: agg[c].nunique()) if params else "cell"
+    others = [c for c in params if c != x]
+    fig, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.6), squeeze=False)
+    groups = agg.groupby(others, sort=True) if others else [((), agg)]
+    for ax, m in zip(axes[0], metrics, strict=True):
+        for key, g in groups:
+            g = g.sort_values(x)
+            key = key if isinstance(key, tuple) else (key,)
+            label = ", ".join(f"{c.partition('.')[2]} = {v:g}" for c, v in zip(others, key, strict=True))
+            ax.errorbar(g[x], g[f"{m}.mean"], yerr=g[f"{m}.ci95"], marker="o", capsize=3, label=label or None)
+        default = ROBOT_DEFAULTS.get(x.partition(".")[2]) if x.startswith("robot.") else None
+        if default is not None:
+            ax.axvline(default, color="0.4", ls="--", lw=1, label=f"library default ({default:g})")
+        pos = agg[x][agg[x] > 0] if x in agg else []
+        if len(pos) and agg[x].max() >= 20 * pos.min():
+            ax.set_xscale("symlog", linthresh=float(pos.min()), linscale=0.5)
+            ax.set_xlim(min(0.0, float(agg[x].min())) - 0.3 * float(pos.min()), 1.5 * float(agg[x].max()))
+        ax.set_xlabel(f"{x.partition('.')[2] or x} ({UNITS.get(x, '-')})")
+        ax.set_ylabel(f"{m.replace('_', ' ')} ({UNITS[m]})")
+        ax.set_title("mean and 95% CI over scenarios", fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=8)
+    n = int(agg["n"].min()) if len(agg) else 0
+    fig.suptitle(f"{title}  ({n} scenarios per point)".strip())
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

@@ -1,0 +1,390 @@
+"""Tests of ijoy_jax.sweep: validation, expansion, results against direct rollouts, no recompiles,
+resume after SIGKILL, loading, and the ``ijoy sweep`` command line.
+
+Sizes are tiny (2D 60 x 50 map at 4 cm, 19 actions, 6 steps) and every in-process sweep shares one
+static configuration, so the chunk function compiles once for the module (plus once for a second
+density, on purpose).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+import pandas as pd
+import pytest
+import scipy.stats
+
+import ijoy_jax as ij
+from ijoy_jax import cli, generators, sweep
+from ijoy_jax.sweep import execute
+
+# Float metrics from a vmapped chunk vs a single jitted rollout: same ops, possibly fused differently (m).
+FLOAT_TOL = 1e-5
+# t quantiles: the table has 6 decimals; the Cornish-Fisher expansion beyond df = 30 is within 1e-7.
+T_TOL = 1e-6
+
+BASE = """
+[sweep]
+name = "tiny"
+seed = 3
+scenarios_per_cell = 3
+num_steps = 6
+method = "exhaustive"
+
+[robot]
+density = 0.25
+
+[terrain]
+family = "obstacles"
+shape = [60, 50]
+resolution = 0.04
+max_count = 8
+
+[terrain.params]
+count = 6
+
+[command]
+vx = [0.1, 0.3]
+vy = [-0.05, 0.05]
+wz = 0.0
+
+[grid]
+"robot.w" = [0.5, 2.0]
+"robot.margin" = [0.0, 0.05]
+"""
+CHUNK = 2  # 12 scenarios -> 6 chunks
+
+
+def write(tmp_path: Path, text: str, name: str = "s.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+@pytest.fixture(scope="module")
+def base_file(tmp_path_factory) -> Path:
+    return write(tmp_path_factory.mktemp("cfg"), BASE, "tiny.toml")
+
+
+@pytest.fixture(scope="module")
+def reference(base_file, tmp_path_factory):
+    """One uninterrupted run of BASE: (output folder, stats)."""
+    out = tmp_path_factory.mktemp("ref") / "tiny"
+    stats = sweep.run(base_file, out, chunk_size=CHUNK, progress=False)
+    return out, stats
+
+
+# --------------------------------------------------------------------------- validation
+
+
+BAD = [
+    ("[nonsense]\nx = 1\n", "nonsense", "unknown key"),
+    ("[sweep]\nnum_stepz = 4\n", "sweep.num_stepz", "unknown key"),
+    ('[sweep]\nnum_steps = "ten"\n', "sweep.num_steps", "must be an integer"),
+    ("[sweep]\nnum_steps = 0\n", "sweep.num_steps", "must be >= 1"),
+    ("[sweep]\nscenarios_per_cell = 2.5\n", "sweep.scenarios_per_cell", "must be an integer"),
+    ('[sweep]\nmethod = "greedy"\n', "sweep.method", "must be one of"),
+    ("[robot]\nmargin = -0.01\n", "robot.margin", "must be >= 0"),
+    ("[robot]\nstep_time = 0\n", "robot.step_time", "must be > 0"),
+    ("[robot]\nw = true\n", "robot.w", "must be a number"),
+    ("[robot]\nmetrics.slope_wait = 1.0\n", "robot.metrics.slope_wait", "unknown key"),
+    ('[terrain]\nfamily = "lava"\n', "terrain.family", "must be one of"),
+    ("[terrain]\nshape = [60]\n", "terrain.shape", "must be [nx, ny]"),
+    ("[terrain]\nresolution = -0.02\n", "terrain.resolution", "must be > 0"),
+    ('[terrain]\nfamily = "slope"\nmax_count = 3\n', "terrain.max_count", "has no object slots"),
+    ("[terrain.params]\ncount = 40\n", "terrain.params.count", "exceeds [terrain] max_count"),
+    ("[terrain.params]\nheight = 1.0\n", "terrain.params.height", "unknown key"),
+    ("[terrain.params]\nsize_min = 0.3\nsize_max = 0.1\n", "terrain.params.size_min", "impossible range"),
+    ("[command]\nvx = [0.3, 0.1]\n", "command.vx", "impossible range: lo (0.3) > hi (0.1)"),
+    ("[command]\nvx = [0.1, nan]\n", "command.vx[1]", "must be finite"),
+    ("[command]\nspin = 1.0\n", "command.spin", "unknown key"),
+    ('[grid]\n"robot.wiggle" = [1, 2]\n', "grid.robot.wiggle", "unknown parameter"),
+    ('[grid]\n"robot.w" = []\n', "grid.robot.w", "non-empty list"),
+    ('[grid]\n"robot.w" = [1, 1]\n', "grid.robot.w", "repeated values"),
+    ('[grid]\n"robot.margin" = [0.02, -0.1]\n', "grid.robot.margin[1]", "must be >= 0"),
+    ('[robot]\nw = 1.0\n[grid]\n"robot.w" = [1, 2]\n', "grid.robot.w", "also set as a fixed value"),
+    ('[sweep]\nrandom_samples = 2\n[random]\n"robot.density" = [0.5, 1]\n', "random.robot.density",
+     "changes array shapes"),
+    ('[sweep]\nrandom_samples = 2\n[random]\n"robot.w" = [4, 1]\n', "random.robot.w", "impossible range"),
+    ('[random]\n"robot.w" = [1, 4]\n', "sweep.random_samples", "must be >= 1"),
+    ("[sweep\n", "<toml>", ""),
+]
+
+
+@pytest.mark.parametrize("text, key, reason", BAD, ids=[b[1] + ":" + b[2][:20] for b in BAD])
+def test_bad_files_name_file_key_and_reason(tmp_path, text, key, reason):
+    path = write(tmp_path, text, "bad_sweep.toml")
+    with pytest.raises(sweep.SweepConfigError) as e:
+        sweep.load_config(path)
+    msg = str(e.value)
+    assert msg.startswith(f"{path}: {key}: "), msg
+    assert reason in msg
+
+
+@pytest.mark.parametrize("text, key", [("[robot]\nmargin = -1.0\n", "robot.margin"),
+                                       ('[grid]\n"robot.foot_width" = [0.13, 0.3]\n', "robot.foot_width")])
+def test_bad_file_fails_before_any_compute(tmp_path, text, key):
+    # The second is only found when the robot is built (its actions would overlap the stance foot).
+    path = write(tmp_path, text)
+    before = sweep.trace_count()
+    with pytest.raises(sweep.SweepConfigError, match=key):
+        sweep.run(path, tmp_path / "out", progress=False)
+    assert not (tmp_path / "out").exists()
+    assert sweep.trace_count() == before
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(sweep.SweepConfigError, match="cannot read"):
+        sweep.load_config(tmp_path / "nope.toml")
+
+
+def test_robot_defaults_are_hrp2s():
+    robot = ij.robots.hrp2()
+    for name, value in sweep.ROBOT_DEFAULTS.items():
+        if name == "density":
+            assert robot.num_actions == 496
+            continue
+        obj = robot.metrics if name.startswith("metrics.") else robot
+        assert float(getattr(obj, name.partition(".")[2] or name)) == pytest.approx(value, rel=1e-6), name
+
+
+def test_defaults_are_fresh_and_not_shared():
+    a, b = sweep.parse_config(""), sweep.parse_config("")
+    assert a.command == b.command and a.command is not b.command
+    assert a.robot is not b.robot and a.grid is not b.grid
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        a.seed = 4  # type: ignore[misc]
+
+
+# --------------------------------------------------------------------------- expansion
+
+
+def test_grid_expansion_order_and_pairing(base_file):
+    cfg = sweep.load_config(base_file)
+    assert cfg.num_cells == 4 and cfg.num_scenarios == 12
+    c = sweep.cells(cfg)
+    assert c[["robot.w", "robot.margin"]].values.tolist() == [[0.5, 0.0], [0.5, 0.05], [2.0, 0.0], [2.0, 0.05]]
+    s = sweep.scenarios(cfg)
+    assert s["scenario"].tolist() == list(range(12))
+    assert s["replicate"].tolist() == [0, 1, 2] * 4
+    assert (s["robot.density"] == 0.25).all() and (s["terrain.count"] == 6).all()
+    assert s["terrain.count"].dtype == np.int64
+    # Replicate r has the same command in every cell (paired design), drawn in range.
+    per_rep = s.groupby("replicate")[["command.vx", "command.vy"]].nunique()
+    assert (per_rep == 1).all().all()
+    assert s["command.vx"].between(0.1, 0.3).all() and s["command.vy"].between(-0.05, 0.05).all()
+    assert (s["command.wz"] == 0.0).all()
+    assert len(sweep.scenarios(cfg, max_scenarios=5)) == 5
+
+
+def test_random_samples_crossed_with_grid():
+    cfg = sweep.parse_config('[sweep]\nrandom_samples = 3\nseed = 7\n[grid]\n"robot.w" = [1, 2]\n'
+                             '[random]\n"robot.margin" = [0.01, 0.08]\n"terrain.size_max" = [0.1, 0.2]\n')
+    c = sweep.cells(cfg)
+    assert len(c) == cfg.num_cells == 6
+    assert c["robot.margin"].between(0.01, 0.08).all() and c["terrain.size_max"].between(0.1, 0.2).all()
+    # The same three draws under each w.
+    np.testing.assert_array_equal(c["robot.margin"].values[:3], c["robot.margin"].values[3:])
+    assert c["robot.margin"].nunique() == 3
+    pd.testing.assert_frame_equal(c, sweep.cells(sweep.parse_config(cfg.text)))
+
+
+def test_nested_tables_equal_dotted_keys():
+    a = sweep.parse_config('[grid]\n"robot.w" = [1, 2]\n"robot.metrics.slope_weight" = [0.1, 0.2]\n')
+    b = sweep.parse_config("[grid.robot]\nw = [1, 2]\nmetrics.slope_weight = [0.1, 0.2]\n")
+    assert a.grid == b.grid
+
+
+# --------------------------------------------------------------------------- execution and results
+
+
+def test_results_equal_direct_rollouts(reference, base_file):
+    out, stats = reference
+    df = sweep.load(out)
+    cfg = sweep.load_config(base_file)
+    for i in (1, 10):
+        row = df.iloc[i]
+        params = generators.ObstacleParams(count=int(row["terrain.count"]))
+        key = jax.random.fold_in(jax.random.key(cfg.seed), int(row["replicate"]))
+        terrain = generators.generate("obstacles", key, params, shape=(60, 50), resolution=0.04, max_count=8)
+        robot = ij.robots.hrp2(margin=float(row["robot.margin"]), density=0.25, w=float(row["robot.w"]))
+        c = np.asarray(generators.start_point(params, shape=(60, 50), resolution=0.04))
+        start = np.array([[c[0], c[1] + 0.095, 0.0], [c[0], c[1] - 0.095, 0.0]])
+        command = row[["command.vx", "command.vy", "command.wz"]].to_numpy(np.float64)
+        want = ij.rollout(terrain, robot, start, command, num_steps=6).summary()
+        for k, v in want.items():
+            if np.issubdtype(np.asarray(v).dtype, np.floating):
+                assert row[k] == pytest.approx(float(v), abs=FLOAT_TOL), k
+            else:
+                assert row[k] == v, k
+    # Some scenario actually walked, so the comparison is not vacuous.
+    assert df["distance_along"].max() > 0.2
+
+
+def test_parameter_values_do_not_recompile(reference, tmp_path):
+    _, stats = reference
+    assert stats.compiles <= 1  # 0 if an earlier test of this module compiled the same shapes
+    cache = execute._run_chunk._cache_size()
+    other = BASE.replace('"robot.w" = [0.5, 2.0]', '"robot.w" = [0.1, 7.0]').replace(
+        '"robot.margin" = [0.0, 0.05]', '"robot.margin" = [0.02, 0.08]').replace(
+        "count = 6", "count = 2").replace("vx = [0.1, 0.3]", "vx = 0.2").replace("seed = 3", "seed = 11")
+    s = sweep.run(write(tmp_path, other), tmp_path / "o", chunk_size=CHUNK, progress=False)
+    assert s.computed == 12 and s.compiles == 0
+    assert execute._run_chunk._cache_size() == cache
+
+
+def test_density_compiles_once_per_size(tmp_path):
+    text = BASE.replace("[robot]\ndensity = 0.25\n", "").replace(
+        '"robot.margin" = [0.0, 0.05]', '"robot.density" = [0.25, 0.5]').replace("scenarios_per_cell = 3",
+                                                                              "scenarios_per_cell = 4")
+    s = sweep.run(write(tmp_path, text), tmp_path / "o", chunk_size=CHUNK, progress=False)
+    df = sweep.load(tmp_path / "o")
+    assert s.chunks == 8 and len(df) == 16
+    assert s.compiles <= 2 and set(s.first_chunk_s) == {0.25, 0.5}  # 0.25 may be cached already
+    assert sweep.run(write(tmp_path, text), tmp_path / "o2", chunk_size=CHUNK, progress=False).compiles == 0
+
+
+def test_rotation_weight_and_metrics_sweep_match_direct_rollout(tmp_path):
+    # rotation_weight swept: each scenario builds its own targets (a second, separate compile).
+    text = BASE.replace('"robot.margin" = [0.0, 0.05]', '"robot.rotation_weight" = [0.5, 100.0]').replace(
+        '"robot.w" = [0.5, 2.0]', "").replace("density = 0.25", "density = 0.25\nmetrics.band_weight = 2.0")
+    text = text.replace("vy = [-0.05, 0.05]\nwz = 0.0", "vy = 0.0\nwz = [-0.3, 0.3]")
+    cfg = sweep.load_config(write(tmp_path, text))
+    sweep.run(cfg, tmp_path / "o", chunk_size=CHUNK, max_scenarios=4, progress=False)
+    df = sweep.load(tmp_path / "o")
+    assert (df["robot.metrics.band_weight"] == 2.0).all() and len(df) == 4
+    row = df.iloc[3]
+    params = generators.ObstacleParams(count=6)
+    key = jax.random.fold_in(jax.random.key(cfg.seed), int(row["replicate"]))
+    terrain = generators.generate("obstacles", key, params, shape=(60, 50), resolution=0.04, max_count=8)
+    robot = ij.robots.hrp2(density=0.25, rotation_weight=float(row["robot.rotation_weight"]),
+                           metrics=ij.robots.default_metrics(band_weight=2.0))
+    c = np.asarray(generators.start_point(params, shape=(60, 50), resolution=0.04))
+    start = np.array([[c[0], c[1] + 0.095, 0.0], [c[0], c[1] - 0.095, 0.0]])
+    command = row[["command.vx", "command.vy", "command.wz"]].to_numpy(np.float64)
+    want = ij.rollout(terrain, robot, start, command, num_steps=6).summary()
+    for k, v in want.items():
+        assert row[k] == pytest.approx(float(v), abs=FLOAT_TOL), k
+
+
+def test_padding_rows_are_dropped(tmp_path, base_file):
+    # 12 scenarios in chunks of 5: the last chunk has 2 rows padded to 5 (a new shape: one compile).
+    s = sweep.run(base_file, tmp_path / "o", chunk_size=5, progress=False)
+    df = sweep.load(tmp_path / "o")
+    assert s.chunks == 3 and df["scenario"].tolist() == list(range(12))
+    assert df.groupby("chunk").size().tolist() == [5, 5, 2]
+
+
+_SLOW_CHILD = """
+import os, sys, time
+_replace = os.replace
+def slow_replace(src, dst):
+    _replace(src, dst)
+    if str(dst).endswith(".parquet"):
+        time.sleep(0.5)   # widen the window between chunks so the parent kills the child mid-sweep
+os.replace = slow_replace
+from ijoy_jax import cli
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+def test_resume_after_sigkill(reference, base_file, tmp_path):
+    ref_out, _ = reference
+    out = tmp_path / "killed"
+    parts = out / "parts"
+    child = subprocess.Popen([sys.executable, "-c", _SLOW_CHILD, "sweep", "run", str(base_file), "--out", str(out),
+                              "--chunk", str(CHUNK)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(parts.glob("part-*.parquet")) if parts.exists() else True:
+            assert child.poll() is None, "the sweep ended before any chunk was written"
+            assert time.monotonic() < deadline, "no chunk written in 120 s"
+            time.sleep(0.01)
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.kill()
+        child.wait()
+    done = sorted(p.name for p in parts.glob("part-*.parquet"))
+    assert 1 <= len(done) < 6, done
+    (parts / "part-00005.parquet.tmp").write_bytes(b"half a file")  # a write cut short by a kill
+    stats = sweep.run(base_file, out, chunk_size=CHUNK, progress=False)
+    assert stats.skipped == len(done) and stats.computed == 12 - CHUNK * len(done)
+    got, want = sweep.load(out), sweep.load(ref_out)
+    assert got["scenario"].tolist() == list(range(12))
+    pd.testing.assert_frame_equal(got, want)
+    # A third run has nothing left to do.
+    again = sweep.run(base_file, out, chunk_size=CHUNK, progress=False)
+    assert again.computed == 0 and again.skipped == 6
+    pd.testing.assert_frame_equal(sweep.load(out), want)
+
+
+def test_resume_refuses_a_different_plan(reference, base_file):
+    out, _ = reference
+    with pytest.raises(ValueError, match="different sweep or chunk plan"):
+        sweep.run(base_file, out, chunk_size=3, progress=False)
+
+
+def test_load_round_trip_and_aggregates(reference, base_file):
+    out, _ = reference
+    df = sweep.load(out)
+    assert len(df) == 12 and df["scenario"].is_unique
+    for m in sweep.METRICS:
+        assert m in df.columns
+    assert {"robot.w", "robot.margin", "terrain.count", "command.vx", "cell", "replicate", "chunk"} <= set(df.columns)
+    agg = sweep.load_aggregates(out)
+    pd.testing.assert_frame_equal(agg, pd.read_parquet(out / "aggregates.parquet"))
+    assert list(agg["robot.w"]) == [0.5, 0.5, 2.0, 2.0] and (agg["n"] == 3).all()
+    g = df[df["cell"] == 2]["distance_along"].to_numpy(np.float64)
+    row = agg[agg["cell"] == 2].iloc[0]
+    assert row["distance_along.mean"] == pytest.approx(g.mean())
+    half = scipy.stats.t.ppf(0.975, 2) * scipy.stats.sem(g)
+    assert row["distance_along.ci95"] == pytest.approx(half, rel=T_TOL, abs=1e-12)
+    man = __import__("json").loads((out / "manifest.json").read_text())
+    assert man["sweep_text"] == base_file.read_text() and (out / "sweep.toml").read_text() == BASE
+    assert man["versions"]["jax"] == jax.__version__ and man["plan"]["chunks"] == 6
+    assert man["sessions"][-1]["complete"] and man["sessions"][-1]["device"]
+
+
+@pytest.mark.parametrize("df", [1, 2, 3, 4, 5, 9, 30, 31, 100, 10_000])
+def test_t_quantile_against_scipy(df):
+    assert sweep.t_quantile(df) == pytest.approx(scipy.stats.t.ppf(0.975, df), abs=T_TOL)
+    assert math.isnan(sweep.t_quantile(0))
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def test_cli_run_and_summarize(base_file, tmp_path, capsys):
+    out = tmp_path / "cli"
+    assert cli.main(["sweep", "run", str(base_file), "--out", str(out), "--chunk", str(CHUNK),
+                     "--max-scenarios", "4"]) == 0
+    printed = capsys.readouterr()
+    assert '"computed": 4' in printed.out and "scenarios/s" in printed.err and "ETA" in printed.err
+    assert len(sweep.load(out)) == 4
+    assert cli.main(["sweep", "summarize", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "robot.w" in printed and "distance_along (m)" in printed
+    png = out / "summary.png"
+    assert png.exists() and png.stat().st_size > 10_000
+
+
+def test_cli_bad_file_exits_2(tmp_path, capsys):
+    path = write(tmp_path, "[sweep]\nmethod = 'greedy'\n")
+    assert cli.main(["sweep", "run", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: sweep.method: must be one of" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_shipped_w_sweep_is_valid():
+    cfg = sweep.load_config(Path(__file__).parents[1] / "sweeps" / "w_sweep.toml")
+    assert cfg.swept == ("robot.w",) and cfg.num_scenarios >= 100
