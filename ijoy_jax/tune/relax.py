@@ -1,0 +1,457 @@
+"""A smooth relaxation of FootCost and of step selection, for tuning by gradient.
+
+The exact selector (:mod:`ijoy_jax.select`) is an argmin over the action set of
+``FootCost + w * dist`` where FootCost is +inf for invalid steps: piecewise
+constant in every parameter, so its gradient is useless. This module replaces
+
+* exact cell coverage by *soft coverage*: each window cell's membership in a
+  rectangle is the separating-axis test made smooth, a product of four
+  "boxes" ``sigmoid(k (h - x)) sigmoid(k (h + x))`` over the two cell axes and
+  the two rectangle axes, with ``k = sharpness / resolution``. As
+  ``sharpness -> inf`` it tends to the exact "interiors overlap" indicator of
+  :mod:`ijoy_jax.geometry` everywhere except on the measure-zero boundary;
+* the obstacle check by a linear barrier ``barrier_weight * sharpness * mass``
+  on the soft obstacle mass (cells off the map count as obstacles);
+* each metric limit by a softplus barrier
+  ``barrier_weight * softplus(sharpness * (metric - limit) / limit)``, which
+  tends to 0 below the limit and to +inf above it;
+* the least-squares plane under the foot by a fit weighted by soft membership;
+  max/abs in the metrics by log-sum-exp and ``sqrt(x^2 + e^2) - e`` with a
+  height scale ``e = resolution / sharpness`` (metres);
+* the argmin by a Boltzmann distribution ``p_i ~ exp(-cost_i / tau)``.
+
+Every output is finite for finite inputs and differentiable with respect to
+every Robot leaf (w, rotation_weight, margin, foot size, step_time, action
+costs, step-height limits, metric weights and limits) and the poses. Not
+relaxed yet: the swing-path check (``swing_from``) and the static-window
+``unsupported`` check (a window that leaves the padded map gets a constant
+finite barrier instead).
+
+Units: metres, radians, seconds; costs in the cost units of FootCost.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from ijoy_jax import geometry
+from ijoy_jax.footcost import _side_sign, foot_cost_terms_indexed, index_terrain, window_cells
+from ijoy_jax.robots import Robot, side_actions, side_p0
+from ijoy_jax.select import Targets, make_targets
+from ijoy_jax.terrain import Terrain
+
+_EXTRA_CELLS = 2  # window border (cells each side) that holds the soft-coverage tails
+_ABS_EPS = 1e-3  # smoothing of |cos|, |sin| in projected half-extents (dimensionless; <= 1e-3 res bias)
+_RIDGE = 1e-6  # plane-fit ridge per (cell count + 1), in cell units, as footcost's
+
+
+def _smooth_abs(x, eps):
+    """|x| smoothed at 0: ``sqrt(x^2 + eps^2) - eps`` (within eps of |x|, smooth gradient)."""
+    return jnp.sqrt(x * x + eps * eps) - eps
+
+
+def _safe_norm(x, y):
+    """sqrt(x^2 + y^2) with a zero (not NaN) gradient at the origin (double-where)."""
+    sq = x * x + y * y
+    pos = sq > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
+
+
+def _box(x, half, k):
+    """Soft indicator of |x| < half: sigmoid(k (half - x)) * sigmoid(k (half + x))."""
+    return jax.nn.sigmoid(k * (half - x)) * jax.nn.sigmoid(k * (half + x))
+
+
+def soft_coverage(dx, dy, theta, half_length, half_width, resolution: float, sharpness):
+    """Soft membership in (0, 1) of grid cells in a rotated rectangle.
+
+    The separating-axis test of an axis-aligned cell (edge ``resolution``)
+    against the rectangle, with each of its four 1D overlap tests replaced by
+    a product of sigmoids of slope ``sharpness / resolution``. Tends to the
+    exact "interiors overlap" indicator as ``sharpness -> inf``.
+
+    Args:
+      dx, dy: (...) cell-centre offsets from the rectangle centre (m).
+      theta: () rectangle angle (rad); its length runs along theta.
+      half_length, half_width: () half sizes (m), >= 0 (zero gives a point).
+      resolution: cell edge (m), Python float.
+      sharpness: () dimensionless, > 0.
+
+    Returns:
+      (...) membership, same dtype as ``dx``.
+
+    Example:
+      >>> import jax.numpy as jnp
+      >>> m = soft_coverage(jnp.array([0.0, 0.5]), jnp.array([0.0, 0.0]), 0.0, 0.1, 0.05, 0.02, 50.0)
+      >>> [round(float(v), 3) for v in m]
+      [1.0, 0.0]
+    """
+    k = sharpness / resolution
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    ac, as_ = _smooth_abs(c, _ABS_EPS), _smooth_abs(s, _ABS_EPS)
+    r = 0.5 * resolution
+    du = c * dx + s * dy
+    dv = -s * dx + c * dy
+    return (
+        _box(du, half_length + r * (ac + as_), k)
+        * _box(dv, half_width + r * (ac + as_), k)
+        * _box(dx, r + half_length * ac + half_width * as_, k)
+        * _box(dy, r + half_length * as_ + half_width * ac, k)
+    )
+
+
+class SoftFootCostTerms(NamedTuple):
+    """Relaxed FootCost of N candidate steps: total, named terms and raw metrics (all (N,)).
+
+    Cost terms (cost units; finite): total (their sum), action, obstacle
+    (barrier on the soft obstacle mass), slope, roughness, bump, step, band
+    (each ``weight * metric + barrier``; 0 on 2D terrains).
+    Raw: obstacle_mass (cells, soft count of obstacle or off-map cells under
+    the grown footprint), slope_angle (rad), roughness_m, bump_m,
+    step_height_m (signed), band_m, foot_height_m (m).
+    """
+
+    total: jax.Array
+    action: jax.Array
+    obstacle: jax.Array
+    slope: jax.Array
+    roughness: jax.Array
+    bump: jax.Array
+    step: jax.Array
+    band: jax.Array
+    obstacle_mass: jax.Array
+    slope_angle: jax.Array
+    roughness_m: jax.Array
+    bump_m: jax.Array
+    step_height_m: jax.Array
+    band_m: jax.Array
+    foot_height_m: jax.Array
+
+
+class _Patch(NamedTuple):
+    du: jax.Array  # (K,) column-centre x offsets from the pose (m)
+    dv: jax.Array  # (K,) row-centre y offsets (m)
+    free: jax.Array  # (K, K) 1.0 where free, 0.0 for obstacles / off the map
+    height: jax.Array  # (K, K) heights (m)
+    outside: jax.Array  # () bool: the window was clipped (pose far off the map)
+
+
+def _window_size(robot: Robot, res: float) -> int:
+    return window_cells(robot.max_radius, res) + 2 * _EXTRA_CELLS
+
+
+def _patch(terrain: Terrain, free_pad, h_pad, k: int, pose) -> _Patch:
+    res = terrain.resolution
+    nx, ny = terrain.shape
+    cx = pose[0] - terrain.origin[0]
+    cy = pose[1] - terrain.origin[1]
+    i0 = jnp.floor(cx / res).astype(jnp.int32) - k // 2
+    j0 = jnp.floor(cy / res).astype(jnp.int32) - k // 2
+    si = jnp.clip(i0 + k, 0, nx + k)
+    sj = jnp.clip(j0 + k, 0, ny + k)
+    outside = (si != i0 + k) | (sj != j0 + k)
+    free = jax.lax.dynamic_slice(free_pad, (si, sj), (k, k))
+    height = jax.lax.dynamic_slice(h_pad, (si, sj), (k, k))
+    ar = jnp.arange(k, dtype=pose.dtype)
+    du = (si - k + ar + 0.5) * res - cx
+    dv = (sj - k + ar + 0.5) * res - cy
+    return _Patch(du, dv, free.astype(pose.dtype), height.astype(pose.dtype), outside)
+
+
+class _SoftPlane(NamedTuple):
+    height: jax.Array
+    slope: jax.Array
+    roughness: jax.Array
+    bump: jax.Array
+    band: jax.Array
+
+
+def _soft_max0(values, weights, temp):
+    """Soft max(0, max over weighted values): temp * log(1 + sum_i w_i exp(v_i / temp))."""
+    a = jnp.concatenate([jnp.zeros((1,), values.dtype), (values / temp).ravel()])
+    b = jnp.concatenate([jnp.ones((1,), values.dtype), weights.ravel()])
+    return temp * jax.nn.logsumexp(a, b=b)
+
+
+def _soft_plane(patch: _Patch, m_foot, m_grown, res: float, temp) -> _SoftPlane:
+    """Membership-weighted least-squares plane and its metrics (coordinates in cells)."""
+    u = patch.du / res
+    v = patch.dv / res
+    k = u.shape[0]
+    h_ref = patch.height[k // 2, k // 2]
+    h = patch.height - h_ref
+    n = jnp.sum(m_foot)
+    n_safe = n + 1e-6
+    mu = jnp.sum(m_foot, axis=1) @ u / n_safe
+    mv = jnp.sum(m_foot, axis=0) @ v / n_safe
+    mh = jnp.sum(m_foot * h) / n_safe
+    uc = (u - mu)[:, None]
+    vc = (v - mv)[None, :]
+    hc = h - mh
+    ridge = _RIDGE * (n + 1.0)
+    suu = jnp.sum(m_foot * uc * uc) + ridge
+    svv = jnp.sum(m_foot * vc * vc) + ridge
+    suv = jnp.sum(m_foot * uc * vc)
+    suh = jnp.sum(m_foot * uc * hc)
+    svh = jnp.sum(m_foot * vc * hc)
+    det = suu * svv - suv * suv
+    b = (suh * svv - svh * suv) / det  # metres per cell along x
+    c = (svh * suu - suh * suv) / det
+    resid = hc - (b * uc + c * vc)
+    height = h_ref + mh - b * mu - c * mv  # plane height at the pose (m)
+    slope = jnp.arctan(_safe_norm(b, c) / res)
+    roughness = jnp.sum(m_foot * _smooth_abs(resid, temp)) / n_safe
+    bump = _soft_max0(resid, m_foot, temp)
+    m_band = m_grown * (1.0 - m_foot)
+    band = _soft_max0(_smooth_abs(resid, temp), m_band, temp)
+    return _SoftPlane(height, slope, roughness, bump, band)
+
+
+def _memberships(patch: _Patch, robot: Robot, theta, res: float, sharpness):
+    du, dv = patch.du[:, None], patch.dv[None, :]
+    hl, hw = 0.5 * robot.foot_length, 0.5 * robot.foot_width
+    m_foot = soft_coverage(du, dv, theta, hl, hw, res, sharpness)
+    m_grown = soft_coverage(du, dv, theta, hl + robot.margin, hw + robot.margin, res, sharpness)
+    return m_foot, m_grown
+
+
+def _barrier(metric, limit, sharpness, barrier_weight):
+    scale = jnp.maximum(limit, 1e-6)
+    return barrier_weight * jax.nn.softplus(sharpness * (metric - limit) / scale)
+
+
+def _padded(terrain: Terrain, k: int):
+    free_pad = jnp.pad(terrain.free, k, constant_values=False)
+    h_pad = jnp.pad(terrain.height, k, mode="edge")
+    return free_pad, h_pad
+
+
+def soft_foot_cost_terms(
+    terrain: Terrain,
+    robot: Robot,
+    stance,
+    steps,
+    action_index,
+    *,
+    sharpness,
+    barrier_weight=1.0,
+) -> SoftFootCostTerms:
+    """Relaxed FootCost of candidate swing-foot poses, with named terms.
+
+    Args:
+      terrain: one Terrain (2D or 2.5D; vmap for batches).
+      robot: the Robot; every leaf used is differentiable.
+      stance: (3,) world pose of the stance foot (m, rad); its soft plane is
+        the reference of the step-height metric (2.5D).
+      steps: (N, 3) world poses of the swing foot centre.
+      action_index: (N,) int, the action whose cost and step-height limit apply.
+      sharpness: () > 0, dimensionless; larger is closer to exact FootCost.
+        Soft coverage has slope sharpness / resolution per metre; height
+        smoothing scale is resolution / sharpness (m).
+      barrier_weight: () cost units per unit of barrier (see module docstring).
+
+    Returns:
+      :class:`SoftFootCostTerms` of (N,) arrays, finite; dtype of ``steps``.
+
+    Example:
+      >>> import numpy as np, ijoy_jax as ij
+      >>> from ijoy_jax.tune import relax
+      >>> free = np.ones((60, 60), bool); free[40:, :] = False
+      >>> t = ij.terrain.from_arrays(None, free, resolution=0.02)
+      >>> robot = ij.robots.hrp2(margin=0.02, density=0.25)
+      >>> steps = np.array([[0.5, 0.6, 0.0], [0.78, 0.6, 0.0]])
+      >>> c = relax.soft_foot_cost_terms(t, robot, np.array([0.5, 0.4, 0.0]), steps, [0, 0], sharpness=50.0)
+      >>> bool(c.total[0] < 1e-3), bool(c.total[1] > 100.0)
+      (True, True)
+    """
+    steps = jnp.asarray(steps)
+    dtype = jnp.result_type(steps.dtype, jnp.float32)
+    steps = steps.astype(dtype).reshape(-1, 3)
+    stance = jnp.asarray(stance, dtype)
+    action_index = jnp.broadcast_to(jnp.asarray(action_index, jnp.int32), steps.shape[:1])
+    sharpness = jnp.asarray(sharpness, dtype)
+    res = terrain.resolution
+    k = _window_size(robot, res)
+    free_pad, h_pad = _padded(terrain, k)
+    temp = res / sharpness
+    metrics = robot.metrics
+    stance_plane = None
+    if terrain.has_height:
+        sp = _patch(terrain, free_pad, h_pad, k, stance)
+        sm_foot, sm_grown = _memberships(sp, robot, stance[2], res, sharpness)
+        stance_plane = _soft_plane(sp, sm_foot, sm_grown, res, temp)
+
+    def one(step, a):
+        patch = _patch(terrain, free_pad, h_pad, k, step)
+        m_foot, m_grown = _memberships(patch, robot, step[2], res, sharpness)
+        mass = jnp.sum(m_grown * (1.0 - patch.free))
+        obstacle = barrier_weight * sharpness * (mass + jnp.where(patch.outside, float(k * k), 0.0))
+        zero = jnp.zeros((), dtype)
+        action = robot.action_cost[a].astype(dtype)
+        if terrain.has_height:
+            pl = _soft_plane(patch, m_foot, m_grown, res, temp)
+            dh = pl.height - stance_plane.height
+            adh = _smooth_abs(dh, temp)
+
+            def term(weight, metric, limit):
+                return weight * metric + _barrier(metric, limit, sharpness, barrier_weight)
+
+            slope = term(metrics.slope_weight, pl.slope, metrics.slope_limit)
+            rough = term(metrics.roughness_weight, pl.roughness, metrics.roughness_limit)
+            bump = term(metrics.bump_weight, pl.bump, metrics.bump_limit)
+            stepc = term(metrics.step_weight, adh, robot.max_step_height[a])
+            band = term(metrics.band_weight, pl.band, metrics.band_limit)
+            raw = (pl.slope, pl.roughness, pl.bump, dh, pl.band, pl.height)
+        else:
+            slope = rough = bump = stepc = band = zero
+            raw = (zero,) * 6
+        total = action + obstacle + slope + rough + bump + stepc + band
+        return SoftFootCostTerms(total, action, obstacle, slope, rough, bump, stepc, band, mass, *raw)
+
+    return jax.vmap(one)(steps, action_index)
+
+
+class RelaxedChoice(NamedTuple):
+    """Result of :func:`relaxed_select` (one decision).
+
+    probs: (N,) Boltzmann probabilities ``softmax(-cost / tau)`` over S.
+    log_probs: (N,) their logarithms (for likelihoods).
+    cost: (N,) relaxed cost, soft FootCost + w * dist (cost units).
+    terms: :class:`SoftFootCostTerms` of (N,) arrays.
+    expected_pose: (3,) world pose sum_i p_i step_i (m, rad; angles averaged
+      linearly, fine for a set spanning well under pi).
+    expected_cost: () sum_i p_i cost_i.
+    mode: () int32 most probable action (argmin of the relaxed cost).
+    invalid_mass: () probability on steps whose exact FootCost is +inf
+      (NaN when ``exact=False``); no gradient (a constant indicator).
+    exact_valid: (N,) bool exact validity (all True when ``exact=False``).
+    target: (3,) world pose the costs were scored against.
+    """
+
+    probs: jax.Array
+    log_probs: jax.Array
+    cost: jax.Array
+    terms: SoftFootCostTerms
+    expected_pose: jax.Array
+    expected_cost: jax.Array
+    mode: jax.Array
+    invalid_mass: jax.Array
+    exact_valid: jax.Array
+    target: jax.Array
+
+
+def soft_dist(a, b, rotation_weight):
+    """The paper's dist ``|dxy| + rotation_weight |wrap(dtheta)|`` with a NaN-free gradient at dxy = 0."""
+    d = a - b
+    return _safe_norm(d[..., 0], d[..., 1]) + rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
+
+
+def relaxed_select(
+    terrain: Terrain,
+    robot: Robot,
+    stance,
+    stance_side,
+    command,
+    *,
+    sharpness,
+    tau,
+    barrier_weight=1.0,
+    quantize: bool = False,
+    targets: Targets | None = None,
+    exact: bool = True,
+) -> RelaxedChoice:
+    """Boltzmann (softmin) relaxation of :func:`ijoy_jax.select_step`.
+
+    ``p_i = softmax(-(softFootCost_i + w dist(s_i, target)) / tau)`` over the
+    action set; the most probable action tends to the exact exhaustive choice
+    as sharpness grows, and the probability mass concentrates on it as tau
+    falls.
+
+    Args:
+      terrain, robot, stance, stance_side, command: as :func:`ijoy_jax.select_step`
+        (stance (3,) world pose; stance_side +1 left / -1 right; command (3,)
+        xdot m/s, ydot m/s, thetadot rad/s).
+      sharpness: () > 0 (see :func:`soft_foot_cost_terms`).
+      tau: () > 0 temperature (cost units).
+      barrier_weight: () barrier scale (cost units).
+      quantize: static; True scores against the nearest target f_i of F like
+        the exact selector's default (then the choice is piecewise constant in
+        step_time and the command); False (default) scores against p_next, so
+        step_time and the command get gradients.
+      targets: prebuilt :func:`ijoy_jax.select.make_targets` (quantize only).
+      exact: static; also compute exact FootCost validity for ``invalid_mass``.
+
+    Returns:
+      :class:`RelaxedChoice`.
+
+    Example:
+      >>> import numpy as np, ijoy_jax as ij
+      >>> from ijoy_jax.tune import relax
+      >>> free = np.ones((60, 60), bool); free[38:, :] = False     # wall at x = 0.76 m
+      >>> t = ij.terrain.from_arrays(None, free, resolution=0.02)
+      >>> robot = ij.robots.hrp2(margin=0.02, density=0.5)
+      >>> r = relax.relaxed_select(t, robot, np.array([0.45, 0.5, 0.0]), -1, np.array([0.25, 0.0, 0.0]),
+      ...                          sharpness=50.0, tau=0.05)
+      >>> e = ij.select_step(t, robot, [0.45, 0.5, 0.0], -1, [0.25, 0.0, 0.0], quantize=False)
+      >>> int(r.mode) == int(e.index), float(r.invalid_mass) < 1e-3
+      (True, True)
+    """
+    command = jnp.asarray(command)
+    dtype = jnp.result_type(command.dtype, robot.step_time.dtype, jnp.float32)
+    command = command.astype(dtype)
+    stance = jnp.asarray(stance, dtype)
+    side = _side_sign(stance_side).astype(dtype)
+    swing = -side
+    acts = side_actions(robot, swing).astype(dtype)  # (N, 3) stance frame
+    p_next = side_p0(robot, swing).astype(dtype) + robot.step_time * command
+    mirror = jnp.stack([jnp.ones_like(swing), swing, swing])
+    if quantize:
+        if targets is None:
+            targets = make_targets(robot)
+        fi = targets.nearest(jax.lax.stop_gradient(mirror * p_next))
+        target_rel = mirror * targets.point(fi).astype(dtype)
+    else:
+        target_rel = p_next
+    n = acts.shape[0]
+    idx = jnp.arange(n, dtype=jnp.int32)
+    steps = geometry.compose(stance, acts)
+    terms = soft_foot_cost_terms(terrain, robot, stance, steps, idx, sharpness=sharpness, barrier_weight=barrier_weight)
+    cost = terms.total + robot.w * soft_dist(acts, target_rel, robot.rotation_weight)
+    log_probs = jax.nn.log_softmax(-cost / tau)
+    probs = jnp.exp(log_probs)
+    if exact:
+        index = index_terrain(terrain, robot)
+        fc = foot_cost_terms_indexed(
+            terrain,
+            index,
+            jax.lax.stop_gradient(robot),
+            jax.lax.stop_gradient(stance),
+            side,
+            jax.lax.stop_gradient(steps),
+            None,
+            idx,
+        ).total
+        valid = jnp.isfinite(fc)
+        invalid_mass = jnp.sum(jnp.where(valid, 0.0, jax.lax.stop_gradient(probs)))
+    else:
+        valid = jnp.ones((n,), bool)
+        invalid_mass = jnp.full((), jnp.nan, dtype)
+    return RelaxedChoice(
+        probs=probs,
+        log_probs=log_probs,
+        cost=cost,
+        terms=terms,
+        expected_pose=probs @ steps,
+        expected_cost=jnp.sum(probs * cost),
+        mode=jnp.argmax(log_probs).astype(jnp.int32),
+        invalid_mass=invalid_mass,
+        exact_valid=valid,
+        target=geometry.compose(stance, target_rel),
+    )
+
+
+relaxed_select_jit = jax.jit(relaxed_select, static_argnames=("quantize", "exact"))
+relaxed_select_jit.__doc__ = "``jax.jit(relaxed_select)`` (quantize and exact static)."
