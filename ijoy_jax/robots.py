@@ -358,6 +358,22 @@ def hrp2(margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
     return make_robot(lattice_actions(density_counts(density)), **kwargs)
 
 
+def get_leaf(robot: Robot, name: str):
+    """The leaf of ``robot`` named by a dotted path, e.g. ``"w"`` or ``"metrics.slope_limit"``."""
+    obj = robot
+    for part in name.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def set_leaf(robot: Robot, name: str, value) -> Robot:
+    """A copy of ``robot`` with the leaf at a dotted path (see :func:`get_leaf`) replaced by ``value``."""
+    head, _, tail = name.partition(".")
+    if tail:
+        return robot.replace(**{head: set_leaf(getattr(robot, head), tail, value)})
+    return robot.replace(**{name: value})
+
+
 def side_actions(robot: Robot, swing_side) -> jax.Array:
     """(N, 3) actions of the swing foot on ``swing_side`` (+1 left, -1 right).
 

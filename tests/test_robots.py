@@ -96,3 +96,11 @@ def test_robot_is_a_pytree_with_static_sizes():
     assert r2.max_radius == r.max_radius and r2.num_actions == 496
     stacked = jax.tree_util.tree_map(lambda *x: np.stack(x), r, r.replace(margin=r.margin * 2))
     assert stacked.margin.shape == (2,)
+
+
+def test_dotted_leaf_access():
+    r = ij.robots.hrp2()
+    r2 = robots.set_leaf(r, "metrics.slope_limit", 0.5)
+    assert float(robots.get_leaf(r2, "metrics.slope_limit")) == 0.5
+    assert float(robots.get_leaf(r, "metrics.slope_limit")) != 0.5  # the original is untouched
+    assert float(robots.get_leaf(robots.set_leaf(r, "w", 3.0), "w")) == 3.0

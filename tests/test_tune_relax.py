@@ -10,6 +10,7 @@ from jax.test_util import check_grads
 
 import ijoy_jax as ij
 from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain
+from ijoy_jax.robots import get_leaf, set_leaf
 from ijoy_jax.select import make_targets, select_step_indexed
 from ijoy_jax.tune import relax
 
@@ -150,20 +151,6 @@ SCALAR_LEAVES = (
 )
 
 
-def _get(robot, name):
-    obj = robot
-    for part in name.split("."):
-        obj = getattr(obj, part)
-    return obj
-
-
-def _set(robot, name, value):
-    if "." in name:
-        head, tail = name.split(".", 1)
-        return robot.replace(**{head: _set(getattr(robot, head), tail, value)})
-    return robot.replace(**{name: value})
-
-
 def _objective(terrain, robot, stance, command, sharpness, tau):
     r = relax.relaxed_select(terrain, robot, stance, -1.0, command, sharpness=sharpness, tau=tau, exact=False)
     return r.expected_cost + r.log_probs[3] + jnp.sum(r.expected_pose)
@@ -181,12 +168,12 @@ def test_gradients_match_finite_differences_float64(robot):
         worst = 0.0
         h = 1e-6
         for name in SCALAR_LEAVES + ("action_cost", "max_step_height"):
-            leaf = _get(r64, name)
-            g = _get(grads[0], name)
+            leaf = get_leaf(r64, name)
+            g = get_leaf(grads[0], name)
             direction = jnp.asarray(np.random.default_rng(len(name)).normal(size=leaf.shape))
             fd = (
-                f(terrain, _set(r64, name, leaf + h * direction), *args)
-                - f(terrain, _set(r64, name, leaf - h * direction), *args)
+                f(terrain, set_leaf(r64, name, leaf + h * direction), *args)
+                - f(terrain, set_leaf(r64, name, leaf - h * direction), *args)
             ) / (2 * h)
             an = jnp.sum(g * direction)
             assert np.isfinite(float(an)), name
@@ -212,12 +199,12 @@ def test_gradients_float32_check_grads(robot):
     stance, command = _query(6)
 
     names = ("w", "rotation_weight", "margin", "foot_length", "step_time", "metrics.slope_limit")
-    nominal = [_get(robot, n) for n in names]
+    nominal = [get_leaf(robot, n) for n in names]
 
     def f(*scales):  # each parameter as a multiple of its nominal value, so eps is a relative step
         rb = robot
         for n, v, s in zip(names, nominal, scales, strict=True):
-            rb = _set(rb, n, v * s)
+            rb = set_leaf(rb, n, v * s)
         return _objective(terrain, rb, jnp.asarray(stance), jnp.asarray(command), 5.0, 3.0)
 
     check_grads(

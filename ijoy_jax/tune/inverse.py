@@ -37,7 +37,7 @@ import optax
 
 from ijoy_jax import geometry
 from ijoy_jax.footcost import _side_sign, index_terrain
-from ijoy_jax.robots import Robot, side_actions, side_p0
+from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0
 from ijoy_jax.select import make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain
 from ijoy_jax.tune import relax
@@ -126,24 +126,10 @@ def exact_agreement(demos: Demonstrations, robot: Robot, *, quantize: bool = Fal
     return float(np.mean(pred[ok] == act[ok]))
 
 
-def _get(robot, name):
-    obj = robot
-    for part in name.split("."):
-        obj = getattr(obj, part)
-    return obj
-
-
-def _set(robot, name, value):
-    if "." in name:
-        head, tail = name.split(".", 1)
-        return robot.replace(**{head: _set(getattr(robot, head), tail, value)})
-    return robot.replace(**{name: value})
-
-
 def with_params(robot: Robot, log_params: dict) -> Robot:
     """Robot with each named scalar leaf set to ``exp(log_params[name])``."""
     for name, v in log_params.items():
-        robot = _set(robot, name, jnp.exp(v).astype(_get(robot, name).dtype))
+        robot = set_leaf(robot, name, jnp.exp(v).astype(get_leaf(robot, name).dtype))
     return robot
 
 
@@ -257,7 +243,7 @@ def fit(
     names = tuple(names)
     init = {} if init is None else dict(init)
     init.setdefault("tau", tau)
-    log0 = {n: jnp.log(jnp.asarray(init[n] if n in init else _get(robot, n), jnp.float32)) for n in names}
+    log0 = {n: jnp.log(jnp.asarray(init[n] if n in init else get_leaf(robot, n), jnp.float32)) for n in names}
     num_starts = max([int(np.size(v)) for v in log0.values()] + [1])
     log0 = {n: jnp.broadcast_to(v, (num_starts,)) for n, v in log0.items()}
     selector_only = set(names) <= _SELECTOR_ONLY | {"tau"}
