@@ -9,6 +9,7 @@ density, on purpose).
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import signal
@@ -388,3 +389,59 @@ def test_cli_bad_file_exits_2(tmp_path, capsys):
 def test_shipped_w_sweep_is_valid():
     cfg = sweep.load_config(Path(__file__).parents[1] / "sweeps" / "w_sweep.toml")
     assert cfg.swept == ("robot.w",) and cfg.num_scenarios >= 100
+
+
+# --------------------------------------------------------------------------- several devices
+
+_SHARDED_CHILD = """
+import sys
+import jax
+from ijoy_jax import sweep
+from ijoy_jax.sweep import execute
+assert jax.local_device_count() == 4, jax.devices()
+seen = []
+_run_chunk = execute._run_chunk
+def spy(*args, **kwargs):
+    out = _run_chunk(*args, **kwargs)
+    seen.append(len(out["distance_along"].sharding.device_set))  # outputs come back sharded
+    return out
+execute._run_chunk = spy
+stats = sweep.run(sys.argv[1], sys.argv[2], chunk_size=3, max_scenarios=10, progress=False)
+assert (stats.devices, stats.chunk_size, stats.chunks) == (4, 4, 3), stats
+assert seen == [4, 4, 4], seen
+"""
+
+
+def test_four_cpu_devices_give_the_single_device_result(reference, base_file, tmp_path):
+    # chunk_size 3 is rounded up to 4 (one scenario per device); 10 scenarios make chunks of 4, 4 and 2,
+    # the last padded to 4. Compared with the in-process single-device reference (chunks of 2).
+    ref_out, _ = reference
+    out = tmp_path / "four"
+    env = dict(os.environ, JAX_PLATFORMS="cpu",
+               XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=4").strip())
+    r = subprocess.run([sys.executable, "-c", _SHARDED_CHILD, str(base_file), str(out)], env=env,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-3000:]
+    man = json.loads((out / "manifest.json").read_text())["sessions"][-1]
+    assert man["devices"] == 4 and man["device_count"] == 4 and man["chunk_size"] == 4 and man["complete"]
+    assert "'scenarios': 4" in man["sharding"] and "P('scenarios'" in man["sharding"], man["sharding"]
+    one = json.loads((ref_out / "manifest.json").read_text())["sessions"][-1]
+    assert one["devices"] == 1 and one["sharding"] is None
+    got = sweep.load(out)
+    want = sweep.load(ref_out).iloc[:10]
+    assert got.groupby("chunk").size().tolist() == [4, 4, 2]
+    assert list(got.columns) == list(want.columns) and got["scenario"].tolist() == list(range(10))
+    # Each scenario is computed independently, so the split over devices should not change a bit (it does
+    # not, on CPU); floats get 1e-6 only in case XLA fuses a per-device batch of 1 unlike one of 2.
+    for c in got.columns.drop("chunk"):
+        if np.issubdtype(got[c].dtype, np.floating):
+            np.testing.assert_allclose(got[c], want[c], rtol=0, atol=1e-6, err_msg=c)
+        else:
+            np.testing.assert_array_equal(got[c], want[c], err_msg=c)
+
+
+def test_bad_device_count(base_file, tmp_path):
+    for n in (0, len(jax.local_devices()) + 1, 1.0):
+        with pytest.raises(ValueError, match="devices must be"):
+            sweep.run(base_file, tmp_path / "o", devices=n, progress=False)
+    assert not (tmp_path / "o").exists()

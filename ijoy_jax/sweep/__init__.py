@@ -2,7 +2,8 @@
 
   load_config / parse_config / SweepConfig / SweepConfigError   the TOML schema, validated before compute
   cells / scenarios                                              the expansion into cells and scenarios
-  run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks, parquet parts, resume
+  run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks sharded over local
+                                                                 devices, parquet parts, resume
   load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table, 95% CIs, plot
 
 Example:

@@ -22,19 +22,37 @@ Compiles (measured by :func:`trace_count`, tested): parameter values never
 recompile; each density value compiles once (its action-set size is a shape;
 no padding of action sets). Static too: the terrain family, grid shape,
 resolution, 2D/2.5D flag, ``num_steps``, ``method`` and the chunk shape
-``min(chunk_size, scenarios of that density)``. When ``robot.rotation_weight``
-is not swept, the targets F and L_i are built once per density outside the
-jit and shared by every scenario; when it is, each scenario sorts its own
+``min(chunk_size, scenarios of that density)`` rounded up to a multiple of
+the device count. When ``robot.rotation_weight`` is not swept, the targets F
+and L_i are built once per density outside the jit and shared by every
+scenario; when it is, each scenario sorts its own
 (|F| x N entries), a different compiled function.
+
+Devices. A chunk's scenario batch is sharded over the local devices (all of
+them by default, or the first ``devices``): a 1-D
+:class:`jax.sharding.Mesh` with axis ``"scenarios"`` (default, Auto axis
+type), the per-scenario inputs (seeds, robot and terrain values, commands)
+placed with ``NamedSharding(mesh, PartitionSpec("scenarios"))``, the shared
+ones (base robot, targets, key) replicated; jit propagates the sharding, each
+device runs its slice of the ``vmap`` and the summaries are gathered to the
+host. The chunk size is rounded up to a multiple of the device count (the
+plan's ``chunk_size``) and a padded chunk is padded to a multiple of it too.
+Each session in the manifest records ``devices`` and ``sharding``. Scenarios
+are independent, so the results are those of one device (bit-identical with 4
+forced CPU devices, tested). With one device nothing is placed: arrays go to
+the default device as before. Several hosts (``jax.distributed``) are not done yet: every
+process would run the whole sweep on its own local devices.
 
 Progress: one line per chunk on stderr (scenarios done, scenarios/s over
 compiled chunks, ETA); ``first_chunk_s`` in the manifest holds each density's
 first chunk time, which includes its compile.
 
 Resume. The chunk plan is a pure function of the sweep file, ``chunk_size``
-and ``max_scenarios`` and is saved in the manifest. Each finished chunk is
-written to a temporary file and renamed (atomic on POSIX), so after a kill a
-part file is either complete or absent; a rerun on the same folder skips the
+(after rounding to the device count) and ``max_scenarios`` and is saved in the
+manifest; a rerun with another device count resumes when the rounded chunk
+size is the same (e.g. the default 32 on 1, 2, 4 or 8 devices). Each finished
+chunk is written to a temporary file and renamed (atomic on POSIX), so after a
+kill a part file is either complete or absent; a rerun on the same folder skips the
 chunks whose part exists and computes the rest. Nothing is lost or duplicated.
 """
 
@@ -54,6 +72,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ijoy_jax import generators, robots
 from ijoy_jax.control import rollout_core
@@ -131,6 +150,8 @@ class RunStats:
       scenarios: scenarios in the plan; computed: scenarios computed by this
         call (skipped chunks excluded); chunks, skipped: chunk counts.
       compiles: traces of the chunk function during this call.
+      devices: devices the scenario batch is sharded over; chunk_size: the
+        plan's chunk size (the requested one rounded up to a multiple of devices).
       first_chunk_s: per density, wall time of its first chunk (includes compile).
       run_s: total wall time of this call.
     """
@@ -141,6 +162,8 @@ class RunStats:
     chunks: int = 0
     skipped: int = 0
     compiles: int = 0
+    devices: int = 1
+    chunk_size: int = 0
     first_chunk_s: dict = dataclasses.field(default_factory=dict)
     run_s: float = 0.0
 
@@ -199,6 +222,16 @@ def _plan(cfg: SweepConfig, table, chunk_size: int) -> list[tuple[int, float, np
     return plan
 
 
+def _local_devices(devices) -> list:
+    """The first ``devices`` local devices (all when None); ValueError when there are not that many."""
+    local = jax.local_devices()
+    if devices is None:
+        return local
+    if isinstance(devices, bool) or not isinstance(devices, int) or not 1 <= devices <= len(local):
+        raise ValueError(f"devices must be an int in [1, {len(local)}] (local devices) or None, got {devices!r}")
+    return local[:devices]
+
+
 def _progress(done: int, total: int, rate: float, chunk: int, nchunks: int) -> None:
     eta = (total - done) / rate if rate > 0 else float("nan")
     line = (f"[ijoy sweep] {done}/{total} scenarios  chunk {chunk}/{nchunks}  "
@@ -214,6 +247,7 @@ def run(
     chunk_size: int = DEFAULT_CHUNK,
     max_scenarios: int | None = None,
     progress: bool = True,
+    devices: int | None = None,
 ) -> RunStats:
     """Run (or resume) a sweep and write its results (see the module docstring for the layout).
 
@@ -222,15 +256,19 @@ def run(
       out: output folder (default ``results/<name>``); an existing folder
         from the same sweep file and options is resumed.
       chunk_size: scenarios per jitted call (>= 1); memory grows linearly with it.
+        Rounded up to a multiple of the device count.
       max_scenarios: run only the first this many scenarios (smoke tests).
       progress: print a progress line (scenarios/s, ETA) to stderr.
+      devices: shard each chunk over the first this many local devices
+        (default None: all of them); 1 runs unsharded on the default device.
 
     Returns:
       :class:`RunStats`.
 
     Raises:
       SweepConfigError: a bad sweep file (before any compute).
-      ValueError: ``out`` holds results of a different sweep or chunk plan.
+      ValueError: ``out`` holds results of a different sweep or chunk plan, or a
+        bad ``chunk_size``, ``max_scenarios`` or ``devices``.
 
     Example:
       >>> from ijoy_jax import sweep
@@ -244,6 +282,14 @@ def run(
         raise ValueError(f"chunk_size must be a positive int, got {chunk_size!r}")
     if max_scenarios is not None and (not isinstance(max_scenarios, int) or max_scenarios < 1):
         raise ValueError(f"max_scenarios must be a positive int, got {max_scenarios!r}")
+    devs = _local_devices(devices)
+    ndev = len(devs)
+    chunk_size = -(-chunk_size // ndev) * ndev  # a multiple of the device count
+    if ndev > 1:
+        mesh = Mesh(np.array(devs), ("scenarios",))
+        batched, replicated = NamedSharding(mesh, PartitionSpec("scenarios")), NamedSharding(mesh, PartitionSpec())
+    else:
+        batched = replicated = None
     out = Path(out) if out is not None else Path("results") / cfg.name
     table = scenarios(cfg, max_scenarios)
     plan = _plan(cfg, table, chunk_size)
@@ -258,7 +304,8 @@ def run(
         old = json.loads(manifest_path.read_text())
         if old.get("sweep_text") != cfg.text or old.get("plan") != plan_key:
             raise ValueError(f"{out} holds results of a different sweep or chunk plan "
-                             f"({old.get('plan')} vs {plan_key}); choose another --out or delete it")
+                             f"({old.get('plan')} vs {plan_key}; chunk_size is rounded up to a multiple "
+                             f"of the {ndev} device(s)); choose another --out or delete it")
         manifest = old
     else:
         manifest = {"sweep_file": cfg.source, "sweep_text": cfg.text, "name": cfg.name, "plan": plan_key,
@@ -266,12 +313,13 @@ def run(
     parts.mkdir(parents=True, exist_ok=True)
     (out / "sweep.toml").write_text(cfg.text)
     session: dict[str, Any] = {"started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-                               "device": str(jax.devices()[0]), "backend": jax.default_backend(),
-                               "device_count": jax.device_count()}
+                               "device": str(devs[0]), "backend": jax.default_backend(),
+                               "device_count": jax.device_count(), "devices": ndev, "chunk_size": chunk_size,
+                               "sharding": None if batched is None else str(batched)}
     manifest["sessions"].append(session)
     _write_json(manifest_path, manifest)
 
-    stats = RunStats(out=out, scenarios=len(table), chunks=len(plan))
+    stats = RunStats(out=out, scenarios=len(table), chunks=len(plan), devices=ndev, chunk_size=chunk_size)
     static = _Static(cfg.family, cfg.shape, cfg.resolution, cfg.has_height, cfg.static_max_count,
                      cfg.num_steps, cfg.method)
     key = jax.random.key(cfg.seed)
@@ -283,30 +331,37 @@ def run(
     done_before = int(sum(len(p[2]) for p in plan if (parts / _PART.format(p[0])).exists()))
     by_id = table.set_index("scenario", drop=False)
     traces0 = trace_count()
-    targets_of: dict[float, Any] = {}
+    shared_of: dict[float, Any] = {}  # per density: (base robot, targets, key), placed
     computed = steady_n = 0
     steady_s = 0.0
     for chunk_id, density, ids in todo:
         t0 = time.perf_counter()
         base = bases[density]
-        if density not in targets_of:
-            targets_of[density] = None if rw_swept else make_targets(base.replace(
+        if density not in shared_of:
+            targets = None if rw_swept else make_targets(base.replace(
                 rotation_weight=jnp.float32(table["robot.rotation_weight"].iloc[0])))
-        targets = targets_of[density]
+            # Shared by every scenario: replicated on every device of the mesh.
+            shared = (base, targets, key)
+            shared_of[density] = shared if replicated is None else jax.device_put(shared, replicated)
+        base_d, targets, key_d = shared_of[density]
         rows = by_id.loc[ids]
         n = len(rows)
         size = min(chunk_size, int((table["robot.density"] == density).sum()))
+        size = -(-size // ndev) * ndev  # every device gets the same number of rows
         pad = np.concatenate([np.arange(n), np.full(size - n, n - 1)])  # repeat the last row
 
         def col(name, dtype, rows=rows, pad=pad):
-            return jnp.asarray(rows[name].to_numpy()[pad], dtype)
+            return np.asarray(rows[name].to_numpy()[pad], dtype)
 
-        robot_vals = {c.partition(".")[2]: col(c, jnp.float32) for c in robot_cols}
-        terrain_vals = {c.partition(".")[2]: col(c, jnp.int32 if rows[c].dtype.kind == "i" else jnp.float32)
+        robot_vals = {c.partition(".")[2]: col(c, np.float32) for c in robot_cols}
+        terrain_vals = {c.partition(".")[2]: col(c, np.int32 if rows[c].dtype.kind == "i" else np.float32)
                         for c in terrain_cols}
-        commands = jnp.stack([col(f"command.{k}", jnp.float32) for k in COMMAND_KEYS], axis=-1)
-        seeds = col("replicate", jnp.int32)
-        summary = _run_chunk(static, base, targets, key, seeds, robot_vals, terrain_vals, commands)
+        commands = np.stack([col(f"command.{k}", np.float32) for k in COMMAND_KEYS], axis=-1)
+        seeds = col("replicate", np.int32)
+        batch = (seeds, robot_vals, terrain_vals, commands)
+        # Per-scenario inputs: split along the scenario axis over the mesh (one device: default device).
+        batch = jax.tree.map(jnp.asarray, batch) if batched is None else jax.device_put(batch, batched)
+        summary = _run_chunk(static, base_d, targets, key_d, *batch)
         summary = jax.device_get(jax.block_until_ready(summary))
         result = rows.reset_index(drop=True).copy()
         for k, v in summary.items():

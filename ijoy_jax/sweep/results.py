@@ -33,7 +33,8 @@ METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "foot
 UNITS = {
     "steps_taken": "steps", "steps_in_place": "steps", "steps_stationary": "steps", "stopped": "fraction",
     "footholds_on_obstacles": "footholds", "distance_along": "m", "distance_across": "m",
-    "mean_deviation": "m", "mean_foot_cost": "cost units", "robot.w": "cost units per m", "robot.rotation_weight": "cost units per rad",
+    "mean_deviation": "m", "mean_foot_cost": "cost units", "robot.w": "cost units per m",
+    "robot.rotation_weight": "cost units per rad",
     "robot.margin": "m", "robot.step_time": "s", "robot.foot_length": "m", "robot.foot_width": "m",
     "robot.density": "x HRP-2's 496 actions", "command.vx": "m/s", "command.vy": "m/s", "command.wz": "rad/s",
 }
