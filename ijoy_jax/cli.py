@@ -35,6 +35,8 @@ def main(argv: list[str] | None = None) -> int:
                       help="scenarios per jitted call; memory grows with it (default: 32)")
     srun.add_argument("--max-scenarios", type=int, default=None,
                       help="run only the first N scenarios (smoke tests; part of the resume plan)")
+    srun.add_argument("--devices", type=int, default=None,
+                      help="shard each chunk over the first N local devices (default: all of them)")
     ssum = sweep_sub.add_parser("summarize", help="print per-cell means with 95%% CIs and write a plot PNG")
     ssum.add_argument("dir", help="a sweep's output folder")
     ssum.add_argument("--png", default=None, help="plot to write (default: DIR/summary.png)")
@@ -73,7 +75,8 @@ def _sweep(args) -> int:
             return 2
         chunk = sweep.DEFAULT_CHUNK if args.chunk is None else args.chunk
         try:
-            stats = sweep.run(cfg, args.out, chunk_size=chunk, max_scenarios=args.max_scenarios)
+            stats = sweep.run(cfg, args.out, chunk_size=chunk, max_scenarios=args.max_scenarios,
+                              devices=args.devices)
         except ValueError as e:
             print(f"ijoy sweep: error: {e}", file=sys.stderr)
             return 2
