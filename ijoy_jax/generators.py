@@ -205,6 +205,13 @@ class BarParams(_StartZone):
     and tilted from the y axis by ``U(-yaw_jitter, yaw_jitter)``. A bar that
     would reach into the start zone is dropped.
 
+    Single-lane bars (``lane`` = -1 or +1) block one foot's lane only, as in
+    the paper's stepping-over experiment (V.B): the bar then runs from
+    ``lane_gap`` beside the start point's y (measured along the bar from the
+    point where its centre line crosses y = start y) out past the map edge on
+    the robot's right (-1, lower y) or left (+1, higher y), so the other foot
+    walks past beside it. ``lane = 0`` (default) spans the whole map.
+
     Fields (metres, radians):
       count: number of bars (int; clipped to ``[0, max_count]``).
       first: distance along +x from the start point to the first bar, metres.
@@ -213,6 +220,10 @@ class BarParams(_StartZone):
       top: bar top elevation, metres (2.5D; always an obstacle).
       position_jitter: half-range of the uniform x offset, metres.
       yaw_jitter: half-range of the uniform tilt, radians.
+      lane: 0 across the whole map (default); -1 only right of the start
+        point (lower y), +1 only left of it (higher y); only its sign is used.
+      lane_gap: for a single-lane bar, distance from the start point's y to
+        the bar's inner end, metres (ignored when ``lane = 0``).
       start_x, start_y, start_radius: start zone.
     """
 
@@ -223,6 +234,8 @@ class BarParams(_StartZone):
     top: Any = 0.05
     position_jitter: Any = 0.05
     yaw_jitter: Any = 0.0
+    lane: Any = 0.0
+    lane_gap: Any = 0.0
 
 
 @pytree_dataclass
@@ -574,10 +587,14 @@ def _bars_objects(key, params: BarParams, grid: _Grid, n: int) -> Objects:
     start = grid.start(params)
     j = jnp.arange(n, dtype=jnp.float32)
     x = start[0] + _f32(params.first) + j * _f32(params.spacing) + u[:, 0] * _f32(params.position_jitter)
-    centre = jnp.stack([x, jnp.full((n,), start[1])], axis=-1)
     yaw = 0.5 * jnp.pi + u[:, 1] * _f32(params.yaw_jitter)
     # Centred on the start's y, a bar this long crosses the whole map at any tilt.
     length = jnp.full((n,), 2.0 * jnp.sum(grid.size))
+    # A single-lane bar slides along its axis by lane_gap + half its length, to one side only
+    # (it still reaches past the map edge on that side).
+    shift = jnp.sign(_f32(params.lane)) * (_f32(params.lane_gap) + 0.5 * length)
+    axis = jnp.stack([jnp.cos(yaw), jnp.sin(yaw)], axis=-1)  # (n, 2); +y for an untilted bar
+    centre = jnp.stack([x, jnp.full((n,), start[1])], axis=-1) + shift[:, None] * axis
     width = jnp.full((n,), _f32(params.width))
     top = jnp.full((n,), _f32(params.top))
     r = _f32(params.start_radius)

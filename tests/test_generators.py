@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
-from reference import disc_touches_cells, rect_touches_cells
 from scipy import ndimage
 
 import ijoy_jax.generators as gen
 from ijoy_jax.terrain import Terrain
+
+from reference import disc_touches_cells, rect_touches_cells
 
 # One small grid for (almost) every test, so each family compiles once per mode:
 # 48 x 40 cells of 5 cm = 2.4 m x 2.0 m; the default start point is (0.36, 1.0) m.
@@ -566,3 +567,46 @@ def test_platforms_and_flat_heights():
 def test_start_point():
     p = gen.WallParams(start_x=0.5, start_y=0.25)
     np.testing.assert_allclose(np.asarray(gen.start_point(p, **GRID)), [0.3 + 1.2, -0.7 + 0.5], atol=1e-6)
+
+
+# --------------------------------------------------------------------------- single-lane bars
+
+
+@pytest.mark.parametrize("lane", [-1.0, 1.0])
+@pytest.mark.parametrize("gap", [0.012, 0.12, 0.31])  # inner ends off the cell edges
+def test_single_lane_bars_block_one_side_only(lane, gap):
+    """lane = -1 (+1): the bar's columns are those of the full-width bar, but only on the cells
+    whose open y-interval overlaps y < start_y - gap (y > start_y + gap), out to the map edge."""
+    full = gen.BarParams(count=2, first=0.5, spacing=0.6, width=0.07, position_jitter=0.0)
+    p = dataclasses.replace(full, lane=lane, lane_gap=gap)
+    _, free_full = _np(compiled("bars", False)(jax.random.key(0), full))
+    _, free = _np(compiled("bars", False)(jax.random.key(0), p))
+    _, sy = _start(p)
+    yl = ORIGIN[1] + np.arange(SHAPE[1]) * RES  # lower cell edges
+    side = (yl < sy - gap) if lane < 0 else (yl + RES > sy + gap)
+    assert np.all(np.abs(yl - (sy - gap)) > GEOM_TOL) and np.all(np.abs(yl - (sy + gap)) > GEOM_TOL)
+    np.testing.assert_array_equal(free, free_full | ~side[None, :])
+    assert (~free).any() and (free_full[:, side] == free[:, side]).all()
+
+
+def test_single_lane_bar_defaults_and_tracing():
+    """lane = 0 (the default) is the full-width bar; lane and lane_gap are traced leaves (vmap, no
+    recompile), and objects() gives the rasterised boxes."""
+    base = gen.BarParams(count=1, first=0.6, width=0.1)
+    keys = jax.random.split(jax.random.key(3), 3)
+    params = dataclasses.replace(base, lane=jnp.array([0.0, -1.0, 1.0]), lane_gap=jnp.array([0.0, 0.2, 0.2]))
+    params = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x), (3,)), params)  # every leaf per terrain
+    fn = compiled("bars", False, batched=True)
+    free = np.asarray(fn(keys, params).free)
+    full = np.asarray(gen.bars(keys[0], base, **GRID).free)
+    np.testing.assert_array_equal(free[0], full)
+    _, sy = _start(base)
+    yc = ORIGIN[1] + (np.arange(SHAPE[1]) + 0.5) * RES
+    assert (free[1][:, yc > sy - 0.2 + RES]).all() and not free[1][:, yc < sy - 0.2 - RES].all()
+    assert (free[2][:, yc < sy + 0.2 - RES]).all() and not free[2][:, yc > sy + 0.2 + RES].all()
+    before = TRACES[("bars", False, True)]
+    fn(keys, dataclasses.replace(params, lane_gap=jnp.array([0.1, 0.3, 0.0])))
+    assert TRACES[("bars", False, True)] == before
+    objs = gen.objects("bars", keys[1], jax.tree.map(lambda x: x[1], params), **GRID)
+    x, y, yaw, length = (float(v) for v in objs.boxes[0, :4])
+    assert y + 0.5 * length == pytest.approx(sy - 0.2, abs=1e-5) and yaw == pytest.approx(math.pi / 2)

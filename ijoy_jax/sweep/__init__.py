@@ -5,6 +5,7 @@
   run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks sharded over local
                                                                  devices, parquet parts, resume
   load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table, 95% CIs, plot
+  FAMILY_METRICS / bar_crossings / plot_crossing / b_max        bars: crossing rate vs the paper's bound
 
 Example:
   >>> from ijoy_jax import sweep
@@ -26,11 +27,25 @@ from ijoy_jax.sweep.config import (
     scenarios,
 )
 from ijoy_jax.sweep.execute import DEFAULT_CHUNK, RunStats, run, trace_count
-from ijoy_jax.sweep.results import METRICS, UNITS, aggregate, load, load_aggregates, plot, t_quantile
+from ijoy_jax.sweep.metrics import FAMILY_METRICS, bar_crossings
+from ijoy_jax.sweep.results import (
+    EXTRA_METRICS,
+    METRICS,
+    UNITS,
+    aggregate,
+    b_max,
+    load,
+    load_aggregates,
+    plot,
+    plot_crossing,
+    t_quantile,
+)
 
 __all__ = [
     "COMMAND_KEYS",
     "DEFAULT_CHUNK",
+    "EXTRA_METRICS",
+    "FAMILY_METRICS",
     "METRICS",
     "ROBOT_DEFAULTS",
     "UNITS",
@@ -38,12 +53,15 @@ __all__ = [
     "SweepConfig",
     "SweepConfigError",
     "aggregate",
+    "b_max",
+    "bar_crossings",
     "cells",
     "load",
     "load_aggregates",
     "load_config",
     "parse_config",
     "plot",
+    "plot_crossing",
     "run",
     "scenarios",
     "t_quantile",

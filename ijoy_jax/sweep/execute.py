@@ -16,7 +16,8 @@ family's parameters are traced per scenario), ``robot.replace`` with the
 scenario's traced leaves (w, rotation weight, margin, step time, footprint,
 metric weights), the start stance from the terrain's start zone, and
 :func:`ijoy_jax.control.rollout_core` with the scenario's command, returning
-:meth:`ijoy_jax.Trajectory.summary`.
+:meth:`ijoy_jax.Trajectory.summary` plus the family's extra metrics
+(:data:`ijoy_jax.sweep.metrics.FAMILY_METRICS`; bars: whether the robot got past them).
 
 Compiles (measured by :func:`trace_count`, tested): parameter values never
 recompile; each density value compiles once (its action-set size is a shape;
@@ -85,6 +86,7 @@ from ijoy_jax.sweep.config import (
     load_config,
     scenarios,
 )
+from ijoy_jax.sweep.metrics import bar_crossings
 
 __all__ = ["DEFAULT_CHUNK", "RunStats", "run", "trace_count"]
 
@@ -121,15 +123,20 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_val
     fam = generators.FAMILIES[static.family]
     params = fam.params(**terrain_vals)
     kw = {} if static.max_count is None else {"max_count": static.max_count}
-    terrain = fam.generator(jax.random.fold_in(key, seed), params, shape=static.shape,
-                            resolution=static.resolution, has_height=static.has_height, **kw)
+    tkey = jax.random.fold_in(key, seed)
+    terrain = fam.generator(tkey, params, shape=static.shape, resolution=static.resolution,
+                            has_height=static.has_height, **kw)
     metrics = base.metrics.replace(**{m: robot_vals[f"metrics.{m}"] for m in _METRIC_NAMES})
     robot = base.replace(metrics=metrics, **{k: robot_vals[k] for k in _LEAF_NAMES})
     centre = generators.start_point(params, shape=static.shape, resolution=static.resolution)
     half = 0.5 * base.p0[1]  # feet side by side at the step-in-place width, facing +x
     start = jnp.stack([jnp.stack([centre[0], centre[1] + half, 0.0]), jnp.stack([centre[0], centre[1] - half, 0.0])])
     traj = rollout_core(terrain, robot, start, command, static.num_steps, static.method, targets=targets)
-    return traj.summary()
+    summary = traj.summary()
+    if static.family == "bars":  # FAMILY_METRICS: from the bars the generator rasterised
+        objs = generators.objects("bars", tkey, params, shape=static.shape, resolution=static.resolution, **kw)
+        summary.update(bar_crossings(objs.boxes, traj.feet, robot.foot_length, robot.foot_width))
+    return summary
 
 
 def _chunk(static: _Static, base, targets, key, seeds, robot_vals, terrain_vals, commands):

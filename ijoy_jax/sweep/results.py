@@ -3,7 +3,8 @@
 Per-scenario table (:func:`load`): one row per scenario with its parameters
 (``robot.*``, ``terrain.*``, ``command.*``), ids (``scenario``, ``cell``,
 ``replicate``, ``chunk``) and the metrics of :meth:`ijoy_jax.Trajectory.summary`
-(:data:`METRICS`, units in :data:`UNITS`).
+(:data:`METRICS`, units in :data:`UNITS`), plus the terrain family's extra
+metrics (:data:`EXTRA_METRICS`, e.g. ``crossed`` for bars) when it has any.
 
 Aggregates (:func:`aggregate`): per cell and metric, ``mean``, ``std``
 (sample, ddof 1), ``n``, ``sem = std / sqrt(n)`` and the half-width
@@ -24,11 +25,16 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["METRICS", "UNITS", "aggregate", "load", "load_aggregates", "plot", "t_quantile"]
+__all__ = ["EXTRA_METRICS", "METRICS", "UNITS", "aggregate", "b_max", "load", "load_aggregates", "plot",
+           "plot_crossing", "t_quantile"]
 
 METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
            "distance_along", "distance_across", "mean_deviation", "mean_foot_cost")
 """Rollout metrics (:meth:`ijoy_jax.Trajectory.summary`) in every results table."""
+
+EXTRA_METRICS = ("bars_crossed", "crossed")
+"""Family-specific metrics (:data:`ijoy_jax.sweep.metrics.FAMILY_METRICS`), aggregated when present:
+``bars_crossed`` bars passed by both feet, ``crossed`` every bar passed (fraction of scenarios)."""
 
 UNITS = {
     "steps_taken": "steps", "steps_in_place": "steps", "steps_stationary": "steps", "stopped": "fraction",
@@ -37,6 +43,7 @@ UNITS = {
     "robot.rotation_weight": "cost units per rad",
     "robot.margin": "m", "robot.step_time": "s", "robot.foot_length": "m", "robot.foot_width": "m",
     "robot.density": "x HRP-2's 496 actions", "command.vx": "m/s", "command.vy": "m/s", "command.wz": "rad/s",
+    "bars_crossed": "bars", "crossed": "fraction", "terrain.width": "m",
 }
 """Units of metrics and parameters, for tables and axis labels."""
 
@@ -120,7 +127,7 @@ def aggregate(df, by=None):
     for cell, g in df.groupby("cell", sort=True):
         row = {"cell": cell, **{c: g[c].iloc[0] for c in by}, "n": len(g)}
         t = t_quantile(len(g) - 1)
-        for m in METRICS:
+        for m in METRICS + tuple(e for e in EXTRA_METRICS if e in df.columns):
             x = g[m].to_numpy(np.float64)
             std = float(np.std(x, ddof=1)) if len(x) > 1 else math.nan
             sem = std / math.sqrt(len(x))
@@ -148,7 +155,14 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
     Other swept columns become one line each (legend). A robot parameter's
     library default (:data:`ijoy_jax.sweep.ROBOT_DEFAULTS`) is marked by a
     dashed line; values spanning 20x or more get a symlog axis. Returns ``out``.
+
+    Aggregates of a bar-crossing sweep (a ``crossed`` metric and a swept
+    ``terrain.width``) with the default ``metrics`` and ``x`` go to
+    :func:`plot_crossing` instead.
     """
+    if ("crossed.mean" in agg and "terrain.width" in agg and x in (None, "terrain.width")
+            and metrics == plot.__defaults__[1]):
+        return plot_crossing(agg, out, title=title)
     import matplotlib
 
     from ijoy_jax.sweep.config import ROBOT_DEFAULTS
@@ -180,6 +194,80 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
         ax.set_title("mean and 95% CI over scenarios", fontsize=9)
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=8)
+    n = int(agg["n"].min()) if len(agg) else 0
+    fig.suptitle(f"{title}  ({n} scenarios per point)".strip())
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def b_max(margin, step_length: float = 0.20, foot_length: float = 0.242):
+    """The paper's bound on the bar length a foot can step over: ``2 L - foot length - 2 m`` (metres).
+
+    From a stance beside the bar, the blocked foot lands at most ``L`` ahead of
+    the stance foot after starting up to ``L`` behind it (a ``2 L`` swing); its
+    grown footprint (length + 2 m) must fit before the bar and then beyond it.
+    HRP-2: L = 0.20 m (largest dx of an action), foot length 0.242 m.
+
+    Example:
+      >>> round(b_max(0.02), 3)
+      0.118
+    """
+    out = 2.0 * step_length - foot_length - 2.0 * np.asarray(margin, np.float64)
+    return float(out) if out.ndim == 0 else out
+
+
+def plot_crossing(agg, out, title: str = "", step_length: float = 0.20, foot_length: float = 0.242):
+    """Crossing rate against bar length, one line per safety margin, the paper's bound marked.
+
+    Args:
+      agg: :func:`aggregate` output of a sweep over ``terrain.width`` (bar
+        length along the walk) and optionally ``robot.margin``, with the
+        ``crossed`` metric (bars family).
+      out: PNG path.
+      title: figure title.
+      step_length, foot_length: L and the foot length in :func:`b_max` (HRP-2's by default).
+
+    Each margin m is drawn in its own colour with the fraction of scenarios
+    that crossed (95% CI error bars, clipped to [0, 1]) and a dashed vertical
+    line at ``b_max(m)`` (in the legend; a margin with ``b_max <= 0`` admits
+    no bar and is noted there). Returns ``out``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9.0, 4.8))
+    margins = sorted(agg["robot.margin"].unique()) if "robot.margin" in agg else [None]
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    handles = []
+    for i, m in enumerate(margins):
+        g = (agg if m is None else agg[agg["robot.margin"] == m]).sort_values("terrain.width")
+        color = colors[i % len(colors)]
+        mean = g["crossed.mean"].to_numpy(np.float64)
+        ci = np.nan_to_num(g["crossed.ci95"].to_numpy(np.float64))
+        lo, hi = np.clip(mean - ci, 0, 1), np.clip(mean + ci, 0, 1)
+        name = "measured" if m is None else f"m = {100 * m:g} cm: measured"
+        handles.append(ax.errorbar(g["terrain.width"] * 100, mean, yerr=[mean - lo, hi - mean], marker="o",
+                                   capsize=3, color=color, label=name))
+        if m is not None:
+            bound = float(b_max(m, step_length, foot_length))
+            if bound > 0:
+                handles.append(ax.axvline(100 * bound, color=color, ls="--", lw=1.2,
+                                          label=f"m = {100 * m:g} cm: paper's b_max = {100 * bound:.1f} cm"))
+            else:
+                handles.append(ax.plot([], [], color=color, ls="--", lw=1.2,
+                                       label=f"m = {100 * m:g} cm: b_max = {100 * bound:.1f} cm, none crossable")[0])
+    ax.set_xlabel("bar length along the walking direction, b (cm)")
+    ax.set_ylabel("scenarios that got past the bar (fraction)")
+    ax.set_ylim(-0.05, 1.05)
+    ax.grid(alpha=0.3)
+    ax.legend(handles=handles, fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    ax.set_title(f"dashed: the paper's bound b_max(m) = 2 L - foot length - 2 m (L = {100 * step_length:g} cm, "
+                 f"foot {100 * foot_length:g} cm)\npoints: mean and 95% CI; below b_max, crossing also depends "
+                 "on where the foothold lattice meets the bar", fontsize=8)
     n = int(agg["n"].min()) if len(agg) else 0
     fig.suptitle(f"{title}  ({n} scenarios per point)".strip())
     fig.tight_layout()
