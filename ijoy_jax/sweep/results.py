@@ -194,6 +194,13 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
         ax.set_title("mean and 95% CI over scenarios", fontsize=9)
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=8)
+    return _finish(fig, agg, title, out)
+
+
+def _finish(fig, agg, title, out):
+    """Title a sweep figure with its scenarios per point, save it to ``out`` and close it."""
+    import matplotlib.pyplot as plt
+
     n = int(agg["n"].min()) if len(agg) else 0
     fig.suptitle(f"{title}  ({n} scenarios per point)".strip())
     fig.tight_layout()
@@ -268,9 +275,4 @@ def plot_crossing(agg, out, title: str = "", step_length: float = 0.20, foot_len
     ax.set_title(f"dashed: the paper's bound b_max(m) = 2 L - foot length - 2 m (L = {100 * step_length:g} cm, "
                  f"foot {100 * foot_length:g} cm)\npoints: mean and 95% CI; below b_max, crossing also depends "
                  "on where the foothold lattice meets the bar", fontsize=8)
-    n = int(agg["n"].min()) if len(agg) else 0
-    fig.suptitle(f"{title}  ({n} scenarios per point)".strip())
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return _finish(fig, agg, title, out)
