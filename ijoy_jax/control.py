@@ -45,12 +45,15 @@ class Walker(NamedTuple):
     execute(state, pose (3,), go ()) -> state (SendRobotCmd if go else StopWalking,
                                                then WaitForNextStep)
     feet(state) -> (2, 3) world poses, row 0 left, row 1 right.
+    log(state) -> pytree recorded after every step (optional; e.g. a physically
+        simulated robot's placement error and falls), kept in Trajectory.log.
     """
 
     init: Callable[[jax.Array, jax.Array], Any]
     stance: Callable[[Any], StanceInfo]
     execute: Callable[[Any, jax.Array, jax.Array], Any]
     feet: Callable[[Any], jax.Array]
+    log: Callable[[Any], Any] | None = None
 
 class _PerfectState(NamedTuple):
     feet: jax.Array  # (2, 3) row 0 left, row 1 right
@@ -90,6 +93,9 @@ class Trajectory(NamedTuple):
         chosen foothold is invalid): how good the ground under the foot is.
       index: action index (-1 if none).
       target: (T, 3) world pose the choice was scored against.
+      commanded: (T, 3) world pose sent to the robot (the chosen step; the
+        swing foot's pose when none was sent). With a perfect walker it equals
+        ``footsteps`` wherever a step was taken.
       command_ok: False where the command had NaN/inf (treated as zero).
       in_place: the step taken was the step-in-place action p0.
       stationary: the step taken put the swing foot back where it was (the
@@ -103,6 +109,7 @@ class Trajectory(NamedTuple):
       rotation_deviation: |wrap(achieved - p_next)| rotation (rad).
       evaluated: actions whose FootCost was computed.
     feet: (2, 3) final foot poses (row 0 left).
+    log: the walker's per-step log (leaves with a leading T axis), or None.
     """
 
     footsteps: jax.Array
@@ -124,6 +131,8 @@ class Trajectory(NamedTuple):
     rotation_deviation: jax.Array
     evaluated: jax.Array
     feet: jax.Array
+    commanded: jax.Array | None = None
+    log: Any = None
 
     def summary(self) -> dict[str, jax.Array]:
         """Per-rollout totals: steps taken, in place, stopped, footholds on obstacles, distances (m),
@@ -205,6 +214,7 @@ def rollout_core(
             foot_cost=choice.foot_cost,
             index=choice.index,
             target=choice.target,
+            commanded=jnp.where(go, choice.pose, info.swing_from),
             command_ok=choice.command_ok,
             in_place=go & (choice.index >= 0) & jnp.all(
                 jnp.abs(robot.actions[jnp.maximum(choice.index, 0)] - robot.p0) < 1e-6),
@@ -216,6 +226,8 @@ def rollout_core(
             rotation_deviation=jnp.where(go, jnp.abs(geometry.wrap_angle(err[2])), 0.0),
             evaluated=choice.evaluated,
         )
+        if walker.log is not None:
+            record["log"] = walker.log(new_state)
         return (new_state, now_stopped), record
 
     (state, _), rec = lax.scan(step, (state0, jnp.bool_(False)), commands[:num_steps])
