@@ -1,0 +1,572 @@
+"""The HRP-2-like biped as a MuJoCo model built with MjSpec, and the terrain as its height field.
+
+The robot: a free-floating pelvis (the hips' frame: hip joints at
+``(0, +-hip_offset_y, 0)``), the upper body (torso, head, arms) lumped as rigid
+geoms on the pelvis, and two 6-DoF legs (hip yaw/roll/pitch, knee, ankle
+pitch/roll; see :mod:`ijoy_jax.sim.kinematics`) driven by position actuators.
+Only small spheres under each sole (and, optionally, the shin capsules) touch
+the terrain: MJX collides a sphere with a height field through a 2 x 2
+sub-grid of prisms, a box through ``(ceil(2 rbound / res) + 1)^2`` prisms
+(hundreds per foot), so the foot box is visual and inertial only.
+
+The terrain: a :class:`ijoy_jax.terrain.Terrain` becomes one height field
+whose samples sit at the cell centres (MuJoCo's ``nrow`` is the terrain's
+``ny``, ``ncol`` its ``nx``). MuJoCo interpolates the surface linearly between
+samples, so a raised cell is a plateau between its raised neighbours with
+walls one cell wide. Heights are stored normalised,
+``z = z_lo + data * (z_hi - z_lo)``, and a batch of terrains only swaps the
+traced ``hfield_data`` leaf of one compiled model (:func:`put_terrain`,
+:func:`put_terrains`).
+
+Example:
+  >>> import mujoco, ijoy_jax as ij
+  >>> from ijoy_jax.sim import model
+  >>> p = model.biped_params(ij.robots.hrp2())
+  >>> m = model.build_model(p, ij.terrain.flat((100, 60)))
+  >>> round(float(sum(m.body_mass)), 1), m.nq, m.nu
+  (58.0, 19, 12)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+
+from ijoy_jax.sim import kinematics
+
+__all__ = [
+    "JOINTS",
+    "SIDES",
+    "BipedParams",
+    "ModelIndex",
+    "biped_params",
+    "build_model",
+    "build_spec",
+    "hfield_data",
+    "model_index",
+    "physical_heights",
+    "put_terrain",
+    "put_terrains",
+    "standing_qpos",
+]
+
+SIDES = ("left", "right")
+JOINTS = ("hip_yaw", "hip_roll", "hip_pitch", "knee", "ankle_pitch", "ankle_roll")
+_AXES = ((0, 0, 1), (1, 0, 0), (0, 1, 0), (0, 1, 0), (0, 1, 0), (1, 0, 0))
+_FOOT_THICKNESS = 0.03  # visual/inertial foot box height above the sole, metres
+
+
+@dataclasses.dataclass(frozen=True)
+class BipedParams:
+    """Static parameters of the HRP-2-like biped and its terrain model (hashable; metres, kg, seconds, radians).
+
+    Geometry:
+      hip_offset_y: lateral distance of each hip point from the pelvis origin.
+      thigh, shank: hip-knee and knee-ankle lengths.
+      ankle_height: ankle joint centre above the sole.
+      foot_length, foot_width: box foot (the footprint), along the foot's x and y.
+      stand_height: default height of the pelvis origin (hip joints) above the
+        soles in :func:`standing_qpos` (0.68: knees bent about 32 deg, CoM 0.77 m).
+      stand_width: default lateral distance between the feet (HRP-2's step in place, 0.19).
+    Masses (kg; total 58.0): pelvis, torso, head, arm (each), thigh (with the
+      hip motors), shank, foot (with the ankle motors) per leg: legs 10.0 kg each, upper body 38 kg.
+    Joints, per leg in :data:`JOINTS` order (6-tuples):
+      range_lo, range_hi: LEFT leg joint limits (the right leg mirrors yaw and
+        roll: ``(-hi, -lo)``), HRP-2-like.
+      armature: reflected rotor inertia (kg m^2); damping: joint viscous damping (N m s/rad).
+      kp (N m/rad), kv (N m s/rad), force (N m): position actuator gains and torque limits.
+    Contacts:
+      sole_grid: (n along the foot, n across) sole spheres (3 x 2: toe/middle/heel x edges).
+      sole_radius: sphere radius; the spheres' bottoms lie on the sole plane. MJX collides
+        a sphere with ``(ceil(2 r / res) + 1)^2`` height field cells: 0.009 keeps that 2 x 2 at
+        res = 0.02 (at r = res / 2 exactly, float rounding of the grid step makes it 2 x 3 or 3 x 3).
+      shin_contacts: shin capsules also collide with the terrain (off by default:
+        each capsule-hfield pair costs MJX a sub-grid of prisms as large as the capsule).
+      shin_radius, thigh_radius: capsule radii of the shank and thigh.
+      friction: sliding friction of the sole spheres.
+    Simulation:
+      timestep: physics step (0.002 s: stable with these gains and armature);
+        integrator implicitfast (implicit in the actuator damping kv).
+      iterations, ls_iterations: Newton solver caps (4 and 8): MJX unrolls every
+        iteration for every robot, so they bound each step's cost; Newton converges
+        in 2-3 iterations on this small system (nv = 18).
+    Terrain:
+      obstacle_height: height given to obstacle cells of 2D terrains.
+      z_lo, z_hi: elevation range of the height field (heights outside are clipped).
+      base_depth: thickness of the height field's base below z_lo.
+    """
+
+    hip_offset_y: float = 0.06
+    thigh: float = 0.30
+    shank: float = 0.30
+    ankle_height: float = 0.105
+    foot_length: float = 0.242
+    foot_width: float = 0.13
+    stand_height: float = 0.68
+    stand_width: float = 0.19
+    pelvis_mass: float = 6.0
+    torso_mass: float = 17.4
+    head_mass: float = 3.4
+    arm_mass: float = 5.6
+    thigh_mass: float = 5.2
+    shank_mass: float = 3.1
+    foot_mass: float = 1.7
+    range_lo: tuple[float, ...] = tuple(math.radians(v) for v in (-30.0, -25.0, -125.0, 0.0, -75.0, -20.0))
+    range_hi: tuple[float, ...] = tuple(math.radians(v) for v in (45.0, 35.0, 42.0, 150.0, 42.0, 35.0))
+    armature: tuple[float, ...] = (0.1, 0.2, 0.2, 0.2, 0.2, 0.1)
+    damping: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    kp: tuple[float, ...] = (1500.0, 3000.0, 3000.0, 3000.0, 3000.0, 2000.0)
+    kv: tuple[float, ...] = (30.0, 50.0, 50.0, 50.0, 50.0, 30.0)
+    force: tuple[float, ...] = (150.0, 250.0, 300.0, 350.0, 300.0, 200.0)
+    sole_grid: tuple[int, int] = (3, 2)
+    sole_radius: float = 0.009
+    shin_contacts: bool = False
+    shin_radius: float = 0.04
+    thigh_radius: float = 0.06
+    friction: float = 1.0
+    timestep: float = 0.002
+    iterations: int = 4
+    ls_iterations: int = 8
+    obstacle_height: float = 0.3
+    z_lo: float = -0.2
+    z_hi: float = 0.6
+    base_depth: float = 0.1
+
+    def __post_init__(self):
+        positive = ("thigh", "shank", "ankle_height", "foot_length", "foot_width", "stand_height", "stand_width",
+                    "pelvis_mass", "torso_mass", "head_mass", "arm_mass", "thigh_mass", "shank_mass", "foot_mass",
+                    "sole_radius", "shin_radius", "thigh_radius", "timestep", "base_depth")
+        for name in positive:
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"BipedParams.{name} must be a positive finite number, got {v!r}")
+        for name in ("hip_offset_y", "friction", "obstacle_height", "z_lo", "z_hi"):
+            v = getattr(self, name)
+            if not math.isfinite(v) or (name in ("hip_offset_y", "friction") and v < 0):
+                raise ValueError(f"BipedParams.{name} must be finite (and >= 0 for lengths), got {v!r}")
+        for name in ("range_lo", "range_hi", "armature", "damping", "kp", "kv", "force"):
+            v = getattr(self, name)
+            if len(v) != 6 or not all(math.isfinite(x) for x in v):
+                raise ValueError(f"BipedParams.{name} must be 6 finite numbers (one per leg joint), got {v!r}")
+            if name not in ("range_lo", "range_hi") and min(v) < 0:
+                raise ValueError(f"BipedParams.{name} must be >= 0, got {v!r}")
+        if any(lo >= hi for lo, hi in zip(self.range_lo, self.range_hi, strict=True)):
+            raise ValueError("BipedParams.range_lo must be below range_hi for every joint")
+        if self.z_hi <= self.z_lo:
+            raise ValueError(f"BipedParams.z_hi ({self.z_hi}) must exceed z_lo ({self.z_lo})")
+        if len(self.sole_grid) != 2 or min(self.sole_grid) < 1:
+            raise ValueError(f"BipedParams.sole_grid must be two counts >= 1, got {self.sole_grid!r}")
+        if 2 * self.sole_radius > min(self.foot_length, self.foot_width):
+            raise ValueError("BipedParams.sole_radius is too large for the foot")
+        if self.stand_height >= self.thigh + self.shank + self.ankle_height:
+            raise ValueError("BipedParams.stand_height must be below the straight leg's length")
+        if self.iterations < 1 or self.ls_iterations < 1:
+            raise ValueError("BipedParams.iterations and ls_iterations must be >= 1")
+
+    @property
+    def total_mass(self) -> float:
+        """Total mass of the robot, kg."""
+        upper = self.pelvis_mass + self.torso_mass + self.head_mass + 2 * self.arm_mass
+        return upper + 2 * (self.thigh_mass + self.shank_mass + self.foot_mass)
+
+    def joint_range(self, side: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(6,) lower and upper joint limits (radians) of one leg; the right leg mirrors yaw and roll."""
+        lo, hi = np.array(self.range_lo), np.array(self.range_hi)
+        if kinematics.side_sign(side) < 0:
+            mirror = np.array([True, True, False, False, False, True])
+            lo, hi = np.where(mirror, -hi, lo), np.where(mirror, -lo, hi)
+        return lo, hi
+
+
+def biped_params(robot=None, **overrides) -> BipedParams:
+    """:class:`BipedParams` with the footprint of ``robot`` (if given) and any field overridden.
+
+    Args:
+      robot: an :class:`ijoy_jax.robots.Robot` (concrete; its ``foot_length``
+        and ``foot_width`` become the box feet) or None for HRP-2's.
+      **overrides: any :class:`BipedParams` field.
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> from ijoy_jax.sim import model
+      >>> model.biped_params(ij.robots.hrp2(), timestep=0.001).foot_width
+      0.13
+    """
+    kwargs: dict[str, Any] = {}
+    if robot is not None:
+        # the Robot stores float32: round to micrometres so 0.13 stays 0.13 (and the params hash alike)
+        kwargs["foot_length"] = round(float(robot.foot_length), 6)
+        kwargs["foot_width"] = round(float(robot.foot_width), 6)
+    names = {f.name for f in dataclasses.fields(BipedParams)}
+    unknown = set(overrides) - names
+    if unknown:
+        raise ValueError(f"unknown BipedParams fields: {sorted(unknown)}")
+    kwargs.update(overrides)
+    return BipedParams(**kwargs)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The robot
+
+
+def _sole_points(p: BipedParams) -> np.ndarray:
+    """(K, 3) sphere centres in the foot frame (origin at the ankle), K = n_along * n_across."""
+    r = p.sole_radius
+    nx, ny = p.sole_grid
+    xs = np.linspace(p.foot_length / 2 - r, -(p.foot_length / 2 - r), nx) if nx > 1 else np.zeros(1)
+    ys = np.linspace(p.foot_width / 2 - r, -(p.foot_width / 2 - r), ny) if ny > 1 else np.zeros(1)
+    return np.array([(x, y, -p.ankle_height + r) for x in xs for y in ys])
+
+
+def _add_robot(spec: mujoco.MjSpec, p: BipedParams) -> None:
+    box, sphere, capsule = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_SPHERE, mujoco.mjtGeom.mjGEOM_CAPSULE
+    visual = dict(contype=0, conaffinity=0)
+    pelvis = spec.worldbody.add_body(name="pelvis", pos=[0, 0, p.stand_height])
+    pelvis.add_freejoint(name="root")
+    pelvis.add_geom(name="pelvis", type=box, size=[0.1, 0.14, 0.06], pos=[0, 0, 0.06], mass=p.pelvis_mass,
+                    rgba=[0.6, 0.6, 0.65, 1], **visual)
+    pelvis.add_geom(name="torso", type=box, size=[0.12, 0.17, 0.2], pos=[-0.03, 0, 0.34], mass=p.torso_mass,
+                    rgba=[0.75, 0.75, 0.8, 1], **visual)
+    pelvis.add_geom(name="head", type=sphere, size=[0.1, 0, 0], pos=[0, 0, 0.74], mass=p.head_mass,
+                    rgba=[0.8, 0.8, 0.85, 1], **visual)
+    for s in (1, -1):
+        pelvis.add_geom(name=f"{SIDES[(1 - s) // 2]}_arm", type=capsule, size=[0.045, 0, 0],
+                        fromto=[0, s * 0.23, 0.5, 0, s * 0.23, 0.02], mass=p.arm_mass, rgba=[0.7, 0.7, 0.75, 1],
+                        **visual)
+    pelvis.add_site(name="imu", pos=[0, 0, 0])
+    pelvis.add_site(name="torso", pos=[0, 0, 0.34])
+
+    shin_con = dict(contype=1, conaffinity=0) if p.shin_contacts else visual
+    for side in SIDES:
+        sgn = kinematics.side_sign(side)
+        lo, hi = p.joint_range(side)
+
+        def joint(body, k, pos=(0, 0, 0), side=side, lo=lo, hi=hi):
+            body.add_joint(name=f"{side}_{JOINTS[k]}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=list(_AXES[k]),
+                           pos=list(pos), range=[lo[k], hi[k]], limited=True, armature=p.armature[k],
+                           damping=p.damping[k])
+
+        thigh = pelvis.add_body(name=f"{side}_thigh", pos=[0, sgn * p.hip_offset_y, 0])
+        for k in range(3):
+            joint(thigh, k)
+        thigh.add_geom(name=f"{side}_thigh", type=capsule, size=[p.thigh_radius, 0, 0],
+                       fromto=[0, 0, -0.05, 0, 0, -p.thigh + 0.05], mass=p.thigh_mass, rgba=[0.5, 0.5, 0.9, 1],
+                       **visual)
+        shank = thigh.add_body(name=f"{side}_shank", pos=[0, 0, -p.thigh])
+        joint(shank, 3)
+        shank.add_geom(name=f"{side}_shin", type=capsule, size=[p.shin_radius, 0, 0],
+                       fromto=[0, 0, -0.04, 0, 0, -p.shank + 0.06], mass=p.shank_mass, rgba=[0.5, 0.5, 0.9, 1],
+                       **shin_con)
+        foot = shank.add_body(name=f"{side}_foot", pos=[0, 0, -p.shank])
+        joint(foot, 4)
+        joint(foot, 5)
+        foot.add_geom(name=f"{side}_foot", type=box,
+                      size=[p.foot_length / 2, p.foot_width / 2, _FOOT_THICKNESS / 2],
+                      pos=[0, 0, -p.ankle_height + _FOOT_THICKNESS / 2], mass=p.foot_mass, rgba=[0.3, 0.3, 0.35, 1],
+                      **visual)
+        for k, c in enumerate(_sole_points(p)):
+            foot.add_geom(name=f"{side}_sole{k}", type=sphere, size=[p.sole_radius, 0, 0], pos=list(c),
+                          contype=1, conaffinity=0, condim=3, friction=[p.friction, 0.005, 0.0001], mass=0.0,
+                          rgba=[0.9, 0.3, 0.3, 1])
+        foot.add_site(name=f"{side}_sole", pos=[0, 0, -p.ankle_height])
+
+    for side in SIDES:
+        lo, hi = p.joint_range(side)
+        for k, name in enumerate(JOINTS):
+            act = spec.add_actuator(name=f"{side}_{name}", target=f"{side}_{name}",
+                                    trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            act.set_to_position(kp=p.kp[k], kv=p.kv[k])
+            act.ctrllimited = True
+            act.ctrlrange = [lo[k], hi[k]]
+            act.forcelimited = True
+            act.forcerange = [-p.force[k], p.force[k]]
+
+
+def _hfield_geometry(p: BipedParams, shape, resolution: float, origin) -> tuple[list, list]:
+    """MuJoCo hfield size and geom position for a grid: sample (i, j) at cell (i, j)'s centre."""
+    nx, ny = (int(v) for v in shape)
+    rx, ry = (nx - 1) * resolution / 2, (ny - 1) * resolution / 2
+    ox, oy = (float(v) for v in np.asarray(origin, np.float64))
+    size = [rx, ry, p.z_hi - p.z_lo, p.base_depth]
+    pos = [ox + resolution / 2 + rx, oy + resolution / 2 + ry, p.z_lo]
+    return size, pos
+
+
+def build_spec(params: BipedParams, shape=(200, 200), resolution: float = 0.02, origin=(0.0, 0.0)) -> mujoco.MjSpec:
+    """The biped and a height field of a terrain grid as an (uncompiled) :class:`mujoco.MjSpec`.
+
+    The height field has ``nrow = ny`` rows (along y) and ``ncol = nx``
+    columns (along x), its samples at the cell centres
+    ``origin + (i + 0.5, j + 0.5) * resolution``, elevation
+    ``z_lo + data * (z_hi - z_lo)``, and zero data (set it with
+    :func:`build_model` or :func:`put_terrain`). The geom is named "terrain".
+
+    Args:
+      params: :class:`BipedParams`.
+      shape: (nx, ny) terrain grid, each >= 2 (static).
+      resolution: cell size, metres (> 0).
+      origin: (2,) world (x, y) of the grid's lower corner, metres (concrete).
+
+    Returns:
+      The spec (options: timestep, implicitfast, Newton with ``iterations``/``ls_iterations``),
+      with a keyframe "stand" (:func:`standing_qpos` at default feet, ground 0).
+    """
+    nx, ny = (int(v) for v in shape)
+    if nx < 2 or ny < 2:
+        raise ValueError(f"the terrain grid needs at least 2 x 2 cells for a height field, got {shape}")
+    if not (math.isfinite(resolution) and resolution > 0):
+        raise ValueError(f"resolution must be a positive finite number of metres, got {resolution!r}")
+    spec = mujoco.MjSpec()
+    spec.modelname = "ijoy_biped"
+    spec.compiler.degree = False  # every angle here is in radians (MjSpec defaults to degrees for ranges)
+    opt = spec.option
+    opt.timestep = params.timestep
+    opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
+    opt.iterations = params.iterations
+    opt.ls_iterations = params.ls_iterations
+    opt.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+    size, pos = _hfield_geometry(params, (nx, ny), float(resolution), origin)
+    spec.add_hfield(name="terrain", nrow=ny, ncol=nx, size=size, userdata=[0.0] * (nx * ny))
+    spec.worldbody.add_geom(name="terrain", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="terrain", pos=pos,
+                            contype=0, conaffinity=1, condim=3, rgba=[0.55, 0.6, 0.5, 1])
+    spec.worldbody.add_light(name="sun", pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    _add_robot(spec, params)
+    qpos = standing_qpos(params)
+    spec.add_key(name="stand", qpos=qpos.tolist(), ctrl=qpos[7:].tolist())
+    return spec
+
+
+def physical_heights(terrain, obstacle_height: float = 0.3) -> jax.Array:
+    """(nx, ny) float32 surface heights (metres) the simulated robot meets.
+
+    2D terrains (``has_height=False``): 0 on free cells, ``obstacle_height`` on
+    obstacle cells (walls the robot must not touch). 2.5D terrains: their
+    heights unchanged, also on non-free cells: a 2.5D map's heights already
+    describe its obstacles (a 5 cm bar is 5 cm high), and ``free`` is a
+    planning label (too steep, too rough), not extra geometry.
+    """
+    height = jnp.asarray(terrain.height, jnp.float32)
+    if terrain.has_height:
+        return height
+    return jnp.where(terrain.free, height, jnp.float32(obstacle_height))
+
+
+def hfield_data(params: BipedParams, terrain) -> jax.Array:
+    """(ny * nx,) float32 height field data of a terrain, in MuJoCo's order, normalised to [0, 1].
+
+    ``data[j * nx + i] = clip((h[i, j] - z_lo) / (z_hi - z_lo), 0, 1)`` with
+    ``h = physical_heights(terrain, params.obstacle_height)``: row j runs along
+    y, column i along x. Heights outside ``[z_lo, z_hi]`` are clipped to the
+    range (the robot meets a surface at ``z_lo`` or ``z_hi`` there). Pure JAX:
+    jit and vmap over terrains freely.
+    """
+    h = physical_heights(terrain, params.obstacle_height)
+    data = jnp.clip((h - params.z_lo) / (params.z_hi - params.z_lo), 0.0, 1.0)
+    return data.T.reshape(-1).astype(jnp.float32)
+
+
+def build_model(params: BipedParams, terrain) -> mujoco.MjModel:
+    """The compiled :class:`mujoco.MjModel` of the biped on ``terrain`` (concrete).
+
+    The height field data is written into the compiled model (``hfield_data``
+    equals :func:`hfield_data` exactly); passing it to the spec instead would
+    let MuJoCo's compiler rescale it to span [0, 1] (user hfield data is
+    min-max normalised at compile time, which would lose the absolute heights).
+    Keyframe 0 ("stand") is :func:`standing_qpos` on flat ground at z = 0 with matching ``ctrl``.
+    """
+    spec = build_spec(params, terrain.shape, terrain.resolution, np.asarray(terrain.origin))
+    m = spec.compile()
+    m.hfield_data[:] = np.asarray(hfield_data(params, terrain), np.float32)
+    return m
+
+
+def put_terrain(mjx_model, params: BipedParams, terrain):
+    """An ``mjx.Model`` with its height field data replaced by ``terrain``'s (same grid shape).
+
+    Pure and jit-able; MJX reads ``hfield_data`` inside its collision functions,
+    so the replaced data is what the robot meets. Vmapping this over terrains
+    batches every model leaf; :func:`put_terrains` batches only the height field.
+    """
+    data = hfield_data(params, terrain)
+    if data.shape != mjx_model.hfield_data.shape:
+        raise ValueError(f"terrain grid {terrain.shape} does not match the model's height field "
+                         f"({mjx_model.hfield_data.shape[0]} samples)")
+    return mjx_model.replace(hfield_data=data.astype(mjx_model.hfield_data.dtype))
+
+
+def put_terrains(mjx_model, params: BipedParams, terrains):
+    """A batch of terrains (a Terrain with a leading batch axis) in one ``mjx.Model``.
+
+    Returns:
+      (model, in_axes): the model with (B, ny * nx) ``hfield_data`` and its other
+      leaves shared, and the matching ``in_axes`` pytree for ``jax.vmap``
+      (0 for ``hfield_data``, None elsewhere), as in mujoco_playground's randomize.
+
+    Example:
+      >>> # m, axes = put_terrains(mjx.put_model(mj), p, batch)
+      >>> # jax.vmap(mjx.step, in_axes=(axes, 0))(m, d)
+    """
+    data = jax.vmap(lambda t: hfield_data(params, t))(terrains)
+    if data.shape[1:] != mjx_model.hfield_data.shape:
+        raise ValueError(f"terrain grids do not match the model's height field ({mjx_model.hfield_data.shape[0]})")
+    model = mjx_model.replace(hfield_data=data.astype(mjx_model.hfield_data.dtype))
+    in_axes = jax.tree_util.tree_map(lambda _: None, mjx_model).replace(hfield_data=0)
+    return model, in_axes
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Indices and the standing pose
+
+
+class ModelIndex(NamedTuple):
+    """Addresses in a compiled biped model (NumPy ints; rows: 0 left, 1 right; columns: :data:`JOINTS`).
+
+    Fields:
+      qpos_adr: (2, 6) qpos addresses of the leg joints.
+      qvel_adr: (2, 6) qvel (dof) addresses of the leg joints.
+      actuator: (2, 6) actuator ids.
+      pelvis: () pelvis body id (the free joint's body).
+      foot: (2,) foot body ids.
+      sole_site: (2,) sole-centre site ids.
+      sole_geoms: (2, K) sole sphere geom ids.
+      shin_geom: (2,) shin capsule geom ids.
+      hfield_geom: () the terrain geom id.
+      imu_site: () site at the pelvis origin.
+      torso_site: () site in the torso.
+    """
+
+    qpos_adr: np.ndarray
+    qvel_adr: np.ndarray
+    actuator: np.ndarray
+    pelvis: np.ndarray
+    foot: np.ndarray
+    sole_site: np.ndarray
+    sole_geoms: np.ndarray
+    shin_geom: np.ndarray
+    hfield_geom: np.ndarray
+    imu_site: np.ndarray
+    torso_site: np.ndarray
+
+
+def model_index(mj_model: mujoco.MjModel) -> ModelIndex:
+    """The :class:`ModelIndex` of a model made by :func:`build_model` (or ``build_spec().compile()``)."""
+    def oid(kind, name):
+        i = mujoco.mj_name2id(mj_model, kind, name)
+        if i < 0:
+            raise ValueError(f"model has no {kind.name} named {name!r}; was it built by ijoy_jax.sim.model?")
+        return i
+
+    jnt, body, site, geom, act = (mujoco.mjtObj.mjOBJ_JOINT, mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_SITE,
+                                  mujoco.mjtObj.mjOBJ_GEOM, mujoco.mjtObj.mjOBJ_ACTUATOR)
+    jids = np.array([[oid(jnt, f"{s}_{j}") for j in JOINTS] for s in SIDES])
+    sole_geoms = []
+    for s in SIDES:
+        ids, k = [], 0
+        while (g := mujoco.mj_name2id(mj_model, geom, f"{s}_sole{k}")) >= 0:
+            ids.append(g)
+            k += 1
+        sole_geoms.append(ids)
+    return ModelIndex(
+        qpos_adr=np.asarray(mj_model.jnt_qposadr[jids]),
+        qvel_adr=np.asarray(mj_model.jnt_dofadr[jids]),
+        actuator=np.array([[oid(act, f"{s}_{j}") for j in JOINTS] for s in SIDES]),
+        pelvis=np.asarray(oid(body, "pelvis")),
+        foot=np.array([oid(body, f"{s}_foot") for s in SIDES]),
+        sole_site=np.array([oid(site, f"{s}_sole") for s in SIDES]),
+        sole_geoms=np.array(sole_geoms),
+        shin_geom=np.array([oid(geom, f"{s}_shin") for s in SIDES]),
+        hfield_geom=np.asarray(oid(geom, "terrain")),
+        imu_site=np.asarray(oid(site, "imu")),
+        torso_site=np.asarray(oid(site, "torso")),
+    )
+
+
+def _x64():
+    if hasattr(jax, "enable_x64"):
+        return jax.enable_x64(True)
+    from jax.experimental import enable_x64  # jax < 0.10
+
+    return enable_x64()
+
+
+@functools.lru_cache(maxsize=8)
+def _robot_model(params: BipedParams) -> mujoco.MjModel:
+    """The robot over a small flat height field (for CoM queries)."""
+    return build_spec(params, (2, 2), 1.0).compile()
+
+
+def _standing(params: BipedParams, feet: np.ndarray, ground: np.ndarray, pelvis_z: float):
+    yaw = math.atan2(np.sin(feet[:, 2]).sum(), np.cos(feet[:, 2]).sum())
+    pelvis = np.array([feet[:, 0].mean(), feet[:, 1].mean(), pelvis_z])
+    qpos = np.zeros(19)
+    qpos[:3], qpos[3:7] = pelvis, (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+    ok = True
+    with _x64():
+        prot = kinematics.rot_z(jnp.float64(yaw))
+        for row, side in enumerate(SIDES):
+            sole = jnp.array([feet[row, 0], feet[row, 1], ground[row]], jnp.float64)
+            srot = kinematics.rot_z(jnp.float64(feet[row, 2]))
+            q, reach = kinematics.leg_ik(params, side, jnp.asarray(pelvis), prot, sole, srot)
+            qpos[7 + 6 * row: 13 + 6 * row] = np.asarray(q)
+            ok = ok and bool(reach)
+    return qpos, ok
+
+
+def standing_qpos(params: BipedParams, feet=None, ground=(0.0, 0.0), com_height: float | None = None) -> np.ndarray:
+    """(19,) float64 qpos of the robot standing with its soles at ``feet`` (host-side, NumPy).
+
+    The pelvis is level, above the feet's midpoint, yawed to the feet's mean
+    yaw, at ``stand_height`` above the lower foot's ground (so the legs stay in
+    reach on uneven ground; or at the height that puts the whole-body CoM
+    ``com_height`` above that ground); the legs come from
+    :func:`ijoy_jax.sim.kinematics.leg_ik` in float64, so ``mj_forward`` puts
+    each sole site at ``(x, y, ground)`` with yaw ``theta`` (to ~1e-12 m).
+
+    Args:
+      params: :class:`BipedParams`.
+      feet: (2, 3) sole poses (x, y, theta) in metres/radians; row 0 left, row 1
+        right. None: ``(0, +-stand_width / 2, 0)``.
+      ground: (2,) ground height under each foot, metres.
+      com_height: optional CoM height above the lower foot's ground, metres.
+
+    Returns:
+      qpos: (19,) free joint (pos, quat wxyz) then the 12 leg joints (left, right).
+
+    Raises:
+      ValueError: if a foot is out of the legs' reach.
+
+    Example:
+      >>> from ijoy_jax.sim import model
+      >>> q = model.standing_qpos(model.BipedParams(), [[0.0, 0.095, 0.0], [0.0, -0.095, 0.0]])
+      >>> round(float(q[2]), 3), q.shape
+      (0.68, (19,))
+    """
+    if feet is None:
+        feet = [[0.0, params.stand_width / 2, 0.0], [0.0, -params.stand_width / 2, 0.0]]
+    feet = np.asarray(feet, np.float64).reshape(2, 3)
+    ground = np.broadcast_to(np.asarray(ground, np.float64), (2,))
+    if not (np.all(np.isfinite(feet)) and np.all(np.isfinite(ground))):
+        raise ValueError("feet and ground must be finite")
+    z0 = float(ground.min())
+    pelvis_z = z0 + params.stand_height
+    if com_height is not None:
+        m = _robot_model(params)
+        d = mujoco.MjData(m)
+        for _ in range(4):  # the CoM moves slightly with the knee bend: a few fixed-point steps
+            d.qpos[:] = _standing(params, feet, ground, pelvis_z)[0]
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            pelvis_z += z0 + com_height - d.subtree_com[0, 2]
+    qpos, ok = _standing(params, feet, ground, pelvis_z)
+    if not ok:
+        raise ValueError(f"feet {feet.tolist()} at ground {ground.tolist()} are out of the legs' reach "
+                         f"from a pelvis at z = {pelvis_z:.3f} m")
+    return qpos

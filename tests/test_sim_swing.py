@@ -1,0 +1,223 @@
+"""Tests of ijoy_jax.sim.swing: footprint heights against brute force, swing path properties."""
+
+from __future__ import annotations
+
+import functools
+
+import hypothesis.strategies as st
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+import ijoy_jax as ij
+from ijoy_jax.sim import swing as sw
+
+from reference import enable_x64, rect_touches_cells
+
+FOOT_L, FOOT_W = 0.242, 0.13  # HRP-2 footprint (m)
+RES = 0.02
+# Finite-difference derivative checks in float64 with step 1e-4: O(h^2) ~ 1e-7
+# times the path's third derivative (~1e3 for a 0.4 m / 0.05 s quintic corner).
+FD_TOL = 1e-5
+# Heights are compared as the max of the same float32 cells: exact, but the
+# clearance checks add float32 rounding of heights ~1 m.
+HEIGHT_TOL = 1e-6
+
+
+def np_footprint_height(height, origin, pose, hl, hw, off_map=0.0, pad=20):
+    """Brute force: max height over every cell a separating-axis test says the rectangle overlaps."""
+    hp = np.pad(np.asarray(height, np.float64), pad, constant_values=off_map)
+    org = np.asarray(origin, np.float64) - pad * RES
+    mask = rect_touches_cells(pose[0], pose[1], pose[2], hl, hw, RES, hp.shape, org)
+    return hp[mask].max()
+
+
+def random_terrain(rng, shape=(40, 30)):
+    h = rng.uniform(0.0, 0.2, shape) * (rng.uniform(size=shape) < 0.3)
+    origin = rng.uniform(-1, 1, 2)
+    return ij.terrain.from_arrays(h.astype(np.float32), resolution=RES, origin=origin)
+
+
+@pytest.mark.parametrize("margin", [0.0, 0.03])
+def test_footprint_height_matches_brute_force(margin):
+    rng = np.random.default_rng(int(margin * 100))
+    fh = jax.jit(
+        jax.vmap(
+            functools.partial(sw.footprint_height, foot_length=FOOT_L, foot_width=FOOT_W, margin=margin), (None, 0)
+        )
+    )
+    with enable_x64():
+        for _ in range(3):
+            t = random_terrain(rng)
+            size = np.array(t.shape) * RES
+            org = np.asarray(t.origin, np.float64)
+            # Poses inside, across the edges and fully outside the map.
+            xy = org + rng.uniform(-0.3, 1.0, (40, 2)) * size
+            poses = np.concatenate([xy, rng.uniform(-np.pi, np.pi, (40, 1))], 1)
+            got = np.asarray(fh(t, jnp.asarray(poses)))
+            want = [np_footprint_height(t.height, org, p, FOOT_L / 2 + margin, FOOT_W / 2 + margin) for p in poses]
+            np.testing.assert_array_equal(got, np.asarray(want, np.float32))
+
+
+def test_footprint_height_off_map_and_degenerate():
+    t = ij.terrain.from_arrays(np.full((20, 20), -0.1, np.float32), resolution=RES)
+    # Half off the map: the off-map floor (0) is higher than the map (-0.1).
+    assert float(sw.footprint_height(t, jnp.array([0.0, 0.2, 0.0]), FOOT_L, FOOT_W)) == 0.0
+    low = sw.footprint_height(t, jnp.array([0.0, 0.2, 0.0]), FOOT_L, FOOT_W, off_map_height=-1.0)
+    assert float(low) == pytest.approx(-0.1)
+    assert float(sw.footprint_height(t, jnp.array([0.2, 0.2, 0.3]), FOOT_L, FOOT_W)) == pytest.approx(-0.1)
+    # Tiny foot: still the cell under its centre, never -inf.
+    assert float(sw.footprint_height(t, jnp.array([0.2, 0.2, 0.0]), 1e-6, 1e-6)) == pytest.approx(-0.1)
+    with pytest.raises(ValueError, match="positive"):
+        sw.footprint_height(t, jnp.zeros(3), 0.0, FOOT_W)
+    with pytest.raises(ValueError, match="max_radius"):
+        jax.jit(lambda fl: sw.footprint_height(t, jnp.zeros(3), fl, FOOT_W))(FOOT_L)
+    # Traced sizes with a static window are fine (a Robot's array leaves).
+    f = jax.jit(lambda fl: sw.footprint_height(t, jnp.array([0.2, 0.2, 0.3]), fl, FOOT_W, max_radius=0.15))
+    assert float(f(FOOT_L)) == pytest.approx(-0.1)
+    with pytest.raises(ValueError, match="samples"):
+        sw.corridor_height(t, jnp.zeros(3), jnp.ones(3), FOOT_L, FOOT_W, samples=1)
+
+
+def test_corridor_height_sees_obstacle_between():
+    h = np.zeros((60, 40), np.float32)
+    h[30:32, :] = 0.12  # a 4 cm wide, 12 cm high bar at x = 0.60 .. 0.64 m
+    t = ij.terrain.from_arrays(h, resolution=RES)
+    start, end = jnp.array([0.35, 0.4, 0.0]), jnp.array([0.9, 0.4, 0.3])
+    assert float(sw.footprint_height(t, start, FOOT_L, FOOT_W)) == 0.0
+    assert float(sw.footprint_height(t, end, FOOT_L, FOOT_W)) == 0.0
+    assert float(sw.corridor_height(t, start, end, FOOT_L, FOOT_W)) == pytest.approx(0.12)
+    apex = sw.swing_apex(t, jnp.array([0.35, 0.4, 0.0, 0.0]), jnp.array([0.9, 0.4, 0.0, 0.3]), FOOT_L, FOOT_W, 0.05)
+    assert float(apex) == pytest.approx(0.17)
+
+
+def path(start, end, apex, s, lift=0.25):
+    pos, yaw = sw.swing_pose(start, end, apex, s, lift=lift)
+    return jnp.concatenate([pos, yaw[None]])
+
+
+def test_swing_endpoints_and_smoothness():
+    start = jnp.array([0.1, -0.2, 0.02, 3.0])
+    end = jnp.array([0.4, -0.1, 0.07, -2.9])  # yaw across +-pi: the short way round
+    apex = 0.15
+    f = jax.jit(path)
+    np.testing.assert_array_equal(f(start, end, apex, 0.0), start)
+    p1 = np.asarray(f(start, end, apex, 1.0))
+    np.testing.assert_array_equal(p1[:3], end[:3])
+    assert np.isclose(np.mod(p1[3] - end[3] + np.pi, 2 * np.pi) - np.pi, 0.0, atol=1e-6)
+    np.testing.assert_array_equal(f(start, end, apex, -0.3), start)
+    np.testing.assert_array_equal(f(start, end, apex, 1.4), f(start, end, apex, 1.0))
+    # Velocity (jvp) and acceleration (second jvp) vanish at the ends and at the corners.
+    vel = jax.jit(lambda s: jax.jvp(lambda si: path(start, end, apex, si), (s,), (1.0,))[1])
+    acc = jax.jit(lambda s: jax.jvp(vel, (s,), (1.0,))[1])
+    for s in (0.0, 0.25, 0.75, 1.0):
+        np.testing.assert_allclose(vel(jnp.float32(s)), 0.0, atol=1e-5)
+        np.testing.assert_allclose(acc(jnp.float32(s)), 0.0, atol=1e-3)
+    pos_v, yaw_v = sw.swing_velocity(start, end, apex, 0.5)
+    np.testing.assert_allclose(jnp.concatenate([pos_v, yaw_v[None]]), vel(jnp.float32(0.5)), rtol=1e-6)
+    # Continuity of velocity and acceleration through the whole phase (float64 finite differences).
+    with enable_x64():
+        s = jnp.linspace(0.0, 1.0, 2001)
+        x = jax.vmap(lambda si: path(start, end, apex, si))(s)
+        v = jax.vmap(vel)(s)
+        fd = (x[2:] - x[:-2]) / (2 * (s[1] - s[0]))
+        np.testing.assert_allclose(fd, v[1:-1], atol=FD_TOL * 100)
+        a = jax.vmap(acc)(s)
+        assert np.max(np.abs(np.diff(a, axis=0))) < 0.5  # no jumps in acceleration (peaks ~60 per unit s^2)
+
+
+def test_swing_degenerate_inputs_no_nan():
+    f = jax.jit(jax.vmap(path, (None, None, None, 0)))
+    s = jnp.array([-1.0, 0.0, 0.2, 0.5, 1.0, 2.0, jnp.inf, -jnp.inf])
+    p = jnp.array([0.3, 0.1, 0.0, 1.0])
+    for apex in (0.0, -1.0, 0.1):
+        out = f(p, p, apex, s)
+        assert np.all(np.isfinite(out))
+    out = jax.jit(jax.vmap(lambda si: path(p, p, 0.1, si, lift=0.5)))(s)
+    assert np.all(np.isfinite(out))
+    g = jax.grad(lambda si: jnp.sum(path(p, p + 0.1, 0.1, si)))(jnp.float32(0.3))
+    assert np.isfinite(g)
+    gv = jax.vmap(jax.grad(lambda si: jnp.sum(path(p, p, 0.1, si, lift=0.5))))(jnp.array([0.0, 0.5, 1.0]))
+    assert np.all(np.isfinite(gv))
+    with pytest.raises(ValueError, match="lift"):
+        sw.swing_pose(p, p, 0.1, 0.5, lift=0.0)
+    # Apex below both ends is raised to the higher end: never dips below the ends.
+    z = f(p, p.at[2].set(0.05), -1.0, jnp.linspace(0, 1, 8))[:, 2]
+    assert np.all(z >= -1e-7) and np.all(np.diff(z) >= -1e-7)
+
+
+_TERRAIN = ij.terrain.from_arrays(
+    (
+        np.random.default_rng(7).uniform(0, 0.15, (40, 40)) * (np.random.default_rng(8).uniform(size=(40, 40)) < 0.2)
+    ).astype(np.float32),
+    resolution=RES,
+)
+SAMPLES = 16
+R_FOOT = float(np.hypot(FOOT_L / 2, FOOT_W / 2))
+
+
+@functools.partial(jax.jit, static_argnums=(3,))
+def _clearance_case(start, end, clearance, margin):
+    """Apex, and along 101 phases: sole height, terrain under the foot, transfer flag."""
+    apex = sw.swing_apex(_TERRAIN, start, end, FOOT_L, FOOT_W, clearance, SAMPLES, margin)
+
+    def at(s):
+        pos, yaw = sw.swing_pose(start, end, apex, s)
+        under = sw.footprint_height(_TERRAIN, jnp.array([pos[0], pos[1], yaw]), FOOT_L, FOOT_W)
+        return pos[2], under
+
+    s = jnp.linspace(0.0, 1.0, 101)
+    z, under = jax.vmap(at)(s)
+    return apex, z, under, (s >= 0.25) & (s <= 0.75)
+
+
+@settings(max_examples=25)
+@given(
+    xy0=st.tuples(st.floats(0.2, 0.6), st.floats(0.2, 0.6)),
+    d=st.tuples(st.floats(-0.2, 0.2), st.floats(-0.2, 0.2)),
+    yaw0=st.floats(-np.pi, np.pi),
+    dyaw=st.floats(-0.6, 0.6),
+    clearance=st.floats(0.0, 0.1),
+)
+def test_swing_clears_swept_terrain(xy0, d, yaw0, dyaw, clearance):
+    """During the transfer the sole is at the apex >= corridor + clearance, above every footprint it passes.
+
+    The corridor uses the margin of corridor_height's sampling bound, a static
+    0.03 m here: (|d| + R |dyaw|) / (2 * 15) <= (0.283 + 0.138 * 0.6) / 30 = 0.0122 m.
+    """
+    start_xy = np.array(xy0)
+    end_xy = start_xy + np.array(d)
+    sz = float(sw.footprint_height(_TERRAIN, jnp.array([*start_xy, yaw0]), FOOT_L, FOOT_W))
+    ez = float(sw.footprint_height(_TERRAIN, jnp.array([*end_xy, yaw0 + dyaw]), FOOT_L, FOOT_W))
+    start = jnp.array([*start_xy, sz, yaw0], jnp.float32)
+    end = jnp.array([*end_xy, ez, yaw0 + dyaw], jnp.float32)
+    apex, z, under, transfer = (np.asarray(a) for a in _clearance_case(start, end, jnp.float32(clearance), 0.03))
+    corridor = float(
+        sw.corridor_height(_TERRAIN, start[jnp.array([0, 1, 3])], end[jnp.array([0, 1, 3])], FOOT_L, FOOT_W, SAMPLES)
+    )
+    assert apex >= corridor + clearance - HEIGHT_TOL
+    assert np.all(z[transfer] >= apex - HEIGHT_TOL)
+    # Every footprint the foot passes during the transfer is clear by the clearance...
+    assert np.all(z[transfer] - under[transfer] >= clearance - HEIGHT_TOL)
+    # ... and outside it the foot is over its own start or end footprint, never below it.
+    assert np.all(z - under >= -HEIGHT_TOL)
+
+
+def test_jit_vmap_batch_and_no_recompile():
+    traces = []
+
+    def f(start, end, s):
+        traces.append(1)
+        apex = sw.swing_apex(_TERRAIN, start, end, FOOT_L, FOOT_W, 0.05)
+        return sw.swing_pose(start, end, apex, s)
+
+    bf = jax.jit(jax.vmap(f))
+    rng = np.random.default_rng(3)
+    for _ in range(2):
+        starts = jnp.asarray(np.c_[rng.uniform(0.2, 0.6, (5, 2)), np.zeros(5), rng.uniform(-3, 3, 5)], jnp.float32)
+        ends = starts + jnp.asarray(rng.uniform(-0.2, 0.2, (5, 4)), jnp.float32)
+        pos, yaw = bf(starts, ends, jnp.asarray(rng.uniform(0, 1, 5), jnp.float32))
+        assert pos.shape == (5, 3) and yaw.shape == (5,)
+    assert len(traces) == 1
