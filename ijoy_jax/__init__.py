@@ -14,9 +14,10 @@ Public API:
   select_step, StepChoice, make_targets              the next foothold for a command
   rollout, Trajectory, perfect_walker, Walker        the control loop (Algorithm 1)
   haptics                                            the ALDURO force-feedback joystick
+  tune                                               tuning by gradient (relaxed selector, optax tuners)
 """
 
-from ijoy_jax import control, footcost, generators, geometry, haptics, plot, robots, scene, select, terrain
+from ijoy_jax import control, footcost, generators, geometry, haptics, plot, robots, scene, select, terrain, tune
 from ijoy_jax.control import Trajectory, Walker, perfect_walker, rollout
 from ijoy_jax.footcost import FootCostTerms, foot_cost, foot_cost_terms
 from ijoy_jax.robots import LEFT, RIGHT, Robot, TerrainMetrics
@@ -53,4 +54,5 @@ __all__ = [
     "select",
     "select_step",
     "terrain",
+    "tune",
 ]

@@ -247,3 +247,189 @@ def test_no_recompile_across_parameters(robot):
     n = f._cache_size()
     f(terrain, robot.replace(w=jnp.float32(2.0)), stance, command, 30.0, 0.1)
     assert f._cache_size() == n
+
+
+# ---------------------------------------------------------------------------
+# Relaxed swing-path check (swing_from).
+
+SWING_SCHEDULE = (3.0, 30.0, 300.0, 1000.0)  # sharpness
+SWING_FROM = np.array([0.5, 0.62, 0.0], np.float32)  # left foot behind the right stance foot below
+SWING_STANCE = np.array([0.6, 0.45, 0.1], np.float32)
+# Soft corridor height vs exact at the largest sharpness: the soft max over K^2 = 50^2 gated cells is biased
+# by at most temp * log(K^2 + 1) = (0.02 / 1000) * 7.8 = 1.6e-4 m (median); the worst step also carries the
+# soft foothold planes' error next to a bar (measured 7e-4 m).
+PATH_HEIGHT_MEDIAN_ATOL = 2e-4
+PATH_HEIGHT_MAX_ATOL = 2e-3
+
+
+def _bar_terrain(seed: int) -> ij.Terrain:
+    """Flat ground with three 2-cell-thick bars 5-20 cm high across the swing paths (free cells)."""
+    rng = np.random.default_rng(seed)
+    n = 60
+    h = np.zeros((n, n))
+    for _ in range(3):
+        x, y0 = rng.integers(10, 50), rng.integers(0, 40)
+        h[x : x + 2, y0 : y0 + rng.integers(10, 30)] = rng.uniform(0.05, 0.2)
+    return ij.terrain.from_arrays(h, None, RES)
+
+
+@jax.jit
+def _exact_and_soft_paths(terrain, robot, stance, swing_from, sharpness):
+    acts = ij.robots.side_actions(robot, 1.0)
+    steps = ij.geometry.compose(stance, acts)
+    idx = jnp.arange(acts.shape[0])
+    e = foot_cost_terms_indexed(terrain, index_terrain(terrain, robot), robot, stance, -1.0, steps, swing_from, idx)
+    s = relax.soft_foot_cost_terms(terrain, robot, stance, steps, idx, sharpness=sharpness, swing_from=swing_from)
+    return e, s
+
+
+def test_swing_path_converges_to_exact(robot):
+    agreement, height_err = [], []
+    n_bad = 0
+    for seed in range(3):
+        terrain = _bar_terrain(seed)
+        row_a, row_e = [], []
+        for sharpness in SWING_SCHEDULE:
+            e, s = _exact_and_soft_paths(terrain, robot, SWING_STANCE, SWING_FROM, sharpness)
+            bad = np.isinf(np.asarray(e.swing_path))
+            soft = np.asarray(s.swing_path)
+            assert np.all(np.isfinite(soft))
+            row_a.append(float(np.mean((soft > 1.0) == bad)))
+            dh = np.maximum(np.asarray(e.path_height_m), 0.0) - np.asarray(s.path_height_m)
+            row_e.append((float(np.median(np.abs(dh))), float(np.max(np.abs(dh)))))
+        n_bad += int(bad.sum())
+        # At the largest sharpness the barrier is ~0 on exactly clear corridors and large on blocked ones.
+        assert np.all(soft[~bad] < 1e-3) and np.all(soft[bad] > 10.0), seed
+        agreement.append(row_a)
+        height_err.append(row_e)
+    print(f"swing-path agreement per terrain over sharpness {SWING_SCHEDULE}: {agreement}; "
+          f"(median, max) |dh| {height_err}")
+    assert n_bad > 10  # the bars do block some swings
+    for row_a, row_e in zip(agreement, height_err, strict=True):
+        assert row_a[-1] == 1.0
+        assert all(b[0] < a[0] for a, b in zip(row_e, row_e[1:], strict=False))
+        assert row_e[-1][0] < PATH_HEIGHT_MEDIAN_ATOL and row_e[-1][1] < PATH_HEIGHT_MAX_ATOL
+
+
+def _post_terrain(seed: int) -> ij.Terrain:
+    """Flat ground with one 4 cm x 4 cm post, 20 cm high (twice the clearance), across the swing's way."""
+    rng = np.random.default_rng(seed)
+    h = np.zeros((60, 60))
+    x, y = rng.integers(26, 31), rng.integers(28, 35)
+    h[x : x + 2, y : y + 2] = 0.2
+    return ij.terrain.from_arrays(h, None, RES)
+
+
+NUM_POST_QUERIES = 8
+
+
+def test_relaxed_select_with_swing_from_matches_exact(robot):
+    """The mode equals ``select_step(swing_from=...)``'s choice, and the swing check changes most choices.
+
+    The swing foot starts 20 cm behind the stance foot, a post stands between it and the commanded step.
+    Measured: 8/8 modes agree, the check changes 7/8 exact choices. (Bars next to a foothold are avoided
+    here: the soft band/bump metrics weight cells just outside the footprint by their membership, which
+    lets a tall cell within its height of the foot leak in at any sharpness; see the report.)
+    """
+    stance = np.array([0.6, 0.45, 0.0], np.float32)
+    swing_from = np.array([0.4, 0.64, 0.0], np.float32)
+    agree = changed = 0
+    for seed in range(NUM_POST_QUERIES):
+        terrain = _post_terrain(seed)
+        command = np.random.default_rng(100 + seed).uniform([0.1, -0.1, -0.3], [0.3, 0.1, 0.3]).astype(np.float32)
+        e = ij.select_step(terrain, robot, stance, -1, command, swing_from=swing_from, quantize=False)
+        e0 = ij.select_step(terrain, robot, stance, -1, command, quantize=False)
+        r = relax.relaxed_select_jit(
+            terrain, robot, stance, -1, command, sharpness=300.0, tau=0.01, swing_from=swing_from
+        )
+        assert bool(e.valid)
+        assert float(r.invalid_mass) < 1e-3
+        agree += int(r.mode) == int(e.index)
+        changed += int(e.index) != int(e0.index)
+    print(f"swing_from: relaxed mode = exact choice in {agree}/{NUM_POST_QUERIES}; check changed {changed}")
+    assert agree == NUM_POST_QUERIES
+    assert changed >= NUM_POST_QUERIES // 2
+
+
+@pytest.fixture(scope="module")
+def small_robot():
+    """19 actions: gradient checks compile and run several times faster than with 117."""
+    return ij.robots.hrp2(margin=0.02, density=0.25, max_margin=0.03)
+
+
+def _swing_objective(terrain, robot, stance, swing_from, command, sharpness, tau):
+    r = relax.relaxed_select(
+        terrain, robot, stance, -1.0, command, sharpness=sharpness, tau=tau, exact=False, swing_from=swing_from
+    )
+    return r.expected_cost + r.log_probs[3] + jnp.sum(r.expected_pose) + jnp.sum(r.terms.path_height_m)
+
+
+def test_swing_path_gradients_float64(small_robot):
+    robot = small_robot
+    with jax.enable_x64(True):
+        terrain = _bar_terrain(1)
+        terrain = terrain.replace(height=terrain.height.astype(jnp.float64), origin=terrain.origin.astype(jnp.float64))
+        r64 = _float_leaves(robot, jnp.float64)
+        stance = jnp.asarray(SWING_STANCE, jnp.float64)
+        swing_from = jnp.asarray(SWING_FROM, jnp.float64)
+        command = jnp.array([0.2, 0.05, 0.1])
+        f = jax.jit(_swing_objective)
+        grad_fn = jax.jit(jax.grad(_swing_objective, argnums=(1, 2, 3)))
+        grads = grad_fn(terrain, r64, stance, swing_from, command, 10.0, 1.0)
+        h = 1e-6
+        worst = 0.0
+        for name in ("clearance", "foot_width", "foot_length", "w", "margin"):
+            leaf = get_leaf(r64, name)
+            d = jnp.asarray(np.random.default_rng(len(name)).normal(size=leaf.shape))
+            fd = (
+                f(terrain, set_leaf(r64, name, leaf + h * d), stance, swing_from, command, 10.0, 1.0)
+                - f(terrain, set_leaf(r64, name, leaf - h * d), stance, swing_from, command, 10.0, 1.0)
+            ) / (2 * h)
+            an = float(jnp.sum(get_leaf(grads[0], name) * d))
+            err = abs(float(fd) - an) / max(1.0, abs(float(fd)))
+            worst = max(worst, err)
+            assert err < FD_RTOL64, (name, float(fd), an)
+        assert abs(float(jnp.sum(grads[0].clearance))) > 0  # the clearance barrier is active somewhere
+        for k, g in ((2, grads[1]), (3, grads[2])):
+            d = jnp.asarray(np.random.default_rng(10 + k).normal(size=3))
+            args = [terrain, r64, stance, swing_from, command, 10.0, 1.0]
+            plus, minus = list(args), list(args)
+            plus[k], minus[k] = args[k] + h * d, args[k] - h * d
+            fd = (f(*plus) - f(*minus)) / (2 * h)
+            err = abs(float(fd) - float(g @ d)) / max(1.0, abs(float(fd)))
+            worst = max(worst, err)
+            assert err < FD_RTOL64, (k, float(fd), float(g @ d))
+        print(f"swing path float64 worst relative gradient error: {worst:.2e}")
+
+
+def test_swing_path_gradients_float32_check_grads(small_robot):
+    robot = small_robot
+    terrain = _bar_terrain(2)
+    names = ("clearance", "foot_width", "w")
+    nominal = [get_leaf(robot, n) for n in names]
+
+    def f(*scales):
+        rb = robot
+        for n, v, s in zip(names, nominal, scales, strict=True):
+            rb = set_leaf(rb, n, v * s)
+        return _swing_objective(
+            terrain, rb, jnp.asarray(SWING_STANCE), jnp.asarray(SWING_FROM), jnp.array([0.2, 0.05, 0.1]), 5.0, 3.0
+        )
+
+    check_grads(
+        jax.jit(f), (jnp.float32(1.0),) * len(names), order=1, modes=("rev",), eps=1e-2, atol=FD_RTOL32, rtol=FD_RTOL32
+    )
+
+
+def test_swing_path_zero_length_swing_is_finite(small_robot):
+    robot = small_robot
+    """A swing that ends where it starts (corridor of zero length) has finite values and gradients."""
+    terrain = _bar_terrain(0)
+    stance = jnp.asarray(SWING_STANCE)
+    swing_from = ij.geometry.compose(stance, ij.robots.side_actions(robot, 1.0)[5])  # exactly on candidate 5
+    val, grads = jax.jit(jax.value_and_grad(_swing_objective, argnums=(1, 2, 3)))(
+        terrain, robot, stance, swing_from, jnp.zeros(3), 20.0, 0.5
+    )
+    assert np.isfinite(float(val))
+    for g in jax.tree.leaves(grads):
+        assert np.all(np.isfinite(np.asarray(g)))

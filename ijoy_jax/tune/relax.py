@@ -18,14 +18,21 @@ constant in every parameter, so its gradient is useless. This module replaces
 * the least-squares plane under the foot by a fit weighted by soft membership;
   max/abs in the metrics by log-sum-exp and ``sqrt(x^2 + e^2) - e`` with a
   height scale ``e = resolution / sharpness`` (metres);
+* the swing-path check (``swing_from``, 2.5D only): the corridor (the
+  foot-wide rectangle between the swing foot's start and end centres) gets soft
+  coverage m_i, its height above the higher of the two soft foothold planes is
+  the soft max of gated heights ``e log(1 + sum_i exp(m_i (h_i - h_ref) / e))``
+  (a soft ``max(0, top - h_ref)``; clipping at 0 changes no decision since
+  clearances are >= 0), and the clearance check is the softplus barrier above;
+  corridor cells off the map count like obstacles, and a swing longer than the
+  path window (``max_swing``) gets a softplus barrier.
 * the argmin by a Boltzmann distribution ``p_i ~ exp(-cost_i / tau)``.
 
 Every output is finite for finite inputs and differentiable with respect to
 every Robot leaf (w, rotation_weight, margin, foot size, step_time, action
-costs, step-height limits, metric weights and limits) and the poses. Not
-relaxed yet: the swing-path check (``swing_from``) and the static-window
-``unsupported`` check (a window that leaves the padded map gets a constant
-finite barrier instead).
+costs, step-height limits, clearances, metric weights and limits) and the
+poses. Not relaxed: the static-window ``unsupported`` check of the footprint
+(a window that leaves the padded map gets a constant finite barrier instead).
 
 Units: metres, radians, seconds; costs in the cost units of FootCost.
 """
@@ -89,8 +96,17 @@ def soft_coverage(dx, dy, theta, half_length, half_width, resolution: float, sha
       >>> [round(float(v), 3) for v in m]
       [1.0, 0.0]
     """
+    return _soft_coverage_cs(dx, dy, jnp.cos(theta), jnp.sin(theta), half_length, half_width, resolution, sharpness)
+
+
+def _soft_coverage_cs(dx, dy, c, s, half_length, half_width, resolution: float, sharpness):
+    """:func:`soft_coverage` with the rectangle's direction given as (cos, sin) (need not be unit).
+
+    A direction shorter than unit (a corridor of almost zero length, see
+    :func:`_swing_path`) shrinks the projections smoothly instead of taking an
+    ill-defined angle.
+    """
     k = sharpness / resolution
-    c, s = jnp.cos(theta), jnp.sin(theta)
     ac, as_ = _smooth_abs(c, _ABS_EPS), _smooth_abs(s, _ABS_EPS)
     r = 0.5 * resolution
     du = c * dx + s * dy
@@ -108,10 +124,13 @@ class SoftFootCostTerms(NamedTuple):
 
     Cost terms (cost units; finite): total (their sum), action, obstacle
     (barrier on the soft obstacle mass), slope, roughness, bump, step, band
-    (each ``weight * metric + barrier``; 0 on 2D terrains).
+    (each ``weight * metric + barrier``; 0 on 2D terrains), swing_path
+    (clearance barrier on the swing corridor plus its off-map and length
+    barriers; 0 without ``swing_from`` or on 2D terrains).
     Raw: obstacle_mass (cells, soft count of obstacle or off-map cells under
     the grown footprint), slope_angle (rad), roughness_m, bump_m,
-    step_height_m (signed), band_m, foot_height_m (m).
+    step_height_m (signed), band_m, foot_height_m (m), path_height_m (m, soft
+    ``max(0, corridor top - higher foothold)``; 0 when not checked).
     """
 
     total: jax.Array
@@ -129,6 +148,8 @@ class SoftFootCostTerms(NamedTuple):
     step_height_m: jax.Array
     band_m: jax.Array
     foot_height_m: jax.Array
+    swing_path: jax.Array
+    path_height_m: jax.Array
 
 
 class _Patch(NamedTuple):
@@ -229,6 +250,39 @@ def _padded(terrain: Terrain, k: int):
     return free_pad, h_pad
 
 
+def _swing_path(terrain: Terrain, robot: Robot, on_pad, h_pad, kp: int, start, step, h_ref, a, sharpness, bw, temp):
+    """Soft swing-path check of one step: ``(barrier (), soft path height () m)``.
+
+    The corridor runs from ``start`` to ``step`` (world poses (3,)), foot-wide.
+    Its direction is ``(dx, dy) / sqrt(dx^2 + dy^2 + e^2)`` with
+    ``e = resolution / sharpness`` (m): no angle, so the gradient stays finite
+    when the swing has zero length (bias O(e^2 / length), vanishing as
+    sharpness grows).
+    """
+    res = terrain.resolution
+    dx, dy = step[0] - start[0], step[1] - start[1]
+    eps = res / sharpness
+    smooth_len = jnp.sqrt(dx * dx + dy * dy + eps * eps)
+    length = _safe_norm(dx, dy)
+    mid = 0.5 * (start + step)
+    patch = _patch(terrain, on_pad, h_pad, kp, mid)
+    m = _soft_coverage_cs(
+        patch.du[:, None], patch.dv[None, :], dx / smooth_len, dy / smooth_len, 0.5 * length,
+        0.5 * robot.foot_width, res, sharpness,
+    )
+    # Gated values m_i (h_i - h_ref), not weights m_i: a weight enters as temp log m_i ~ -distance (m) at
+    # any sharpness (temp and the coverage slope both scale with it), so tall cells just outside the
+    # corridor would never drop out; a gated value of a cell outside tends to 0 (bias <= temp log K^2).
+    top = _soft_max0(m * (patch.height - h_ref), jnp.ones_like(m), temp)  # soft max(0, corridor top - h_ref)
+    off_map = jnp.sum(m * (1.0 - patch.free)) + jnp.where(patch.outside, float(kp * kp), 0.0)
+    barrier = (
+        _barrier(top, robot.clearance[a], sharpness, bw)
+        + bw * sharpness * off_map
+        + _barrier(length + robot.foot_width, robot.max_swing, sharpness, bw)
+    )
+    return barrier, top
+
+
 def soft_foot_cost_terms(
     terrain: Terrain,
     robot: Robot,
@@ -238,6 +292,7 @@ def soft_foot_cost_terms(
     *,
     sharpness,
     barrier_weight=1.0,
+    swing_from=None,
 ) -> SoftFootCostTerms:
     """Relaxed FootCost of candidate swing-foot poses, with named terms.
 
@@ -252,6 +307,8 @@ def soft_foot_cost_terms(
         Soft coverage has slope sharpness / resolution per metre; height
         smoothing scale is resolution / sharpness (m).
       barrier_weight: () cost units per unit of barrier (see module docstring).
+      swing_from: (3,) world pose the swing foot starts from, for the relaxed
+        swing-path check on 2.5D terrains (None: no check, as FootCost).
 
     Returns:
       :class:`SoftFootCostTerms` of (N,) arrays, finite; dtype of ``steps``.
@@ -283,6 +340,15 @@ def soft_foot_cost_terms(
         sp = _patch(terrain, free_pad, h_pad, k, stance)
         sm_foot, sm_grown = _memberships(sp, robot, stance[2], res, sharpness)
         stance_plane = _soft_plane(sp, sm_foot, sm_grown, res, temp)
+    check_path = terrain.has_height and swing_from is not None
+    if check_path:
+        swing_from = jnp.asarray(swing_from, dtype)
+        kp = window_cells(0.5 * robot.max_swing, res) + 2 * _EXTRA_CELLS
+        on_pad = jnp.pad(jnp.ones(terrain.shape, dtype), kp)
+        hp_pad = jnp.pad(terrain.height.astype(dtype), kp, mode="edge")
+        fp = _patch(terrain, free_pad, h_pad, k, swing_from)
+        fm_foot, fm_grown = _memberships(fp, robot, swing_from[2], res, sharpness)
+        start_height = _soft_plane(fp, fm_foot, fm_grown, res, temp).height
 
     def one(step, a):
         patch = _patch(terrain, free_pad, h_pad, k, step)
@@ -308,8 +374,16 @@ def soft_foot_cost_terms(
         else:
             slope = rough = bump = stepc = band = zero
             raw = (zero,) * 6
-        total = action + obstacle + slope + rough + bump + stepc + band
-        return SoftFootCostTerms(total, action, obstacle, slope, rough, bump, stepc, band, mass, *raw)
+        swing = path_height = zero
+        if check_path:
+            h_ref = temp * jnp.logaddexp(start_height / temp, raw[5] / temp)  # soft max of the two footholds
+            swing, path_height = _swing_path(
+                terrain, robot, on_pad, hp_pad, kp, swing_from, step, h_ref, a, sharpness, barrier_weight, temp
+            )
+        total = action + obstacle + slope + rough + bump + stepc + band + swing
+        return SoftFootCostTerms(
+            total, action, obstacle, slope, rough, bump, stepc, band, mass, *raw, swing, path_height
+        )
 
     return jax.vmap(one)(steps, action_index)
 
@@ -362,6 +436,7 @@ def relaxed_select(
     quantize: bool = False,
     targets: Targets | None = None,
     exact: bool = True,
+    swing_from=None,
 ) -> RelaxedChoice:
     """Boltzmann (softmin) relaxation of :func:`ijoy_jax.select_step`.
 
@@ -383,6 +458,9 @@ def relaxed_select(
         step_time and the command get gradients.
       targets: prebuilt :func:`ijoy_jax.select.make_targets` (quantize only).
       exact: static; also compute exact FootCost validity for ``invalid_mass``.
+      swing_from: (3,) world pose of the swing foot, for the (relaxed and
+        exact) swing-path check on 2.5D terrains, as :func:`ijoy_jax.select_step`;
+        None: no check.
 
     Returns:
       :class:`RelaxedChoice`.
@@ -418,7 +496,11 @@ def relaxed_select(
     n = acts.shape[0]
     idx = jnp.arange(n, dtype=jnp.int32)
     steps = geometry.compose(stance, acts)
-    terms = soft_foot_cost_terms(terrain, robot, stance, steps, idx, sharpness=sharpness, barrier_weight=barrier_weight)
+    if swing_from is not None:
+        swing_from = jnp.asarray(swing_from, dtype)
+    terms = soft_foot_cost_terms(
+        terrain, robot, stance, steps, idx, sharpness=sharpness, barrier_weight=barrier_weight, swing_from=swing_from
+    )
     cost = terms.total + robot.w * soft_dist(acts, target_rel, robot.rotation_weight)
     log_probs = jax.nn.log_softmax(-cost / tau)
     probs = jnp.exp(log_probs)
@@ -431,7 +513,7 @@ def relaxed_select(
             jax.lax.stop_gradient(stance),
             side,
             jax.lax.stop_gradient(steps),
-            None,
+            None if swing_from is None else jax.lax.stop_gradient(swing_from),
             idx,
         ).total
         valid = jnp.isfinite(fc)
