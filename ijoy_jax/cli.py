@@ -16,9 +16,11 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--steps", type=int, default=24, help="number of steps (default: %(default)s)")
     demo.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
     bench = sub.add_parser("bench", help="run a benchmark and print JSON lines (see BENCHMARKS.md)")
-    bench.add_argument("name", choices=["footcost", "select", "check"],
+    bench.add_argument("name", choices=["footcost", "select", "check", "tune", "sim"],
                        help="footcost: evaluations/s; select: decisions/s, rollout steps/s and the NumPy baseline; "
-                            "check: fixed decisions saved to / compared with --ref (device agreement)")
+                            "check: fixed decisions saved to / compared with --ref (device agreement); "
+                            "tune: seconds per forward-tuning step, compile separate; "
+                            "sim: MJX biped physics steps/s by batch size next to multi-threaded C MuJoCo")
     bench.add_argument("--ref", default=None, help="npz of reference decisions for 'check'")
     bench.add_argument("--quick", action="store_true", help="small sizes, for a smoke test")
     bench.add_argument("--json", default=None, help="also write the results to this file")
@@ -32,16 +34,33 @@ def main(argv: list[str] | None = None) -> int:
                       help="output folder; an existing one from the same file and options is resumed "
                            "(default: results/<sweep name>)")
     srun.add_argument("--chunk", type=int, default=None,
-                      help="scenarios per jitted call; memory grows with it (default: 32)")
+                      help="scenarios per jitted call; memory grows with it (default: the folder's when resuming, "
+                           "else 32 on CPU and sized to device memory on a GPU)")
     srun.add_argument("--max-scenarios", type=int, default=None,
                       help="run only the first N scenarios (smoke tests; part of the resume plan)")
     srun.add_argument("--devices", type=int, default=None,
                       help="shard each chunk over the first N local devices (default: all of them)")
+    srun.add_argument("--num-processes", type=int, default=None,
+                      help="several processes/hosts: how many run this sweep into the same shared --out "
+                           "(env IJOY_NUM_PROCESSES; default 1); each runs chunks with chunk %% N == its id")
+    srun.add_argument("--process-id", type=int, default=None,
+                      help="this process's id in [0, N) (env IJOY_PROCESS_ID); process 0 hosts the coordinator")
+    srun.add_argument("--coordinator", default=None,
+                      help="HOST:PORT of process 0's jax.distributed coordinator, reachable from every process "
+                           "(env IJOY_COORDINATOR)")
+    srun.add_argument("--distributed", action="store_true",
+                      help="call jax.distributed.initialize and let JAX detect unset values from the cluster "
+                           "(SLURM, Open MPI, ...; env IJOY_DISTRIBUTED=1); see sweeps/README.md")
     ssum = sweep_sub.add_parser("summarize", help="print per-cell means with 95%% CIs and write a plot PNG")
     ssum.add_argument("dir", help="a sweep's output folder")
     ssum.add_argument("--png", default=None, help="plot to write (default: DIR/summary.png)")
     ssum.add_argument("--x", default=None, help="parameter on the plot's x axis (default: the most varied)")
+    from ijoy_jax.tune import cli as tune_cli
+
+    tune_cli.add_parser(sub)
     args = parser.parse_args(argv)
+    if args.command == "tune":
+        return tune_cli.main(args)
     if args.command == "sweep":
         return _sweep(args)
     if args.command == "demo":
@@ -53,7 +72,17 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "bench":
         from ijoy_jax import bench as bench_mod
 
-        rows = bench_mod.run(args.name, quick=args.quick, path=args.ref)
+        if args.name == "sim":
+            from ijoy_jax.sim import bench as sim_bench
+
+            rows = []
+            for row in sim_bench.run(quick=args.quick):
+                print(json.dumps(row), flush=True)
+                rows.append(row)
+        elif args.name == "tune":
+            rows = tune_cli.bench(quick=args.quick)
+        else:
+            rows = bench_mod.run(args.name, quick=args.quick, path=args.ref)
         if args.json:
             with open(args.json, "w") as f:
                 json.dump(rows, f, indent=2)
@@ -73,9 +102,10 @@ def _sweep(args) -> int:
         except sweep.SweepConfigError as e:
             print(f"ijoy sweep: error: {e}", file=sys.stderr)
             return 2
-        chunk = sweep.DEFAULT_CHUNK if args.chunk is None else args.chunk
-        try:
-            stats = sweep.run(cfg, args.out, chunk_size=chunk, max_scenarios=args.max_scenarios,
+        try:  # the layout is checked before jax.distributed starts and before any compute
+            lay = sweep.distributed.layout(args.num_processes, args.process_id, args.coordinator, args.distributed)
+            sweep.distributed.initialize(lay)
+            stats = sweep.run(cfg, args.out, chunk_size=args.chunk, max_scenarios=args.max_scenarios,
                               devices=args.devices)
         except ValueError as e:
             print(f"ijoy sweep: error: {e}", file=sys.stderr)
@@ -86,7 +116,11 @@ def _sweep(args) -> int:
         return 0
     import pandas as pd
 
-    agg = sweep.load_aggregates(args.dir)
+    try:
+        agg = sweep.load_aggregates(args.dir)
+    except (FileNotFoundError, sweep.IncompleteSweepError) as e:
+        print(f"ijoy sweep: error: {e}", file=sys.stderr)
+        return 2
     show = [c for c in agg.columns if c.startswith(("robot.", "terrain.")) or c == "n"]
     table = agg[show].copy()
     for m in ("distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles"):

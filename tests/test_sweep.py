@@ -445,3 +445,85 @@ def test_bad_device_count(base_file, tmp_path):
         with pytest.raises(ValueError, match="devices must be"):
             sweep.run(base_file, tmp_path / "o", devices=n, progress=False)
     assert not (tmp_path / "o").exists()
+
+
+# --------------------------------------------------------------------------- chunk size from device memory
+
+MiB = 2**20
+
+
+@pytest.mark.parametrize("per, mem, ndev, want", [
+    (1 * MiB, 40 * MiB, 1, 16),        # 0.5 * 40 / 1 = 20 -> 16 (a power of two per device)
+    (1 * MiB, 64 * MiB, 1, 32),        # exactly a power of two
+    (1 * MiB, 40 * MiB, 4, 64),        # per device, times the devices
+    (100 * MiB, 80 * 2**30, 1, 256),   # 100 MiB per scenario on an 80 GiB GPU: 409 -> 256
+    (1 * MiB, 80 * 2**30, 1, execute.MAX_AUTO_CHUNK),   # capped
+    (1 * MiB, 80 * 2**30, 3, 4095),    # the cap rounded down to a multiple of 3 devices
+    (10 * 2**30, 16 * 2**30, 2, 2),    # a scenario larger than half the memory: still one per device
+])
+def test_auto_chunk_size(per, mem, ndev, want):
+    got = sweep.auto_chunk_size(per, mem, ndev)
+    assert got == want and got % ndev == 0
+
+
+def test_auto_chunk_size_leaves_room_for_the_shared_tables():
+    # 40 MiB, half usable, 4 MiB of shared target tables: (20 - 4) / 1 = 16 scenarios; 10 MiB shared -> 8.
+    assert sweep.auto_chunk_size(MiB, 40 * MiB, shared_bytes=4 * MiB) == 16
+    assert sweep.auto_chunk_size(MiB, 40 * MiB, shared_bytes=10 * MiB) == 8
+    assert sweep.auto_chunk_size(MiB, 40 * MiB, shared_bytes=30 * MiB) == 1  # nothing fits: one per device
+
+
+def test_default_chunk_size_is_the_cpu_default_here(base_file):
+    cfg = sweep.load_config(base_file)
+    assert execute._device_bytes(jax.local_devices()[0]) is None  # CPU reports no memory limit
+    assert sweep.default_chunk_size(cfg, sweep.scenarios(cfg), {}, jax.local_devices()) == sweep.DEFAULT_CHUNK
+
+
+def test_scenario_bytes_from_the_compiled_chunk(base_file):
+    cfg = sweep.load_config(base_file)
+    table = sweep.scenarios(cfg)
+    traces = sweep.trace_count()
+    base = execute._base_robot(cfg, table, 0.25)
+    per, shared = sweep.scenario_bytes(cfg, table, base)
+    assert sweep.trace_count() == traces + 1  # lowered and compiled ahead of time, not run
+    assert 1_000 < per < 10**8, per
+    # The shared part (base robot, target tables, as kept by jit) is at most their leaves' bytes.
+    _, targets = execute._shared(table, base)
+    assert 0 < shared <= sum(np.asarray(x).nbytes for x in jax.tree.leaves((base, targets)))
+
+
+def test_run_sizes_chunks_from_a_fake_device_memory(base_file, tmp_path, monkeypatch):
+    # As on a GPU reporting 40 MiB with 1 MiB per scenario: 16 per chunk, and a resume keeps it.
+    monkeypatch.setattr(execute, "_device_bytes", lambda device: 40 * MiB)
+    monkeypatch.setattr(execute, "scenario_bytes", lambda cfg, table, base: (1 * MiB, 0))
+    s = sweep.run(base_file, tmp_path / "o", max_scenarios=4, progress=False)
+    assert (s.chunk_size, s.chunks) == (16, 1)
+    monkeypatch.setattr(execute, "_device_bytes", lambda device: 400 * MiB)  # another GPU on resume
+    again = sweep.run(base_file, tmp_path / "o", max_scenarios=4, progress=False)
+    assert (again.chunk_size, again.computed, again.skipped) == (16, 0, 1)
+    man = json.loads((tmp_path / "o" / "manifest.json").read_text())
+    assert man["plan"]["chunk_size"] == 16
+
+
+# --------------------------------------------------------------------------- action-set size plot
+
+
+def test_density_axis_is_drawn_in_action_counts_with_the_papers_496(tmp_path, monkeypatch):
+    from ijoy_jax.sweep import results
+
+    dens = [0.4, 0.5, 0.75, 1.0, 1.5, 2.0]
+    assert sweep.action_counts(dens).tolist() == [52, 117, 202, 496, 1279, 3307]
+    agg = pd.DataFrame({"cell": range(6), "robot.density": dens, "n": 4})
+    for m in ("distance_along", "mean_deviation"):
+        agg[f"{m}.mean"], agg[f"{m}.ci95"] = np.linspace(1, 2, 6), 0.1
+    figs = []
+    finish = results._finish
+    monkeypatch.setattr(results, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
+    png = sweep.plot(agg, tmp_path / "size.png", metrics=("distance_along", "mean_deviation"), title="size")
+    assert Path(png).stat().st_size > 10_000
+    for ax in figs[0].axes:
+        assert ax.get_xscale() == "log" and "actions" in ax.get_xlabel()
+        assert ax.lines[0].get_xdata().tolist() == [52, 117, 202, 496, 1279, 3307]
+        marks = [ln for ln in ax.lines if "496" in str(ln.get_label())]
+        assert len(marks) == 1 and marks[0].get_xdata()[0] == sweep.PAPER_ACTIONS
+        assert "496" in [t.get_text() for t in ax.get_xticklabels()]

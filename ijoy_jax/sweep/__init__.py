@@ -4,7 +4,10 @@
   cells / scenarios                                              the expansion into cells and scenarios
   run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks sharded over local
                                                                  devices, parquet parts, resume
-  load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table, 95% CIs, plot
+  default_chunk_size / auto_chunk_size / scenario_bytes          chunks sized to device memory
+  distributed                                                    several processes/hosts (jax.distributed)
+  load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table (union of processes), 95% CIs, plot
+  IncompleteSweepError / action_counts / PAPER_ACTIONS           missing chunks; density as action counts
   FAMILY_METRICS / bar_crossings / plot_crossing / b_max        bars: crossing rate vs the paper's bound
 
 Example:
@@ -16,6 +19,7 @@ Example:
 Command line: ``ijoy sweep run FILE`` and ``ijoy sweep summarize DIR``.
 """
 
+from ijoy_jax.sweep import distributed
 from ijoy_jax.sweep.config import (
     COMMAND_KEYS,
     ROBOT_DEFAULTS,
@@ -26,12 +30,25 @@ from ijoy_jax.sweep.config import (
     parse_config,
     scenarios,
 )
-from ijoy_jax.sweep.execute import DEFAULT_CHUNK, RunStats, run, trace_count
+from ijoy_jax.sweep.execute import (
+    DEFAULT_CHUNK,
+    MAX_AUTO_CHUNK,
+    MEMORY_FRACTION,
+    RunStats,
+    auto_chunk_size,
+    default_chunk_size,
+    run,
+    scenario_bytes,
+    trace_count,
+)
 from ijoy_jax.sweep.metrics import FAMILY_METRICS, bar_crossings
 from ijoy_jax.sweep.results import (
     EXTRA_METRICS,
     METRICS,
+    PAPER_ACTIONS,
     UNITS,
+    IncompleteSweepError,
+    action_counts,
     aggregate,
     b_max,
     load,
@@ -46,16 +63,24 @@ __all__ = [
     "DEFAULT_CHUNK",
     "EXTRA_METRICS",
     "FAMILY_METRICS",
+    "MAX_AUTO_CHUNK",
+    "MEMORY_FRACTION",
     "METRICS",
+    "PAPER_ACTIONS",
     "ROBOT_DEFAULTS",
     "UNITS",
+    "IncompleteSweepError",
     "RunStats",
     "SweepConfig",
     "SweepConfigError",
+    "action_counts",
     "aggregate",
+    "auto_chunk_size",
     "b_max",
     "bar_crossings",
     "cells",
+    "default_chunk_size",
+    "distributed",
     "load",
     "load_aggregates",
     "load_config",
@@ -63,6 +88,7 @@ __all__ = [
     "plot",
     "plot_crossing",
     "run",
+    "scenario_bytes",
     "scenarios",
     "t_quantile",
     "trace_count",

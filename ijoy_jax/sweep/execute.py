@@ -5,6 +5,7 @@ Layout of an output folder::
     DIR/sweep.toml              the sweep file's text, as run
     DIR/manifest.json           sweep text, plan, package versions, device, git commit, timings
     DIR/parts/part-00000.parquet  one file per completed chunk (written atomically)
+    DIR/processes/process-00001.json  sessions of process 1 of several (process 0's are in the manifest)
     DIR/aggregates.parquet      per-cell means and 95% confidence intervals (when complete)
 
 Execution. Scenarios are grouped by action-set density (the only parameter
@@ -41,8 +42,28 @@ plan's ``chunk_size``) and a padded chunk is padded to a multiple of it too.
 Each session in the manifest records ``devices`` and ``sharding``. Scenarios
 are independent, so the results are those of one device (bit-identical with 4
 forced CPU devices, tested). With one device nothing is placed: arrays go to
-the default device as before. Several hosts (``jax.distributed``) are not done yet: every
-process would run the whole sweep on its own local devices.
+the default device as before.
+
+Chunk size. Given, or (``chunk_size=None``) the manifest's when resuming, else
+:func:`default_chunk_size`: :data:`DEFAULT_CHUNK` on CPU; on an accelerator
+the compiled chunk function's memory for one scenario of the largest action
+set (:func:`scenario_bytes`, ahead-of-time ``memory_analysis()``, nothing
+runs; split into per-scenario and shared bytes) sets :func:`auto_chunk_size`,
+a power of two per device filling :data:`MEMORY_FRACTION` of
+``memory_stats()["bytes_limit"]``.
+
+Several processes (hosts). Process ``I`` of ``N`` (``jax.process_index()``
+and ``jax.process_count()`` after :func:`jax.distributed.initialize`, or
+``process_id``/``num_processes``) runs the chunks with ``chunk_id % N == I``
+over its local devices and writes their parts into the shared folder; there
+are no cross-process collectives (see :mod:`ijoy_jax.sweep.distributed`).
+Process 0 alone writes ``manifest.json`` (with the ``layout``) and
+``sweep.toml``; process ``I > 0`` records its sessions in
+``processes/process-0000I.json``. At the end a coordination-service barrier
+(when ``jax.distributed`` is up; a timeout or a dead peer only skips it) lets
+process 0 write ``aggregates.parquet`` once every part exists. Each process
+resumes its own chunks; :func:`ijoy_jax.sweep.load` reads the union and names
+missing chunks and their processes.
 
 Progress: one line per chunk on stderr (scenarios done, scenarios/s over
 compiled chunks, ETA); ``first_chunk_s`` in the manifest holds each density's
@@ -78,6 +99,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from ijoy_jax import generators, robots
 from ijoy_jax.control import rollout_core
 from ijoy_jax.select import make_targets
+from ijoy_jax.sweep import distributed
 from ijoy_jax.sweep.config import (
     COMMAND_KEYS,
     ROBOT_DEFAULTS,
@@ -88,12 +110,19 @@ from ijoy_jax.sweep.config import (
 )
 from ijoy_jax.sweep.metrics import bar_crossings
 
-__all__ = ["DEFAULT_CHUNK", "RunStats", "run", "trace_count"]
+__all__ = ["DEFAULT_CHUNK", "MAX_AUTO_CHUNK", "MEMORY_FRACTION", "RunStats", "auto_chunk_size", "default_chunk_size",
+           "run", "scenario_bytes", "trace_count"]
 
 DEFAULT_CHUNK = 32
+"""Scenarios per jitted call on CPU (and wherever the device reports no memory figure)."""
+MEMORY_FRACTION = 0.5
+"""Share of an accelerator's memory a default-sized chunk may fill (the rest: XLA workspace, fragmentation)."""
+MAX_AUTO_CHUNK = 4096
+"""Largest chunk :func:`auto_chunk_size` picks (progress and resume granularity)."""
 """Scenarios per chunk by default: large enough to amortise dispatch, small enough to resume often."""
 
 _PART = "part-{:05d}.parquet"
+_PROC = "process-{:05d}.json"
 _TRACES = {"count": 0}
 
 
@@ -239,35 +268,176 @@ def _local_devices(devices) -> list:
     return local[:devices]
 
 
-def _progress(done: int, total: int, rate: float, chunk: int, nchunks: int) -> None:
+def _progress(done: int, total: int, rate: float, chunk: int, nchunks: int, who: str = "") -> None:
     eta = (total - done) / rate if rate > 0 else float("nan")
-    line = (f"[ijoy sweep] {done}/{total} scenarios  chunk {chunk}/{nchunks}  "
+    line = (f"[ijoy sweep{who}] {done}/{total} scenarios  chunk {chunk}/{nchunks}  "
             f"{rate:.1f} scenarios/s  ETA {eta:.0f} s")
     end = "\r" if sys.stderr.isatty() and done < total else "\n"
     print(line.ljust(78), end=end, file=sys.stderr, flush=True)
+
+
+def _process_layout(process_id, num_processes) -> tuple[int, int]:
+    """(I, N) from the arguments, defaulting to ``jax.process_index()`` / ``jax.process_count()``."""
+    if process_id is None and num_processes is None:
+        return jax.process_index(), jax.process_count()
+    for name, v in (("process_id", process_id), ("num_processes", num_processes)):
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ValueError(f"process_id and num_processes must both be ints (or both None), got {name}={v!r}")
+    if num_processes < 1 or not 0 <= process_id < num_processes:
+        raise ValueError(f"process id {process_id} out of range for {num_processes} processes "
+                         f"(0 to {num_processes - 1})")
+    if jax.process_count() > 1 and (process_id, num_processes) != (jax.process_index(), jax.process_count()):
+        raise ValueError(f"process_id={process_id}, num_processes={num_processes} disagree with jax.distributed "
+                         f"(process {jax.process_index()} of {jax.process_count()})")
+    return process_id, num_processes
+
+
+def _batch(rows, size: int, robot_cols, terrain_cols):
+    """Per-scenario inputs of a chunk: ``rows`` padded to ``size`` by repeating the last one (NumPy)."""
+    n = len(rows)
+    pad = np.concatenate([np.arange(n), np.full(size - n, n - 1)])
+
+    def col(name, dtype):
+        return np.asarray(rows[name].to_numpy()[pad], dtype)
+
+    robot_vals = {c.partition(".")[2]: col(c, np.float32) for c in robot_cols}
+    terrain_vals = {c.partition(".")[2]: col(c, np.int32 if rows[c].dtype.kind == "i" else np.float32)
+                    for c in terrain_cols}
+    commands = np.stack([col(f"command.{k}", np.float32) for k in COMMAND_KEYS], axis=-1)
+    return col("replicate", np.int32), robot_vals, terrain_vals, commands
+
+
+def _shared(table, base):
+    """Per-density inputs shared by every scenario: (base robot, targets or None when each scenario sorts)."""
+    if table["robot.rotation_weight"].nunique() > 1:
+        return base, None
+    return base, make_targets(base.replace(rotation_weight=jnp.float32(table["robot.rotation_weight"].iloc[0])))
+
+
+def _cols(table):
+    robot_cols = [f"robot.{k}" for k in ROBOT_DEFAULTS if k != "density"]
+    return robot_cols, [c for c in table.columns if c.startswith("terrain.")]
+
+
+def _device_bytes(device) -> int | None:
+    """Memory an accelerator lets XLA allocate (``memory_stats()["bytes_limit"]``); None on CPU or unknown."""
+    if device.platform == "cpu":
+        return None
+    try:
+        stats = device.memory_stats()
+    except Exception:  # noqa: BLE001 - some backends raise instead of returning None
+        return None
+    limit = (stats or {}).get("bytes_limit")
+    return int(limit) if limit else None
+
+
+def _static(cfg: SweepConfig) -> _Static:
+    return _Static(cfg.family, cfg.shape, cfg.resolution, cfg.has_height, cfg.static_max_count,
+                   cfg.num_steps, cfg.method)
+
+
+def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot) -> tuple[int, int]:
+    """Device bytes of a chunk, from the compiled chunk function for one scenario (AOT: nothing runs).
+
+    ``jit(...).lower(...).compile().memory_analysis()`` of a one-scenario chunk with ``base`` (pass
+    the largest action set: memory grows with it), split into what every scenario adds (its inputs,
+    outputs and XLA temporaries) and what the chunk holds once (the shared base robot, target tables
+    and key, e.g. 27 MB for 496 actions, 0.9 GB for 3307). On an H100 the per-scenario part of the
+    one-scenario compile (about 1 MB for ``sweeps/w_sweep.toml``) bounds the measured slope of the
+    temporaries over batch sizes 8 and 64 (0.75 MB per scenario) from above.
+
+    Returns:
+      ``(per_scenario, shared)`` in bytes.
+    """
+    robot_cols, terrain_cols = _cols(table)
+    base, targets = _shared(table, base)
+    key = jax.random.key(cfg.seed)
+    batch = _batch(table.iloc[:1], 1, robot_cols, terrain_cols)
+    compiled = _run_chunk.lower(_static(cfg), base, targets, key, *batch).compile()
+    mem = compiled.memory_analysis()
+    if mem is None:
+        raise RuntimeError("the backend reports no memory analysis")
+    # Arguments are the per-scenario inputs plus the shared ones jit keeps (unused leaves are pruned).
+    inputs = sum(int(x.nbytes) for x in jax.tree.leaves(batch))
+    shared = max(0, int(mem.argument_size_in_bytes) - inputs)
+    return inputs + int(mem.output_size_in_bytes + mem.temp_size_in_bytes), shared
+
+
+def auto_chunk_size(bytes_per_scenario: int, device_bytes: int, num_devices: int = 1, *, shared_bytes: int = 0,
+                    fraction: float = MEMORY_FRACTION, max_chunk: int = MAX_AUTO_CHUNK) -> int:
+    """The chunk size that fills ``fraction`` of each device's memory, as a power of two per device.
+
+    ``per_device = 2 ** floor(log2((fraction * device_bytes - shared_bytes) / bytes_per_scenario))``
+    (at least 1; ``shared_bytes`` is held once per device), times ``num_devices``, at most
+    ``max_chunk`` (rounded down to a multiple of ``num_devices``). Powers of two keep the plan (and so
+    resume) stable when the estimate moves a little.
+
+    Example:
+      >>> auto_chunk_size(2**20, 80 * 2**30, 1)   # 1 MiB per scenario on an 80 GiB GPU: capped
+      4096
+      >>> auto_chunk_size(100 * 2**20, 16 * 2**30, 2)   # 100 MiB per scenario, 2 x 16 GiB
+      128
+    """
+    if bytes_per_scenario <= 0 or device_bytes <= 0 or num_devices < 1 or shared_bytes < 0:
+        raise ValueError(f"need positive sizes, got bytes_per_scenario={bytes_per_scenario}, "
+                         f"device_bytes={device_bytes}, num_devices={num_devices}, shared_bytes={shared_bytes}")
+    fit = int((fraction * device_bytes - shared_bytes) // bytes_per_scenario)
+    per_device = 1 << (fit.bit_length() - 1) if fit >= 1 else 1
+    cap = max(num_devices, max_chunk // num_devices * num_devices)
+    return min(per_device * num_devices, cap)
+
+
+def default_chunk_size(cfg: SweepConfig, table, bases: dict, devices: list) -> int:
+    """The chunk size used when none is given: :data:`DEFAULT_CHUNK` on CPU, else sized to device memory.
+
+    On an accelerator with a known memory limit: :func:`auto_chunk_size` of
+    :func:`scenario_bytes` for the largest action set (one extra ahead-of-time
+    compile); :data:`DEFAULT_CHUNK` when the backend reports no memory figure.
+    """
+    mem = _device_bytes(devices[0])
+    if mem is None:
+        return DEFAULT_CHUNK
+    base = max(bases.values(), key=lambda b: b.num_actions)
+    try:
+        per, shared = scenario_bytes(cfg, table, base)
+    except RuntimeError:
+        return DEFAULT_CHUNK
+    return auto_chunk_size(per, mem, len(devices), shared_bytes=shared)
 
 
 def run(
     sweep,
     out=None,
     *,
-    chunk_size: int = DEFAULT_CHUNK,
+    chunk_size: int | None = None,
     max_scenarios: int | None = None,
     progress: bool = True,
     devices: int | None = None,
+    process_id: int | None = None,
+    num_processes: int | None = None,
+    barrier_timeout_s: float = 3600.0,
 ) -> RunStats:
-    """Run (or resume) a sweep and write its results (see the module docstring for the layout).
+    """Run (or resume) a sweep, or this process's share of it, and write its results (see the module docstring).
 
     Args:
       sweep: a sweep file path or a :class:`SweepConfig`.
       out: output folder (default ``results/<name>``); an existing folder
         from the same sweep file and options is resumed.
       chunk_size: scenarios per jitted call (>= 1); memory grows linearly with it.
-        Rounded up to a multiple of the device count.
+        Rounded up to a multiple of the device count. None (default): the
+        chunk size of the folder's manifest when resuming, else
+        :func:`default_chunk_size` (:data:`DEFAULT_CHUNK` on CPU, sized to
+        device memory on an accelerator; process 0 decides for all).
       max_scenarios: run only the first this many scenarios (smoke tests).
       progress: print a progress line (scenarios/s, ETA) to stderr.
       devices: shard each chunk over the first this many local devices
         (default None: all of them); 1 runs unsharded on the default device.
+      process_id, num_processes: run only the chunks with ``chunk_id % num_processes == process_id``
+        (default: ``jax.process_index()`` and ``jax.process_count()``, i.e. the whole sweep
+        unless ``jax.distributed`` is initialized). Give both or neither.
+      barrier_timeout_s: with several processes under ``jax.distributed``, how long a finished
+        process waits for the others before process 0 writes ``aggregates.parquet`` (a process
+        that times out just skips that file; results are complete once every part exists).
 
     Returns:
       :class:`RunStats`.
@@ -275,7 +445,7 @@ def run(
     Raises:
       SweepConfigError: a bad sweep file (before any compute).
       ValueError: ``out`` holds results of a different sweep or chunk plan, or a
-        bad ``chunk_size``, ``max_scenarios`` or ``devices``.
+        bad ``chunk_size``, ``max_scenarios``, ``devices`` or process layout.
 
     Example:
       >>> from ijoy_jax import sweep
@@ -285,57 +455,75 @@ def run(
     """
     t_start = time.perf_counter()
     cfg = sweep if isinstance(sweep, SweepConfig) else load_config(sweep)
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
-        raise ValueError(f"chunk_size must be a positive int, got {chunk_size!r}")
+    if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, int)
+                                   or chunk_size < 1):
+        raise ValueError(f"chunk_size must be a positive int or None, got {chunk_size!r}")
     if max_scenarios is not None and (not isinstance(max_scenarios, int) or max_scenarios < 1):
         raise ValueError(f"max_scenarios must be a positive int, got {max_scenarios!r}")
+    pid, nproc = _process_layout(process_id, num_processes)
     devs = _local_devices(devices)
     ndev = len(devs)
+    out = Path(out) if out is not None else Path("results") / cfg.name
+    table = scenarios(cfg, max_scenarios)
+    # Host-side robots per density (cheap, no compile): footprint problems surface before any output.
+    bases = {d: _base_robot(cfg, table, d) for d in dict.fromkeys(table["robot.density"].tolist())}
+    parts = out / "parts"
+    manifest_path = out / "manifest.json"
+    proc_path = out / "processes" / _PROC.format(pid)
+    old = json.loads(manifest_path.read_text()) if manifest_path.exists() else None
+    mine = json.loads(proc_path.read_text()) if pid > 0 and proc_path.exists() else None
+    if chunk_size is None:
+        # Resume with the folder's chunk size; otherwise process 0 sizes it and the others take its figure.
+        prev = (old or mine or {}).get("plan", {}).get("chunk_size")
+        chunk_size = distributed.agree(f"ijoy_sweep/chunk_size/{cfg.name}/{max_scenarios}",
+                                       lambda: prev or default_chunk_size(cfg, table, bases, devs), pid)
     chunk_size = -(-chunk_size // ndev) * ndev  # a multiple of the device count
     if ndev > 1:
         mesh = Mesh(np.array(devs), ("scenarios",))
         batched, replicated = NamedSharding(mesh, PartitionSpec("scenarios")), NamedSharding(mesh, PartitionSpec())
     else:
         batched = replicated = None
-    out = Path(out) if out is not None else Path("results") / cfg.name
-    table = scenarios(cfg, max_scenarios)
     plan = _plan(cfg, table, chunk_size)
     plan_key = {"chunk_size": chunk_size, "max_scenarios": max_scenarios, "scenarios": len(table),
                 "chunks": len(plan)}
-
-    # Host-side robots per density (cheap, no compile): footprint problems surface before any output.
-    bases = {d: _base_robot(cfg, table, d) for d in dict.fromkeys(p[1] for p in plan)}
-    parts = out / "parts"
-    manifest_path = out / "manifest.json"
-    if manifest_path.exists():
-        old = json.loads(manifest_path.read_text())
-        if old.get("sweep_text") != cfg.text or old.get("plan") != plan_key:
+    for prev in (old, mine):
+        if prev is not None and (prev.get("sweep_text") != cfg.text or prev.get("plan") != plan_key):
             raise ValueError(f"{out} holds results of a different sweep or chunk plan "
-                             f"({old.get('plan')} vs {plan_key}; chunk_size is rounded up to a multiple "
+                             f"({prev.get('plan')} vs {plan_key}; chunk_size is rounded up to a multiple "
                              f"of the {ndev} device(s)); choose another --out or delete it")
-        manifest = old
-    else:
-        manifest = {"sweep_file": cfg.source, "sweep_text": cfg.text, "name": cfg.name, "plan": plan_key,
-                    "versions": _versions(), "git_commit": _git_commit(), "sessions": []}
+    layout = {"num_processes": nproc, "rule": "chunk % num_processes == process_id",
+              "process_files": "processes/process-NNNNN.json (sessions of processes 1..N-1)"}
+    if pid == 0:  # the manifest and sweep.toml are written by process 0 only
+        manifest = old or {"sweep_file": cfg.source, "sweep_text": cfg.text, "name": cfg.name, "plan": plan_key,
+                           "versions": _versions(), "git_commit": _git_commit(), "sessions": []}
+        manifest["layout"] = layout
+        record = manifest_path
+    else:  # each other process writes only its own file
+        manifest = mine or {"sweep_text": cfg.text, "plan": plan_key, "process_id": pid, "sessions": []}
+        record = proc_path
+    mine_plan = [p for p in plan if p[0] % nproc == pid]
     parts.mkdir(parents=True, exist_ok=True)
-    (out / "sweep.toml").write_text(cfg.text)
+    record.parent.mkdir(parents=True, exist_ok=True)
+    if pid == 0:
+        (out / "sweep.toml").write_text(cfg.text)
     session: dict[str, Any] = {"started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                               "process_id": pid, "num_processes": nproc, "chunks_assigned": len(mine_plan),
+                               "host": platform.node(),
                                "device": str(devs[0]), "backend": jax.default_backend(),
                                "device_count": jax.device_count(), "devices": ndev, "chunk_size": chunk_size,
                                "sharding": None if batched is None else str(batched)}
     manifest["sessions"].append(session)
-    _write_json(manifest_path, manifest)
+    _write_json(record, manifest)
 
     stats = RunStats(out=out, scenarios=len(table), chunks=len(plan), devices=ndev, chunk_size=chunk_size)
-    static = _Static(cfg.family, cfg.shape, cfg.resolution, cfg.has_height, cfg.static_max_count,
-                     cfg.num_steps, cfg.method)
+    static = _static(cfg)
     key = jax.random.key(cfg.seed)
-    rw_swept = table["robot.rotation_weight"].nunique() > 1
-    robot_cols = [f"robot.{k}" for k in ROBOT_DEFAULTS if k != "density"]
-    terrain_cols = [c for c in table.columns if c.startswith("terrain.")]
-    todo = [p for p in plan if not (parts / _PART.format(p[0])).exists()]
-    stats.skipped = len(plan) - len(todo)
-    done_before = int(sum(len(p[2]) for p in plan if (parts / _PART.format(p[0])).exists()))
+    robot_cols, terrain_cols = _cols(table)
+    todo = [p for p in mine_plan if not (parts / _PART.format(p[0])).exists()]
+    stats.skipped = len(mine_plan) - len(todo)
+    total = int(sum(len(p[2]) for p in mine_plan))
+    done_before = total - int(sum(len(p[2]) for p in todo))
+    who = f" {pid}/{nproc}" if nproc > 1 else ""
     by_id = table.set_index("scenario", drop=False)
     traces0 = trace_count()
     shared_of: dict[float, Any] = {}  # per density: (base robot, targets, key), placed
@@ -343,29 +531,16 @@ def run(
     steady_s = 0.0
     for chunk_id, density, ids in todo:
         t0 = time.perf_counter()
-        base = bases[density]
         if density not in shared_of:
-            targets = None if rw_swept else make_targets(base.replace(
-                rotation_weight=jnp.float32(table["robot.rotation_weight"].iloc[0])))
             # Shared by every scenario: replicated on every device of the mesh.
-            shared = (base, targets, key)
+            shared = (*_shared(table, bases[density]), key)
             shared_of[density] = shared if replicated is None else jax.device_put(shared, replicated)
         base_d, targets, key_d = shared_of[density]
         rows = by_id.loc[ids]
         n = len(rows)
         size = min(chunk_size, int((table["robot.density"] == density).sum()))
         size = -(-size // ndev) * ndev  # every device gets the same number of rows
-        pad = np.concatenate([np.arange(n), np.full(size - n, n - 1)])  # repeat the last row
-
-        def col(name, dtype, rows=rows, pad=pad):
-            return np.asarray(rows[name].to_numpy()[pad], dtype)
-
-        robot_vals = {c.partition(".")[2]: col(c, np.float32) for c in robot_cols}
-        terrain_vals = {c.partition(".")[2]: col(c, np.int32 if rows[c].dtype.kind == "i" else np.float32)
-                        for c in terrain_cols}
-        commands = np.stack([col(f"command.{k}", np.float32) for k in COMMAND_KEYS], axis=-1)
-        seeds = col("replicate", np.int32)
-        batch = (seeds, robot_vals, terrain_vals, commands)
+        batch = _batch(rows, size, robot_cols, terrain_cols)
         # Per-scenario inputs: split along the scenario axis over the mesh (one device: default device).
         batch = jax.tree.map(jnp.asarray, batch) if batched is None else jax.device_put(batch, batched)
         summary = _run_chunk(static, base_d, targets, key_d, *batch)
@@ -387,20 +562,23 @@ def run(
         if progress:
             # Rate over compiled chunks only (the first chunk of a density includes its compile).
             rate = steady_n / steady_s if steady_n else n / dt
-            _progress(done_before + computed, len(table), rate, chunk_id + 1, len(plan))
+            _progress(done_before + computed, total, rate, chunk_id + 1, len(plan), who)
     stats.computed = computed
     stats.compiles = trace_count() - traces0
     stats.run_s = time.perf_counter() - t_start
 
+    if nproc > 1:  # no device collective: the coordination service's barrier (skipped without jax.distributed)
+        distributed.barrier(f"ijoy_sweep/done/{cfg.name}/{max_scenarios}", barrier_timeout_s)
     complete = all((parts / _PART.format(p[0])).exists() for p in plan)
-    if complete:
+    if complete and pid == 0:
         from ijoy_jax.sweep.results import aggregate, load
 
         aggregate(load(out), cfg.swept).to_parquet(out / "aggregates.parquet", index=False)
     session.update(finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), run_s=stats.run_s,
                    computed=computed, skipped_chunks=stats.skipped, compiles=stats.compiles,
                    first_chunk_s={str(k): v for k, v in stats.first_chunk_s.items()}, complete=complete)
-    _write_json(manifest_path, manifest)
+    _write_json(record, manifest)
     if progress and not todo:
-        print(f"[ijoy sweep] {out}: all {len(plan)} chunks already done", file=sys.stderr)
+        print(f"[ijoy sweep{who}] {out}: all {len(mine_plan)} of this process's chunks already done",
+              file=sys.stderr)
     return stats

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["EXTRA_METRICS", "METRICS", "UNITS", "aggregate", "b_max", "load", "load_aggregates", "plot",
-           "plot_crossing", "t_quantile"]
+__all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "UNITS", "IncompleteSweepError", "action_counts", "aggregate",
+           "b_max", "load", "load_aggregates", "plot", "plot_crossing", "t_quantile"]
 
 METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
            "distance_along", "distance_across", "mean_deviation", "mean_foot_cost")
@@ -76,15 +76,70 @@ def t_quantile(df: int) -> float:
             + (79 * z**9 + 776 * z**7 + 1482 * z**5 - 1920 * z**3 - 945 * z) / (92160 * v**4))
 
 
-def load(path):
-    """The per-scenario table of a sweep folder, in one call.
+class IncompleteSweepError(ValueError):
+    """A sweep folder lacks chunks (a process has not finished) or holds duplicated scenarios."""
+
+
+def _process_sessions(path: Path) -> list[dict]:
+    """Every process's sessions: the manifest's (process 0) and ``processes/process-*.json``'s."""
+    out = []
+    man = path / "manifest.json"
+    if man.exists():
+        out += json.loads(man.read_text()).get("sessions", [])
+    for f in sorted((path / "processes").glob("process-*.json")):
+        out += json.loads(f.read_text()).get("sessions", [])
+    return out
+
+
+def _check_complete(path: Path, files: list[Path], df) -> None:
+    """Raise :class:`IncompleteSweepError` unless the parts are exactly the manifest plan's chunks."""
+    man_path = path / "manifest.json"
+    if not man_path.exists():
+        raise IncompleteSweepError(f"{path}: no manifest.json (process 0 writes it when it starts; has it run?)")
+    plan = json.loads(man_path.read_text())["plan"]
+    have = [int(f.name[len("part-"):-len(".parquet")]) for f in files]
+    missing = sorted(set(range(plan["chunks"])) - set(have))
+    foreign = sorted(set(have) - set(range(plan["chunks"])))
+    if foreign:
+        raise IncompleteSweepError(f"{path}: parts of chunks {foreign} are not in the plan ({plan['chunks']} "
+                                   f"chunks): results of another plan are mixed in")
+    if missing:
+        sessions = _process_sessions(path)
+        latest = max(sessions, key=lambda s: s.get("started", "")) if sessions else {}
+        nproc = int(latest.get("num_processes", 1))
+        shown = ", ".join(map(str, missing[:20])) + (", ..." if len(missing) > 20 else "")
+        if nproc > 1:
+            owners = sorted({c % nproc for c in missing})
+            who = (f"; with {nproc} processes (chunk % {nproc} == process id) they belong to process(es) "
+                   f"{', '.join(map(str, owners))}: has each finished? Rerun `ijoy sweep run` with the same --out "
+                   f"and --process-id to resume it")
+        else:
+            who = "; the sweep has not finished: rerun `ijoy sweep run` with the same --out to resume it"
+        raise IncompleteSweepError(f"{path}: incomplete sweep: {len(missing)} of {plan['chunks']} chunks missing "
+                                   f"(chunks {shown}){who}; or load(..., partial=True) for the finished chunks")
+    dup = df["scenario"][df["scenario"].duplicated()].unique()
+    if len(dup):
+        raise IncompleteSweepError(f"{path}: scenarios {sorted(dup.tolist())[:20]} appear more than once "
+                                   f"(in chunks {sorted(df.loc[df['scenario'].isin(dup), 'chunk'].unique())})")
+    if len(df) != plan["scenarios"]:
+        raise IncompleteSweepError(f"{path}: {len(df)} scenarios in the parts, the plan has {plan['scenarios']}")
+
+
+def load(path, *, partial: bool = False):
+    """The per-scenario table of a sweep folder, in one call: the union of every process's parts.
 
     Args:
       path: the sweep's output folder (``ijoy sweep run --out``).
+      partial: return the finished chunks of an unfinished sweep instead of raising.
 
     Returns:
-      pandas.DataFrame, one row per completed scenario, sorted by ``scenario``
-      (a partial sweep gives its completed chunks).
+      pandas.DataFrame, one row per scenario, sorted by ``scenario``.
+
+    Raises:
+      FileNotFoundError: no parts at all.
+      IncompleteSweepError: (unless ``partial``) chunks of the manifest's plan are missing (the
+        message names them and, for a multi-process run, the processes they belong to), or
+        scenarios are duplicated, or parts of another plan are mixed in.
 
     Example:
       >>> from ijoy_jax import sweep
@@ -93,10 +148,13 @@ def load(path):
     """
     import pandas as pd
 
-    parts = sorted((Path(path) / "parts").glob("part-*.parquet"))
-    if not parts:
-        raise FileNotFoundError(f"no result parts under {Path(path) / 'parts'}")
-    df = pd.concat([pd.read_parquet(p) for p in parts], ignore_index=True)
+    path = Path(path)
+    files = sorted((path / "parts").glob("part-*.parquet"))
+    if not files:
+        raise FileNotFoundError(f"no result parts under {path / 'parts'}")
+    df = pd.concat([pd.read_parquet(p) for p in files], ignore_index=True)
+    if not partial:
+        _check_complete(path, files, df)
     return df.sort_values("scenario", kind="stable").reset_index(drop=True)
 
 
@@ -136,9 +194,27 @@ def aggregate(df, by=None):
     return pd.DataFrame(rows)
 
 
-def load_aggregates(path):
-    """The per-cell aggregates of a sweep folder (computed from its parts; written when complete)."""
-    return aggregate(load(path), list(_swept(path)))
+def load_aggregates(path, *, partial: bool = False):
+    """The per-cell aggregates of a sweep folder, computed from its parts (see :func:`load` for ``partial``)."""
+    return aggregate(load(path, partial=partial), list(_swept(path)))
+
+
+PAPER_ACTIONS = 496
+"""Actions per foot in the paper's HRP-2 action set (``ijoy_jax.robots.hrp2(density=1.0)``)."""
+
+
+def action_counts(densities) -> np.ndarray:
+    """Actions per foot of HRP-2's action set at each density (:func:`ijoy_jax.robots.hrp2`), as float64.
+
+    Example:
+      >>> action_counts([0.4, 1.0, 2.0]).tolist()
+      [52.0, 496.0, 3307.0]
+    """
+    from ijoy_jax import robots
+
+    d = np.asarray(densities, np.float64)
+    sizes = {v: robots.hrp2(density=v).num_actions for v in np.unique(d).tolist()}
+    return np.array([sizes[v] for v in d.tolist()], np.float64).reshape(d.shape)
 
 
 def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_foot_cost", "steps_in_place",
@@ -154,7 +230,9 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
 
     Other swept columns become one line each (legend). A robot parameter's
     library default (:data:`ijoy_jax.sweep.ROBOT_DEFAULTS`) is marked by a
-    dashed line; values spanning 20x or more get a symlog axis. Returns ``out``.
+    dashed line; values spanning 20x or more get a symlog axis. Action-set
+    density is drawn as the number of actions per foot (:func:`action_counts`)
+    on a log axis with the paper's 496 (:data:`PAPER_ACTIONS`) marked. Returns ``out``.
 
     Aggregates of a bar-crossing sweep (a ``crossed`` metric and a swept
     ``terrain.width``) with the default ``metrics`` and ``x`` go to
@@ -176,20 +254,30 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
     others = [c for c in params if c != x]
     fig, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.6), squeeze=False)
     groups = agg.groupby(others, sort=True) if others else [((), agg)]
+    # Density is drawn as what it means: the number of actions in the set (HRP-2's lattice), 496 the paper's.
+    xv = action_counts if x == "robot.density" else (lambda v: np.asarray(v, np.float64))
     for ax, m in zip(axes[0], metrics, strict=True):
         for key, g in groups:
             g = g.sort_values(x)
             key = key if isinstance(key, tuple) else (key,)
             label = ", ".join(f"{c.partition('.')[2]} = {v:g}" for c, v in zip(others, key, strict=True))
-            ax.errorbar(g[x], g[f"{m}.mean"], yerr=g[f"{m}.ci95"], marker="o", capsize=3, label=label or None)
-        default = ROBOT_DEFAULTS.get(x.partition(".")[2]) if x.startswith("robot.") else None
-        if default is not None:
-            ax.axvline(default, color="0.4", ls="--", lw=1, label=f"library default ({default:g})")
-        pos = agg[x][agg[x] > 0] if x in agg else []
-        if len(pos) and agg[x].max() >= 20 * pos.min():
-            ax.set_xscale("symlog", linthresh=float(pos.min()), linscale=0.5)
-            ax.set_xlim(min(0.0, float(agg[x].min())) - 0.3 * float(pos.min()), 1.5 * float(agg[x].max()))
-        ax.set_xlabel(f"{x.partition('.')[2] or x} ({UNITS.get(x, '-')})")
+            ax.errorbar(xv(g[x]), g[f"{m}.mean"], yerr=g[f"{m}.ci95"], marker="o", capsize=3, label=label or None)
+        if x == "robot.density":
+            ax.axvline(PAPER_ACTIONS, color="0.4", ls="--", lw=1, label=f"paper's {PAPER_ACTIONS} actions (HRP-2)")
+            ax.set_xscale("log")
+            ticks = sorted(set(action_counts(agg[x]).astype(int).tolist()) | {PAPER_ACTIONS})
+            ax.set_xticks(ticks, [str(t) for t in ticks], rotation=45, fontsize=7)
+            ax.minorticks_off()
+            ax.set_xlabel("actions in the set S, per foot (count)")
+        else:
+            default = ROBOT_DEFAULTS.get(x.partition(".")[2]) if x.startswith("robot.") else None
+            if default is not None:
+                ax.axvline(default, color="0.4", ls="--", lw=1, label=f"library default ({default:g})")
+            pos = agg[x][agg[x] > 0] if x in agg else []
+            if len(pos) and agg[x].max() >= 20 * pos.min():
+                ax.set_xscale("symlog", linthresh=float(pos.min()), linscale=0.5)
+                ax.set_xlim(min(0.0, float(agg[x].min())) - 0.3 * float(pos.min()), 1.5 * float(agg[x].max()))
+            ax.set_xlabel(f"{x.partition('.')[2] or x} ({UNITS.get(x, '-')})")
         ax.set_ylabel(f"{m.replace('_', ' ')} ({UNITS[m]})")
         ax.set_title("mean and 95% CI over scenarios", fontsize=9)
         ax.grid(alpha=0.3)

@@ -1,0 +1,172 @@
+"""Several processes (hosts) running one sweep: the process layout, ``jax.distributed`` setup, agreement.
+
+A sweep's chunk plan is a pure function of the sweep file, the chunk size and
+``max_scenarios``, so processes need no collectives: process ``I`` of ``N``
+runs the chunks with ``chunk_id % N == I`` on its own local devices (sharded
+over them as in one process) and writes its parquet parts into the shared
+output folder. The coordination service started by
+:func:`jax.distributed.initialize` is used only for two small things, both
+optional: process 0's automatic chunk size is handed to the others through its
+key-value store (so every process cuts the same plan), and a final barrier lets
+process 0 write ``aggregates.parquet`` once every process is done. Neither is
+a device collective, so the CPU backend needs no gloo/MPI collectives.
+
+Layout sources, first match wins per field:
+
+  flags            ``ijoy sweep run --num-processes N --process-id I --coordinator HOST:PORT``
+  environment      ``IJOY_NUM_PROCESSES``, ``IJOY_PROCESS_ID``, ``IJOY_COORDINATOR``
+  JAX's detection  ``--distributed`` (or ``IJOY_DISTRIBUTED=1``) with fields left unset:
+                   :func:`jax.distributed.initialize` fills them from SLURM, Open MPI,
+                   Kubernetes/GKE or ``JAX_COORDINATOR_ADDRESS`` (its cluster auto-detection)
+
+Example:
+  >>> lay = layout(num_processes=2, process_id=1, coordinator="node0:12355")
+  >>> lay.num_processes, lay.process_id, lay.multi
+  (2, 1, True)
+  >>> layout(env={}).multi
+  False
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+from collections.abc import Mapping
+
+import jax
+
+__all__ = ["ENV", "Layout", "agree", "barrier", "client", "initialize", "layout"]
+
+ENV = {"num_processes": "IJOY_NUM_PROCESSES", "process_id": "IJOY_PROCESS_ID", "coordinator": "IJOY_COORDINATOR",
+       "distributed": "IJOY_DISTRIBUTED"}
+"""Environment variables read by :func:`layout` (a flag given on the command line wins)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Layout:
+    """Where this process stands among the processes of one sweep.
+
+    Fields:
+      num_processes: N (>= 1), or None to let JAX's cluster detection decide.
+      process_id: I in [0, N), or None (JAX's cluster detection).
+      coordinator: ``"host:port"`` of process 0's coordination service, or None.
+      auto: call :func:`jax.distributed.initialize` even with fields unset
+        (SLURM, Open MPI, ... fill them).
+    """
+
+    num_processes: int | None = None
+    process_id: int | None = None
+    coordinator: str | None = None
+    auto: bool = False
+
+    @property
+    def multi(self) -> bool:
+        """Whether :func:`initialize` must start ``jax.distributed`` (more than one process, or auto)."""
+        return self.auto or (self.num_processes or 1) > 1
+
+
+def _int(name: str, value, lo: int) -> int | None:
+    if value is None or value == "":
+        return None
+    try:
+        v = int(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an integer, got {value!r}") from None
+    if isinstance(value, float) and v != value:
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    if v < lo:
+        raise ValueError(f"{name} must be >= {lo}, got {v}")
+    return v
+
+
+def layout(num_processes=None, process_id=None, coordinator=None, auto: bool = False,
+           env: Mapping[str, str] | None = None) -> Layout:
+    """The process layout from flags, then ``IJOY_*`` environment variables, validated (no compute, no network).
+
+    Args:
+      num_processes, process_id, coordinator, auto: command-line values (None: not given).
+      env: environment to read (default ``os.environ``).
+
+    Returns:
+      :class:`Layout`.
+
+    Raises:
+      ValueError: a non-integer or out-of-range count or id (``process id 2 out of range for 2
+        processes``), a coordinator that is not ``host:port``, or several processes without a
+        coordinator and without ``--distributed``.
+    """
+    env = os.environ if env is None else env
+    flag = {"num_processes": "--num-processes", "process_id": "--process-id", "coordinator": "--coordinator"}
+    src = {k: (flag[k] if v is not None else ENV[k]) for k, v in
+           (("num_processes", num_processes), ("process_id", process_id), ("coordinator", coordinator))}
+    n = _int(src["num_processes"], num_processes if num_processes is not None else env.get(ENV["num_processes"]), 1)
+    i = _int(src["process_id"], process_id if process_id is not None else env.get(ENV["process_id"]), 0)
+    coord = coordinator if coordinator is not None else (env.get(ENV["coordinator"]) or None)
+    auto = bool(auto) or env.get(ENV["distributed"], "").lower() in ("1", "true", "yes")
+    if n is not None and i is not None and i >= n:
+        raise ValueError(f"{src['process_id']}: process id {i} out of range for {n} processes (0 to {n - 1})")
+    if i is not None and i > 0 and n is None and not auto:
+        raise ValueError(f"{src['process_id']} = {i} needs --num-processes (or {ENV['num_processes']})")
+    if coord is not None:
+        host, sep, port = coord.rpartition(":")
+        if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise ValueError(f"{src['coordinator']} must be HOST:PORT (e.g. node0:12355), got {coord!r}")
+    if n is not None and n > 1 and coord is None and not auto:
+        raise ValueError(f"{src['num_processes']} = {n} needs --coordinator HOST:PORT (or {ENV['coordinator']}), "
+                         f"or --distributed to let JAX detect the cluster (SLURM, Open MPI, ...)")
+    return Layout(n, i, coord, auto)
+
+
+def initialize(lay: Layout) -> tuple[int, int]:
+    """Start ``jax.distributed`` for a multi-process layout (once per process); returns (process id, count).
+
+    A single-process layout starts nothing and returns ``(0, 1)``. Call it
+    before anything touches a device (the CLI does so right after parsing).
+    """
+    if not lay.multi:
+        return 0, 1
+    if not jax.distributed.is_initialized():
+        jax.distributed.initialize(lay.coordinator, lay.num_processes, lay.process_id)
+    return jax.process_index(), jax.process_count()
+
+
+def client():
+    """The coordination-service client of ``jax.distributed`` (None when it is not initialized)."""
+    if not jax.distributed.is_initialized():
+        return None
+    from jax._src import distributed as _dist  # the public API exposes no key-value store or barrier
+
+    return _dist.global_state.client
+
+
+def agree(name: str, value_fn, process_id: int, timeout_s: float = 600.0) -> int:
+    """An int computed by process 0 (``value_fn()``) and read by every process through the key-value store.
+
+    Without ``jax.distributed`` every process computes ``value_fn()`` itself.
+    """
+    c = client()
+    if c is None:
+        return int(value_fn())
+    if process_id == 0:
+        value = int(value_fn())
+        c.key_value_set(name, str(value), allow_overwrite=True)
+        return value
+    return int(c.blocking_key_value_get(name, int(timeout_s * 1000)))
+
+
+def barrier(name: str, timeout_s: float) -> bool:
+    """Wait until every process reaches ``name``; False (and a note on stderr) on timeout or a dead peer.
+
+    Without ``jax.distributed`` (one process, or a layout given without it) returns False at once.
+    """
+    c = client()
+    if c is None:
+        return False
+    try:
+        c.wait_at_barrier(name, int(timeout_s * 1000))
+    except Exception as e:  # noqa: BLE001 - JaxRuntimeError (deadline, peer failure): not fatal here
+        print(f"[ijoy sweep] barrier {name!r} not reached by every process ({str(e).splitlines()[0]}); "
+              "continuing without it", file=sys.stderr)
+        return False
+    return True

@@ -1,0 +1,198 @@
+"""Several processes on one sweep (jax.distributed): launch recipe, union of parts, missing chunks, bad flags.
+
+Two local CPU processes stand in for two hosts: a coordinator on localhost, a shared output folder. Each
+process runs the chunks with chunk % 2 == its id; the union must equal a one-process run exactly.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from ijoy_jax import cli, sweep
+
+TINY = """
+[sweep]
+name = "tiny_mh"
+seed = 5
+scenarios_per_cell = 2
+num_steps = 4
+method = "exhaustive"
+
+[robot]
+density = 0.25
+
+[terrain]
+family = "obstacles"
+shape = [40, 32]
+resolution = 0.05
+max_count = 4
+
+[terrain.params]
+count = 3
+
+[command]
+vx = [0.1, 0.3]
+vy = [-0.05, 0.05]
+
+[grid]
+"robot.w" = [0.5, 2.0]
+"robot.margin" = [0.0, 0.05]
+"""
+CHUNK = 2  # 8 scenarios -> chunks 0..3; process 0 runs 0 and 2, process 1 runs 1 and 3
+# A launched process must finish (and pass the final barrier) within this (s): it compiles one rollout
+# (about 15 s on 2 idle cores; generous for a shared machine).
+PROC_TIMEOUT = 240
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory) -> Path:
+    p = tmp_path_factory.mktemp("cfg") / "tiny_mh.toml"
+    p.write_text(TINY)
+    return p
+
+
+@pytest.fixture(scope="module")
+def single(tiny, tmp_path_factory) -> Path:
+    """The same sweep in this one process."""
+    out = tmp_path_factory.mktemp("single") / "out"
+    sweep.run(tiny, out, chunk_size=CHUNK, progress=False)
+    return out
+
+
+def _launch(tiny: Path, out: Path, pid: int, port: int, extra_env=None) -> subprocess.Popen:
+    # The recipe of sweeps/README.md: one command per process, the same --out, file and coordinator.
+    env = dict(os.environ, JAX_PLATFORMS="cpu", **(extra_env or {}))
+    cmd = [sys.executable, "-m", "ijoy_jax.cli", "sweep", "run", str(tiny), "--out", str(out),
+           "--chunk", str(CHUNK), "--num-processes", "2", "--process-id", str(pid),
+           "--coordinator", f"localhost:{port}"]
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_two_processes_give_the_one_process_result(tiny, single, tmp_path):
+    out = tmp_path / "shared"
+    port = _free_port()
+    t0 = time.monotonic()
+    procs = [_launch(tiny, out, pid, port) for pid in (0, 1)]
+    results = []
+    try:
+        for p in procs:
+            stdout, stderr = p.communicate(timeout=PROC_TIMEOUT)
+            results.append((p.returncode, stdout, stderr))
+    finally:
+        for p in procs:
+            p.kill()
+    for rc, _, stderr in results:
+        assert rc == 0, stderr[-3000:]
+    print(f"two processes: {time.monotonic() - t0:.1f} s")
+    stats = [json.loads(stdout) for _, stdout, _ in results]
+    assert [s["computed"] for s in stats] == [4, 4]  # each ran its half
+    assert "[ijoy sweep 1/2]" in results[1][2]
+    assert not any("barrier" in stderr for _, _, stderr in results)  # both reached the final barrier
+    got, want = sweep.load(out), sweep.load(single)
+    assert got["chunk"].tolist() == want["chunk"].tolist() == [0, 0, 1, 1, 2, 2, 3, 3]
+    pd.testing.assert_frame_equal(got, want)  # exactly: same chunks, same compiled function
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["layout"]["num_processes"] == 2
+    s0 = man["sessions"][-1]
+    assert (s0["process_id"], s0["num_processes"], s0["chunks_assigned"]) == (0, 2, 2) and s0["complete"]
+    s1 = json.loads((out / "processes" / "process-00001.json").read_text())["sessions"][-1]
+    assert (s1["process_id"], s1["num_processes"], s1["chunks_assigned"]) == (1, 2, 2)
+    assert not (out / "processes" / "process-00000.json").exists()  # process 0's sessions are in the manifest
+    # After the final barrier process 0 wrote the aggregates of the whole sweep.
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "aggregates.parquet"), sweep.load_aggregates(single))
+
+
+def test_a_missing_process_is_named_and_its_rerun_completes_the_sweep(tiny, single, tmp_path, capsys):
+    # Process 1 never ran (or was killed): the layout without jax.distributed, as sweep.run arguments.
+    out = tmp_path / "half"
+    s0 = sweep.run(tiny, out, chunk_size=CHUNK, process_id=0, num_processes=2, progress=False)
+    assert (s0.computed, s0.chunks) == (4, 4)
+    with pytest.raises(sweep.IncompleteSweepError, match=r"2 of 4 chunks missing \(chunks 1, 3\).*process\(es\) 1"):
+        sweep.load(out)
+    assert cli.main(["sweep", "summarize", str(out)]) == 2
+    assert "chunks 1, 3" in capsys.readouterr().err
+    assert sorted(sweep.load(out, partial=True)["chunk"].unique()) == [0, 2]
+    assert not (out / "aggregates.parquet").exists()
+    # One process with the same --out (any process count: the plan does not depend on it) finishes the rest.
+    alone = tmp_path / "alone"
+    shutil.copytree(out, alone)
+    assert cli.main(["sweep", "run", str(tiny), "--out", str(alone)]) == 0  # chunk size from the manifest
+    assert json.loads(capsys.readouterr().out)["computed"] == 4
+    pd.testing.assert_frame_equal(sweep.load(alone), sweep.load(single))
+    # Rerunning process 1 (resume per process) completes it; process 0 rerun skips its chunks, writes aggregates.
+    s1 = sweep.run(tiny, out, chunk_size=CHUNK, process_id=1, num_processes=2, progress=False)
+    assert (s1.computed, s1.skipped) == (4, 0)
+    pd.testing.assert_frame_equal(sweep.load(out), sweep.load(single))
+    again = sweep.run(tiny, out, process_id=0, num_processes=2, progress=False)  # chunk size from the manifest
+    assert (again.computed, again.skipped, again.chunk_size) == (0, 2, CHUNK)
+    assert (out / "aggregates.parquet").exists()
+
+
+def test_duplicated_scenarios_are_refused(single, tmp_path):
+    out = tmp_path / "dup"
+    shutil.copytree(single, out)
+    part = pd.read_parquet(out / "parts" / "part-00000.parquet")
+    part.to_parquet(out / "parts" / "part-00001.parquet", index=False)  # chunk 1's file holds chunk 0's rows
+    with pytest.raises(sweep.IncompleteSweepError, match="more than once"):
+        sweep.load(out)
+
+
+BAD_FLAGS = [
+    (["--num-processes", "2", "--process-id", "2", "--coordinator", "localhost:1"], {},
+     "process id 2 out of range for 2 processes"),
+    (["--num-processes", "2", "--process-id", "0"], {}, "needs --coordinator"),
+    (["--num-processes", "2", "--process-id", "1", "--coordinator", "localhost"], {}, "must be HOST:PORT"),
+    (["--num-processes", "0"], {}, "--num-processes must be >= 1"),
+    (["--process-id", "1"], {}, "needs --num-processes"),
+    ([], {"IJOY_NUM_PROCESSES": "2", "IJOY_PROCESS_ID": "5", "IJOY_COORDINATOR": "localhost:1"},
+     "IJOY_PROCESS_ID: process id 5 out of range"),
+    ([], {"IJOY_NUM_PROCESSES": "two"}, "IJOY_NUM_PROCESSES must be an integer"),
+]
+
+
+@pytest.mark.parametrize("flags, env, message", BAD_FLAGS, ids=[b[2][:30] for b in BAD_FLAGS])
+def test_bad_layout_fails_before_any_compute(tiny, tmp_path, capsys, monkeypatch, flags, env, message):
+    for k in sweep.distributed.ENV.values():
+        monkeypatch.delenv(k, raising=False)
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    out = tmp_path / "o"
+    assert cli.main(["sweep", "run", str(tiny), "--out", str(out), *flags]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_run_checks_the_layout(tiny, tmp_path):
+    for pid, n in ((2, 2), (-1, 2), (0, 0), (0, None), (True, 2)):
+        with pytest.raises(ValueError, match="process"):
+            sweep.run(tiny, tmp_path / "o", process_id=pid, num_processes=n, progress=False)
+    assert not (tmp_path / "o").exists()
+
+
+def test_layout_from_flags_and_environment():
+    lay = sweep.distributed.layout(env={"IJOY_NUM_PROCESSES": "3", "IJOY_PROCESS_ID": "2",
+                                        "IJOY_COORDINATOR": "node0:1234"})
+    assert (lay.num_processes, lay.process_id, lay.coordinator, lay.multi) == (3, 2, "node0:1234", True)
+    # A flag wins over the environment; one process needs no coordinator and starts nothing.
+    lay = sweep.distributed.layout(num_processes=1, env={"IJOY_NUM_PROCESSES": "3"})
+    assert lay.num_processes == 1 and not lay.multi
+    assert sweep.distributed.initialize(lay) == (0, 1)
+    # --distributed leaves unset fields to JAX's cluster detection (SLURM, Open MPI, ...).
+    lay = sweep.distributed.layout(env={"IJOY_DISTRIBUTED": "1"})
+    assert lay.multi and lay.num_processes is None and lay.coordinator is None
