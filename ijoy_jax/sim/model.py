@@ -81,7 +81,9 @@ class BipedParams:
       range_lo, range_hi: LEFT leg joint limits (the right leg mirrors yaw and
         roll: ``(-hi, -lo)``), HRP-2-like.
       armature: reflected rotor inertia (kg m^2); damping: joint viscous damping (N m s/rad).
-      kp (N m/rad), kv (N m s/rad), force (N m): position actuator gains and torque limits.
+      kp (N m/rad), kv (N m s/rad), force (N m): position actuator gains and torque limits. Stiff
+        (kp 30000 on the pitch joints): softer gains (3000) let the CoM lag the plan at ~2 Hz
+        bandwidth and diverge; twice these is unstable at timestep 0.002.
     Contacts:
       sole_grid: (n along the foot, n across) sole spheres (3 x 2: toe/middle/heel x edges).
       sole_radius: sphere radius; the spheres' bottoms lie on the sole plane. MJX collides
@@ -122,9 +124,9 @@ class BipedParams:
     range_hi: tuple[float, ...] = tuple(math.radians(v) for v in (45.0, 35.0, 42.0, 150.0, 42.0, 35.0))
     armature: tuple[float, ...] = (0.1, 0.2, 0.2, 0.2, 0.2, 0.1)
     damping: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
-    kp: tuple[float, ...] = (1500.0, 3000.0, 3000.0, 3000.0, 3000.0, 2000.0)
-    kv: tuple[float, ...] = (30.0, 50.0, 50.0, 50.0, 50.0, 30.0)
-    force: tuple[float, ...] = (150.0, 250.0, 300.0, 350.0, 300.0, 200.0)
+    kp: tuple[float, ...] = (15000.0, 30000.0, 30000.0, 30000.0, 30000.0, 20000.0)
+    kv: tuple[float, ...] = (150.0, 200.0, 200.0, 200.0, 200.0, 150.0)
+    force: tuple[float, ...] = (300.0, 500.0, 500.0, 500.0, 500.0, 400.0)
     sole_grid: tuple[int, int] = (3, 2)
     sole_radius: float = 0.009
     shin_contacts: bool = False

@@ -1,0 +1,329 @@
+"""The MJX biped as a :class:`ijoy_jax.control.Walker`: the joystick loop with physics in place of a perfect robot.
+
+:func:`mjx_walker` implements the Walker's pure functions over a state that
+holds the MuJoCo XLA data: ``execute`` runs one step of the walking controller
+and the physics (``step_time`` seconds) in a ``lax.scan``, ``stance`` and
+``feet`` report the *measured* soles, so the next decision starts from where
+the simulated foot really landed. :func:`rollout` is the control loop of
+:func:`ijoy_jax.rollout` (the same selector code) with this walker, jitted as
+one scan; vmap :func:`rollout_core` for batches of terrains, commands and
+starts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from jax import lax
+from mujoco import mjx
+
+from ijoy_jax import control, geometry
+from ijoy_jax.robots import LEFT, Robot
+from ijoy_jax.select import METHODS, Targets
+from ijoy_jax.sim import controller, kinematics, model, swing
+from ijoy_jax.sim.controller import WalkConfig
+from ijoy_jax.terrain import Terrain
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Sim:
+    """A biped for one terrain grid shape: the host model, its MJX twin and the controller settings.
+
+    Build it once with :func:`make_sim` (it compiles nothing); every terrain of
+    that grid shape reuses it, its heights go into the height field per call.
+    """
+
+    params: model.BipedParams
+    cfg: WalkConfig
+    mj_model: mujoco.MjModel
+    mjx_model: mjx.Model
+    index: model.ModelIndex
+    shape: tuple[int, int]
+    resolution: float
+    fall_height: float  # pelvis height above its ground below which the robot has fallen (m)
+    fall_tilt: float  # torso tilt beyond which it has fallen (rad)
+
+    @property
+    def substeps(self) -> int:
+        return int(round(self.cfg.control_dt / self.mj_model.opt.timestep))
+
+
+def make_sim(shape, resolution: float, params: model.BipedParams | None = None, cfg: WalkConfig | None = None,
+             *, robot: Robot | None = None) -> Sim:
+    """Build the biped and its controller for terrains of ``shape`` (nx, ny) cells of ``resolution`` m.
+
+    ``cfg.com_height`` is replaced by the model's own CoM height at the
+    standing posture with the pelvis ``cfg.pelvis_height`` above the ground,
+    so the LIPM matches the robot. With ``robot`` given, its footprint sizes
+    the feet and its step time must equal ``cfg.step_time``.
+    """
+    shape = (int(shape[0]), int(shape[1]))
+    if min(shape) < 2:
+        raise ValueError(f"terrain shape must be at least (2, 2) cells, got {shape}")
+    params = model.biped_params(robot) if params is None else params
+    cfg = WalkConfig() if cfg is None else cfg
+    if robot is not None:
+        check_robot(robot, cfg)
+    timestep = params.timestep
+    ratio = cfg.control_dt / timestep
+    if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
+        raise ValueError(f"control_dt {cfg.control_dt} must be a whole multiple of the physics timestep {timestep}")
+    ratio = cfg.step_time / cfg.control_dt
+    if abs(ratio - round(ratio)) > 1e-6:
+        raise ValueError(f"step_time {cfg.step_time} must be a whole multiple of control_dt {cfg.control_dt}")
+    flat = Terrain(height=jnp.zeros(shape, jnp.float32), free=jnp.ones(shape, bool),
+                   origin=jnp.zeros(2, jnp.float32), resolution=float(resolution), has_height=True)
+    mj_model = model.build_model(params, flat)
+    # The LIPM's z_c and the horizontal CoM model (controller.WalkConfig): fitted on the standing robot.
+    data = mujoco.MjData(mj_model)
+    idx = model.model_index(mj_model)
+
+    def com_of(shift):
+        qpos = standing_qpos(params, cfg, jnp.asarray([[0.0, half, 0.0], [0.0, -half, 0.0]], jnp.float32),
+                             jnp.zeros(2), shift=jnp.asarray(shift, jnp.float32))
+        data.qpos[:] = np.asarray(qpos)
+        mujoco.mj_forward(mj_model, data)
+        return data.subtree_com[idx.pelvis].copy()
+
+    half = params.stand_width / 2
+    com0, com1 = com_of([0.0, 0.0]), com_of([0.04, 0.0])
+    # Pelvis moved by 0.04 m over fixed soles: the CoM moves by (1 - b) 0.04.
+    b = float(np.clip(1.0 - (com1[0] - com0[0]) / 0.04, 0.0, 0.9))
+    cfg = dataclasses.replace(cfg, com_height=float(com0[2]), com_offset=float(com0[0]), leg_share=b)
+    return Sim(params, cfg, mj_model, mjx.put_model(mj_model), idx, shape, float(resolution),
+               fall_height=0.5 * cfg.pelvis_height, fall_tilt=0.7)
+
+
+def check_robot(robot: Robot, cfg: WalkConfig) -> None:
+    """The selector's step time (p_next = p0 + dt j) must be the walker's."""
+    st = robot.step_time
+    if not isinstance(st, jax.core.Tracer) and np.ndim(st) == 0 and abs(float(st) - cfg.step_time) > 1e-6:
+        raise ValueError(f"robot.step_time {float(st)} s differs from the walking controller's {cfg.step_time} s")
+
+
+def standing_qpos(params: model.BipedParams, cfg: WalkConfig, feet, ground, shift=None) -> jax.Array:
+    """(7 + 12,) qpos standing on soles ``feet`` (2, 3) at heights ``ground`` (2,), pelvis above their midpoint
+    (moved by ``shift`` (2,) m in the world frame when given)."""
+    feet = jnp.asarray(feet, jnp.float32)
+    yaw = feet[0, 2] + 0.5 * geometry.wrap_angle(feet[1, 2] - feet[0, 2])
+    mid = 0.5 * (feet[0, :2] + feet[1, :2]) + (0.0 if shift is None else shift)
+    pelvis = jnp.concatenate([mid, (jnp.mean(ground) + cfg.pelvis_height)[None]])
+    rot = controller.rot_z(yaw)
+    q = [kinematics.leg_ik(params, side, pelvis, rot, jnp.array([f[0], f[1], g]), controller.rot_z(f[2]))[0]
+         for side, f, g in ((1, feet[0], ground[0]), (-1, feet[1], ground[1]))]
+    quat = jnp.array([jnp.cos(yaw / 2), 0.0, 0.0, jnp.sin(yaw / 2)])
+    return jnp.concatenate([pelvis, quat, q[0], q[1]])
+
+
+class StepLog(NamedTuple):
+    """What one executed step did (recorded per step in ``Trajectory.log``)."""
+
+    landed: jax.Array  # (4,) measured swing sole at the step's end: x, y, z, yaw
+    placement_error: jax.Array  # () m, |landed - commanded| in xy (0 when no step was sent)
+    yaw_error: jax.Array  # () rad, |wrap(landed - commanded)| yaw
+    fallen: jax.Array  # () bool, the robot has fallen (now or before)
+    obstacle_contact: jax.Array  # () bool, a sole sphere (or shin) touched an obstacle cell during the step
+    min_pelvis_height: jax.Array  # () m, lowest pelvis height above the ground during the step
+    max_tilt: jax.Array  # () rad, largest torso tilt during the step
+
+
+class SimState(NamedTuple):
+    data: mjx.Data
+    ctrl: controller.CtrlState
+    soles: jax.Array  # (2, 4) measured soles x, y, z, yaw (row 0 left)
+    swing: jax.Array  # () +1 if the left foot swings next
+    anchor: jax.Array  # (2,) the ZMP's current support point
+    last: StepLog
+
+
+def _observe(sim: Sim, d: mjx.Data) -> controller.Observation:
+    return controller.Observation(d.qpos[0:3], d.qpos[3:7], d.qvel[0:3], d.subtree_com[sim.index.pelvis])
+
+
+def _soles(sim: Sim, d: mjx.Data) -> jax.Array:
+    pos = d.site_xpos[sim.index.sole_site]  # (2, 3)
+    mat = d.site_xmat[sim.index.sole_site].reshape(2, 3, 3)
+    yaw = jnp.arctan2(mat[:, 1, 0], mat[:, 0, 0])
+    return jnp.concatenate([pos, yaw[:, None]], axis=1)
+
+
+def _tilt(quat) -> jax.Array:
+    """Angle between the torso's z axis and the vertical (rad)."""
+    x, y = quat[1], quat[2]
+    cos = 1 - 2 * (x * x + y * y) / jnp.maximum(jnp.sum(quat**2), 1e-12)
+    return jnp.arccos(jnp.clip(cos, -1.0, 1.0))
+
+
+def _obstacle_contact(sim: Sim, terrain: Terrain, d: mjx.Data) -> jax.Array:
+    """A robot geom touches the terrain inside an obstacle cell (looked up half a cell into the ground)."""
+    con = d._impl.contact
+    robot_geoms = jnp.asarray(np.concatenate([sim.index.sole_geoms.ravel(), sim.index.shin_geom]))
+    g = con.geom  # (ncon, 2)
+    involves = jnp.any(g[:, :, None] == robot_geoms[None, None, :], axis=(1, 2))
+    with_ground = jnp.any(g == sim.index.hfield_geom, axis=1)
+    active = (con.dist < 0) & involves & with_ground
+    normal = con.frame[:, 0, :]
+    probe = con.pos[:, :2] - 0.5 * terrain.resolution * normal[:, :2]
+    ij = jnp.floor((probe - terrain.origin) / terrain.resolution).astype(jnp.int32)
+    nx, ny = terrain.free.shape
+    inside = (ij[:, 0] >= 0) & (ij[:, 0] < nx) & (ij[:, 1] >= 0) & (ij[:, 1] < ny)
+    free = terrain.free[jnp.clip(ij[:, 0], 0, nx - 1), jnp.clip(ij[:, 1], 0, ny - 1)]
+    return jnp.any(active & (~free | ~inside))
+
+
+def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> control.Walker:
+    """The Walker of the simulated biped on ``terrain`` (call inside jit; ``m`` = the model with its height field).
+
+    The terrain's heights as the robot feels them (2D obstacles raised to
+    ``params.obstacle_height``) also place the footholds' heights and the
+    swing paths' apexes.
+    """
+    params, cfg = sim.params, sim.cfg
+    phys = terrain.replace(height=model.physical_heights(terrain, params.obstacle_height), has_height=True)
+    m = model.put_terrain(sim.mjx_model, params, terrain) if m is None else m
+    pgains = controller.gains(cfg)
+    foot_l, foot_w = params.foot_length, params.foot_width
+
+    def ground_of(pose):
+        return swing.footprint_height(phys, pose, foot_l, foot_w)
+
+    def simulate(d, cs, plan):
+        """One step of control ticks and physics: (data, ctrl state, obstacle touched, lowest pelvis, max tilt)."""
+        ground = 0.5 * (plan.stance[2] + plan.swing_to[2])
+
+        def tick(carry, _):
+            d, cs, touched, low, tilt = carry
+            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, _observe(sim, d))
+            d = d.replace(ctrl=q)
+
+            def physics(c, _):
+                d, touched, low, tilt = c
+                d = mjx.step(m, d)
+                low = jnp.minimum(low, d.qpos[2] - ground)
+                tilt = jnp.maximum(tilt, _tilt(d.qpos[3:7]))
+                touched = touched | _obstacle_contact(sim, terrain, d)
+                return (d, touched, low, tilt), None
+
+            (d, touched, low, tilt), _ = lax.scan(physics, (d, touched, low, tilt), None, length=sim.substeps)
+            return (d, cs, touched, low, tilt), None
+
+        carry0 = (d, cs._replace(t=jnp.zeros((), jnp.float32)), jnp.bool_(False), jnp.float32(jnp.inf),
+                  jnp.float32(0))
+        (d, cs, touched, low, tilt), _ = lax.scan(tick, carry0, None, length=cfg.ticks_per_step)
+        return d, cs, touched, low, tilt
+
+    def split(soles, swing_side):
+        left_swings = swing_side > 0
+        return jnp.where(left_swings, soles[1], soles[0]), jnp.where(left_swings, soles[0], soles[1])
+
+    def init(start, first_swing):
+        ground = jax.vmap(ground_of)(start)
+        qpos = standing_qpos(params, cfg, start, ground)
+        d = mjx.make_data(m)
+        d = d.replace(qpos=qpos, ctrl=qpos[7:])
+        d = mjx.forward(m, d)
+        soles = _soles(sim, d)
+        swing_side = jnp.asarray(first_swing, jnp.float32)
+        # One step standing while the preview sees the first step's weight shift coming.
+        st, sw = split(soles, swing_side)
+        cs = controller.init_state(pgains, d.subtree_com[sim.index.pelvis][:2])
+        d, cs, touched, low, tilt = simulate(d, cs, controller.prepare_plan(st, sw, swing_side))
+        soles = _soles(sim, d)
+        fallen = (low < sim.fall_height) | (tilt > sim.fall_tilt)
+        log = StepLog(soles[0], jnp.float32(0), jnp.float32(0), fallen, touched, low, tilt)
+        return SimState(d, cs, soles, swing_side, 0.5 * (soles[0, :2] + soles[1, :2]), log)
+
+    def stance(s):
+        st, sw = split(s.soles, s.swing)
+        return control.StanceInfo(st[jnp.array([0, 1, 3])], -s.swing, sw[jnp.array([0, 1, 3])])
+
+    def execute(s, pose, go):
+        go = jnp.asarray(go) & ~s.last.fallen
+        st, sw = split(s.soles, s.swing)
+        pose = jnp.asarray(pose, jnp.float32)
+        target = jnp.array([pose[0], pose[1], ground_of(pose), pose[2]])
+        top = swing.corridor_height(phys, sw[jnp.array([0, 1, 3])], pose, foot_l, foot_w)
+        plan = controller.plan_step(s.anchor, st, sw, target, go, s.swing, top, cfg.clearance)
+        d, cs, touched, low, tilt = simulate(s.data, s.ctrl, plan)
+        soles = _soles(sim, d)
+        landed = jnp.where(s.swing > 0, soles[0], soles[1])
+        fallen = s.last.fallen | (low < sim.fall_height) | (tilt > sim.fall_tilt)
+        err = jnp.where(go, jnp.hypot(landed[0] - target[0], landed[1] - target[1]), 0.0)
+        yaw_err = jnp.where(go, jnp.abs(geometry.wrap_angle(landed[3] - target[3])), 0.0)
+        log = StepLog(landed, err, yaw_err, fallen, touched, low, tilt)
+        anchor = jnp.where(go, st[:2], 0.5 * (soles[0, :2] + soles[1, :2]))
+        return SimState(d, cs, soles, jnp.where(go, -s.swing, s.swing), anchor, log)
+
+    def feet(s):
+        return s.soles[:, jnp.array([0, 1, 3])]
+
+    return control.Walker(init, stance, execute, feet, lambda s: s.last)
+
+
+def rollout_core(sim: Sim, terrain: Terrain, robot: Robot, start, commands, num_steps: int,
+                 method: str = "exhaustive", first_swing=LEFT, targets: Targets | None = None,
+                 swing_path: bool = True, quantize: bool = True) -> control.Trajectory:
+    """The joystick loop with the simulated biped, without checks or jit (vmap it for batches)."""
+    walker = mjx_walker(sim, terrain)
+    return control.rollout_core(terrain, robot, start, commands, num_steps, method, first_swing, walker,
+                                swing_path, quantize, targets)
+
+
+@functools.partial(jax.jit, static_argnames=("sim", "num_steps", "method", "swing_path", "quantize"))
+def _rollout_jit(sim, terrain, robot, start, commands, num_steps, method, first_swing, targets, swing_path, quantize):
+    return rollout_core(sim, terrain, robot, start, commands, num_steps, method, first_swing, targets,
+                        swing_path, quantize)
+
+
+def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, num_steps: int, method: str = "exhaustive",
+            *, first_swing: int = LEFT, targets: Targets | None = None, swing_path: bool = True,
+            quantize: bool = True) -> control.Trajectory:
+    """Walk the simulated biped with the joystick for ``num_steps`` steps (jitted as one scan).
+
+    Same arguments and result as :func:`ijoy_jax.rollout`, with the physics in
+    place of the perfect robot: ``footsteps`` are the measured touch-downs,
+    ``commanded`` the steps sent, and ``log`` a :class:`StepLog` per step
+    (placement error, falls, obstacle contacts). :func:`summary` condenses it.
+    """
+    if tuple(terrain.free.shape) != sim.shape or terrain.resolution != sim.resolution:
+        raise ValueError(f"terrain grid {tuple(terrain.free.shape)} at {terrain.resolution} m does not match the "
+                         f"Sim's {sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid")
+    check_robot(robot, sim.cfg)
+    if np.shape(start) != (2, 3):
+        raise ValueError(f"start must have shape (2, 3) (left foot, right foot), got {np.shape(start)}")
+    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
+        raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
+    if np.shape(commands) not in ((3,), (num_steps, 3)):
+        raise ValueError(f"commands must have shape (3,) or ({num_steps}, 3), got {np.shape(commands)}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    return _rollout_jit(sim, terrain, robot, start, commands, int(num_steps), method, first_swing, targets,
+                        swing_path, quantize)
+
+
+def summary(traj: control.Trajectory) -> dict[str, jax.Array]:
+    """Per-rollout totals of a simulated rollout, on top of ``traj.summary()``.
+
+    fell: the robot fell; obstacle_contacts: steps during which a foot (or
+    shin) touched an obstacle cell; placement_error_mean / _p95 (m): the
+    touch-down error of the steps taken; yaw_error_mean (rad).
+    """
+    log: StepLog = traj.log
+    taken = traj.taken
+    n = jnp.maximum(jnp.sum(taken, axis=-1), 1)
+    err = jnp.where(taken, log.placement_error, jnp.nan)
+    out = dict(traj.summary())
+    out.update(
+        fell=jnp.any(log.fallen, axis=-1),
+        obstacle_contacts=jnp.sum(log.obstacle_contact, axis=-1),
+        placement_error_mean=jnp.sum(jnp.where(taken, log.placement_error, 0.0), axis=-1) / n,
+        placement_error_p95=jnp.where(jnp.any(taken, axis=-1), jnp.nanpercentile(err, 95, axis=-1), 0.0),
+        yaw_error_mean=jnp.sum(jnp.where(taken, log.yaw_error, 0.0), axis=-1) / n,
+    )
+    return out
