@@ -142,10 +142,6 @@ class SimState(NamedTuple):
     last: StepLog
 
 
-def _observe(sim: Sim, d: mjx.Data) -> controller.Observation:
-    return controller.Observation(d.qpos[0:3], d.qpos[3:7], d.qvel[0:3], d.subtree_com[sim.index.pelvis])
-
-
 def _soles(sim: Sim, d: mjx.Data) -> jax.Array:
     pos = d.site_xpos[sim.index.sole_site]  # (2, 3)
     mat = d.site_xmat[sim.index.sole_site].reshape(2, 3, 3)
@@ -199,7 +195,7 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
 
         def tick(carry, _):
             d, cs, touched, low, tilt = carry
-            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, _observe(sim, d))
+            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs)
             d = d.replace(ctrl=q)
 
             def physics(c, _):
