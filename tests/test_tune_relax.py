@@ -433,3 +433,23 @@ def test_swing_path_zero_length_swing_is_finite(small_robot):
     assert np.isfinite(float(val))
     for g in jax.tree.leaves(grads):
         assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_tall_cell_beside_the_band_does_not_leak_into_bump_or_band():
+    """A 0.3 m column one cell outside the grown footprint: exact bump and band are 0, and the soft ones are
+    under 1 cm at sharpness 30 (memberships scale the values; as log-sum-exp weights the column leaked 0.26 m
+    into band at sharpness 10 and 30, and only dropped out from about 100)."""
+    res = 0.02
+    h = np.zeros((40, 40), np.float32)
+    robot = ij.robots.hrp2(margin=0.02)
+    pose = np.array([0.4, 0.4, 0.0], np.float32)
+    # the grown footprint reaches x = 0.4 + 0.121 + 0.02 = 0.541; the column is the cell [0.56, 0.58)
+    i = int((0.541 + 0.02) / res)
+    h[i, 20] = 0.3
+    terrain = ij.terrain.from_arrays(h, None, res)
+    idx = jnp.zeros(1, jnp.int32)
+    exact = ij.foot_cost_terms(terrain, robot, pose, 1, pose[None], action_index=idx)
+    assert float(exact.bump_m[0]) == 0.0 and float(exact.band_m[0]) == 0.0
+    soft = [relax.soft_foot_cost_terms(terrain, robot, pose, pose[None], idx, sharpness=k) for k in (10.0, 30.0)]
+    assert float(soft[1].bump_m[0]) < 0.01 and float(soft[1].band_m[0]) < 0.01
+    assert float(soft[1].band_m[0]) <= float(soft[0].band_m[0]) + 1e-6

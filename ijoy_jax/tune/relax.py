@@ -225,9 +225,13 @@ def _soft_plane(patch: _Patch, m_foot, m_grown, res: float, temp) -> _SoftPlane:
     height = h_ref + mh - b * mu - c * mv  # plane height at the pose (m)
     slope = jnp.arctan(_safe_norm(b, c) / res)
     roughness = jnp.sum(m_foot * _smooth_abs(resid, temp)) / n_safe
-    bump = _soft_max0(resid, m_foot, temp)
+    # Memberships scale the values, not the log-sum-exp weights: a weight m only shifts a value by
+    # temp * log(m), about minus the cell's distance outside the foot, which never vanishes as the
+    # sharpness grows, so cells near the foot would leak into bump and band.
+    ones = jnp.ones_like(m_foot)
+    bump = _soft_max0(m_foot * resid, ones, temp)
     m_band = m_grown * (1.0 - m_foot)
-    band = _soft_max0(_smooth_abs(resid, temp), m_band, temp)
+    band = _soft_max0(m_band * _smooth_abs(resid, temp), ones, temp)
     return _SoftPlane(height, slope, roughness, bump, band)
 
 
