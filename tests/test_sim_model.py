@@ -200,3 +200,23 @@ def test_mjx_put_terrains_ball_contact_and_standing():
     for k in range(2):
         assert qpos[2] - qpos_end[k, 2] < STAND_DROP
         np.testing.assert_allclose(qpos_end[k, :2], 0.0, atol=0.02)
+
+
+def test_put_terrain_places_the_height_field_on_the_terrains_grid():
+    """A model built at one origin, given terrains at others: the height field geom sits where build_model puts it."""
+    from mujoco import mjx
+
+    params = model.biped_params()
+    shape, res = (30, 20), 0.02
+    m = mjx.put_model(model.build_model(params, ij.terrain.flat(shape, res, origin=(0.0, 0.0), has_height=True)))
+    gid = model.model_index(model.build_model(params, ij.terrain.flat(shape, res, has_height=True))).hfield_geom
+    origins = [(-1.0, -0.8), (2.5, 0.3)]
+    terrains = [ij.terrain.flat(shape, res, origin=o, has_height=True) for o in origins]
+    for t in terrains:
+        want = model.build_model(params, t).geom_pos[gid]
+        np.testing.assert_allclose(model.put_terrain(m, params, t).geom_pos[gid], want, atol=1e-6)
+    batch = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *terrains)
+    mb, axes = model.put_terrains(m, params, batch)
+    assert axes.geom_pos == 0
+    for k, t in enumerate(terrains):
+        np.testing.assert_allclose(mb.geom_pos[k, gid], model.build_model(params, t).geom_pos[gid], atol=1e-6)

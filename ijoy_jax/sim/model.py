@@ -401,14 +401,26 @@ def put_terrain(mjx_model, params: BipedParams, terrain):
     if data.shape != mjx_model.hfield_data.shape:
         raise ValueError(f"terrain grid {terrain.shape} does not match the model's height field "
                          f"({mjx_model.hfield_data.shape[0]} samples)")
-    return mjx_model.replace(hfield_data=data.astype(mjx_model.hfield_data.dtype))
+    return mjx_model.replace(hfield_data=data.astype(mjx_model.hfield_data.dtype),
+                             geom_pos=_terrain_geom_pos(mjx_model, params, terrain))
+
+
+def _terrain_geom_pos(mjx_model, params: BipedParams, terrain) -> jax.Array:
+    """The model's geom positions with the height field's centred on ``terrain``'s grid (its origin may differ
+    from the one the model was built with)."""
+    gid = int(np.flatnonzero(np.asarray(mjx_model.geom_type) == int(mujoco.mjtGeom.mjGEOM_HFIELD))[0])
+    centre = jnp.asarray(terrain.origin, jnp.float32) + 0.5 * terrain.resolution * jnp.asarray(terrain.shape,
+                                                                                                jnp.float32)
+    pos = jnp.concatenate([centre, jnp.full((1,), params.z_lo, jnp.float32)])
+    return mjx_model.geom_pos.at[gid].set(pos.astype(mjx_model.geom_pos.dtype))
 
 
 def put_terrains(mjx_model, params: BipedParams, terrains):
     """A batch of terrains (a Terrain with a leading batch axis) in one ``mjx.Model``.
 
     Returns:
-      (model, in_axes): the model with (B, ny * nx) ``hfield_data`` and its other
+      (model, in_axes): the model with (B, ny * nx) ``hfield_data`` and (B, ngeom, 3)
+      ``geom_pos`` (the height field placed on each terrain's grid) and its other
       leaves shared, and the matching ``in_axes`` pytree for ``jax.vmap``
       (0 for ``hfield_data``, None elsewhere), as in mujoco_playground's randomize.
 
@@ -419,8 +431,9 @@ def put_terrains(mjx_model, params: BipedParams, terrains):
     data = jax.vmap(lambda t: hfield_data(params, t))(terrains)
     if data.shape[1:] != mjx_model.hfield_data.shape:
         raise ValueError(f"terrain grids do not match the model's height field ({mjx_model.hfield_data.shape[0]})")
-    model = mjx_model.replace(hfield_data=data.astype(mjx_model.hfield_data.dtype))
-    in_axes = jax.tree_util.tree_map(lambda _: None, mjx_model).replace(hfield_data=0)
+    geom_pos = jax.vmap(lambda t: _terrain_geom_pos(mjx_model, params, t))(terrains)
+    model = mjx_model.replace(hfield_data=data.astype(mjx_model.hfield_data.dtype), geom_pos=geom_pos)
+    in_axes = jax.tree_util.tree_map(lambda _: None, mjx_model).replace(hfield_data=0, geom_pos=0)
     return model, in_axes
 
 
