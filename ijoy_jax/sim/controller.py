@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 
 from ijoy_jax import geometry
-from ijoy_jax.sim import kinematics, preview, swing
+from ijoy_jax.sim import dynamics, kinematics, preview, swing
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,6 +48,8 @@ class WalkConfig:
       its swept footprint.
     swing_lift: fraction of the swing spent rising (and as much descending)
       before (after) the foot moves horizontally (:func:`swing.swing_pose`).
+    filter_passes: passes of the dynamics filter (:func:`zmp_correction`)
+      run at the start of every step; 0 tracks the LIPM's ZMP uncorrected.
     com_offset, leg_share: the CoM model ``com = (1 - b) pelvis + b/2 (sole_l
       + sole_r) + (com_offset, 0)`` in the horizontal plane (b = leg_share),
       fitted to the robot by :func:`ijoy_jax.sim.walker.make_sim`; the pelvis
@@ -63,6 +65,7 @@ class WalkConfig:
     pelvis_height: float = 0.68
     clearance: float = 0.05
     swing_lift: float = 0.2
+    filter_passes: int = 0
     com_offset: float = 0.0
     leg_share: float = 0.0
     preview_q: float = 1.0
@@ -186,11 +189,18 @@ def foot_targets(cfg: WalkConfig, plan: StepPlan, t) -> jax.Array:
     return jnp.stack([left, right])
 
 
-def control_tick(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPlan,
-                 cs: CtrlState) -> tuple[jax.Array, CtrlState, jax.Array]:
-    """One controller period: the 12 joint targets (left leg then right), the new state, the ZMP reference (2,)."""
+def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPlan, cs: CtrlState,
+            correction=None) -> tuple[jax.Array, CtrlState, jax.Array]:
+    """One controller period of the pattern: the whole planned qpos (19,) at the period's end, the new state,
+    and the ZMP reference (2,) at its start.
+
+    ``correction`` (N, 2), when given, is subtracted from the ZMP reference the
+    LIPM tracks over the horizon: the dynamics filter's estimate of how far the
+    multibody ZMP of this pattern falls from the LIPM's (:func:`zmp_correction`).
+    """
     zref = preview.zmp_reference(plan.zmp, cs.t, cfg.control_dt, cfg.horizon, cfg.step_time, cfg.ds_time)
-    lipm, err_sum, _ = preview.preview_update(pgains, cs.lipm, cs.err_sum, zref)
+    ztrack = zref if correction is None else zref - correction
+    lipm, err_sum, _ = preview.preview_update(pgains, cs.lipm, cs.err_sum, ztrack)
     t = cs.t + cfg.control_dt
     feet = foot_targets(cfg, plan, t)
     # Ground under the body: the mean of the stance sole and the swing sole's start/end heights.
@@ -205,4 +215,54 @@ def control_tick(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: St
     pelvis_rot = rot_z(yaw_mid)
     q = [kinematics.leg_ik(params, side, pelvis_pos, pelvis_rot, feet[row, :3], rot_z(feet[row, 3]))[0]
          for row, side in enumerate((1, -1))]
-    return jnp.concatenate(q), CtrlState(lipm, err_sum, t), zref[0]
+    quat = jnp.stack([jnp.cos(yaw_mid / 2), jnp.zeros_like(yaw_mid), jnp.zeros_like(yaw_mid), jnp.sin(yaw_mid / 2)])
+    return jnp.concatenate([pelvis_pos, quat, *q]), CtrlState(lipm, err_sum, t), zref[0]
+
+
+def control_tick(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPlan, cs: CtrlState,
+                 correction=None) -> tuple[jax.Array, CtrlState, jax.Array]:
+    """One controller period: the 12 joint targets (left leg then right), the new state, the ZMP reference (2,)."""
+    qpos, cs, zref = pattern(params, cfg, pgains, plan, cs, correction)
+    return qpos[7:], cs, zref
+
+
+def predict(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPlan, cs: CtrlState, correction,
+            length: int) -> tuple[jax.Array, jax.Array]:
+    """The pattern of ``length`` periods from ``cs`` (kinematics only): qpos (length, 19), ZMP reference (length, 2).
+
+    ``correction`` (length + N, 2) is indexed by period (row k is subtracted at
+    period k's time); the k-th qpos is at the end of period k, the k-th
+    reference at its start.
+    """
+    n = cfg.horizon
+
+    def body(cs, k):
+        window = jax.lax.dynamic_slice_in_dim(correction, k, n)
+        qpos, cs, zref = pattern(params, cfg, pgains, plan, cs, window)
+        return cs, (qpos, zref)
+
+    _, (qpos, zref) = jax.lax.scan(body, cs, jnp.arange(length))
+    return qpos, zref
+
+
+def zmp_correction(m_free, params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPlan, cs: CtrlState,
+                   passes: int = 2) -> jax.Array:
+    """The dynamics filter (Kajita et al. 2003, as fixed-point passes): ZMP corrections for one step.
+
+    Plays the step's pattern (and the horizon after it) kinematically,
+    measures its multibody ZMP with inverse dynamics
+    (:func:`ijoy_jax.sim.dynamics.motion_zmp` on ``m_free``, the model without
+    constraints), and adds the error to the correction the LIPM tracks; each
+    pass replans with it. Returns (ticks_per_step + 2 N, 2) corrections indexed
+    by control period, for :func:`control_tick`'s windows. The prediction
+    holds the feet still after this step (the next swing is not known yet).
+    """
+    length = cfg.ticks_per_step + cfg.horizon
+    corr = jnp.zeros((length + cfg.horizon, 2), jnp.float32)  # windows of predict() reach period length + N
+    for _ in range(passes):
+        qpos, zref = predict(params, cfg, pgains, plan, cs, corr, length)
+        zmp, _ = dynamics.motion_zmp(m_free, qpos, cfg.control_dt)  # at the ends of periods 1 .. length - 2
+        # qpos[k] is at the end of period k = the start of period k + 1, whose reference is zref[k + 1].
+        err = zmp - zref[2:length]
+        corr = corr.at[2:length].add(err)
+    return corr

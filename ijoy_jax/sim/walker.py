@@ -26,7 +26,7 @@ from mujoco import mjx
 from ijoy_jax import control, geometry
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import METHODS, Targets
-from ijoy_jax.sim import controller, kinematics, model, swing
+from ijoy_jax.sim import controller, dynamics, kinematics, model, swing
 from ijoy_jax.sim.controller import WalkConfig
 from ijoy_jax.terrain import Terrain
 
@@ -43,6 +43,7 @@ class Sim:
     cfg: WalkConfig
     mj_model: mujoco.MjModel
     mjx_model: mjx.Model
+    mjx_free: mjx.Model  # the same robot without constraints, for the dynamics filter's inverse dynamics
     index: model.ModelIndex
     shape: tuple[int, int]
     resolution: float
@@ -96,7 +97,8 @@ def make_sim(shape, resolution: float, params: model.BipedParams | None = None, 
     # Pelvis moved by 0.04 m over fixed soles: the CoM moves by (1 - b) 0.04.
     b = float(np.clip(1.0 - (com1[0] - com0[0]) / 0.04, 0.0, 0.9))
     cfg = dataclasses.replace(cfg, com_height=float(com0[2]), com_offset=float(com0[0]), leg_share=b)
-    return Sim(params, cfg, mj_model, mjx.put_model(mj_model), idx, shape, float(resolution),
+    return Sim(params, cfg, mj_model, mjx.put_model(mj_model), dynamics.no_contact_model(mj_model), idx, shape,
+               float(resolution),
                fall_height=0.5 * cfg.pelvis_height, fall_tilt=0.7)
 
 
@@ -193,9 +195,16 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
         """One step of control ticks and physics: (data, ctrl state, obstacle touched, lowest pelvis, max tilt)."""
         ground = 0.5 * (plan.stance[2] + plan.swing_to[2])
 
-        def tick(carry, _):
+        cs = cs._replace(t=jnp.zeros((), jnp.float32))
+        if cfg.filter_passes > 0:
+            corr = controller.zmp_correction(sim.mjx_free, params, cfg, pgains, plan, cs, cfg.filter_passes)
+        else:
+            corr = jnp.zeros((cfg.ticks_per_step + cfg.horizon, 2), jnp.float32)
+
+        def tick(carry, k):
             d, cs, touched, low, tilt = carry
-            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs)
+            window = lax.dynamic_slice_in_dim(corr, k, cfg.horizon)
+            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, window)
             d = d.replace(ctrl=q)
 
             def physics(c, _):
@@ -209,9 +218,9 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
             (d, touched, low, tilt), _ = lax.scan(physics, (d, touched, low, tilt), None, length=sim.substeps)
             return (d, cs, touched, low, tilt), None
 
-        carry0 = (d, cs._replace(t=jnp.zeros((), jnp.float32)), jnp.bool_(False), jnp.float32(jnp.inf),
+        carry0 = (d, cs, jnp.bool_(False), jnp.float32(jnp.inf),
                   jnp.float32(0))
-        (d, cs, touched, low, tilt), _ = lax.scan(tick, carry0, None, length=cfg.ticks_per_step)
+        (d, cs, touched, low, tilt), _ = lax.scan(tick, carry0, jnp.arange(cfg.ticks_per_step))
         return d, cs, touched, low, tilt
 
     def split(soles, swing_side):
