@@ -226,19 +226,34 @@ def control_tick(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: St
     return qpos[7:], cs, zref
 
 
+def next_plan(cfg: WalkConfig, plan: StepPlan) -> StepPlan:
+    """The step after ``plan`` as the ZMP plan assumes it: the other foot repeats the stride (or both stand)."""
+    stride_yaw = geometry.wrap_angle(plan.swing_to[3] - plan.swing_from[3])
+    target = jnp.concatenate([plan.zmp[3], plan.stance[2:3], (plan.stance[3] + stride_yaw)[None]])
+    top = plan.apex - cfg.clearance
+    return plan_step(plan.stance[:2], plan.swing_to, plan.stance, target, plan.go, -plan.swing_side, top,
+                     cfg.clearance)
+
+
 def predict(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPlan, cs: CtrlState, correction,
             length: int) -> tuple[jax.Array, jax.Array]:
     """The pattern of ``length`` periods from ``cs`` (kinematics only): qpos (length, 19), ZMP reference (length, 2).
 
     ``correction`` (length + N, 2) is indexed by period (row k is subtracted at
     period k's time); the k-th qpos is at the end of period k, the k-th
-    reference at its start.
+    reference at its start. After this step the pattern goes on with the
+    assumed next step (:func:`next_plan`).
     """
     n = cfg.horizon
+    steps = cfg.ticks_per_step
+    after = next_plan(cfg, plan)
 
     def body(cs, k):
         window = jax.lax.dynamic_slice_in_dim(correction, k, n)
-        qpos, cs, zref = pattern(params, cfg, pgains, plan, cs, window)
+        later = k >= steps
+        now = jax.tree_util.tree_map(lambda a, b: jnp.where(later, b, a), plan, after)
+        cs = cs._replace(t=jnp.where(k == steps, jnp.zeros_like(cs.t), cs.t))
+        qpos, cs, zref = pattern(params, cfg, pgains, now, cs, window)
         return cs, (qpos, zref)
 
     _, (qpos, zref) = jax.lax.scan(body, cs, jnp.arange(length))
