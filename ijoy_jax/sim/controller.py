@@ -13,6 +13,8 @@ the swing foot moves from ``swing_from`` to ``swing_to``. Every control tick
    the LIPM's CoM, and solves both legs' analytic inverse kinematics for the
    actuators' position targets.
 
+Optionally (``filter_passes``) a dynamics filter corrects the ZMP reference
+by the multibody ZMP error of the planned motion (:func:`zmp_correction`).
 This is the walking pattern generator without a stabiliser: it reads no
 measurement. It steps in place and takes short steps on flat ground, but
 longer steps fall within a few steps (issue 7; the stabiliser that reads the
