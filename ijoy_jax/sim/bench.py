@@ -23,6 +23,7 @@ import numpy as np
 from jax import lax
 from mujoco import mjx
 
+from ijoy_jax import terrain
 from ijoy_jax.sim import model
 from ijoy_jax.terrain import Terrain
 
@@ -38,9 +39,7 @@ def _terrains(key, batch: int) -> Terrain:
 
 
 def _setup(params: model.BipedParams):
-    one = Terrain(height=jnp.zeros(SHAPE, jnp.float32), free=jnp.ones(SHAPE, bool),
-                  origin=jnp.full(2, -1.0, jnp.float32), resolution=RESOLUTION, has_height=True)
-    mj_model = model.build_model(params, one)
+    mj_model = model.build_model(params, terrain.flat(SHAPE, RESOLUTION, origin=(-1.0, -1.0), has_height=True))
     qpos = model.standing_qpos(params, ground=(BUMPS, BUMPS))
     return mj_model, qpos
 

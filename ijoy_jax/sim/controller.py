@@ -117,12 +117,6 @@ def gains(cfg: WalkConfig) -> preview.PreviewGains:
     return preview.preview_gains(cfg.com_height, cfg.control_dt, cfg.horizon, q=cfg.preview_q, r=cfg.preview_r)
 
 
-def rot_z(yaw) -> jax.Array:
-    c, s = jnp.cos(yaw), jnp.sin(yaw)
-    z, o = jnp.zeros_like(c), jnp.ones_like(c)
-    return jnp.stack([jnp.stack([c, -s, z]), jnp.stack([s, c, z]), jnp.stack([z, z, o])])
-
-
 def plan_step(anchor, stance, swing_from, pose, go, swing_side, corridor_top, clearance) -> StepPlan:
     """The plan of one step.
 
@@ -211,11 +205,11 @@ def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPla
     yaw_mid = feet[0, 3] + 0.5 * geometry.wrap_angle(feet[1, 3] - feet[0, 3])
     # The pelvis that puts the CoM model (1 - b) pelvis + b mean(soles) + offset on the LIPM's CoM.
     b = cfg.leg_share
-    offset = rot_z(yaw_mid)[:2, 0] * cfg.com_offset
+    offset = kinematics.rot_z(yaw_mid)[:2, 0] * cfg.com_offset
     pelvis_xy = (lipm[0] - 0.5 * b * (feet[0, :2] + feet[1, :2]) - offset) / (1.0 - b)
     pelvis_pos = jnp.concatenate([pelvis_xy, (ground + cfg.pelvis_height)[None]])
-    pelvis_rot = rot_z(yaw_mid)
-    q = [kinematics.leg_ik(params, side, pelvis_pos, pelvis_rot, feet[row, :3], rot_z(feet[row, 3]))[0]
+    pelvis_rot = kinematics.rot_z(yaw_mid)
+    q = [kinematics.leg_ik(params, side, pelvis_pos, pelvis_rot, feet[row, :3], kinematics.rot_z(feet[row, 3]))[0]
          for row, side in enumerate((1, -1))]
     quat = jnp.stack([jnp.cos(yaw_mid / 2), jnp.zeros_like(yaw_mid), jnp.zeros_like(yaw_mid), jnp.sin(yaw_mid / 2)])
     return jnp.concatenate([pelvis_pos, quat, *q]), CtrlState(lipm, err_sum, t), zref[0]

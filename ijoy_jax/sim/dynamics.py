@@ -71,12 +71,8 @@ def motion_zmp(m: mjx.Model, qpos: jax.Array, dt: float) -> tuple[jax.Array, jax
         d = mjx.make_data(m).replace(qpos=q, qvel=qv, qacc=qa)
         d = mjx.inverse(m, d)
         f = d.qfrc_inverse[0:3]
-        rot = d.xquat[1]
-        w, x, y, z = rot[0], rot[1], rot[2], rot[3]
-        mat = jnp.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-        tau = mat @ d.qfrc_inverse[3:6] + jnp.cross(q[0:3], f)
+        # The free joint's torque is in the floating body's frame; inverse dynamics computed its pose.
+        tau = d.xmat[1].reshape(3, 3) @ d.qfrc_inverse[3:6] + jnp.cross(q[0:3], f)
         fz = f[2]
         safe = jnp.where(jnp.abs(fz) > 1e-6, fz, 1.0)
         return jnp.stack([-tau[1] / safe, tau[0] / safe]), fz

@@ -518,21 +518,34 @@ def _robot_model(params: BipedParams) -> mujoco.MjModel:
     return build_spec(params, (2, 2), 1.0).compile()
 
 
+def stand_pose(params: BipedParams, feet, ground, pelvis_z, shift=None) -> tuple[jax.Array, jax.Array]:
+    """qpos (19,) of the robot standing with its soles at ``feet`` (2, 3) on ``ground`` (2,), and whether both
+    legs reach (pure JAX: jit/vmap-able; float64 under ``jax.enable_x64``).
+
+    The pelvis is level, yawed to the feet's mean yaw, ``pelvis_z`` high, above
+    the feet's midpoint (moved by ``shift`` (2,) m when given); the legs come
+    from :func:`ijoy_jax.sim.kinematics.leg_ik`.
+    """
+    feet = jnp.asarray(feet)
+    dtype = feet.dtype
+    ground = jnp.asarray(ground, dtype)
+    yaw = jnp.arctan2(jnp.sum(jnp.sin(feet[:, 2])), jnp.sum(jnp.cos(feet[:, 2])))
+    xy = jnp.mean(feet[:, :2], axis=0) + (0.0 if shift is None else jnp.asarray(shift, dtype))
+    pelvis = jnp.concatenate([xy, jnp.asarray(pelvis_z, dtype)[None]])
+    prot = kinematics.rot_z(yaw)
+    legs = [kinematics.leg_ik(params, side, pelvis, prot, jnp.stack([feet[row, 0], feet[row, 1], ground[row]]),
+                              kinematics.rot_z(feet[row, 2]))
+            for row, side in enumerate(SIDES)]
+    zero = jnp.zeros_like(yaw)
+    quat = jnp.stack([jnp.cos(yaw / 2), zero, zero, jnp.sin(yaw / 2)])
+    return jnp.concatenate([pelvis, quat, legs[0].q, legs[1].q]), legs[0].reachable & legs[1].reachable
+
+
 def _standing(params: BipedParams, feet: np.ndarray, ground: np.ndarray, pelvis_z: float):
-    yaw = math.atan2(np.sin(feet[:, 2]).sum(), np.cos(feet[:, 2]).sum())
-    pelvis = np.array([feet[:, 0].mean(), feet[:, 1].mean(), pelvis_z])
-    qpos = np.zeros(19)
-    qpos[:3], qpos[3:7] = pelvis, (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
-    ok = True
     with _x64():
-        prot = kinematics.rot_z(jnp.float64(yaw))
-        for row, side in enumerate(SIDES):
-            sole = jnp.array([feet[row, 0], feet[row, 1], ground[row]], jnp.float64)
-            srot = kinematics.rot_z(jnp.float64(feet[row, 2]))
-            q, reach = kinematics.leg_ik(params, side, jnp.asarray(pelvis), prot, sole, srot)
-            qpos[7 + 6 * row: 13 + 6 * row] = np.asarray(q)
-            ok = ok and bool(reach)
-    return qpos, ok
+        qpos, ok = stand_pose(params, jnp.asarray(feet, jnp.float64), jnp.asarray(ground, jnp.float64),
+                              jnp.float64(pelvis_z))
+        return np.asarray(qpos, np.float64), bool(ok)
 
 
 def standing_qpos(params: BipedParams, feet=None, ground=(0.0, 0.0), com_height: float | None = None) -> np.ndarray:

@@ -24,9 +24,10 @@ from jax import lax
 from mujoco import mjx
 
 from ijoy_jax import control, geometry
+from ijoy_jax import terrain as terrain_mod
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import METHODS, Targets
-from ijoy_jax.sim import controller, dynamics, kinematics, model, swing
+from ijoy_jax.sim import controller, dynamics, model, swing
 from ijoy_jax.sim.controller import WalkConfig
 from ijoy_jax.terrain import Terrain
 
@@ -78,9 +79,7 @@ def make_sim(shape, resolution: float, params: model.BipedParams | None = None, 
     ratio = cfg.step_time / cfg.control_dt
     if abs(ratio - round(ratio)) > 1e-6:
         raise ValueError(f"step_time {cfg.step_time} must be a whole multiple of control_dt {cfg.control_dt}")
-    flat = Terrain(height=jnp.zeros(shape, jnp.float32), free=jnp.ones(shape, bool),
-                   origin=jnp.zeros(2, jnp.float32), resolution=float(resolution), has_height=True)
-    mj_model = model.build_model(params, flat)
+    mj_model = model.build_model(params, terrain_mod.flat(shape, resolution, has_height=True))
     # The LIPM's z_c and the horizontal CoM model (controller.WalkConfig): fitted on the standing robot.
     data = mujoco.MjData(mj_model)
     idx = model.model_index(mj_model)
@@ -110,17 +109,11 @@ def check_robot(robot: Robot, cfg: WalkConfig) -> None:
 
 
 def standing_qpos(params: model.BipedParams, cfg: WalkConfig, feet, ground, shift=None) -> jax.Array:
-    """(7 + 12,) qpos standing on soles ``feet`` (2, 3) at heights ``ground`` (2,), pelvis above their midpoint
-    (moved by ``shift`` (2,) m in the world frame when given)."""
-    feet = jnp.asarray(feet, jnp.float32)
-    yaw = feet[0, 2] + 0.5 * geometry.wrap_angle(feet[1, 2] - feet[0, 2])
-    mid = 0.5 * (feet[0, :2] + feet[1, :2]) + (0.0 if shift is None else shift)
-    pelvis = jnp.concatenate([mid, (jnp.mean(ground) + cfg.pelvis_height)[None]])
-    rot = controller.rot_z(yaw)
-    q = [kinematics.leg_ik(params, side, pelvis, rot, jnp.array([f[0], f[1], g]), controller.rot_z(f[2]))[0]
-         for side, f, g in ((1, feet[0], ground[0]), (-1, feet[1], ground[1]))]
-    quat = jnp.array([jnp.cos(yaw / 2), 0.0, 0.0, jnp.sin(yaw / 2)])
-    return jnp.concatenate([pelvis, quat, q[0], q[1]])
+    """(7 + 12,) qpos standing on soles ``feet`` (2, 3) at heights ``ground`` (2,), the pelvis
+    ``cfg.pelvis_height`` above their mean and above their midpoint (moved by ``shift`` (2,) m when given)."""
+    ground = jnp.asarray(ground, jnp.float32)
+    return model.stand_pose(params, jnp.asarray(feet, jnp.float32), ground, jnp.mean(ground) + cfg.pelvis_height,
+                            shift)[0]
 
 
 class StepLog(NamedTuple):
@@ -196,14 +189,12 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
         ground = 0.5 * (plan.stance[2] + plan.swing_to[2])
 
         cs = cs._replace(t=jnp.zeros((), jnp.float32))
-        if cfg.filter_passes > 0:
-            corr = controller.zmp_correction(sim.mjx_free, params, cfg, pgains, plan, cs, cfg.filter_passes)
-        else:
-            corr = jnp.zeros((cfg.ticks_per_step + cfg.horizon, 2), jnp.float32)
+        corr = (controller.zmp_correction(sim.mjx_free, params, cfg, pgains, plan, cs, cfg.filter_passes)
+                if cfg.filter_passes > 0 else None)
 
         def tick(carry, k):
             d, cs, touched, low, tilt = carry
-            window = lax.dynamic_slice_in_dim(corr, k, cfg.horizon)
+            window = None if corr is None else lax.dynamic_slice_in_dim(corr, k, cfg.horizon)
             q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, window)
             d = d.replace(ctrl=q)
 
