@@ -20,7 +20,8 @@ def main(argv: list[str] | None = None) -> int:
                        help="footcost: evaluations/s; select: decisions/s, rollout steps/s and the NumPy baseline; "
                             "check: fixed decisions saved to / compared with --ref (device agreement); "
                             "tune: seconds per forward-tuning step, compile separate; "
-                            "sim: MJX biped physics steps/s by batch size next to multi-threaded C MuJoCo")
+                            "sim: MJX biped physics steps/s by batch size next to multi-threaded C MuJoCo, then "
+                            "the closed loop (selector + controller + physics) with falls and placement error")
     bench.add_argument("--ref", default=None, help="npz of reference decisions for 'check'")
     bench.add_argument("--quick", action="store_true", help="small sizes, for a smoke test")
     bench.add_argument("--json", default=None, help="also write the results to this file")

@@ -7,7 +7,12 @@ jitted ``lax.scan`` over K physics steps: compile time, then physics steps
 per second (B * K / wall time) for each batch size B, on JAX's default
 device. ``cpu_rollout``: the same model (one height field), stepped by
 multi-threaded C MuJoCo (``mujoco.rollout``, one thread per core), as the
-reference. Run it on one GPU through the device tool for the MJX figures.
+reference. ``closed_loop``: the whole joystick loop (selector, walking
+controller with its dynamics filter, physics) for B robots on flat ground,
+each with its own random command per step inside the action set's range:
+compile time, physics steps/s of the loop (B * steps * physics steps per
+walking step / wall time), falls and placement error. Run it on one GPU
+through the device tool for the MJX figures.
 """
 
 from __future__ import annotations
@@ -100,12 +105,74 @@ def cpu_rollout(batch: int, steps: int, params: model.BipedParams | None = None,
                 mujoco=mujoco.__version__, final_ok=bool(np.all(np.isfinite(out[:, -1]))))
 
 
+def random_commands(key, robot, batch: int, num_steps: int) -> jax.Array:
+    """(batch, num_steps, 3) joystick commands, uniform over the range the action set can realise.
+
+    With p_next = p0 + dt j, the commands span the actions' extent around p0:
+    xdot over [min dx - p0x, max dx - p0x] / dt, ydot over +-(max dy - p0y) / dt
+    (the lateral room beyond the step in place, either way), thetadot over
+    +-max |dtheta| / dt.
+    """
+    acts = np.asarray(robot.actions)
+    p0, dt = np.asarray(robot.p0), float(robot.step_time)
+    lo = np.array([acts[:, 0].min() - p0[0], -(acts[:, 1].max() - p0[1]), -np.abs(acts[:, 2]).max()]) / dt
+    hi = np.array([acts[:, 0].max() - p0[0], acts[:, 1].max() - p0[1], np.abs(acts[:, 2]).max()]) / dt
+    u = jax.random.uniform(key, (batch, num_steps, 3), jnp.float32)
+    return jnp.asarray(lo, jnp.float32) + u * jnp.asarray(hi - lo, jnp.float32)
+
+
+def closed_loop(batch: int, num_steps: int, seed: int = 0, shape=(300, 300), resolution: float = 0.04,
+                params: model.BipedParams | None = None, cfg=None) -> dict:
+    """The joystick loop with the MJX biped for ``batch`` robots with random commands on flat ground.
+
+    The ground is ``shape`` cells of ``resolution`` m (12 m square by
+    default, room for 30 steps any way), centred on the start. Returns compile
+    time, wall time of the run, physics steps/s of the loop, the number of
+    robots that fell, and the placement error (mean and 95th percentile over
+    all steps taken, m).
+    """
+    from ijoy_jax import robots
+    from ijoy_jax.sim import walker
+
+    robot = robots.hrp2()
+    sim = walker.make_sim(shape, resolution, params, cfg, robot=robot)
+    origin = (-0.5 * shape[0] * resolution, -0.5 * shape[1] * resolution)
+    ground = terrain.flat(shape, resolution, origin=origin, has_height=True)
+    start = jnp.asarray([[0.0, 0.095, 0.0], [0.0, -0.095, 0.0]], jnp.float32)
+    commands = random_commands(jax.random.key(seed), robot, batch, num_steps)
+
+    def one(cmd):
+        return walker.rollout_core(sim, ground, robot, start, cmd, num_steps)
+
+    fn = jax.jit(jax.vmap(one))
+    t0 = time.perf_counter()
+    compiled = fn.lower(commands).compile()
+    compile_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    traj = compiled(commands)
+    jax.block_until_ready(traj)
+    wall = time.perf_counter() - t0
+    sub = sim.substeps * sim.cfg.ticks_per_step  # physics steps per walking step
+    physics = batch * (num_steps + 1) * sub  # + the standing step that starts every rollout
+    taken = np.asarray(traj.taken)
+    err = np.asarray(traj.log.placement_error)[taken]
+    fell = np.asarray(traj.log.fallen).any(axis=1)
+    return dict(name="closed_loop", batch=batch, num_steps=num_steps, compile_s=round(compile_s, 2),
+                wall_s=round(wall, 3), physics_steps_per_s=physics / wall, walking_steps_per_s=batch * num_steps / wall,
+                fell=int(fell.sum()), steps_taken=int(taken.sum()),
+                placement_error_mean=float(err.mean()) if err.size else 0.0,
+                placement_error_p95=float(np.percentile(err, 95)) if err.size else 0.0,
+                obstacle_contacts=int(np.asarray(traj.log.obstacle_contact).sum()),
+                device=str(jax.devices()[0].device_kind), jax=jax.__version__, mujoco=mujoco.__version__)
+
+
 def run(quick: bool = False) -> list[dict]:
-    """The benchmark rows: MJX at several batch sizes, then the CPU reference."""
+    """The benchmark rows: MJX physics at several batch sizes, the CPU reference, then the closed loop (30 steps)."""
     if quick:
         return [mjx_physics(4, 10), cpu_rollout(8, 50, threads=2)]
     on_gpu = jax.default_backend() != "cpu"
     batches = (1024, 4096, 16384, 32768) if on_gpu else (16, 64)
     rows = [mjx_physics(b, 200 if on_gpu else 50) for b in batches]
     rows.append(cpu_rollout(1024 if on_gpu else 64, 1000 if on_gpu else 200))
+    rows += [closed_loop(b, 30) for b in ((1024, 4096) if on_gpu else (4,))]
     return rows

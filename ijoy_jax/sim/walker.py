@@ -4,7 +4,10 @@
 holds the MuJoCo XLA data: ``execute`` runs one step of the walking controller
 and the physics (``step_time`` seconds) in a ``lax.scan``, ``stance`` and
 ``feet`` report the *measured* soles, so the next decision starts from where
-the simulated foot really landed. :func:`rollout` is the control loop of
+the simulated foot really landed. The controller plans in its own frame:
+each chosen step, taken relative to the measured stance foot, is applied
+to the commanded one (``SimState.planned``), so the joint targets never jump
+to the measured soles between steps. :func:`rollout` is the control loop of
 :func:`ijoy_jax.rollout` (the same selector code) with this walker, jitted as
 one scan; vmap :func:`rollout_core` for batches of terrains, commands and
 starts.
@@ -132,8 +135,10 @@ class SimState(NamedTuple):
     data: mjx.Data
     ctrl: controller.CtrlState
     soles: jax.Array  # (2, 4) measured soles x, y, z, yaw (row 0 left)
+    planned: jax.Array  # (2, 4) the same soles as the controller commanded them, in its own frame
     swing: jax.Array  # () +1 if the left foot swings next
-    anchor: jax.Array  # (2,) the ZMP's current support point
+    anchor: jax.Array  # (2,) the ZMP's current support point (controller frame)
+    corr: jax.Array  # (controller.correction_length, 2) the dynamics filter's last correction
     last: StepLog
 
 
@@ -184,56 +189,66 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
     def ground_of(pose):
         return swing.footprint_height(phys, pose, foot_l, foot_w)
 
-    def simulate(d, cs, plan):
-        """One step of control ticks and physics: (data, ctrl state, obstacle touched, lowest pelvis, max tilt)."""
+    def simulate(d, cs, plan, corr):
+        """One step of control ticks and physics.
+
+        Returns (data, ctrl state, filter correction, obstacle touched, lowest pelvis, max tilt). Each tick's
+        joint targets reach the actuators interpolated linearly over its physics steps from the previous
+        tick's (a servo's first-order hold): held as steps every 10 ms, they jolt the stiff joints and the
+        robot falls within a few 0.2 m steps (measured on the native loop; interpolated, it walks).
+        """
         ground = 0.5 * (plan.stance[2] + plan.swing_to[2])
 
         cs = cs._replace(t=jnp.zeros((), jnp.float32))
-        corr = (controller.zmp_correction(sim.mjx_free, params, cfg, pgains, plan, cs, cfg.filter_passes)
-                if cfg.filter_passes > 0 else None)
+        if cfg.filter_passes > 0:
+            corr = controller.zmp_correction(sim.mjx_free, params, cfg, pgains, plan, cs, cfg.filter_passes,
+                                             init=controller.carry_correction(cfg, corr))
+        fractions = jnp.arange(1, sim.substeps + 1, dtype=jnp.float32) / sim.substeps
 
         def tick(carry, k):
             d, cs, touched, low, tilt = carry
-            window = None if corr is None else lax.dynamic_slice_in_dim(corr, k, cfg.horizon)
+            window = None if cfg.filter_passes == 0 else lax.dynamic_slice_in_dim(corr, k, cfg.horizon)
             q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, window)
-            d = d.replace(ctrl=q)
+            q0 = d.ctrl
 
-            def physics(c, _):
+            def physics(c, frac):
                 d, touched, low, tilt = c
-                d = mjx.step(m, d)
+                d = mjx.step(m, d.replace(ctrl=q0 + frac * (q - q0)))
                 low = jnp.minimum(low, d.qpos[2] - ground)
                 tilt = jnp.maximum(tilt, _tilt(d.qpos[3:7]))
                 touched = touched | _obstacle_contact(sim, terrain, d)
                 return (d, touched, low, tilt), None
 
-            (d, touched, low, tilt), _ = lax.scan(physics, (d, touched, low, tilt), None, length=sim.substeps)
+            (d, touched, low, tilt), _ = lax.scan(physics, (d, touched, low, tilt), fractions)
             return (d, cs, touched, low, tilt), None
 
         carry0 = (d, cs, jnp.bool_(False), jnp.float32(jnp.inf),
                   jnp.float32(0))
         (d, cs, touched, low, tilt), _ = lax.scan(tick, carry0, jnp.arange(cfg.ticks_per_step))
-        return d, cs, touched, low, tilt
+        return d, cs, corr, touched, low, tilt
 
     def split(soles, swing_side):
         left_swings = swing_side > 0
         return jnp.where(left_swings, soles[1], soles[0]), jnp.where(left_swings, soles[0], soles[1])
 
     def init(start, first_swing):
+        start = jnp.asarray(start, jnp.float32)
         ground = jax.vmap(ground_of)(start)
         qpos = standing_qpos(params, cfg, start, ground)
         d = mjx.make_data(m)
         d = d.replace(qpos=qpos, ctrl=qpos[7:])
         d = mjx.forward(m, d)
-        soles = _soles(sim, d)
+        planned = jnp.concatenate([start[:, :2], ground[:, None], start[:, 2:]], axis=1)
         swing_side = jnp.asarray(first_swing, jnp.float32)
         # One step standing while the preview sees the first step's weight shift coming.
-        st, sw = split(soles, swing_side)
+        st, sw = split(planned, swing_side)
         cs = controller.init_state(pgains, d.subtree_com[sim.index.pelvis][:2])
-        d, cs, touched, low, tilt = simulate(d, cs, controller.prepare_plan(st, sw, swing_side))
+        corr = jnp.zeros((controller.correction_length(cfg), 2), jnp.float32)
+        d, cs, corr, touched, low, tilt = simulate(d, cs, controller.prepare_plan(st, sw, swing_side), corr)
         soles = _soles(sim, d)
         fallen = (low < sim.fall_height) | (tilt > sim.fall_tilt)
         log = StepLog(soles[0], jnp.float32(0), jnp.float32(0), fallen, touched, low, tilt)
-        return SimState(d, cs, soles, swing_side, 0.5 * (soles[0, :2] + soles[1, :2]), log)
+        return SimState(d, cs, soles, planned, swing_side, 0.5 * (planned[0, :2] + planned[1, :2]), corr, log)
 
     def stance(s):
         st, sw = split(s.soles, s.swing)
@@ -242,19 +257,28 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
     def execute(s, pose, go):
         go = jnp.asarray(go) & ~s.last.fallen
         st, sw = split(s.soles, s.swing)
+        pst, psw = split(s.planned, s.swing)
         pose = jnp.asarray(pose, jnp.float32)
         target = jnp.array([pose[0], pose[1], ground_of(pose), pose[2]])
         top = swing.corridor_height(phys, sw[jnp.array([0, 1, 3])], pose, foot_l, foot_w)
-        plan = controller.plan_step(s.anchor, st, sw, target, go, s.swing, top, cfg.clearance)
-        d, cs, touched, low, tilt = simulate(s.data, s.ctrl, plan)
+        # The step relative to the measured stance foot, applied to the commanded one: the plan stays
+        # continuous (no jump to the measured soles' millimetres), the foot lands where the selector chose
+        # relative to where the stance foot really is.
+        rel = geometry.relative(st[jnp.array([0, 1, 3])], pose)
+        planar = geometry.compose(pst[jnp.array([0, 1, 3])], rel)
+        ptarget = jnp.array([planar[0], planar[1], target[2], planar[2]])
+        plan = controller.plan_step(s.anchor, pst, psw, ptarget, go, s.swing, top, cfg.clearance)
+        d, cs, corr, touched, low, tilt = simulate(s.data, s.ctrl, plan, s.corr)
         soles = _soles(sim, d)
-        landed = jnp.where(s.swing > 0, soles[0], soles[1])
+        left_swings = s.swing > 0
+        landed = jnp.where(left_swings, soles[0], soles[1])
+        planned = jnp.where(left_swings, jnp.stack([plan.swing_to, pst]), jnp.stack([pst, plan.swing_to]))
         fallen = s.last.fallen | (low < sim.fall_height) | (tilt > sim.fall_tilt)
         err = jnp.where(go, jnp.hypot(landed[0] - target[0], landed[1] - target[1]), 0.0)
         yaw_err = jnp.where(go, jnp.abs(geometry.wrap_angle(landed[3] - target[3])), 0.0)
         log = StepLog(landed, err, yaw_err, fallen, touched, low, tilt)
-        anchor = jnp.where(go, st[:2], 0.5 * (soles[0, :2] + soles[1, :2]))
-        return SimState(d, cs, soles, jnp.where(go, -s.swing, s.swing), anchor, log)
+        anchor = jnp.where(go, pst[:2], 0.5 * (planned[0, :2] + planned[1, :2]))
+        return SimState(d, cs, soles, planned, jnp.where(go, -s.swing, s.swing), anchor, corr, log)
 
     def feet(s):
         return s.soles[:, jnp.array([0, 1, 3])]
