@@ -1,9 +1,9 @@
 """The MJX biped in the joystick loop (ijoy_jax.sim.walker): one small jitted rollout, checked end to end.
 
-MJX compiles slowly on a CPU (about a minute), so this file runs one rollout (two
-steps in place, then four 0.2 m steps forward)
-and checks everything on it; the controller's physics is tested with native
-MuJoCo in test_sim_controller.py.
+MJX compiles slowly on a CPU (about a minute), so this file runs one rollout
+(two steps in place, then four 0.2 m steps forward) and checks everything on
+it; the controller's physics is tested with native MuJoCo in
+test_sim_controller.py.
 """
 
 import jax
