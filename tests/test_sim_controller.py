@@ -74,7 +74,7 @@ class _Native:
     interpolated over its physics steps.
     """
 
-    def __init__(self, sim, filt=None):
+    def __init__(self, sim):
         self.sim, self.cfg, self.params = sim, sim.cfg, sim.params
         nx, ny = sim.shape
         origin = (-0.5 * nx * sim.resolution, -0.5 * ny * sim.resolution)
@@ -88,10 +88,8 @@ class _Native:
         self.pg = controller.gains(self.cfg)
         params, cfg, pg = self.params, self.cfg, self.pg
         self.tick = jax.jit(lambda plan, cs, window: controller.control_tick(params, cfg, pg, plan, cs, window))
-        passes = cfg.filter_passes if filt is None else filt
         self.filter = jax.jit(lambda plan, cs, corr: controller.zmp_correction(
-            sim.mjx_free, params, cfg, pg, plan, cs, passes, init=controller.carry_correction(cfg, corr)))
-        self.passes = passes
+            sim.mjx_free, params, cfg, pg, plan, cs, cfg.filter_passes, init=controller.carry_correction(cfg, corr)))
         self.corr = jnp.zeros((controller.correction_length(cfg), 2), jnp.float32)
         self.sub = sim.substeps
         self.cs = controller.init_state(pg, self.d.subtree_com[sim.index.pelvis][:2])
@@ -109,7 +107,7 @@ class _Native:
     def run_step(self, plan):
         d, n = self.d, self.cfg.horizon
         self.cs = self.cs._replace(t=jnp.float32(0))
-        if self.passes:
+        if self.cfg.filter_passes:
             self.corr = self.filter(plan, self.cs, self.corr)
         low = np.inf
         for k in range(self.cfg.ticks_per_step):
