@@ -27,8 +27,7 @@ def runs():
     scs = {k: scs[k] for k in NAMES}
     robot = ij.robots.hrp2()
     sim = W.make_sim(SHAPE_2D, RES, robot=robot)
-    terrains = [ij.terrain.from_arrays(np.zeros(SHAPE_2D, np.float32), sc.free, RES) for sc in scs.values()]
-    batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *terrains)
+    batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *[sc.terrain() for sc in scs.values()])
     robots = jax.tree_util.tree_map(lambda *a: jnp.stack(a),
                                     *[ij.robots.hrp2(margin=sc.margin, w=sc.w) for sc in scs.values()])
     starts = jnp.stack([jnp.asarray(sc.start) for sc in scs.values()])
