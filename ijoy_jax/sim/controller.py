@@ -297,8 +297,8 @@ def zmp_correction(m_free, params, cfg: WalkConfig, pgains: preview.PreviewGains
     (6 cm without the filter).
     """
     length = cfg.ticks_per_step + cfg.horizon
-    # windows of predict() reach period length + N
-    corr = jnp.zeros((length + cfg.horizon, 2), jnp.float32) if init is None else jnp.asarray(init, jnp.float32)
+    # windows of predict() reach period length + N = correction_length
+    corr = jnp.zeros((correction_length(cfg), 2), jnp.float32) if init is None else jnp.asarray(init, jnp.float32)
     for _ in range(passes):
         qpos, zref = predict(params, cfg, pgains, plan, cs, corr, length)
         zmp, _ = dynamics.motion_zmp(m_free, qpos, cfg.control_dt)  # at the ends of periods 1 .. length - 2
