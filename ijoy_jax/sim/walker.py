@@ -129,6 +129,7 @@ class StepLog(NamedTuple):
     obstacle_contact: jax.Array  # () bool, a sole sphere (or shin) touched an obstacle cell during the step
     min_pelvis_height: jax.Array  # () m, lowest pelvis height above the ground during the step
     max_tilt: jax.Array  # () rad, largest torso tilt during the step
+    qpos: jax.Array  # (frames_per_step, nq) snapshots of the state through the step, for rendering (0 by default)
 
 
 class SimState(NamedTuple):
@@ -173,14 +174,25 @@ def _obstacle_contact(sim: Sim, terrain: Terrain, d: mjx.Data) -> jax.Array:
     return jnp.any(active & (~free | ~inside))
 
 
-def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> control.Walker:
+def frame_ticks(sim: Sim, frames_per_step: int) -> np.ndarray:
+    """The control ticks (0-based, within a step) whose end states ``StepLog.qpos`` keeps: evenly spaced, the last
+    tick last (the touch-down)."""
+    n = sim.cfg.ticks_per_step
+    if not 0 <= frames_per_step <= n:
+        raise ValueError(f"frames_per_step must be in [0, {n}] (control ticks per step), got {frames_per_step}")
+    return np.round(np.arange(1, frames_per_step + 1) * n / max(frames_per_step, 1)).astype(int) - 1
+
+
+def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_per_step: int = 0) -> control.Walker:
     """The Walker of the simulated biped on ``terrain`` (call inside jit; ``m`` = the model with its height field).
 
     The terrain's heights as the robot feels them (2D obstacles raised to
     ``params.obstacle_height``) also place the footholds' heights and the
-    swing paths' apexes.
+    swing paths' apexes. ``frames_per_step`` (static) states per step are kept
+    in ``StepLog.qpos`` (at :func:`frame_ticks`) for :mod:`ijoy_jax.sim.render`.
     """
     params, cfg = sim.params, sim.cfg
+    keep = frame_ticks(sim, frames_per_step)
     phys = terrain.replace(height=model.physical_heights(terrain, params.obstacle_height), has_height=True)
     m = model.put_terrain(sim.mjx_model, params, terrain) if m is None else m
     pgains = controller.gains(cfg)
@@ -192,7 +204,8 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
     def simulate(d, cs, plan, corr):
         """One step of control ticks and physics.
 
-        Returns (data, ctrl state, filter correction, obstacle touched, lowest pelvis, max tilt). Each tick's
+        Returns (data, ctrl state, filter correction, obstacle touched, lowest pelvis, max tilt, kept qpos
+        frames). Each tick's
         joint targets reach the actuators interpolated linearly over its physics steps from the previous
         tick's (a servo's first-order hold): held as steps every 10 ms, they jolt the stiff joints and the
         robot falls within a few 0.2 m steps (measured on the native loop; interpolated, it walks).
@@ -220,12 +233,12 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
                 return (d, touched, low, tilt), None
 
             (d, touched, low, tilt), _ = lax.scan(physics, (d, touched, low, tilt), fractions)
-            return (d, cs, touched, low, tilt), None
+            return (d, cs, touched, low, tilt), d.qpos if frames_per_step else None
 
-        carry0 = (d, cs, jnp.bool_(False), jnp.float32(jnp.inf),
-                  jnp.float32(0))
-        (d, cs, touched, low, tilt), _ = lax.scan(tick, carry0, jnp.arange(cfg.ticks_per_step))
-        return d, cs, corr, touched, low, tilt
+        carry0 = (d, cs, jnp.bool_(False), jnp.float32(jnp.inf), jnp.float32(0))
+        (d, cs, touched, low, tilt), qs = lax.scan(tick, carry0, jnp.arange(cfg.ticks_per_step))
+        frames = qs[keep] if frames_per_step else jnp.zeros((0, m.nq), jnp.float32)
+        return d, cs, corr, touched, low, tilt, frames
 
     def split(soles, swing_side):
         left_swings = swing_side > 0
@@ -244,10 +257,10 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
         st, sw = split(planned, swing_side)
         cs = controller.init_state(pgains, d.subtree_com[sim.index.pelvis][:2])
         corr = jnp.zeros((controller.correction_length(cfg), 2), jnp.float32)
-        d, cs, corr, touched, low, tilt = simulate(d, cs, controller.prepare_plan(st, sw, swing_side), corr)
+        d, cs, corr, touched, low, tilt, frames = simulate(d, cs, controller.prepare_plan(st, sw, swing_side), corr)
         soles = _soles(sim, d)
         fallen = (low < sim.fall_height) | (tilt > sim.fall_tilt)
-        log = StepLog(soles[0], jnp.float32(0), jnp.float32(0), fallen, touched, low, tilt)
+        log = StepLog(soles[0], jnp.float32(0), jnp.float32(0), fallen, touched, low, tilt, frames)
         return SimState(d, cs, soles, planned, swing_side, 0.5 * (planned[0, :2] + planned[1, :2]), corr, log)
 
     def stance(s):
@@ -268,7 +281,7 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
         planar = geometry.compose(pst[jnp.array([0, 1, 3])], rel)
         ptarget = jnp.array([planar[0], planar[1], target[2], planar[2]])
         plan = controller.plan_step(s.anchor, pst, psw, ptarget, go, s.swing, top, cfg.clearance)
-        d, cs, corr, touched, low, tilt = simulate(s.data, s.ctrl, plan, s.corr)
+        d, cs, corr, touched, low, tilt, frames = simulate(s.data, s.ctrl, plan, s.corr)
         soles = _soles(sim, d)
         left_swings = s.swing > 0
         landed = jnp.where(left_swings, soles[0], soles[1])
@@ -276,7 +289,7 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
         fallen = s.last.fallen | (low < sim.fall_height) | (tilt > sim.fall_tilt)
         err = jnp.where(go, jnp.hypot(landed[0] - target[0], landed[1] - target[1]), 0.0)
         yaw_err = jnp.where(go, jnp.abs(geometry.wrap_angle(landed[3] - target[3])), 0.0)
-        log = StepLog(landed, err, yaw_err, fallen, touched, low, tilt)
+        log = StepLog(landed, err, yaw_err, fallen, touched, low, tilt, frames)
         anchor = jnp.where(go, pst[:2], 0.5 * (planned[0, :2] + planned[1, :2]))
         return SimState(d, cs, soles, planned, jnp.where(go, -s.swing, s.swing), anchor, corr, log)
 
@@ -288,43 +301,101 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None) -> contro
 
 def rollout_core(sim: Sim, terrain: Terrain, robot: Robot, start, commands, num_steps: int,
                  method: str = "exhaustive", first_swing=LEFT, targets: Targets | None = None,
-                 swing_path: bool = True, quantize: bool = True) -> control.Trajectory:
+                 swing_path: bool = True, quantize: bool = True, frames_per_step: int = 0) -> control.Trajectory:
     """The joystick loop with the simulated biped, without checks or jit (vmap it for batches)."""
-    walker = mjx_walker(sim, terrain)
+    walker = mjx_walker(sim, terrain, frames_per_step=frames_per_step)
     return control.rollout_core(terrain, robot, start, commands, num_steps, method, first_swing, walker,
                                 swing_path, quantize, targets)
 
 
-@functools.partial(jax.jit, static_argnames=("sim", "num_steps", "method", "swing_path", "quantize"))
-def _rollout_jit(sim, terrain, robot, start, commands, num_steps, method, first_swing, targets, swing_path, quantize):
+_STATIC = ("sim", "num_steps", "method", "swing_path", "quantize", "frames_per_step")
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _rollout_jit(sim, terrain, robot, start, commands, num_steps, method, first_swing, targets, swing_path, quantize,
+                 frames_per_step):
     return rollout_core(sim, terrain, robot, start, commands, num_steps, method, first_swing, targets,
-                        swing_path, quantize)
+                        swing_path, quantize, frames_per_step)
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _rollout_batch_jit(sim, terrain, robot, start, commands, num_steps, method, first_swing, targets, swing_path,
+                       quantize, frames_per_step):
+    def one(t, r, s, c, f):
+        return rollout_core(sim, t, r, s, c, num_steps, method, f, targets, swing_path, quantize, frames_per_step)
+
+    return jax.vmap(one)(terrain, robot, start, commands, first_swing)
+
+
+def _check(sim: Sim, terrain: Terrain, robot: Robot, num_steps, method: str, frames_per_step: int, batched: bool):
+    lead = 1 if batched else 0
+    if tuple(terrain.free.shape[lead:]) != sim.shape or terrain.resolution != sim.resolution:
+        raise ValueError(f"terrain grid {tuple(terrain.free.shape[lead:])} at {terrain.resolution} m does not match "
+                         f"the Sim's {sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid")
+    if not batched:
+        check_robot(robot, sim.cfg)
+    elif not np.allclose(np.asarray(robot.step_time), sim.cfg.step_time, atol=1e-6):
+        raise ValueError(f"robot.step_time {np.asarray(robot.step_time)} s differs from the walking controller's "
+                         f"{sim.cfg.step_time} s")
+    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
+        raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    frame_ticks(sim, frames_per_step)
 
 
 def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, num_steps: int, method: str = "exhaustive",
             *, first_swing: int = LEFT, targets: Targets | None = None, swing_path: bool = True,
-            quantize: bool = True) -> control.Trajectory:
+            quantize: bool = True, frames_per_step: int = 0) -> control.Trajectory:
     """Walk the simulated biped with the joystick for ``num_steps`` steps (jitted as one scan).
 
     Same arguments and result as :func:`ijoy_jax.rollout`, with the physics in
     place of the perfect robot: ``footsteps`` are the measured touch-downs,
     ``commanded`` the steps sent, and ``log`` a :class:`StepLog` per step
-    (placement error, falls, obstacle contacts). :func:`summary` condenses it.
+    (placement error, falls, obstacle contacts; ``frames_per_step`` states of
+    each step in ``log.qpos`` for :func:`ijoy_jax.sim.render.render`).
+    :func:`summary` condenses it.
     """
-    if tuple(terrain.free.shape) != sim.shape or terrain.resolution != sim.resolution:
-        raise ValueError(f"terrain grid {tuple(terrain.free.shape)} at {terrain.resolution} m does not match the "
-                         f"Sim's {sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid")
-    check_robot(robot, sim.cfg)
+    _check(sim, terrain, robot, num_steps, method, frames_per_step, batched=False)
     if np.shape(start) != (2, 3):
         raise ValueError(f"start must have shape (2, 3) (left foot, right foot), got {np.shape(start)}")
-    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
-        raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
     if np.shape(commands) not in ((3,), (num_steps, 3)):
         raise ValueError(f"commands must have shape (3,) or ({num_steps}, 3), got {np.shape(commands)}")
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     return _rollout_jit(sim, terrain, robot, start, commands, int(num_steps), method, first_swing, targets,
-                        swing_path, quantize)
+                        swing_path, quantize, int(frames_per_step))
+
+
+def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, num_steps: int,
+                  method: str = "exhaustive", *, first_swing=LEFT, targets: Targets | None = None,
+                  swing_path: bool = True, quantize: bool = True, frames_per_step: int = 0) -> control.Trajectory:
+    """:func:`rollout` for B robots at once: one jitted ``vmap`` of the simulated joystick loop.
+
+    Args:
+      sim: the :class:`Sim` of the terrains' grid shape.
+      terrains: a :class:`Terrain` whose arrays have a leading batch axis B (stack B terrains).
+      robots: a :class:`Robot` with a leading batch axis on every leaf (stack B robots, e.g. margins).
+      starts: (B, 2, 3) world foot poses (left, right), m and rad.
+      commands: (B, 3) or (B, num_steps, 3) joystick commands (m/s, m/s, rad/s).
+      num_steps: steps per rollout (static).
+      first_swing: () or (B,), +1 for the left foot first.
+
+    Returns:
+      A :class:`ijoy_jax.control.Trajectory` with a leading axis B on every leaf.
+
+    Shapes and static arguments key the compile cache: batches of the same B,
+    grid and ``num_steps`` reuse one compiled program whatever the terrains,
+    robots' parameters (margins, weights) or commands.
+    """
+    _check(sim, terrains, robots, num_steps, method, frames_per_step, batched=True)
+    b = np.shape(starts)[0] if np.ndim(starts) == 3 else None
+    if np.shape(starts) != (b, 2, 3) or np.shape(terrains.free)[0] != b:
+        raise ValueError(f"starts must have shape (B, 2, 3) with B = the terrains' batch {np.shape(terrains.free)[0]},"
+                         f" got {np.shape(starts)}")
+    if np.shape(commands) not in ((b, 3), (b, num_steps, 3)):
+        raise ValueError(f"commands must have shape ({b}, 3) or ({b}, {num_steps}, 3), got {np.shape(commands)}")
+    first = jnp.broadcast_to(jnp.asarray(first_swing, jnp.float32), (b,))
+    return _rollout_batch_jit(sim, terrains, robots, starts, commands, int(num_steps), method, first, targets,
+                              swing_path, quantize, int(frames_per_step))
 
 
 def summary(traj: control.Trajectory) -> dict[str, jax.Array]:
