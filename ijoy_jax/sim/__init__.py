@@ -6,8 +6,19 @@ Modules: :mod:`.model` (the MjSpec robot and the terrain's height field),
 over the terrain), :mod:`.controller` (the walking pattern generator: a
 footstep to joint targets, tick by tick), :mod:`.walker` (the MJX robot as a
 :class:`ijoy_jax.control.Walker` and its rollout), :mod:`.bench` (physics
-steps per second).
+steps per second), :mod:`.render` (offscreen images of a rollout),
+:mod:`.margins` (safety margin against collisions under execution error).
 
-Status (issue 7): the robot stands and steps in place under position control;
-longer steps still fall, because the controller has no stabiliser yet.
+Importing this package on a Linux machine without a display that has
+libEGL, before ``mujoco`` and with ``MUJOCO_GL`` unset, sets
+``MUJOCO_GL=egl`` so that :mod:`.render` works headless (without libEGL,
+mujoco could not even be imported with that setting, so it is left alone).
 """
+
+import ctypes.util as _ctypes_util
+import os as _os
+import sys as _sys
+
+if (_sys.platform.startswith("linux") and "MUJOCO_GL" not in _os.environ and not _os.environ.get("DISPLAY")
+        and "mujoco" not in _sys.modules and _ctypes_util.find_library("EGL")):
+    _os.environ["MUJOCO_GL"] = "egl"
