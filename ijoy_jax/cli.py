@@ -56,6 +56,27 @@ def main(argv: list[str] | None = None) -> int:
     ssum.add_argument("dir", help="a sweep's output folder")
     ssum.add_argument("--png", default=None, help="plot to write (default: DIR/summary.png)")
     ssum.add_argument("--x", default=None, help="parameter on the plot's x axis (default: the most varied)")
+    simp = sub.add_parser("sim", help="the MJX biped: margin sweep in clutter, or a rendered rollout")
+    sim_sub = simp.add_subparsers(dest="sim_command", required=True)
+    marg = sim_sub.add_parser("margins", help="safety margin against obstacle contacts of the simulated biped in "
+                                              "random clutter; prints JSON per margin and writes a plot")
+    marg.add_argument("--margins", default=",".join(str(0.01 * i)[:4] for i in range(11)),
+                      help="comma-separated margins in metres, each in [0, 0.1] (default: 0 to 0.1 by 0.01)")
+    marg.add_argument("--batch", type=int, default=64, help="clutter maps per margin (default: %(default)s)")
+    marg.add_argument("--steps", type=int, default=16, help="steps per rollout (default: %(default)s)")
+    marg.add_argument("--seed", type=int, default=0)
+    marg.add_argument("--chunk", type=int, default=None, help="rollouts per jitted call (default: all at once)")
+    marg.add_argument("--png", default="margins.png", help="plot to write (default: %(default)s)")
+    marg.add_argument("--json", default=None, help="also write the per-margin rows to this file")
+    rend = sim_sub.add_parser("render", help="walk the simulated biped through clutter and write a GIF "
+                                             "(offscreen; headless Linux uses EGL)")
+    rend.add_argument("--out", default="ijoy_walk.gif", help="GIF to write (default: %(default)s)")
+    rend.add_argument("--strip", default=None, help="also write a filmstrip PNG of 5 frames")
+    rend.add_argument("--steps", type=int, default=12, help="steps to walk (default: %(default)s)")
+    rend.add_argument("--frames", type=int, default=10, help="frames per 0.8 s step (default: %(default)s)")
+    rend.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
+    rend.add_argument("--seed", type=int, default=0, help="clutter map (default: %(default)s)")
+    rend.add_argument("--size", default="480x320", help="WIDTHxHEIGHT in pixels (default: %(default)s)")
     from ijoy_jax.tune import cli as tune_cli
 
     tune_cli.add_parser(sub)
@@ -64,6 +85,8 @@ def main(argv: list[str] | None = None) -> int:
         return tune_cli.main(args)
     if args.command == "sweep":
         return _sweep(args)
+    if args.command == "sim":
+        return _sim(args)
     if args.command == "demo":
         from ijoy_jax import demo as demo_mod
 
@@ -89,6 +112,62 @@ def main(argv: list[str] | None = None) -> int:
                 json.dump(rows, f, indent=2)
         return 0
     return 2
+
+
+def _sim(args) -> int:
+    """``ijoy sim margins`` / ``ijoy sim render``."""
+    import numpy as np
+
+    from ijoy_jax.sim import margins
+
+    if args.sim_command == "margins":
+        try:
+            values = [float(v) for v in args.margins.split(",") if v.strip()]
+            res = margins.run(values, batch=args.batch, num_steps=args.steps, seed=args.seed, chunk=args.chunk)
+        except ValueError as e:
+            print(f"ijoy sim margins: error: {e}", file=sys.stderr)
+            return 2
+        rows = [dict(margin=float(m), collision_rate=float(c), contacts_per_step=float(p), fall_rate=float(f),
+                     mean_progress=float(g), footholds_on_obstacles=int(o.sum()), batch=args.batch,
+                     steps=args.steps) for m, c, p, f, g, o in zip(res["margin"], res["collision_rate"],
+                                                                    res["contacts_per_step"], res["fall_rate"],
+                                                                    res["mean_progress"], res["on_obstacle"],
+                                                                    strict=True)]
+        for row in rows:
+            print(json.dumps(row))
+        print(json.dumps(dict(wall_s=round(res["wall_s"], 2), compiles=res["compiles"], png=args.png)))
+        margins.plot(res, args.png)
+        if args.json:
+            with open(args.json, "w") as f:
+                json.dump(rows, f, indent=2)
+        return 0
+    import jax
+
+    from ijoy_jax import robots
+    from ijoy_jax.sim import render
+    from ijoy_jax.sim import walker as W
+
+    try:
+        width, height = (int(v) for v in args.size.lower().split("x"))
+        robot = robots.hrp2(margin=args.margin)
+        sim = W.make_sim(margins.SHAPE, margins.RESOLUTION, robot=robot)
+        terrains, starts = margins.clutter(args.seed, 1)
+        command = margins.forward_commands(args.seed + 1, 1, robot)[0]
+        terrain = jax.tree_util.tree_map(lambda a: a[0], terrains)
+        traj = W.rollout(sim, terrain, robot, starts[0], command, args.steps, frames_per_step=args.frames)
+    except ValueError as e:
+        print(f"ijoy sim render: error: {e}", file=sys.stderr)
+        return 2
+    frames = render.render(sim, terrain, render.states(traj), width=width, height=height,
+                           footsteps=traj.commanded, sides=traj.sides, smooth=args.frames)
+    render.write_gif(args.out, frames, fps=args.frames / sim.cfg.step_time)
+    if args.strip:
+        from PIL import Image
+
+        Image.fromarray(render.filmstrip(frames, 5)).save(args.strip)
+    summary = {k: np.asarray(v).tolist() for k, v in W.summary(traj).items()}
+    print(json.dumps(dict(gif=args.out, strip=args.strip, frames=len(frames), **summary)))
+    return 0
 
 
 def _sweep(args) -> int:
