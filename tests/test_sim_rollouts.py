@@ -1,0 +1,199 @@
+"""The MJX biped in the joystick loop, end to end: one compile of the batched rollout serves the whole file.
+
+MJX compiles slowly on a CPU (about a minute), so every check here runs on
+rollouts of one shape (4 rollouts x 16 steps on a 4 m x 2 m map at 2 cm)
+through ``walker.rollout_batch``, compiled once:
+
+* three of the paper's experiments (tests/test_experiments.py) with the
+  simulated robot in place of the perfect one: walking up to a wall and
+  stepping in place, stepping over a 4 cm obstacle in the right foot's lane,
+  turning on the spot; plus two steps in place and fourteen 0.2 m steps
+  forward on an empty map. Obstacle cells stand ``BipedParams.obstacle_height``
+  (0.1 m) tall in the physics.
+* the margin sweep (``ijoy_jax.sim.margins``) on two clutter maps at 0 and 10 cm.
+* the states recorded for rendering, and the renderer (``ijoy_jax.sim.render``).
+
+The controller's physics is tested with native MuJoCo in test_sim_controller.py.
+"""
+
+import os
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+from test_experiments import HL, RES, SHAPE_2D, STEPS_2D, _start, scenario, scenarios_2d
+
+import ijoy_jax as ij
+from ijoy_jax.sim import margins, render
+from ijoy_jax.sim import walker as W
+
+NAMES = ("wall-m0.05-x1.44", "over-m0.02-b0.04-x1.0", "turn-1", "flat-forward")
+PLACEMENT_TOL = 0.03  # m (measured up to 0.6 cm on these scenarios, 1.1 cm for action-set steps natively)
+FRAMES = 4  # states kept per step
+FORWARD_CMDS = np.array([[0.0, 0.0, 0.0]] * 2 + [[0.25, 0.0, 0.0]] * (STEPS_2D - 2), np.float32)
+
+
+def _batch(scs):
+    stack = lambda *a: jnp.stack(a)  # noqa: E731
+    terrains = jax.tree_util.tree_map(stack, *[sc.terrain() for sc in scs])
+    robots = jax.tree_util.tree_map(stack, *[ij.robots.hrp2(margin=sc.margin, w=sc.w) for sc in scs])
+    starts = jnp.stack([jnp.asarray(sc.start) for sc in scs])
+    commands = jnp.stack([jnp.asarray(sc.commands) for sc in scs])
+    return terrains, robots, starts, commands
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return W.make_sim(SHAPE_2D, RES, robot=ij.robots.hrp2())
+
+
+@pytest.fixture(scope="module")
+def runs(sim):
+    scs = scenarios_2d()
+    scs = {k: scs[k] for k in NAMES[:3]}
+    scs["flat-forward"] = scenario(np.ones(SHAPE_2D, bool), start=_start(), command=FORWARD_CMDS)
+    traj = W.rollout_batch(sim, *_batch(scs.values()), STEPS_2D, "ordered", frames_per_step=FRAMES)
+    traj = jax.tree_util.tree_map(np.asarray, traj)
+    return {k: (sc, jax.tree_util.tree_map(lambda a, i=i: a[i], traj)) for i, (k, sc) in enumerate(scs.items())}
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_no_fall_no_obstacle_touched(runs, name):
+    _, traj = runs[name]
+    assert traj.taken.all() and not traj.log.fallen.any()
+    assert not traj.log.obstacle_contact.any()  # neither the soles nor the shins touched an obstacle cell
+    assert traj.log.placement_error.max() < PLACEMENT_TOL, traj.log.placement_error
+
+
+def test_wall_approach_then_step_in_place(runs):
+    sc, traj = runs["wall-m0.05-x1.44"]
+    front = traj.footsteps[:, 0] + HL  # the feet face +x (no turning command)
+    assert front.max() < sc.info["wall_x"]  # never on the wall
+    # but up close: within the margin, one cell and one lattice step (as the perfect robot), plus the placement error
+    assert front.max() > sc.info["wall_x"] - sc.margin - (RES + 0.05) - PLACEMENT_TOL
+    assert traj.in_place[-4:].all()  # and stepping in place there
+
+
+def test_steps_over_the_obstacle(runs):
+    sc, traj = runs["over-m0.02-b0.04-x1.0"]
+    x1 = sc.info["obstacle"][1]
+    assert traj.feet[:, 0].min() > x1 + HL  # both feet beyond the obstacle's far edge at the end
+
+
+def test_turns_on_the_spot(runs):
+    sc, traj = runs["turn-1"]
+    heading = np.unwrap(traj.footsteps[:, 2])
+    assert abs(heading[-1] - heading[0]) > 0.5 * abs(sc.info["rot"]) * (len(heading) - 1) / 2
+    assert np.ptp(traj.footsteps[:, :2], axis=0).max() < 0.5  # on the spot: the feet stay within half a metre
+
+
+def test_steps_in_place_then_walks_forward(runs):
+    _, traj = runs["flat-forward"]
+    assert traj.valid.all() and not traj.stopped.any()
+    assert traj.in_place[:2].all()  # a zero command on flat ground: the step-in-place action p0
+    np.testing.assert_allclose(np.diff(traj.commanded[2:, 0]), 0.2, atol=0.03)  # each 0.2 m ahead of the last
+    assert traj.footsteps[-1, 0] - traj.footsteps[0, 0] > 0.2 * (STEPS_2D - 3) - 3 * PLACEMENT_TOL
+
+
+def test_footsteps_are_the_measured_touch_downs(runs):
+    _, traj = runs["flat-forward"]
+    np.testing.assert_allclose(traj.footsteps, traj.log.landed[:, [0, 1, 3]], atol=1e-6)
+    err = np.hypot(*(traj.footsteps[:, :2] - traj.commanded[:, :2]).T)
+    np.testing.assert_allclose(err, traj.log.placement_error, atol=1e-5)
+    assert traj.sides.tolist() == [1, -1] * (STEPS_2D // 2)
+
+
+def test_summary(runs):
+    _, traj = runs["flat-forward"]
+    s = {k: np.asarray(v) for k, v in W.summary(traj).items()}
+    assert not s["fell"] and s["obstacle_contacts"] == 0 and s["steps_taken"] == STEPS_2D
+    assert np.isfinite(s["placement_error_p95"]) and s["placement_error_p95"] < PLACEMENT_TOL
+
+
+def test_recorded_states_end_at_the_touch_downs(runs, sim):
+    """The last state kept of each step is the one whose sole gave ``log.landed`` (host forward kinematics).
+
+    ``landed`` reads MJX's site positions, computed before the last physics step's integration: the
+    sole can move by its touch-down speed times 2 ms (measured 0.12 mm), hence 1 mm.
+    """
+    _, traj = runs["flat-forward"]
+    assert traj.log.qpos.shape == (STEPS_2D, FRAMES, sim.mj_model.nq)
+    np.testing.assert_array_equal(W.frame_ticks(sim, FRAMES), [19, 39, 59, 79])
+    data = mujoco.MjData(sim.mj_model)
+    for k in range(STEPS_2D):
+        data.qpos[:] = traj.log.qpos[k, -1]
+        mujoco.mj_kinematics(sim.mj_model, data)
+        row = 0 if traj.sides[k] > 0 else 1
+        np.testing.assert_allclose(data.site_xpos[sim.index.sole_site[row], :2], traj.log.landed[k, :2], atol=1e-3)
+
+
+def test_renders_the_robot_where_it_walks(runs, sim):
+    sc, traj = runs["flat-forward"]
+    q = render.states(traj)
+    assert q.shape == (STEPS_2D * FRAMES, sim.mj_model.nq)
+    pick = q[[0, len(q) - 1]]
+    robot_geoms = np.flatnonzero(sim.mj_model.geom_bodyid > 0)
+    # Tracking camera: the robot stays in view, near the middle of the image, at both ends of the walk.
+    seg = render.render(sim, sc.terrain(), q, width=160, height=120, segmentation=True, smooth=5)
+    for s in seg[[0, -1]]:
+        rows, cols = np.nonzero(np.isin(s, robot_geoms))
+        assert rows.size > 200  # pixels of the robot
+        assert abs(cols.mean() - 80) < 30
+    # A fixed camera looking along -y at the start: the robot walks +x, so it moves right in the image.
+    fixed = render.render(sim, sc.terrain(), pick, width=160, height=120, segmentation=True, track=False,
+                          azimuth=90.0, elevation=-10.0, distance=5.0)
+    cols = [np.nonzero(np.isin(s, robot_geoms))[1].mean() for s in fixed]
+    assert cols[1] > cols[0] + 20
+    rgb = render.render(sim, sc.terrain(), pick[:1], width=160, height=120, footsteps=traj.commanded[:4],
+                        sides=traj.sides[:4])
+    plain = render.render(sim, sc.terrain(), pick[:1], width=160, height=120)
+    assert rgb.shape == (1, 120, 160, 3) and rgb.dtype == np.uint8
+    assert np.abs(rgb.astype(int) - plain).sum(-1).astype(bool).sum() > 50  # the commanded footholds are drawn
+
+
+def test_headless_rendering_without_egl_says_what_to_set():
+    code = "import mujoco\nfrom ijoy_jax.sim import render\nrender._check_gl()"
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "DISPLAY")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode != 0 and "MUJOCO_GL=egl" in out.stderr
+
+
+def test_margin_sweep_reuses_the_compiled_rollout(runs, sim):
+    """Margins 0 and 10 cm on two clutter maps: the same program as the scenarios (no new compile)."""
+    res = margins.run(margins=[0.0, 0.10], batch=2, num_steps=STEPS_2D, seed=3, sim=sim, frames_per_step=FRAMES)
+    assert res["compiles"] == 0
+    assert res["contact"].shape == (2, 2) and res["traj"].taken.shape == (2, 2, STEPS_2D)
+    assert not res["fell"].any()
+    # 10 cm is far beyond the placement error: nothing touched, no foothold on an obstacle.
+    assert res["contact"][1].sum() == 0 and res["on_obstacle"][1].sum() == 0
+    assert res["contacts_per_step"][0] >= res["contacts_per_step"][1]
+    assert res["mean_progress"][0] >= res["mean_progress"][1] - 0.05  # a wider margin never opens a path
+    terr = jax.tree_util.tree_map(lambda a: np.asarray(a)[0], res["terrains"])
+    assert not terr.has_height and (~terr.free).sum() > 50  # clutter, raised in the physics
+
+
+def test_bad_inputs_are_refused_before_compiling(sim):
+    robot = ij.robots.hrp2()
+    wrong = ij.terrain.from_arrays(np.zeros((50, 50)), None, 0.02).replace(has_height=True)
+    with pytest.raises(ValueError, match="does not match"):
+        W.rollout(sim, wrong, robot, np.zeros((2, 3)), np.zeros(3), num_steps=1)
+    good = ij.terrain.from_arrays(np.zeros(sim.shape), None, RES).replace(has_height=True)
+    with pytest.raises(ValueError, match="step_time"):
+        W.rollout(sim, good, ij.robots.hrp2(step_time=0.6), np.zeros((2, 3)), np.zeros(3), num_steps=1)
+    with pytest.raises(ValueError, match="frames_per_step"):
+        W.rollout(sim, good, robot, np.zeros((2, 3)), np.zeros(3), num_steps=1, frames_per_step=81)
+    batch = jax.tree_util.tree_map(lambda a: jnp.stack([a, a]), good)
+    robots2 = jax.tree_util.tree_map(lambda a: jnp.stack([a, a]), robot)
+    with pytest.raises(ValueError, match="starts must have shape"):
+        W.rollout_batch(sim, batch, robots2, np.zeros((3, 2, 3)), np.zeros((3, 3)), num_steps=1)
+    with pytest.raises(ValueError, match="commands must have shape"):
+        W.rollout_batch(sim, batch, robots2, np.zeros((2, 2, 3)), np.zeros((2, 4, 3)), num_steps=2)
+    with pytest.raises(ValueError, match="margins must be"):
+        margins.run(margins=[0.0, 0.2], sim=sim)
+    with pytest.raises(ValueError, match="no states"):
+        render.states(SimpleNamespace(log=SimpleNamespace(qpos=np.zeros((3, 0, 19)))))  # rolled out with 0 frames
