@@ -197,3 +197,16 @@ def test_bad_inputs_are_refused_before_compiling(sim):
         margins.run(margins=[0.0, 0.2], sim=sim)
     with pytest.raises(ValueError, match="no states"):
         render.states(SimpleNamespace(log=SimpleNamespace(qpos=np.zeros((3, 0, 19)))))  # rolled out with 0 frames
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["sim", "margins", "--margins", "0,0.2"], "margins must be"),
+    (["sim", "margins", "--margins", "0,x"], "could not convert"),
+    (["sim", "render", "--size", "big"], "invalid literal"),
+    (["sim", "render", "--frames", "200", "--steps", "1"], "frames_per_step"),
+])
+def test_cli_refuses_bad_arguments_before_compiling(argv, message, capsys):
+    from ijoy_jax import cli
+
+    assert cli.main(argv) == 2
+    assert message in capsys.readouterr().err

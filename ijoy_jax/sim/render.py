@@ -86,7 +86,7 @@ def _add_footprints(scene: mujoco.MjvScene, footsteps, sides, heights, length: f
 
 
 def render(sim, terrain, qpos, *, width: int = 480, height: int = 320, footsteps=None, sides=None,
-           distance: float = 3.2, azimuth: float = 135.0, elevation: float = -20.0, track: bool = True,
+           distance: float = 3.2, azimuth: float = 60.0, elevation: float = -20.0, track: bool = True,
            lookat=None, smooth: int = 9, segmentation: bool = False) -> np.ndarray:
     """Render states of the simulated biped on ``terrain``.
 
