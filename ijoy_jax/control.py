@@ -47,6 +47,11 @@ class Walker(NamedTuple):
     feet(state) -> (2, 3) world poses, row 0 left, row 1 right.
     log(state) -> pytree recorded after every step (optional; e.g. a physically
         simulated robot's placement error and falls), kept in Trajectory.log.
+    warmup: loop iterations before the first decision (static int, default 0)
+        in which the robot settles: ``execute`` is called with ``go=False``,
+        the loop does not stop, and nothing of them is kept in the Trajectory.
+        A robot that must stand a step before walking uses it instead of
+        stepping in ``init``, so the step's code is traced (and compiled) once.
     """
 
     init: Callable[[jax.Array, jax.Array], Any]
@@ -54,6 +59,7 @@ class Walker(NamedTuple):
     execute: Callable[[Any, jax.Array, jax.Array], Any]
     feet: Callable[[Any], jax.Array]
     log: Callable[[Any], Any] | None = None
+    warmup: int = 0
 
 class _PerfectState(NamedTuple):
     feet: jax.Array  # (2, 3) row 0 left, row 1 right
@@ -178,15 +184,16 @@ def rollout_core(
         commands = jnp.broadcast_to(commands, (num_steps, 3))
     state0 = walker.init(jnp.asarray(start, jnp.float32), jnp.asarray(first_swing, jnp.float32))
 
-    def step(carry, command):
+    def step(carry, xs):
+        command, settling = xs
         state, stopped = carry
         info = walker.stance(state)
         choice = select_step_indexed(
             terrain, index, robot, targets, info.stance, info.stance_side, command, method,
             info.swing_from if swing_path else None, quantize,
         )
-        go = ~stopped & (choice.valid | (method == "naive"))
-        now_stopped = stopped | ~go
+        go = ~stopped & (choice.valid | (method == "naive")) & ~settling
+        now_stopped = stopped | (~go & ~settling)
         before = walker.feet(state)
         new_state = walker.execute(state, choice.pose, go)
         after = walker.feet(new_state)
@@ -230,7 +237,12 @@ def rollout_core(
             record["log"] = walker.log(new_state)
         return (new_state, now_stopped), record
 
-    (state, _), rec = lax.scan(step, (state0, jnp.bool_(False)), commands[:num_steps])
+    warm = int(walker.warmup)
+    commands = jnp.concatenate([jnp.zeros((warm, 3), jnp.float32), commands[:num_steps]])
+    settling = jnp.arange(warm + num_steps) < warm
+    (state, _), rec = lax.scan(step, (state0, jnp.bool_(False)), (commands, settling))
+    if warm:
+        rec = jax.tree_util.tree_map(lambda a: a[warm:], rec)
     return Trajectory(feet=walker.feet(state), **rec)
 
 _rollout_jit = jax.jit(rollout_core, static_argnames=("num_steps", "method", "walker", "swing_path", "quantize"))

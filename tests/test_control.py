@@ -116,6 +116,27 @@ def test_custom_walker_replaces_the_robot_without_touching_the_selector():
     np.testing.assert_allclose(np.asarray(traj.deviation), 0.03, atol=1e-5)
 
 
+def test_walker_warmup_iterations_settle_without_being_recorded():
+    """warmup=2: two extra executes with go=False come first; the trajectory holds only the real steps."""
+    base = control.perfect_walker()
+
+    def init(start, first_swing):
+        return base.init(start, first_swing), jnp.int32(0), jnp.int32(0)
+
+    def execute(state, pose, go):
+        inner, calls, gos = state
+        return base.execute(inner, pose, go), calls + 1, gos + go.astype(jnp.int32)
+
+    walker = control.Walker(lambda s, f: init(s, f), lambda s: base.stance(s[0]), execute,
+                            lambda s: base.feet(s[0]), lambda s: jnp.stack([s[1], s[2]]), warmup=2)
+    t = ij.terrain.flat(SHAPE, RES)
+    traj = ij.rollout(t, ROBOT, START, [0.25, 0.0, 0.0], 4, walker=walker)
+    plain = ij.rollout(t, ROBOT, START, [0.25, 0.0, 0.0], 4)
+    np.testing.assert_array_equal(np.asarray(traj.log), [[3, 1], [4, 2], [5, 3], [6, 4]])  # (executes, with go)
+    np.testing.assert_allclose(np.asarray(traj.footsteps), np.asarray(plain.footsteps), atol=1e-6)
+    assert not np.asarray(traj.stopped).any() and np.asarray(traj.taken).all()
+
+
 def test_bad_input_at_the_boundary():
     t = ij.terrain.flat(SHAPE, RES)
     with pytest.raises(ValueError, match="start"):

@@ -7,7 +7,9 @@ and the physics (``step_time`` seconds) in a ``lax.scan``, ``stance`` and
 the simulated foot really landed. The controller plans in its own frame:
 each chosen step, taken relative to the measured stance foot, is applied
 to the commanded one (``SimState.planned``), so the joint targets never jump
-to the measured soles between steps. :func:`rollout` is the control loop of
+to the measured soles between steps. The robot stands one step before the
+first decision (the Walker's ``warmup`` iteration, so that the step's
+physics and dynamics filter are traced and compiled once, not twice). :func:`rollout` is the control loop of
 :func:`ijoy_jax.rollout` (the same selector code) with this walker, jitted as
 one scan; vmap :func:`rollout_core` for batches of terrains, commands and
 starts.
@@ -141,6 +143,7 @@ class SimState(NamedTuple):
     anchor: jax.Array  # (2,) the ZMP's current support point (controller frame)
     corr: jax.Array  # (controller.correction_length, 2) the dynamics filter's last correction
     last: StepLog
+    fresh: jax.Array  # () bool, nothing simulated yet: the next execute stands (the Walker's warm-up step)
 
 
 def _soles(sim: Sim, d: mjx.Data) -> jax.Array:
@@ -250,25 +253,27 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         qpos = standing_qpos(params, cfg, start, ground)
         d = mjx.make_data(m)
         d = d.replace(qpos=qpos, ctrl=qpos[7:])
-        d = mjx.forward(m, d)
+        d = mjx.kinematics(m, d)
+        d = mjx.com_pos(m, d)
         planned = jnp.concatenate([start[:, :2], ground[:, None], start[:, 2:]], axis=1)
         swing_side = jnp.asarray(first_swing, jnp.float32)
-        # One step standing while the preview sees the first step's weight shift coming.
-        st, sw = split(planned, swing_side)
         cs = controller.init_state(pgains, d.subtree_com[sim.index.pelvis][:2])
         corr = jnp.zeros((controller.correction_length(cfg), 2), jnp.float32)
-        d, cs, corr, touched, low, tilt, frames = simulate(d, cs, controller.prepare_plan(st, sw, swing_side), corr)
         soles = _soles(sim, d)
-        fallen = (low < sim.fall_height) | (tilt > sim.fall_tilt)
-        log = StepLog(soles[0], jnp.float32(0), jnp.float32(0), fallen, touched, low, tilt, frames)
-        return SimState(d, cs, soles, planned, swing_side, 0.5 * (planned[0, :2] + planned[1, :2]), corr, log)
+        zero = jnp.float32(0)
+        log = StepLog(soles[0], zero, zero, jnp.bool_(False), jnp.bool_(False), jnp.float32(cfg.pelvis_height), zero,
+                      jnp.zeros((len(keep), m.nq), jnp.float32))
+        # The first execute (the loop's warm-up iteration) stands one step while the preview sees the first
+        # step's weight shift coming; it runs the same simulate as every step, so it is compiled once.
+        return SimState(d, cs, soles, planned, swing_side, 0.5 * (planned[0, :2] + planned[1, :2]), corr, log,
+                        jnp.bool_(True))
 
     def stance(s):
         st, sw = split(s.soles, s.swing)
         return control.StanceInfo(st[jnp.array([0, 1, 3])], -s.swing, sw[jnp.array([0, 1, 3])])
 
     def execute(s, pose, go):
-        go = jnp.asarray(go) & ~s.last.fallen
+        go = jnp.asarray(go) & ~s.last.fallen & ~s.fresh
         st, sw = split(s.soles, s.swing)
         pst, psw = split(s.planned, s.swing)
         pose = jnp.asarray(pose, jnp.float32)
@@ -281,6 +286,8 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         planar = geometry.compose(pst[jnp.array([0, 1, 3])], rel)
         ptarget = jnp.array([planar[0], planar[1], target[2], planar[2]])
         plan = controller.plan_step(s.anchor, pst, psw, ptarget, go, s.swing, top, cfg.clearance)
+        plan = jax.tree_util.tree_map(lambda a, b: jnp.where(s.fresh, a, b),
+                                      controller.prepare_plan(pst, psw, s.swing), plan)
         d, cs, corr, touched, low, tilt, frames = simulate(s.data, s.ctrl, plan, s.corr)
         soles = _soles(sim, d)
         left_swings = s.swing > 0
@@ -291,12 +298,13 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         yaw_err = jnp.where(go, jnp.abs(geometry.wrap_angle(landed[3] - target[3])), 0.0)
         log = StepLog(landed, err, yaw_err, fallen, touched, low, tilt, frames)
         anchor = jnp.where(go, pst[:2], 0.5 * (planned[0, :2] + planned[1, :2]))
-        return SimState(d, cs, soles, planned, jnp.where(go, -s.swing, s.swing), anchor, corr, log)
+        return SimState(d, cs, soles, planned, jnp.where(go, -s.swing, s.swing), anchor, corr, log,
+                        jnp.bool_(False))
 
     def feet(s):
         return s.soles[:, jnp.array([0, 1, 3])]
 
-    return control.Walker(init, stance, execute, feet, lambda s: s.last)
+    return control.Walker(init, stance, execute, feet, lambda s: s.last, warmup=1)
 
 
 def rollout_core(sim: Sim, terrain: Terrain, robot: Robot, start, commands, num_steps: int,
