@@ -13,7 +13,7 @@ import pytest
 
 from ijoy_jax import geometry, robots
 from ijoy_jax import terrain as T
-from ijoy_jax.sim import controller, dynamics, model
+from ijoy_jax.sim import controller, dynamics, model, swing
 from ijoy_jax.sim import walker as W
 
 ATOL = 1e-6  # float32 arithmetic on metre-sized numbers
@@ -67,18 +67,22 @@ def sim():
 
 
 class _Native:
-    """The walker's step logic on host MuJoCo (one robot, flat ground), as :func:`W.mjx_walker` does it.
+    """The walker's step logic on host MuJoCo (one robot), as :func:`W.mjx_walker` does it.
 
     The plan lives in the controller's frame (``planned``), the dynamics filter
     is warm-started from the previous step, and each tick's targets are
-    interpolated over its physics steps.
+    interpolated over its physics steps. ``heights`` (the Sim's grid, m;
+    flat by default) is the ground: touch-downs at its height under the foot,
+    swings over the highest terrain under the swept foot.
     """
 
-    def __init__(self, sim):
+    def __init__(self, sim, heights=None):
         self.sim, self.cfg, self.params = sim, sim.cfg, sim.params
         nx, ny = sim.shape
         origin = (-0.5 * nx * sim.resolution, -0.5 * ny * sim.resolution)
-        terr = T.from_arrays(np.zeros(sim.shape), None, sim.resolution, origin=origin).replace(has_height=True)
+        heights = np.zeros(sim.shape) if heights is None else heights
+        terr = T.from_arrays(heights, None, sim.resolution, origin=origin).replace(has_height=True)
+        self.terr = terr
         self.m = model.build_model(self.params, terr)
         self.d = mujoco.MjData(self.m)
         self.planned = np.array([[0.0, 0.095, 0.0, 0.0], [0.0, -0.095, 0.0, 0.0]], np.float32)
@@ -127,9 +131,12 @@ class _Native:
         rel = jnp.asarray([action[0], action[1] * self.swing, action[2] * self.swing], jnp.float32)
         pose = np.asarray(geometry.compose(jnp.asarray(st[[0, 1, 3]]), rel))
         planar = np.asarray(geometry.compose(jnp.asarray(self.planned[row_st, [0, 1, 3]]), rel))
-        target = jnp.asarray([planar[0], planar[1], 0.0, planar[2]], jnp.float32)
+        foot = (self.params.foot_length, self.params.foot_width)
+        ground = float(swing.footprint_height(self.terr, jnp.asarray(pose), *foot))
+        top = swing.corridor_height(self.terr, jnp.asarray(s[row_sw, [0, 1, 3]]), jnp.asarray(pose), *foot)
+        target = jnp.asarray([planar[0], planar[1], ground, planar[2]], jnp.float32)
         plan = controller.plan_step(self.anchor, jnp.asarray(self.planned[row_st]), jnp.asarray(self.planned[row_sw]),
-                                    target, True, self.swing, 0.0, self.cfg.clearance)
+                                    target, True, self.swing, top, self.cfg.clearance)
         low = self.run_step(plan)
         landed = self.soles()[row_sw]
         self.planned[row_sw] = np.asarray(plan.swing_to)
@@ -166,6 +173,43 @@ def test_walks_random_action_set_steps(sim):
         assert not fell, (len(errs), a)
         errs.append(err)
     assert max(errs) < WALK_TOL, errs
+
+
+def test_walks_with_one_foot_on_a_raised_lane(sim):
+    """Forward 0.2 m steps with the left foot climbing onto an 8 cm lane (the paper's low platform,
+    in one lane as in tests/test_experiments.py) while the right foot stays on the ground. The pelvis
+    holds its height above the lower foot: above the feet's mean, the lower leg straightened (knee
+    0.11 rad at 4.6 cm, 0 beyond) and the robot fell (measured in MJX)."""
+    nx, ny = sim.shape
+    x = (np.arange(nx) + 0.5) * sim.resolution - 0.5 * nx * sim.resolution
+    y = (np.arange(ny) + 0.5) * sim.resolution - 0.5 * ny * sim.resolution
+    lane = 0.08 * ((x[:, None] > 0.35) & (y[None, :] > 0.0))  # the left foot's side (y = +0.095) from x = 0.35
+    walk = _Native(sim, heights=lane)
+    errs, left_z = [], []
+    for k in range(6):  # left to 0.2 (ground), right to 0.4, left to 0.6 (on the lane), ...
+        err, fell = walk.step((0.2, 0.19, 0.0))
+        assert not fell, k
+        errs.append(err)
+        if k % 2 == 0:
+            left_z.append(float(walk.soles()[0, 2]))
+    assert max(errs) < WALK_TOL, errs
+    np.testing.assert_allclose(left_z, [0.0, 0.08, 0.08], atol=0.01)  # up on the lane from the second left step
+    assert abs(float(walk.soles()[1, 2])) < 0.01  # the right foot still on the ground
+
+
+def test_pelvis_stays_above_the_lower_foot(sim):
+    """One foot 8 cm up: both knees stay bent (the flat stance's knee is 0.57 rad)."""
+    cfg, params = sim.cfg, sim.params
+    pg = controller.gains(cfg)
+    stance = jnp.array([0.0, 0.095, 0.08, 0.0], jnp.float32)  # left foot up
+    swing_from = jnp.array([0.0, -0.095, 0.0, 0.0], jnp.float32)  # beside it, on the ground
+    target = jnp.array([0.2, -0.095, 0.0, 0.0], jnp.float32)
+    plan = controller.plan_step(jnp.zeros(2), stance, swing_from, target, True, -1.0, 0.08, cfg.clearance)
+    cs = controller.init_state(pg, jnp.array([0.0, 0.0], jnp.float32))
+    q, _, _ = controller.control_tick(params, cfg, pg, plan, cs)
+    knees = np.asarray(q)[[3, 9]]  # rows: left, right; columns: model.JOINTS
+    assert knees.min() > 0.4, knees
+    assert knees[0] > knees[1]  # the leg on the lane bends more
 
 
 def test_carry_correction_moves_on_by_one_step():

@@ -207,9 +207,10 @@ def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPla
     lipm, err_sum, _ = preview.preview_update(pgains, cs.lipm, cs.err_sum, ztrack)
     t = cs.t + cfg.control_dt
     feet = foot_targets(cfg, plan, t)
-    # Ground under the body: the mean of the stance sole and the swing sole's start/end heights.
+    # Ground under the body: the lower of the stance sole and the swing sole's start/end heights (the mean would
+    # stretch the lower leg straight, its knee singular, once one foot stands 5 cm higher than the other).
     s = swing_phase(cfg, t)
-    ground = 0.5 * (plan.stance[2] + (1 - s) * plan.swing_from[2] + s * plan.swing_to[2])
+    ground = jnp.minimum(plan.stance[2], (1 - s) * plan.swing_from[2] + s * plan.swing_to[2])
     yaw_mid = feet[0, 3] + 0.5 * geometry.wrap_angle(feet[1, 3] - feet[0, 3])
     # The pelvis that puts the CoM model (1 - b) pelvis + b mean(soles) + offset on the LIPM's CoM.
     b = cfg.leg_share

@@ -115,9 +115,10 @@ def check_robot(robot: Robot, cfg: WalkConfig) -> None:
 
 def standing_qpos(params: model.BipedParams, cfg: WalkConfig, feet, ground, shift=None) -> jax.Array:
     """(7 + 12,) qpos standing on soles ``feet`` (2, 3) at heights ``ground`` (2,), the pelvis
-    ``cfg.pelvis_height`` above their mean and above their midpoint (moved by ``shift`` (2,) m when given)."""
+    ``cfg.pelvis_height`` above the lower one (as the controller holds it) and above their midpoint (moved by
+    ``shift`` (2,) m when given)."""
     ground = jnp.asarray(ground, jnp.float32)
-    return model.stand_pose(params, jnp.asarray(feet, jnp.float32), ground, jnp.mean(ground) + cfg.pelvis_height,
+    return model.stand_pose(params, jnp.asarray(feet, jnp.float32), ground, jnp.min(ground) + cfg.pelvis_height,
                             shift)[0]
 
 
@@ -213,7 +214,7 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         tick's (a servo's first-order hold): held as steps every 10 ms, they jolt the stiff joints and the
         robot falls within a few 0.2 m steps (measured on the native loop; interpolated, it walks).
         """
-        ground = 0.5 * (plan.stance[2] + plan.swing_to[2])
+        ground = jnp.minimum(plan.stance[2], plan.swing_to[2])  # as the controller holds the pelvis above it
 
         cs = cs._replace(t=jnp.zeros((), jnp.float32))
         if cfg.filter_passes > 0:
