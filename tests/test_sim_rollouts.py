@@ -210,3 +210,23 @@ def test_cli_refuses_bad_arguments_before_compiling(argv, message, capsys):
 
     assert cli.main(argv) == 2
     assert message in capsys.readouterr().err
+
+
+def test_gif_and_filmstrip(tmp_path):
+    from PIL import Image
+
+    frames = np.zeros((5, 12, 16, 3), np.uint8)
+    frames[np.arange(5), :, np.arange(5) * 3] = 255  # a white column moving right, one per frame
+    render.write_gif(tmp_path / "a.gif", frames, fps=10)
+    with Image.open(tmp_path / "a.gif") as gif:
+        assert gif.n_frames == 5 and gif.size == (16, 12)
+        gif.seek(4)
+        assert np.asarray(gif.convert("RGB"))[:, 12].min() == 255
+    strip = render.filmstrip(frames, count=3, columns=2)  # frames 0, 2, 4 on two rows, one blank tile
+    assert strip.shape == (24, 32, 3)
+    np.testing.assert_array_equal(strip[:12, :16], frames[0])
+    np.testing.assert_array_equal(strip[:12, 16:], frames[2])
+    np.testing.assert_array_equal(strip[12:, :16], frames[4])
+    assert not strip[12:, 16:].any()
+    with pytest.raises(ValueError, match="uint8"):
+        render.write_gif(tmp_path / "b.gif", frames.astype(np.float32))

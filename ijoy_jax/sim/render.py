@@ -183,4 +183,4 @@ def filmstrip(frames: np.ndarray, count: int = 5, columns: int | None = None) ->
     rows = -(-count // columns)
     pad = np.zeros((rows * columns - count, *frames.shape[1:]), frames.dtype)
     tiles = np.concatenate([pick, pad]).reshape(rows, columns, *frames.shape[1:])
-    return np.concatenate(np.concatenate(tiles, axis=2), axis=1)
+    return np.concatenate([np.concatenate(list(row), axis=1) for row in tiles], axis=0)

@@ -9,10 +9,11 @@ each chosen step, taken relative to the measured stance foot, is applied
 to the commanded one (``SimState.planned``), so the joint targets never jump
 to the measured soles between steps. The robot stands one step before the
 first decision (the Walker's ``warmup`` iteration, so that the step's
-physics and dynamics filter are traced and compiled once, not twice). :func:`rollout` is the control loop of
-:func:`ijoy_jax.rollout` (the same selector code) with this walker, jitted as
-one scan; vmap :func:`rollout_core` for batches of terrains, commands and
-starts.
+physics and dynamics filter are traced and compiled once, not twice).
+:func:`rollout` is the control loop of :func:`ijoy_jax.rollout` (the same
+selector code) with this walker, jitted as one scan; :func:`rollout_batch`
+runs B of them in one jitted vmap (terrains, robots, starts, commands), and
+:func:`rollout_core` is the unjitted loop to vmap inside your own code.
 """
 
 from __future__ import annotations
@@ -209,10 +210,9 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         """One step of control ticks and physics.
 
         Returns (data, ctrl state, filter correction, obstacle touched, lowest pelvis, max tilt, kept qpos
-        frames). Each tick's
-        joint targets reach the actuators interpolated linearly over its physics steps from the previous
-        tick's (a servo's first-order hold): held as steps every 10 ms, they jolt the stiff joints and the
-        robot falls within a few 0.2 m steps (measured on the native loop; interpolated, it walks).
+        frames). Each tick's joint targets reach the actuators interpolated linearly over its physics steps
+        from the previous tick's (a servo's first-order hold): held as steps every 10 ms, they jolt the stiff
+        joints and the robot falls within a few 0.2 m steps (measured on the native loop; interpolated, it walks).
         """
         ground = jnp.minimum(plan.stance[2], plan.swing_to[2])  # as the controller holds the pelvis above it
 
