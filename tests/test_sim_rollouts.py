@@ -164,15 +164,18 @@ def test_headless_rendering_without_egl_says_what_to_set():
 
 
 def test_margin_sweep_reuses_the_compiled_rollout(runs, sim):
-    """Margins 0 and 10 cm on two clutter maps: the same program as the scenarios (no new compile)."""
-    res = margins.run(margins=[0.0, 0.10], batch=2, num_steps=STEPS_2D, seed=3, sim=sim, frames_per_step=FRAMES)
+    """Margins 0, 5 and 10 cm on two clutter maps, in chunks of 4 (the last one wraps round): the same program as
+    the scenarios (no new compile)."""
+    res = margins.run(margins=[0.0, 0.05, 0.10], batch=2, num_steps=STEPS_2D, seed=3, sim=sim, chunk=4,
+                      frames_per_step=FRAMES)
     assert res["compiles"] == 0
-    assert res["contact"].shape == (2, 2) and res["traj"].taken.shape == (2, 2, STEPS_2D)
+    assert res["contact"].shape == (3, 2) and res["traj"].taken.shape == (3, 2, STEPS_2D)
     assert not res["fell"].any()
     # 10 cm is far beyond the placement error: nothing touched, no foothold on an obstacle.
-    assert res["contact"][1].sum() == 0 and res["on_obstacle"][1].sum() == 0
-    assert res["contacts_per_step"][0] >= res["contacts_per_step"][1]
-    assert res["mean_progress"][0] >= res["mean_progress"][1] - 0.05  # a wider margin never opens a path
+    assert res["contact"][2].sum() == 0 and res["on_obstacle"][2].sum() == 0
+    assert res["contacts_per_step"][0] >= res["contacts_per_step"][2]
+    assert res["mean_progress"][0] >= res["mean_progress"][2] - 0.05  # a wider margin never opens a path
+    assert np.all(res["steps"] == STEPS_2D)
     terr = jax.tree_util.tree_map(lambda a: np.asarray(a)[0], res["terrains"])
     assert not terr.has_height and (~terr.free).sum() > 50  # clutter, raised in the physics
 

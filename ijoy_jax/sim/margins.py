@@ -12,7 +12,8 @@ landed on one, falls, and the progress made. :func:`plot` draws the result.
     res = margins.run(margins=[0.0, 0.02, 0.05, 0.1], batch=64, num_steps=16)
     margins.plot(res, "margins.png")
 
-``ijoy sim margins`` runs it from the command line.
+``ijoy sim margins`` runs it from the command line (on a GPU: 256 maps x 11
+margins x 16 steps in about two minutes on one H100).
 """
 
 from __future__ import annotations
@@ -75,7 +76,8 @@ def run(margins=MARGINS, batch: int = 64, num_steps: int = 16, seed: int = 0, si
       seed: maps and commands.
       sim: a :class:`~ijoy_jax.sim.walker.Sim` for the 200 x 100 grid at 2 cm (built when None).
       method: the selector ("ordered" or "exhaustive": the same steps).
-      chunk: rollouts per jitted call (default: all ``len(margins) * batch`` at once); equal chunks reuse one compile.
+      chunk: rollouts per jitted call; equal chunks reuse one compile. Each rollout holds about 40 MB of
+        selector windows, so the default is at most 512 on an accelerator and 32 on a CPU.
       frames_per_step: states kept per step for :mod:`ijoy_jax.sim.render` (static; 0: none).
 
     Returns:
@@ -106,7 +108,9 @@ def run(margins=MARGINS, batch: int = 64, num_steps: int = 16, seed: int = 0, si
     all_robots = _stack([robots.hrp2(margin=float(mg)) for mg in margins for _ in range(b)])
     all_starts, all_commands = rep(starts), rep(commands)
     total = m * b
-    chunk = total if chunk is None else max(1, min(int(chunk), total))
+    if chunk is None:
+        chunk = 32 if jax.default_backend() == "cpu" else 512
+    chunk = max(1, min(int(chunk), total))
     parts, t0 = [], time.perf_counter()
     before = W._rollout_batch_jit._cache_size()
     for lo in range(0, total, chunk):
