@@ -32,6 +32,8 @@ from ijoy_jax._struct import pytree_dataclass, static_field
 from ijoy_jax.robots import Robot, side_actions
 from ijoy_jax.terrain import Terrain
 
+_SLACK = 1e-6  # m: float32 rounding allowed above the robot's float64 static window sizes
+
 
 class FootCostTerms(NamedTuple):
     """FootCost of N candidate steps, as a total and as named terms (all (N,) float32).
@@ -233,7 +235,9 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     hl = 0.5 * robot.foot_length + robot.margin
     hw = 0.5 * robot.foot_width + robot.margin
     grown = geometry.rect_column_spans(cx, cy, step[2], hl, hw, res, k)
-    too_big = (jnp.hypot(hl, hw) > robot.max_radius) | grown.overflow
+    # The static sizes are float64 and the pose's float32: a footprint exactly at max_radius (max_margin ==
+    # margin) would round above it, so compare with a micrometre of slack (the column spans flag real overflow).
+    too_big = (jnp.hypot(hl, hw) > robot.max_radius + _SLACK) | grown.overflow
     blocked = jnp.any(_column_has_obstacle(index, grown, terrain.shape))
     metrics = robot.metrics
     zero = jnp.float32(0.0)
@@ -265,7 +269,7 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
         top, off_map = _column_max_height(index, corridor, terrain.shape)
         path_height = top - jnp.maximum(start_plane.height, raw[5])
         path_bad = off_map | (path_height > robot.clearance[action_index])
-        too_big = too_big | corridor.overflow | (length + robot.foot_width > robot.max_swing)
+        too_big = too_big | corridor.overflow | (length + robot.foot_width > robot.max_swing + _SLACK)
     action = robot.action_cost[action_index]
     obstacle = _inf_if(blocked)
     swing = _inf_if(path_bad)

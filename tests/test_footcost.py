@@ -255,6 +255,26 @@ def test_unsupported_margin_and_nan_pose_are_flagged_inside_jit():
     assert np.isinf(b.unsupported).all()
 
 
+@pytest.mark.parametrize("has_height", [False, True])
+def test_windows_sized_exactly_for_the_margin_give_the_same_costs(has_height):
+    """max_margin == margin: the footprint fills the static window exactly (float64 sizes, float32 poses).
+    Without slack every step was flagged unsupported; the costs must equal those with roomy windows."""
+    t = _rough_terrain(3, has_height)
+    stance = np.array([0.8, 0.35, 0.3])
+    tight = ij.robots.hrp2(margin=0.02, max_margin=0.02)
+    steps = np.asarray(ij.action_steps(tight, stance, -1))
+    far = steps[np.argmax(np.hypot(*(steps[:, :2] - stance[:2]).T))]  # the longest step, as the swing's start
+    swing_from = 2 * stance - far
+    kw = dict(swing_from=swing_from, action_index=np.arange(496))
+    a = ij.foot_cost_terms(t, ROBOT, stance, -1, steps, **kw)
+    b = ij.foot_cost_terms(t, tight, stance, -1, steps, **kw)
+    assert not np.isinf(np.asarray(b.unsupported)).any()
+    ta, tb = np.asarray(a.total), np.asarray(b.total)
+    np.testing.assert_array_equal(np.isinf(ta), np.isinf(tb))
+    # the plane fit sums a smaller window: float32 sums in another order (measured 6e-8)
+    np.testing.assert_allclose(ta[np.isfinite(ta)], tb[np.isfinite(tb)], rtol=1e-5, atol=1e-6)
+
+
 def test_bad_input_at_the_boundary():
     t = ij.terrain.flat((20, 20), RES)
     with pytest.raises(ValueError, match="stance_side"):
