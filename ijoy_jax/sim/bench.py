@@ -105,8 +105,8 @@ def cpu_rollout(batch: int, steps: int, params: model.BipedParams | None = None,
                 mujoco=mujoco.__version__, final_ok=bool(np.all(np.isfinite(out[:, -1]))))
 
 
-def random_commands(key, robot, batch: int, num_steps: int) -> jax.Array:
-    """(batch, num_steps, 3) joystick commands, uniform over the range the action set can realise.
+def command_range(robot) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi), each (3,): the joystick commands (m/s, m/s, rad/s) the action set can realise.
 
     With p_next = p0 + dt j, the commands span the actions' extent around p0:
     xdot over [min dx - p0x, max dx - p0x] / dt, ydot over +-(max dy - p0y) / dt
@@ -117,6 +117,12 @@ def random_commands(key, robot, batch: int, num_steps: int) -> jax.Array:
     p0, dt = np.asarray(robot.p0), float(robot.step_time)
     lo = np.array([acts[:, 0].min() - p0[0], -(acts[:, 1].max() - p0[1]), -np.abs(acts[:, 2]).max()]) / dt
     hi = np.array([acts[:, 0].max() - p0[0], acts[:, 1].max() - p0[1], np.abs(acts[:, 2]).max()]) / dt
+    return lo, hi
+
+
+def random_commands(key, robot, batch: int, num_steps: int) -> jax.Array:
+    """(batch, num_steps, 3) joystick commands, uniform over :func:`command_range`."""
+    lo, hi = command_range(robot)
     u = jax.random.uniform(key, (batch, num_steps, 3), jnp.float32)
     return jnp.asarray(lo, jnp.float32) + u * jnp.asarray(hi - lo, jnp.float32)
 

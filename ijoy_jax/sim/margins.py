@@ -27,6 +27,7 @@ import numpy as np
 
 from ijoy_jax import generators, robots
 from ijoy_jax.sim import walker as W
+from ijoy_jax.sim.bench import command_range
 
 SHAPE = (200, 100)  # 4 m x 2 m at 2 cm
 RESOLUTION = 0.02
@@ -50,11 +51,10 @@ def clutter(seed: int, batch: int, params: generators.ObstacleParams = CLUTTER, 
 
 
 def forward_commands(seed: int, batch: int, robot=None) -> jax.Array:
-    """(batch, 3) commands held per rollout: forward at 60-100 % of the action set's longest step, sideways
-    and turning up to a fifth of theirs (m/s, m/s, rad/s)."""
+    """(batch, 3) commands held per rollout: forward at 60-100 % of the fastest the action set realises,
+    sideways and turning up to a fifth of theirs (m/s, m/s, rad/s; :func:`ijoy_jax.sim.bench.command_range`)."""
     robot = robots.hrp2() if robot is None else robot
-    acts, p0, dt = np.asarray(robot.actions), np.asarray(robot.p0), float(robot.step_time)
-    top = np.array([acts[:, 0].max() - p0[0], acts[:, 1].max() - p0[1], np.abs(acts[:, 2]).max()]) / dt
+    _, top = command_range(robot)
     k_fwd, k_side = jax.random.split(jax.random.key(seed))
     fwd = jax.random.uniform(k_fwd, (batch, 1), jnp.float32, 0.6, 1.0) * top[0]
     side = jax.random.uniform(k_side, (batch, 2), jnp.float32, -0.2, 0.2) * jnp.asarray(top[1:], jnp.float32)
