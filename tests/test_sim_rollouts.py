@@ -196,6 +196,9 @@ def test_bad_inputs_are_refused_before_compiling(sim):
         W.rollout_batch(sim, batch, robots2, np.zeros((3, 2, 3)), np.zeros((3, 3)), num_steps=1)
     with pytest.raises(ValueError, match="commands must have shape"):
         W.rollout_batch(sim, batch, robots2, np.zeros((2, 2, 3)), np.zeros((2, 4, 3)), num_steps=2)
+    slow = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), robot, ij.robots.hrp2(step_time=0.6))
+    with pytest.raises(ValueError, match="step_time"):
+        W.rollout_batch(sim, batch, slow, np.zeros((2, 2, 3)), np.zeros((2, 3)), num_steps=1)
     with pytest.raises(ValueError, match="margins must be"):
         margins.run(margins=[0.0, 0.2], sim=sim)
     with pytest.raises(ValueError, match="no states"):

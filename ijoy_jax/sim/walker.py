@@ -108,10 +108,14 @@ def make_sim(shape, resolution: float, params: model.BipedParams | None = None, 
 
 
 def check_robot(robot: Robot, cfg: WalkConfig) -> None:
-    """The selector's step time (p_next = p0 + dt j) must be the walker's."""
+    """The selector's step time (p_next = p0 + dt j) must be the walker's (one robot's or a batch's, when concrete)."""
     st = robot.step_time
-    if not isinstance(st, jax.core.Tracer) and np.ndim(st) == 0 and abs(float(st) - cfg.step_time) > 1e-6:
-        raise ValueError(f"robot.step_time {float(st)} s differs from the walking controller's {cfg.step_time} s")
+    if isinstance(st, jax.core.Tracer):
+        return
+    st = np.asarray(st, np.float64)
+    if np.any(np.abs(st - cfg.step_time) > 1e-6):
+        shown = float(st) if st.ndim == 0 else st
+        raise ValueError(f"robot.step_time {shown} s differs from the walking controller's {cfg.step_time} s")
 
 
 def standing_qpos(params: model.BipedParams, cfg: WalkConfig, feet, ground, shift=None) -> jax.Array:
@@ -341,11 +345,7 @@ def _check(sim: Sim, terrain: Terrain, robot: Robot, num_steps, method: str, fra
     if tuple(terrain.free.shape[lead:]) != sim.shape or terrain.resolution != sim.resolution:
         raise ValueError(f"terrain grid {tuple(terrain.free.shape[lead:])} at {terrain.resolution} m does not match "
                          f"the Sim's {sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid")
-    if not batched:
-        check_robot(robot, sim.cfg)
-    elif not np.allclose(np.asarray(robot.step_time), sim.cfg.step_time, atol=1e-6):
-        raise ValueError(f"robot.step_time {np.asarray(robot.step_time)} s differs from the walking controller's "
-                         f"{sim.cfg.step_time} s")
+    check_robot(robot, sim.cfg)
     if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
         raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
     if method not in METHODS:
