@@ -67,6 +67,7 @@ def test_fk_matches_mujoco():
                 d.qpos[ix.qpos_adr[row]] = _random_q(side, rng.uniform(size=6))
             mujoco.mj_kinematics(m, d)
             prot = d.xmat[ix.pelvis].reshape(3, 3)
+            np.testing.assert_allclose(kin.quat_to_rot(jnp.asarray(quat)), prot, atol=TOL64)  # quat not normalised
             for row, side in enumerate(SIDES):
                 pos, rot = kin.leg_fk(P, side, jnp.asarray(d.qpos[ix.qpos_adr[row]]))
                 site = ix.sole_site[row]

@@ -106,6 +106,15 @@ def rpy_to_rot(rpy: jax.Array) -> jax.Array:
     return rot_z(rpy[2]) @ rot_y(rpy[1]) @ rot_x(rpy[0])
 
 
+def quat_to_rot(quat: jax.Array) -> jax.Array:
+    """(3, 3) rotation of a quaternion ``(w, x, y, z)`` (MuJoCo's order; normalised first)."""
+    quat = jnp.asarray(quat, _dtype(quat))
+    w, x, y, z = quat / jnp.linalg.norm(quat)
+    return jnp.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
 def _leg_dims(params) -> tuple[float, float, float, float]:
     return float(params.hip_offset_y), float(params.thigh), float(params.shank), float(params.ankle_height)
 

@@ -33,7 +33,7 @@ from ijoy_jax import control, geometry
 from ijoy_jax import terrain as terrain_mod
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import METHODS, Targets
-from ijoy_jax.sim import controller, dynamics, model, swing
+from ijoy_jax.sim import controller, dynamics, kinematics, model, swing
 from ijoy_jax.sim.controller import WalkConfig
 from ijoy_jax.terrain import Terrain
 
@@ -210,8 +210,8 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
     def ground_of(pose):
         return swing.footprint_height(phys, pose, foot_l, foot_w)
 
-    def simulate(d, cs, plan, corr):
-        """One step of control ticks and physics.
+    def simulate(d, cs, plan, corr, st, pst):
+        """One step of control ticks and physics (``st``, ``pst``: the stance sole measured and as planned).
 
         Returns (data, ctrl state, filter correction, obstacle touched, lowest pelvis, max tilt, kept qpos
         frames). Each tick's joint targets reach the actuators interpolated linearly over its physics steps
@@ -225,11 +225,14 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
             corr = controller.zmp_correction(sim.mjx_free, params, cfg, pgains, plan, cs, cfg.filter_passes,
                                              init=controller.carry_correction(cfg, corr))
         fractions = jnp.arange(1, sim.substeps + 1, dtype=jnp.float32) / sim.substeps
+        # World -> the plan's frame: the planar transform that takes the measured stance sole onto the planned one.
+        to_plan = kinematics.rot_z(pst[3] - st[3])
 
         def tick(carry, k):
             d, cs, touched, low, tilt = carry
             window = None if cfg.filter_passes == 0 else lax.dynamic_slice_in_dim(corr, k, cfg.horizon)
-            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, window)
+            base = (to_plan @ (d.qpos[:3] - st[:3]) + pst[:3], to_plan @ kinematics.quat_to_rot(d.qpos[3:7]))
+            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, window, base)
             q0 = d.ctrl
 
             def physics(c, frac):
@@ -293,7 +296,7 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         plan = controller.plan_step(s.anchor, pst, psw, ptarget, go, s.swing, top, cfg.clearance)
         plan = jax.tree_util.tree_map(lambda a, b: jnp.where(s.fresh, a, b),
                                       controller.prepare_plan(pst, psw, s.swing), plan)
-        d, cs, corr, touched, low, tilt, frames = simulate(s.data, s.ctrl, plan, s.corr)
+        d, cs, corr, touched, low, tilt, frames = simulate(s.data, s.ctrl, plan, s.corr, st, pst)
         soles = _soles(sim, d)
         left_swings = s.swing > 0
         landed = jnp.where(left_swings, soles[0], soles[1])
