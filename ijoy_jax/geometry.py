@@ -14,6 +14,7 @@ never skips a cell at any position or rotation.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -95,8 +96,13 @@ def polygon_column_spans(corners: jax.Array, res, num_columns: int, ix0=None) ->
     Returns:
       ColumnSpans with (K,) arrays.
     """
-    px, py = corners[:, 0], corners[:, 1]
-    xmin, xmax = jnp.min(px), jnp.max(px)
+    # Unrolled over the (static, few) vertices: every quantity is a (K,) array, so XLA emits one elementwise
+    # loop instead of (K, V) intermediates and reductions over V (min/max are exact: the same result).
+    corners = jnp.asarray(corners)
+    num_vertices = corners.shape[-2]
+    px = [corners[v, 0] for v in range(num_vertices)]
+    py = [corners[v, 1] for v in range(num_vertices)]
+    xmin, xmax = functools.reduce(jnp.minimum, px), functools.reduce(jnp.maximum, px)
     ix_first = jnp.floor(xmin / res).astype(jnp.int32)
     ix0 = ix_first if ix0 is None else jnp.asarray(ix0, jnp.int32)
     ix_last = (jnp.ceil(xmax / res) - 1).astype(jnp.int32)
@@ -107,26 +113,24 @@ def polygon_column_spans(corners: jax.Array, res, num_columns: int, ix0=None) ->
     b = jnp.minimum((ix + 1) * res, xmax)
     has_width = a < b
 
-    # y of each edge at x = a and at x = b (edges that are not vertical and cross x).
-    qx, qy = jnp.roll(px, -1), jnp.roll(py, -1)
-    ex_lo, ex_hi = jnp.minimum(px, qx), jnp.maximum(px, qx)
-    dx = qx - px
-    slanted = dx != 0.0
-    slope = (qy - py) / jnp.where(slanted, dx, 1.0)
-
-    def edge_y(x):  # x: (K,) -> y (K, V), valid (K, V)
-        y = py[None, :] + (x[:, None] - px[None, :]) * slope[None, :]
-        ok = slanted[None, :] & (x[:, None] >= ex_lo[None, :]) & (x[:, None] <= ex_hi[None, :])
-        return y, ok
-
-    ya, oka = edge_y(a)
-    yb, okb = edge_y(b)
-    inside = (px[None, :] >= a[:, None]) & (px[None, :] <= b[:, None])  # vertices in the slab
-    vy = jnp.broadcast_to(py[None, :], inside.shape)
-    ys = jnp.concatenate([ya, yb, vy], axis=1)
-    ok = jnp.concatenate([oka, okb, inside], axis=1)
-    ylo = jnp.min(jnp.where(ok, ys, jnp.inf), axis=1)
-    yhi = jnp.max(jnp.where(ok, ys, -jnp.inf), axis=1)
+    # y-extent over the slab: y of each edge at x = a and at x = b (edges that are not vertical and cross x),
+    # and the vertices inside the slab.
+    ylo = jnp.full(a.shape, jnp.inf, a.dtype)
+    yhi = jnp.full(a.shape, -jnp.inf, a.dtype)
+    for v in range(num_vertices):
+        qx, qy = px[(v + 1) % num_vertices], py[(v + 1) % num_vertices]
+        ex_lo, ex_hi = jnp.minimum(px[v], qx), jnp.maximum(px[v], qx)
+        dx = qx - px[v]
+        slanted = dx != 0.0
+        slope = (qy - py[v]) / jnp.where(slanted, dx, 1.0)
+        for x in (a, b):
+            y = py[v] + (x - px[v]) * slope
+            ok = slanted & (x >= ex_lo) & (x <= ex_hi)
+            ylo = jnp.minimum(ylo, jnp.where(ok, y, jnp.inf))
+            yhi = jnp.maximum(yhi, jnp.where(ok, y, -jnp.inf))
+        inside = (px[v] >= a) & (px[v] <= b)
+        ylo = jnp.minimum(ylo, jnp.where(inside, py[v], jnp.inf))
+        yhi = jnp.maximum(yhi, jnp.where(inside, py[v], -jnp.inf))
 
     touched = has_width & (yhi > ylo)
     j0 = jnp.floor(jnp.where(touched, ylo, 0.0) / res).astype(jnp.int32)
