@@ -14,7 +14,6 @@ never skips a cell at any position or rotation.
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import jax
@@ -100,9 +99,8 @@ def polygon_column_spans(corners: jax.Array, res, num_columns: int, ix0=None) ->
     # loop instead of (K, V) intermediates and reductions over V (min/max are exact: the same result).
     corners = jnp.asarray(corners)
     num_vertices = corners.shape[-2]
-    px = [corners[v, 0] for v in range(num_vertices)]
-    py = [corners[v, 1] for v in range(num_vertices)]
-    xmin, xmax = functools.reduce(jnp.minimum, px), functools.reduce(jnp.maximum, px)
+    px, py = corners[:, 0], corners[:, 1]
+    xmin, xmax = jnp.min(px), jnp.max(px)
     ix_first = jnp.floor(xmin / res).astype(jnp.int32)
     ix0 = ix_first if ix0 is None else jnp.asarray(ix0, jnp.int32)
     ix_last = (jnp.ceil(xmax / res) - 1).astype(jnp.int32)
@@ -113,19 +111,22 @@ def polygon_column_spans(corners: jax.Array, res, num_columns: int, ix0=None) ->
     b = jnp.minimum((ix + 1) * res, xmax)
     has_width = a < b
 
-    # y-extent over the slab: y of each edge at x = a and at x = b (edges that are not vertical and cross x),
-    # and the vertices inside the slab.
+    # Edges that are not vertical, as (V,) arrays.
+    qx, qy = jnp.roll(px, -1), jnp.roll(py, -1)
+    ex_lo, ex_hi = jnp.minimum(px, qx), jnp.maximum(px, qx)
+    dx = qx - px
+    slanted = dx != 0.0
+    slope = (qy - py) / jnp.where(slanted, dx, 1.0)
+    # y-extent over each slab: y of each edge at x = a and at x = b (edges that cross x), and the vertices
+    # inside the slab. Unrolled over the (static, few) vertices, so every quantity is a (K,) array: XLA
+    # fuses it into one loop instead of (K, V) intermediates and reductions over V (min/max are exact,
+    # so the result is the same).
     ylo = jnp.full(a.shape, jnp.inf, a.dtype)
     yhi = jnp.full(a.shape, -jnp.inf, a.dtype)
     for v in range(num_vertices):
-        qx, qy = px[(v + 1) % num_vertices], py[(v + 1) % num_vertices]
-        ex_lo, ex_hi = jnp.minimum(px[v], qx), jnp.maximum(px[v], qx)
-        dx = qx - px[v]
-        slanted = dx != 0.0
-        slope = (qy - py[v]) / jnp.where(slanted, dx, 1.0)
         for x in (a, b):
-            y = py[v] + (x - px[v]) * slope
-            ok = slanted & (x >= ex_lo) & (x <= ex_hi)
+            y = py[v] + (x - px[v]) * slope[v]
+            ok = slanted[v] & (x >= ex_lo[v]) & (x <= ex_hi[v])
             ylo = jnp.minimum(ylo, jnp.where(ok, y, jnp.inf))
             yhi = jnp.maximum(yhi, jnp.where(ok, y, -jnp.inf))
         inside = (px[v] >= a) & (px[v] <= b)
