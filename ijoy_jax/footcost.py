@@ -166,10 +166,41 @@ def _solve3(a00, a01, a02, a11, a12, a22, r0, r1, r2):
     return x0, x1, x2
 
 
-def _sums(xs, axis):
-    """Sums of several same-shaped arrays along ``axis`` as one variadic reduction (one XLA kernel)."""
-    zeros = tuple(jnp.zeros((), x.dtype) for x in xs)
-    return lax.reduce(xs, zeros, lambda a, b: tuple(p + q for p, q in zip(a, b, strict=True)), (axis,))
+def _fused_reduction(reference):
+    """Decorator: the decorated function computes several reductions as ONE variadic ``lax.reduce`` (one
+    XLA:CPU kernel instead of one per result); its derivatives come from ``reference``, the same reductions
+    as plain jnp calls (JAX cannot differentiate a variadic reduce with symbolic-zero tangents)."""
+
+    def wrap(fused):
+        f = jax.custom_jvp(fused)
+        f.defjvp(lambda primals, tangents: (fused(*primals), jax.jvp(reference, primals, tangents)[1]))
+        return f
+
+    return wrap
+
+
+def _add(x, y):
+    return tuple(p + q for p, q in zip(x, y, strict=True))
+
+
+@_fused_reduction(lambda a, b: (jnp.sum(a, axis=1), jnp.sum(b, axis=1)))
+def _row_sums(a, b):
+    """Sums of two (K, R) arrays along rows, ((K,), (K,))."""
+    return lax.reduce((a, b), (jnp.zeros((), a.dtype),) * 2, _add, (1,))
+
+
+@_fused_reduction(lambda *xs: tuple(jnp.sum(x) for x in xs))
+def _totals(*xs):
+    """Sums of several (K,) arrays, one scalar each."""
+    return lax.reduce(xs, (jnp.zeros((), xs[0].dtype),) * len(xs), _add, (0,))
+
+
+@_fused_reduction(lambda a, b, c: (jnp.sum(a), jnp.max(b), jnp.max(c)))
+def _sum_max_max(a, b, c):
+    """(sum(a), max(b), max(c)) of three (K, R) arrays."""
+    z = jnp.zeros((), a.dtype)
+    return lax.reduce((a, b, c), (z, z - jnp.inf, z - jnp.inf),
+                      lambda x, y: (x[0] + y[0], jnp.maximum(x[1], y[1]), jnp.maximum(x[2], y[2])), (0, 1))
 
 
 def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> _Plane:
@@ -206,21 +237,16 @@ def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: ja
     cv = c0 * v_mid
     cvv = c0 * v_mid * v_mid + (res * res / 12.0) * c0 * (c0 * c0 - 1.0)
     mh = jnp.where(m_foot, hrel, 0.0)
-    c1, cvh = _sums((mh, mh * v[None, :]), axis=1)  # one pass over the window for both
+    c1, cvh = _row_sums(mh, mh * v[None, :])
     cols = (c0, c0 * u, c0 * u * u, cv, cv * u, cvv, c1, c1 * u, cvh)
-    n, su, suu, sv, suv, svv, sh, suh, svh = _sums(cols, axis=0)  # one reduction for all nine
+    n, su, suu, sv, suv, svv, sh, suh, svh = _totals(*cols)
     n = jnp.maximum(n, 1.0)
     ridge = 1e-6 * n * res * res  # keeps a one-column footprint well-posed (slope -> 0)
     a, b, c = _solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
     resid = hrel - (a + b * u[:, None] + c * v[None, :])
     slope = jnp.arctan(jnp.sqrt(b * b + c * c))
-    abs_sum, top, band = lax.reduce(  # one pass over the window for the three
-        (jnp.where(m_foot, jnp.abs(resid), 0.0), jnp.where(m_foot, resid, -jnp.inf),
-         jnp.where(m_band, jnp.abs(resid), 0.0)),
-        (jnp.float32(0.0), jnp.float32(-jnp.inf), jnp.float32(0.0)),
-        lambda x, y: (x[0] + y[0], jnp.maximum(x[1], y[1]), jnp.maximum(x[2], y[2])),
-        (0, 1),
-    )
+    abs_sum, top, band = _sum_max_max(jnp.where(m_foot, jnp.abs(resid), 0.0), jnp.where(m_foot, resid, -jnp.inf),
+                                      jnp.where(m_band, jnp.abs(resid), 0.0))
     roughness = abs_sum / n
     bump = jnp.maximum(top, 0.0)
     ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(c)
