@@ -95,8 +95,6 @@ def polygon_column_spans(corners: jax.Array, res, num_columns: int, ix0=None) ->
     Returns:
       ColumnSpans with (K,) arrays.
     """
-    # Unrolled over the (static, few) vertices: every quantity is a (K,) array, so XLA emits one elementwise
-    # loop instead of (K, V) intermediates and reductions over V (min/max are exact: the same result).
     corners = jnp.asarray(corners)
     num_vertices = corners.shape[-2]
     px, py = corners[:, 0], corners[:, 1]
