@@ -166,6 +166,43 @@ def _solve3(a00, a01, a02, a11, a12, a22, r0, r1, r2):
     return x0, x1, x2
 
 
+def _fused_reduction(reference):
+    """Decorator: the decorated function computes several reductions as ONE variadic ``lax.reduce`` (one
+    XLA:CPU kernel instead of one per result); its derivatives come from ``reference``, the same reductions
+    as plain jnp calls (JAX cannot differentiate a variadic reduce with symbolic-zero tangents)."""
+
+    def wrap(fused):
+        f = jax.custom_jvp(fused)
+        f.defjvp(lambda primals, tangents: (fused(*primals), jax.jvp(reference, primals, tangents)[1]))
+        return f
+
+    return wrap
+
+
+def _add(x, y):
+    return tuple(p + q for p, q in zip(x, y, strict=True))
+
+
+@_fused_reduction(lambda a, b: (jnp.sum(a, axis=1), jnp.sum(b, axis=1)))
+def _row_sums(a, b):
+    """Sums of two (K, R) arrays along rows, ((K,), (K,))."""
+    return lax.reduce((a, b), (jnp.zeros((), a.dtype),) * 2, _add, (1,))
+
+
+@_fused_reduction(lambda *xs: tuple(jnp.sum(x) for x in xs))
+def _totals(*xs):
+    """Sums of several (K,) arrays, one scalar each."""
+    return lax.reduce(xs, (jnp.zeros((), xs[0].dtype),) * len(xs), _add, (0,))
+
+
+@_fused_reduction(lambda a, b, c: (jnp.sum(a), jnp.max(b), jnp.max(c)))
+def _sum_max_max(a, b, c):
+    """(sum(a), max(b), max(c)) of three (K, R) arrays."""
+    z = jnp.zeros((), a.dtype)
+    return lax.reduce((a, b, c), (z, z - jnp.inf, z - jnp.inf),
+                      lambda x, y: (x[0] + y[0], jnp.maximum(x[1], y[1]), jnp.maximum(x[2], y[2])), (0, 1))
+
+
 def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> _Plane:
     """Least-squares plane under the footprint at ``pose`` (world) and the metrics around it."""
     res = terrain.resolution
@@ -181,8 +218,8 @@ def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: ja
     sx = jnp.clip(grown.ix[0] + k, 0, nx + k)
     sy = jnp.clip(iy0 + k, 0, ny + k)
     window = lax.dynamic_slice(index.height_padded, (sx, sy), (k, k))
-    m_foot = geometry.spans_mask(foot, iy0, k).astype(window.dtype)
-    m_band = geometry.spans_mask(grown, iy0, k) & (m_foot == 0)
+    m_foot = geometry.spans_mask(foot, iy0, k)  # (K, K) bool; stays bool: XLA:CPU converts it to float slowly
+    m_band = geometry.spans_mask(grown, iy0, k) & ~m_foot
     u = (grown.ix + 0.5) * res - cx  # (K,) column centres relative to the foot centre
     v = (iy0 + jnp.arange(k) + 0.5) * res - cy  # (K,) row centres
     # Heights relative to the cell under the foot centre, for float32 conditioning.
@@ -190,21 +227,28 @@ def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: ja
     jc = jnp.clip(jnp.floor(cy / res).astype(jnp.int32) - iy0, 0, k - 1)
     h_ref = window[ic, jc]
     hrel = window - h_ref
-    # Column sums first (one pass over the window), then O(K) sums over columns.
-    mh = m_foot * hrel
-    c0, c1 = jnp.sum(m_foot, axis=1), jnp.sum(mh, axis=1)
-    cv, cvv, cvh = m_foot @ v, m_foot @ (v * v), mh @ v
-    n = jnp.maximum(jnp.sum(c0), 1.0)
-    su, sv = jnp.dot(c0, u), jnp.sum(cv)
-    suu, svv, suv = jnp.dot(c0, u * u), jnp.sum(cvv), jnp.dot(cv, u)
-    sh, suh, svh = jnp.sum(c1), jnp.dot(c1, u), jnp.sum(cvh)
+    # Per column: the foot covers rows lo..hi of the window, so its cell count and the sums of v and v^2
+    # over them are closed forms (O(K)); only the height sums need a pass over the window.
+    lo = jnp.maximum(foot.j0, iy0)
+    hi = jnp.minimum(foot.j1, iy0 + k - 1)
+    cnt = jnp.where(foot.touched, jnp.maximum(hi - lo + 1, 0), 0)
+    c0 = cnt.astype(window.dtype)
+    v_mid = 0.5 * (lo + hi + 1).astype(window.dtype) * res - cy  # mean of v over the column's rows
+    cv = c0 * v_mid
+    cvv = c0 * v_mid * v_mid + (res * res / 12.0) * c0 * (c0 * c0 - 1.0)
+    mh = jnp.where(m_foot, hrel, 0.0)
+    c1, cvh = _row_sums(mh, mh * v[None, :])
+    cols = (c0, c0 * u, c0 * u * u, cv, cv * u, cvv, c1, c1 * u, cvh)
+    n, su, suu, sv, suv, svv, sh, suh, svh = _totals(*cols)
+    n = jnp.maximum(n, 1.0)
     ridge = 1e-6 * n * res * res  # keeps a one-column footprint well-posed (slope -> 0)
     a, b, c = _solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
     resid = hrel - (a + b * u[:, None] + c * v[None, :])
     slope = jnp.arctan(jnp.sqrt(b * b + c * c))
-    roughness = jnp.sum(m_foot * jnp.abs(resid)) / n
-    bump = jnp.maximum(jnp.max(jnp.where(m_foot > 0, resid, -jnp.inf)), 0.0)
-    band = jnp.max(jnp.where(m_band, jnp.abs(resid), 0.0))
+    abs_sum, top, band = _sum_max_max(jnp.where(m_foot, jnp.abs(resid), 0.0), jnp.where(m_foot, resid, -jnp.inf),
+                                      jnp.where(m_band, jnp.abs(resid), 0.0))
+    roughness = abs_sum / n
+    bump = jnp.maximum(top, 0.0)
     ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(c)
     z = jnp.float32(0.0)
     return _Plane(

@@ -95,6 +95,8 @@ def polygon_column_spans(corners: jax.Array, res, num_columns: int, ix0=None) ->
     Returns:
       ColumnSpans with (K,) arrays.
     """
+    corners = jnp.asarray(corners)
+    num_vertices = corners.shape[-2]
     px, py = corners[:, 0], corners[:, 1]
     xmin, xmax = jnp.min(px), jnp.max(px)
     ix_first = jnp.floor(xmin / res).astype(jnp.int32)
@@ -107,26 +109,27 @@ def polygon_column_spans(corners: jax.Array, res, num_columns: int, ix0=None) ->
     b = jnp.minimum((ix + 1) * res, xmax)
     has_width = a < b
 
-    # y of each edge at x = a and at x = b (edges that are not vertical and cross x).
+    # Edges that are not vertical, as (V,) arrays.
     qx, qy = jnp.roll(px, -1), jnp.roll(py, -1)
     ex_lo, ex_hi = jnp.minimum(px, qx), jnp.maximum(px, qx)
     dx = qx - px
     slanted = dx != 0.0
     slope = (qy - py) / jnp.where(slanted, dx, 1.0)
-
-    def edge_y(x):  # x: (K,) -> y (K, V), valid (K, V)
-        y = py[None, :] + (x[:, None] - px[None, :]) * slope[None, :]
-        ok = slanted[None, :] & (x[:, None] >= ex_lo[None, :]) & (x[:, None] <= ex_hi[None, :])
-        return y, ok
-
-    ya, oka = edge_y(a)
-    yb, okb = edge_y(b)
-    inside = (px[None, :] >= a[:, None]) & (px[None, :] <= b[:, None])  # vertices in the slab
-    vy = jnp.broadcast_to(py[None, :], inside.shape)
-    ys = jnp.concatenate([ya, yb, vy], axis=1)
-    ok = jnp.concatenate([oka, okb, inside], axis=1)
-    ylo = jnp.min(jnp.where(ok, ys, jnp.inf), axis=1)
-    yhi = jnp.max(jnp.where(ok, ys, -jnp.inf), axis=1)
+    # y-extent over each slab: y of each edge at x = a and at x = b (edges that cross x), and the vertices
+    # inside the slab. Unrolled over the (static, few) vertices, so every quantity is a (K,) array: XLA
+    # fuses it into one loop instead of (K, V) intermediates and reductions over V (min/max are exact,
+    # so the result is the same).
+    ylo = jnp.full(a.shape, jnp.inf, a.dtype)
+    yhi = jnp.full(a.shape, -jnp.inf, a.dtype)
+    for v in range(num_vertices):
+        for x in (a, b):
+            y = py[v] + (x - px[v]) * slope[v]
+            ok = slanted[v] & (x >= ex_lo[v]) & (x <= ex_hi[v])
+            ylo = jnp.minimum(ylo, jnp.where(ok, y, jnp.inf))
+            yhi = jnp.maximum(yhi, jnp.where(ok, y, -jnp.inf))
+        inside = (px[v] >= a) & (px[v] <= b)
+        ylo = jnp.minimum(ylo, jnp.where(inside, py[v], jnp.inf))
+        yhi = jnp.maximum(yhi, jnp.where(inside, py[v], -jnp.inf))
 
     touched = has_width & (yhi > ylo)
     j0 = jnp.floor(jnp.where(touched, ylo, 0.0) / res).astype(jnp.int32)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from jax.test_util import check_grads
 
 import ijoy_jax as ij
 from ijoy_jax import footcost
@@ -321,3 +322,38 @@ def test_vmaps_over_terrains_and_robot_parameters():
     # A larger margin never makes an invalid step valid (monotone in the margin on this terrain).
     inf = np.isinf(np.asarray(f(jax.tree_util.tree_map(lambda x: jnp.stack([x[0]] * 3), batch), robots)))
     assert (inf[0] <= inf[1]).all() and (inf[1] <= inf[2]).all() and inf[2].sum() > inf[0].sum()
+
+
+def test_plane_metrics_are_differentiable_in_the_terrain_heights():
+    """The plane fit (fused reductions) keeps JAX's derivatives, forward and reverse, w.r.t. the heights."""
+    x, y = np.meshgrid(np.arange(50) * RES, np.arange(60) * RES, indexing="ij")
+    t = ij.terrain.from_arrays(0.05 * x + 0.02 * np.sin(3 * y), None, RES, (0.3, -0.2))
+    stance = jnp.array([0.8, 0.35, 0.0])
+    steps = ij.action_steps(ROBOT, stance, -1)[::40]
+    swing = jnp.array([0.75, 0.55, 0.0])
+
+    def plane(height):  # linear and smooth in the heights (roughness, bump, band have kinks)
+        terms = ij.foot_cost_terms(t.replace(height=height), ROBOT, stance, -1, steps, swing, jnp.arange(len(steps)))
+        return terms.foot_height_m, terms.slope_angle
+
+    check_grads(plane, (t.height,), order=1, modes=("fwd", "rev"), eps=1e-3)
+
+
+@pytest.mark.parametrize("name", ["_row_sums", "_totals", "_sum_max_max"])
+def test_fused_reductions_have_the_plain_reductions_derivatives(name):
+    """Each variadic reduction equals its plain-jnp reference, values and derivatives (jvp and vjp)."""
+    rng = np.random.default_rng(3)
+    shape = (13,) if name == "_totals" else (7, 9)
+    args = tuple(jnp.asarray(rng.standard_normal(shape), jnp.float32) for _ in range(9 if name == "_totals" else 3))
+    fused = getattr(footcost, name)
+    plain = {"_row_sums": lambda a, b, c: (jnp.sum(a, 1), jnp.sum(b, 1)),
+             "_totals": lambda *xs: tuple(jnp.sum(x) for x in xs),
+             "_sum_max_max": lambda a, b, c: (jnp.sum(a), jnp.max(b), jnp.max(c))}[name]
+    f = (lambda a, b, c: fused(a, b)) if name == "_row_sums" else fused
+    tangents = tuple(jnp.asarray(rng.standard_normal(shape), jnp.float32) for _ in args)
+    (v1, t1), (v2, t2) = jax.jvp(f, args, tangents), jax.jvp(plain, args, tangents)
+    np.testing.assert_allclose(np.array(v1), np.array(v2), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(np.array(t1), np.array(t2), rtol=1e-5, atol=1e-5)
+    g1 = jax.grad(lambda *a: sum(jnp.sum(o) for o in f(*a)), argnums=tuple(range(len(args))))(*args)
+    g2 = jax.grad(lambda *a: sum(jnp.sum(o) for o in plain(*a)), argnums=tuple(range(len(args))))(*args)
+    np.testing.assert_allclose(np.array(g1), np.array(g2), rtol=1e-5, atol=1e-5)
