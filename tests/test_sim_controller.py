@@ -275,6 +275,27 @@ def test_swing_foot_lands_level_under_a_tilted_body(sim):
     np.testing.assert_allclose(cs3.offset[6:], 0.0, atol=1e-6)  # in double support: no feedback yet
 
 
+def test_stance_gain_holds_the_carrying_sole_partly_level(sim):
+    """With ``stance_gain`` g the legs that carry the body low-pass toward g times the compensation the swing
+    leg gets at full weight; the swing leg starts its swing from the same g (no jump at lift-off)."""
+    params = sim.params
+    cfg = dataclasses.replace(sim.cfg, land_gain=1.0, stance_gain=0.3)
+    pg = controller.gains(cfg)
+    plan = _swing_plan(cfg)
+    cs = controller.init_state(pg, jnp.zeros(2))._replace(t=jnp.float32(0.0))  # double support: s = 0
+    qpos, _, _ = controller.pattern(params, cfg, pg, plan, cs)
+    pos, rot = _pelvis(qpos)
+    tilt = kinematics.rpy_to_rot(jnp.array([np.radians(-4), np.radians(2), 0.0], jnp.float32))
+    base = (pos, tilt @ rot)
+    feet = controller.foot_targets(cfg, plan, cs.t + cfg.control_dt)
+    delta = controller.legs_ik(params, *base, feet) - qpos[7:]  # the full compensation
+    _, cs1, _ = controller.control_tick(params, cfg, pg, plan, cs, None, base)
+    decay = np.exp(-cfg.control_dt / cfg.land_decay)
+    np.testing.assert_allclose(cs1.offset[:6], 0.3 * delta[:6], atol=1e-5)  # the swing leg (left) at s = 0
+    np.testing.assert_allclose(cs1.offset[6:], (1 - decay) * 0.3 * delta[6:], atol=1e-5)  # the stance leg
+    assert np.abs(np.asarray(delta[6:])).max() > 0.02
+
+
 def test_stabiliser_rights_the_body_after_a_sideways_push(sim):
     """A 20 N sideways push on the pelvis for one whole step (16 Ns). Without the stabiliser the robot keeps
     rolling 3-6 degrees at every touch-down afterwards (each swing foot lands on its edge, tilted with the
