@@ -278,15 +278,15 @@ def stabilise(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, qpos, base
     and the next step starts from there: in MJX, 1024 robots walking random
     commands on flat ground fell 2 % of the time, each after a body roll that
     grew step by step (5, 9, 15, 25 degrees, then over; BENCHMARKS.md); with
-    this feedback 0.2 % fell. Here
-    the swing leg's joint targets are blended toward the inverse kinematics
-    from the *measured* pelvis pose ``base`` = (position (3,), rotation (3, 3))
-    in the plan's frame, with weight ``land_gain`` faded in over the first
-    ``land_ramp`` of the swing. The foot then lands level; once it carries the
-    body (the next step), its offset fades with time constant ``land_decay``
-    (toward ``stance_gain`` times the same compensation; 0 by default), and
-    the pattern's targets, which hold the body upright over a level foot,
-    right the body through the ankles and hips.
+    this feedback 0.2-0.3 % fell. Here the swing leg's joint targets are
+    blended toward the inverse kinematics from the *measured* pelvis pose
+    ``base`` = (position (3,), rotation (3, 3)) in the plan's frame, with
+    weight ``land_gain`` faded in over the first ``land_ramp`` of the swing.
+    The foot then lands level; once it carries the body (the next step), its
+    offset fades with time constant ``land_decay`` (toward ``stance_gain``
+    times the same compensation; 0 by default), and the pattern's targets,
+    which hold the body upright over a level foot, right the body through
+    the ankles and hips.
 
     Args:
       qpos: (19,) the pattern's planned configuration at the period's end (:func:`pattern`).
