@@ -318,7 +318,7 @@ def probe_robot(robot: Robot, distance: float) -> Robot:
     ``distance`` overlaps an obstacle cell or leaves the map.
     """
     need = 0.5 * math.hypot(float(robot.foot_length) + 2 * distance, float(robot.foot_width) + 2 * distance)
-    return robot.replace(margin=jnp.float32(distance), max_radius=max(float(robot.max_radius), need * (1 + 1e-6)))
+    return robot.replace(margin=jnp.float32(distance), max_radius=max(float(robot.max_radius), need))
 
 
 def _near(terrain, index, probe, stance, side, poses):
