@@ -120,22 +120,31 @@ def command_range(robot) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def random_commands(key, robot, batch: int, num_steps: int) -> jax.Array:
-    """(batch, num_steps, 3) joystick commands, uniform over :func:`command_range`."""
+def random_commands(key, robot, batch: int, num_steps: int, hold: int = 1) -> jax.Array:
+    """(batch, num_steps, 3) joystick commands, uniform over :func:`command_range`.
+
+    Each command is held for ``hold`` steps (1: a new one every step, the
+    harshest joystick; ``num_steps``: one command per robot for the whole run).
+    """
+    if hold < 1:
+        raise ValueError(f"hold must be at least 1 step, got {hold}")
     lo, hi = command_range(robot)
-    u = jax.random.uniform(key, (batch, num_steps, 3), jnp.float32)
+    n = -(-num_steps // hold)
+    u = jax.random.uniform(key, (batch, n, 3), jnp.float32)
+    u = jnp.repeat(u, hold, axis=1)[:, :num_steps]
     return jnp.asarray(lo, jnp.float32) + u * jnp.asarray(hi - lo, jnp.float32)
 
 
 def closed_loop(batch: int, num_steps: int, seed: int = 0, shape=(300, 300), resolution: float = 0.04,
-                params: model.BipedParams | None = None, cfg=None) -> dict:
+                params: model.BipedParams | None = None, cfg=None, hold: int = 1) -> dict:
     """The joystick loop with the MJX biped for ``batch`` robots with random commands on flat ground.
 
     The ground is ``shape`` cells of ``resolution`` m (12 m square by
     default, room for 30 steps any way), centred on the start. Returns compile
     time, wall time of the run, physics steps/s of the loop, the number of
     robots that fell, and the placement error (mean and 95th percentile over
-    all steps taken, m).
+    all steps taken, m). Each random command is held for ``hold`` steps
+    (:func:`random_commands`).
     """
     from ijoy_jax import robots
     from ijoy_jax.sim import walker
@@ -145,7 +154,7 @@ def closed_loop(batch: int, num_steps: int, seed: int = 0, shape=(300, 300), res
     origin = (-0.5 * shape[0] * resolution, -0.5 * shape[1] * resolution)
     ground = terrain.flat(shape, resolution, origin=origin, has_height=True)
     start = jnp.asarray([[0.0, 0.095, 0.0], [0.0, -0.095, 0.0]], jnp.float32)
-    commands = random_commands(jax.random.key(seed), robot, batch, num_steps)
+    commands = random_commands(jax.random.key(seed), robot, batch, num_steps, hold)
 
     def one(cmd):
         return walker.rollout_core(sim, ground, robot, start, cmd, num_steps)
@@ -163,7 +172,7 @@ def closed_loop(batch: int, num_steps: int, seed: int = 0, shape=(300, 300), res
     taken = np.asarray(traj.taken)
     err = np.asarray(traj.log.placement_error)[taken]
     fell = np.asarray(traj.log.fallen).any(axis=1)
-    return dict(name="closed_loop", batch=batch, num_steps=num_steps, compile_s=round(compile_s, 2),
+    return dict(name="closed_loop", batch=batch, num_steps=num_steps, hold=hold, compile_s=round(compile_s, 2),
                 wall_s=round(wall, 3), physics_steps_per_s=physics / wall, walking_steps_per_s=batch * num_steps / wall,
                 fell=int(fell.sum()), steps_taken=int(taken.sum()),
                 placement_error_mean=float(err.mean()) if err.size else 0.0,
