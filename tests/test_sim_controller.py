@@ -101,6 +101,7 @@ class _Native:
         self.sub = sim.substeps
         self.cs = controller.init_state(pg, self.d.subtree_com[sim.index.pelvis][:2])
         self.swing = 1.0
+        self.min_knee = np.inf  # the least knee target sent (rad, either leg)
         p = self.planned
         self.run_step(controller.prepare_plan(jnp.asarray(p[1]), jnp.asarray(p[0]), 1.0))
         self.anchor = 0.5 * (p[0, :2] + p[1, :2])
@@ -130,6 +131,7 @@ class _Native:
                 d.ctrl[:] = q0 + (j + 1) / self.sub * (q - q0)
                 mujoco.mj_step(self.m, d)
             low = min(low, d.qpos[2])
+            self.min_knee = min(self.min_knee, float(d.ctrl[[3, 9]].min()))
         return low
 
     def step(self, action):
@@ -182,6 +184,21 @@ def test_walks_random_action_set_steps(sim):
         assert not fell, (len(errs), a)
         errs.append(err)
     assert max(errs) < WALK_TOL, errs
+
+
+def test_walks_fast_backward_sidesteps_while_turning(sim):
+    """The corner of the command space where the MJX robots fell (BENCHMARKS.md): full speed backward, a wide
+    sidestep to the right and a turn to the left, held. At the old pelvis height (0.68 m) the legs straightened
+    out of reach (knee target 0) before the swing foot was down, the weight moved onto it in the air, it slipped,
+    and this walk fell at the sixth step; with the knees kept bent the feet reach the ground."""
+    walk = _Native(sim)
+    errs = []
+    for k in range(8):  # left: back 0.2, in its lane, +20 deg; right: back 0.2, 0.31 to the right, +20 deg
+        err, fell = walk.step((-0.2, 0.19, 0.349) if walk.swing > 0 else (-0.2, 0.31, -0.349))
+        assert not fell, k
+        errs.append(err)
+    assert max(errs) < WALK_TOL, errs
+    assert walk.min_knee > 0.3, walk.min_knee  # measured 0.55 (0.0 at the old height)
 
 
 def test_walks_with_one_foot_on_a_raised_lane(sim):
