@@ -43,6 +43,11 @@ from ijoy_jax.sim import dynamics, kinematics, preview, swing
 class WalkConfig:
     """Static settings of the walking controller (seconds, metres, radians).
 
+    The fall counts quoted for ``ds_fraction`` and the stabiliser's settings
+    were measured with the pelvis at 0.68 m, before ``pelvis_height`` was
+    lowered to 0.65 (which removed the remaining flat-ground falls); they rank
+    the settings, they are not today's rates.
+
     step_time: duration of one step; must equal the selector's
       ``robot.step_time`` (the Delta t of p_next).
     ds_fraction: fraction of a step spent in double support, at its start.
