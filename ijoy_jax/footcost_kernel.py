@@ -1,0 +1,351 @@
+"""FootCost of a decision's candidates in one fused Pallas kernel (GPU: Triton; CPU: interpreted).
+
+The XLA path (:func:`ijoy_jax.footcost.foot_cost_terms_indexed`) gathers a fixed
+K x K height window per candidate (K = 29 cells with the default windows, sized
+for margins up to 10 cm) and materialises it with its masks and residuals in
+memory: ~12 MB of traffic per 496-candidate decision on a GPU, which bounds it
+to a few hundred thousand decisions per second. This kernel computes the same
+``total`` with every intermediate in registers: each program takes a block of
+candidates and walks the window column by column, only as many columns as its
+widest grown footprint spans (so a 2 cm margin costs less than a 10 cm one at
+the same static window size), gathering one column of heights at a time.
+
+Same definitions as the XLA path, term by term (exact cell coverage, the
+least-squares plane and its metrics, step height, safety band, swing corridor,
+unsupported flags); sums run in a different order, so totals agree to float32
+rounding and a metric within rounding of its limit may decide validity
+differently (the tests measure both).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+from jax.experimental import pallas as pl
+from jax.experimental.pallas import triton as pl_triton
+
+from ijoy_jax.footcost import _SLACK, TerrainIndex, _plane_metrics, nearest_actions, window_cells
+from ijoy_jax.robots import Robot
+from ijoy_jax.terrain import Terrain
+
+_INT_MAX = 2**31 - 1
+
+# Scalars of one decision, packed into one float32 vector (indices into ``par``).
+(_OX, _OY, _GHL, _GHW, _FHL, _FHW, _STANCE_H, _START_H, _SWX, _SWY, _HALF_FW, _SWING_MAX, _FW, _TOO_BIG,
+ _SLOPE_W, _SLOPE_L, _ROUGH_W, _ROUGH_L, _BUMP_W, _BUMP_L, _STEP_W, _BAND_W, _BAND_L) = range(23)
+_NUM_PAR = 32
+# Rows of the per-candidate block ``cand``.
+_X, _Y, _T, _COST, _STEP_LIMIT, _CLEARANCE = range(6)
+_NUM_CAND = 8
+
+
+class _Rect:
+    """A rotated rectangle per candidate ((C,) vectors), prepared for column-by-column coverage.
+
+    Mirrors :func:`ijoy_jax.geometry.rect_column_spans` operation for operation, with the candidates
+    (not the columns) as the vector axis: ``spans(ix)`` gives the rows touched in grid column ``ix``.
+    """
+
+    def __init__(self, cx, cy, c, s, half_length, half_width, res):
+        self.res = res
+        lx = (half_length, -half_length, -half_length, half_length)
+        ly = (half_width, half_width, -half_width, -half_width)
+        self.px = [cx + c * a - s * b for a, b in zip(lx, ly, strict=True)]
+        self.py = [cy + s * a + c * b for a, b in zip(lx, ly, strict=True)]
+        self.xmin = functools.reduce(jnp.minimum, self.px)
+        self.xmax = functools.reduce(jnp.maximum, self.px)
+        self.ix_first = jnp.floor(self.xmin / res).astype(jnp.int32)
+        self.ix_last = (jnp.ceil(self.xmax / res) - 1).astype(jnp.int32)
+        self.edges = []
+        for v in range(4):
+            qx, qy = self.px[(v + 1) % 4], self.py[(v + 1) % 4]
+            dx = qx - self.px[v]
+            slanted = dx != 0.0
+            slope = (qy - self.py[v]) / jnp.where(slanted, dx, 1.0)
+            self.edges.append((jnp.minimum(self.px[v], qx), jnp.maximum(self.px[v], qx), slanted, slope))
+
+    def overflow(self, ix0, num_columns: int):
+        return (self.ix_first < ix0) | ((self.ix_last - ix0 + 1) > num_columns)
+
+    def spans(self, ix):
+        """(j0, j1, touched) of grid column ``ix`` ((C,) int32 / bool)."""
+        res = self.res
+        a = jnp.maximum(ix.astype(jnp.float32) * res, self.xmin)
+        b = jnp.minimum((ix + 1).astype(jnp.float32) * res, self.xmax)
+        has_width = a < b
+        ylo = jnp.full(a.shape, jnp.inf, jnp.float32)
+        yhi = jnp.full(a.shape, -jnp.inf, jnp.float32)
+        for v in range(4):
+            ex_lo, ex_hi, slanted, slope = self.edges[v]
+            for x in (a, b):
+                y = self.py[v] + (x - self.px[v]) * slope
+                ok = slanted & (x >= ex_lo) & (x <= ex_hi)
+                ylo = jnp.minimum(ylo, jnp.where(ok, y, jnp.inf))
+                yhi = jnp.maximum(yhi, jnp.where(ok, y, -jnp.inf))
+            inside = (self.px[v] >= a) & (self.px[v] <= b)
+            ylo = jnp.minimum(ylo, jnp.where(inside, self.py[v], jnp.inf))
+            yhi = jnp.maximum(yhi, jnp.where(inside, self.py[v], -jnp.inf))
+        touched = has_width & (yhi > ylo)
+        j0 = jnp.floor(jnp.where(touched, ylo, 0.0) / res).astype(jnp.int32)
+        j1 = (jnp.ceil(jnp.where(touched, yhi, 0.0) / res) - 1).astype(jnp.int32)
+        return j0, j1, touched & (j1 >= j0)
+
+
+def _limit(weight, metric, limit):
+    return jnp.where(metric > limit, jnp.inf, weight * metric)
+
+
+def _solve3(a00, a01, a02, a11, a12, a22, r0, r1, r2):
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    x0 = (r0 * c00 + r1 * c01 + r2 * c02) / det
+    x1 = (r0 * c01 + r1 * (a00 * a22 - a02 * a02) + r2 * (a01 * a02 - a00 * a12)) / det
+    x2 = (r0 * c02 + r1 * (a01 * a02 - a00 * a12) + r2 * (a00 * a11 - a01 * a01)) / det
+    return x0, x1, x2
+
+
+def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
+    """One block of C candidates: FootCost ``total`` (C,)."""
+    if has_height:
+        par_ref, cand_ref, obs_ref, hp_ref, hmax_ref, out_ref = refs
+    else:
+        par_ref, cand_ref, obs_ref, out_ref = refs
+    nx, ny = shape
+    k = pad
+    p = [par_ref[i] for i in range(_NUM_PAR)]
+    x, y, t = cand_ref[_X, :], cand_ref[_Y, :], cand_ref[_T, :]
+    finite = jnp.isfinite(x) & jnp.isfinite(y) & jnp.isfinite(t)
+    x, y, t = (jnp.where(finite, v, 0.0) for v in (x, y, t))
+    cx = x - p[_OX]
+    cy = y - p[_OY]
+    c, s = jnp.cos(t), jnp.sin(t)
+    grown = _Rect(cx, cy, c, s, p[_GHL], p[_GHW], res)
+    ix0 = grown.ix_first
+    too_big = (p[_TOO_BIG] > 0.0) | grown.overflow(ix0, k)
+    # Columns this block must visit: its widest grown footprint (past ix_last nothing is touched).
+    num_cols = jnp.clip(jnp.max(grown.ix_last - ix0 + 1), 0, k)
+
+    # Pass 1: obstacles and off-map cells under the grown footprint; the longest column span of the block.
+    def obstacle_column(i, carry):
+        blocked, longest = carry
+        ix = ix0 + i
+        j0, j1, touched = grown.spans(ix)
+        ixc = jnp.clip(ix, 0, nx - 1)
+        count = obs_ref[ixc, jnp.clip(j1 + 1, 0, ny)] - obs_ref[ixc, jnp.clip(j0, 0, ny)]
+        off_map = (ix < 0) | (ix >= nx) | (j0 < 0) | (j1 >= ny)
+        blocked = blocked | (touched & (off_map | (count > 0)))
+        return blocked, jnp.maximum(longest, jnp.where(touched, j1 - j0 + 1, 0))
+
+    blocked, longest = lax.fori_loop(0, num_cols, obstacle_column, (finite & False, jnp.zeros_like(ix0)))
+    longest = jnp.clip(jnp.max(longest), 0, k)  # rows per column to visit (more: too big, +inf anyway)
+    total = cand_ref[_COST, :] + jnp.where(blocked, jnp.inf, 0.0)
+
+    if has_height:
+        foot = _Rect(cx, cy, c, s, p[_FHL], p[_FHW], res)
+        # The cell under the foot centre; heights are taken relative to it (float32 conditioning). Within
+        # the map's padded border this is footcost._plane_metrics' window cell; beyond it the step is
+        # off the map and already +inf.
+        h_ref = hp_ref[jnp.clip(jnp.floor(cx / res).astype(jnp.int32) + k, 0, nx + 2 * k - 1),
+                       jnp.clip(jnp.floor(cy / res).astype(jnp.int32) + k, 0, ny + 2 * k - 1)]
+        zero_f = jnp.zeros_like(cx)
+
+        hp_cols = nx + 2 * k
+        hp_rows = ny + 2 * k
+
+        def relative_height(ix, j):
+            """Heights of cells (ix, j) (C,) relative to h_ref (edge-padded beyond the map)."""
+            return hp_ref[jnp.clip(ix + k, 0, hp_cols - 1), jnp.clip(j + k, 0, hp_rows - 1)] - h_ref
+
+        # Every quantity is a (C,) vector, one candidate per lane: the rows of a column are an inner loop
+        # (as many as the block's longest column span), so no reduction ever crosses lanes.
+        # Pass 2: the normal equations of the plane fit (the sums of footcost._plane_metrics).
+        def sums_column(i, acc):
+            ix = ix0 + i
+            u = (ix.astype(jnp.float32) + 0.5) * res - cx
+            j0, j1, touched = foot.spans(ix)
+
+            def row(q, sums):
+                c1, cvh = sums
+                j = j0 + q
+                v = (j.astype(jnp.float32) + 0.5) * res - cy
+                mh = jnp.where(touched & (j <= j1), relative_height(ix, j), 0.0)
+                return c1 + mh, cvh + mh * v
+
+            c1, cvh = lax.fori_loop(0, longest, row, (zero_f, zero_f))
+            c0 = jnp.where(touched, jnp.maximum(j1 - j0 + 1, 0), 0).astype(jnp.float32)
+            v_mid = 0.5 * (j0 + j1 + 1).astype(jnp.float32) * res - cy
+            cv = c0 * v_mid
+            cvv = c0 * v_mid * v_mid + (res * res / 12.0) * c0 * (c0 * c0 - 1.0)
+            terms = (c0, c0 * u, c0 * u * u, cv, cv * u, cvv, c1, c1 * u, cvh)
+            return tuple(a + b for a, b in zip(acc, terms, strict=True))
+
+        n, su, suu, sv, suv, svv, sh, suh, svh = lax.fori_loop(0, num_cols, sums_column, (zero_f,) * 9)
+        n = jnp.maximum(n, 1.0)
+        ridge = 1e-6 * n * res * res
+        a, b, cc = _solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
+
+        # Pass 3: residuals from the plane under the foot (roughness, bump) and in the safety band.
+        def resid_column(i, acc):
+            ix = ix0 + i
+            u = (ix.astype(jnp.float32) + 0.5) * res - cx
+            g0, g1, g_touched = grown.spans(ix)
+            j0, j1, touched = foot.spans(ix)
+            base = a + b * u
+
+            def row(q, acc):
+                abs_sum, top, band = acc
+                j = g0 + q
+                v = (j.astype(jnp.float32) + 0.5) * res - cy
+                resid = relative_height(ix, j) - (base + cc * v)
+                m_grown = g_touched & (j <= g1)
+                m_foot = touched & (j >= j0) & (j <= j1)
+                m_band = m_grown & ~m_foot
+                return (abs_sum + jnp.where(m_foot, jnp.abs(resid), 0.0),
+                        jnp.maximum(top, jnp.where(m_foot, resid, -jnp.inf)),
+                        jnp.maximum(band, jnp.where(m_band, jnp.abs(resid), 0.0)))
+
+            return lax.fori_loop(0, longest, row, acc)
+
+        abs_sum, top, band = lax.fori_loop(0, num_cols, resid_column, (zero_f, zero_f - jnp.inf, zero_f))
+        ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(cc)
+        height = jnp.where(ok, a + h_ref, h_ref)
+        slope = jnp.where(ok, jnp.arctan(jnp.sqrt(b * b + cc * cc)), 0.0)
+        rough = jnp.where(ok, abs_sum / n, 0.0)
+        bump = jnp.where(ok, jnp.maximum(top, 0.0), 0.0)
+        band = jnp.where(ok, band, 0.0)
+        dh = height - p[_STANCE_H]
+        total = (total + _limit(p[_SLOPE_W], slope, p[_SLOPE_L]) + _limit(p[_ROUGH_W], rough, p[_ROUGH_L])
+                 + _limit(p[_BUMP_W], bump, p[_BUMP_L]) + _limit(p[_STEP_W], jnp.abs(dh), cand_ref[_STEP_LIMIT, :])
+                 + _limit(p[_BAND_W], band, p[_BAND_L]))
+
+        if has_swing:
+            # The swing corridor: the foot-wide rectangle from the swing start to the step.
+            dx, dy = cx - p[_SWX], cy - p[_SWY]
+            length = jnp.sqrt(dx * dx + dy * dy)
+            theta = jnp.arctan2(jnp.where(length > 0, dy, 0.0), jnp.where(length > 0, dx, 1.0))
+            path = _Rect(0.5 * (cx + p[_SWX]), 0.5 * (cy + p[_SWY]), jnp.cos(theta), jnp.sin(theta),
+                         0.5 * length, p[_HALF_FW], res)
+            pix0 = path.ix_first
+            path_cols = jnp.clip(jnp.max(path.ix_last - pix0 + 1), 0, swing_cols)
+
+            def path_column(i, acc):
+                top, off = acc
+                ix = pix0 + i
+                j0, j1, touched = path.spans(ix)
+                ixc = jnp.clip(ix, 0, nx - 1)
+                a0 = jnp.clip(j0, 0, ny - 1)
+                a1 = jnp.clip(j1, 0, ny - 1)
+                span = jnp.maximum(a1 - a0 + 1, 1)
+                lvl = jnp.zeros_like(span)
+                for q in range(1, levels):  # floor(log2(span)), capped at the table's levels
+                    lvl = lvl + (span >= (1 << q)).astype(jnp.int32)
+                hi = jnp.maximum(hmax_ref[lvl, ixc, a0], hmax_ref[lvl, ixc, a1 - (1 << lvl) + 1])
+                off_map = (ix < 0) | (ix >= nx) | (j0 < 0) | (j1 >= ny)
+                return jnp.maximum(top, jnp.where(touched, hi, -jnp.inf)), off | (touched & off_map)
+
+            path_top, off_map = lax.fori_loop(0, path_cols, path_column, (zero_f - jnp.inf, finite & False))
+            path_height = path_top - jnp.maximum(p[_START_H], height)
+            path_bad = off_map | (path_height > cand_ref[_CLEARANCE, :])
+            too_big = too_big | path.overflow(pix0, swing_cols) | (length + p[_FW] > p[_SWING_MAX])
+            total = total + jnp.where(path_bad, jnp.inf, 0.0)
+
+    out_ref[...] = total + jnp.where(too_big | ~finite, jnp.inf, 0.0)
+
+
+def foot_cost_fused(
+    terrain: Terrain,
+    index: TerrainIndex,
+    robot: Robot,
+    stance,
+    stance_side,
+    steps,
+    swing_from=None,
+    action_index=None,
+    *,
+    block: int = 32,
+    num_warps: int | None = 1,
+    interpret: bool | None = None,
+) -> jax.Array:
+    """(N,) FootCost totals of candidate steps, the same numbers as ``foot_cost_terms_indexed(...).total``.
+
+    One terrain, one stance (vmap for batches: the terrain tables are shared,
+    not copied, when only the queries are batched). Arguments as in
+    :func:`ijoy_jax.footcost.foot_cost_terms_indexed`.
+
+    Args:
+      block: candidates per kernel program (static, a power of two).
+      num_warps: warps per program on the GPU (None: Triton's default). The
+        defaults put one candidate on each lane of one warp: on an H200,
+        32 x 1 ran 1.54 M decisions/s, 128 x 4 1.42 M, 256 x 8 1.37 M,
+        128 x 1 0.73 M (BENCHMARKS.md).
+      interpret: run the kernel through the Pallas interpreter (None: on every
+        backend but GPU; slow, for tests and CPU use).
+
+    Returns:
+      (N,) float32: +inf where invalid, else >= 0.
+    """
+    if block < 1 or block & (block - 1):
+        raise ValueError(f"block must be a power of two, got {block}")
+    if interpret is None:
+        interpret = jax.default_backend() != "gpu"
+    steps = jnp.asarray(steps, jnp.float32).reshape(-1, 3)
+    stance = jnp.asarray(stance, jnp.float32)
+    num = steps.shape[0]
+    if action_index is None:
+        action_index = nearest_actions(robot, stance, stance_side, steps)
+    action_index = jnp.broadcast_to(jnp.asarray(action_index, jnp.int32), (num,))
+    res = terrain.resolution
+    k = index.pad
+    has_height = terrain.has_height
+    has_swing = has_height and swing_from is not None
+    f32 = functools.partial(jnp.asarray, dtype=jnp.float32)
+    zero = f32(0.0)
+    stance_h = start_h = zero
+    swx = swy = zero
+    if has_height:
+        stance_h = _plane_metrics(terrain, index, robot, stance).height
+        if has_swing:
+            swing_from = jnp.asarray(swing_from, jnp.float32)
+            start_h = _plane_metrics(terrain, index, robot, swing_from).height
+            swx, swy = swing_from[0] - terrain.origin[0], swing_from[1] - terrain.origin[1]
+    ghl = 0.5 * robot.foot_length + robot.margin
+    ghw = 0.5 * robot.foot_width + robot.margin
+    m = robot.metrics
+    par = [terrain.origin[0], terrain.origin[1], ghl, ghw, 0.5 * robot.foot_length, 0.5 * robot.foot_width,
+           stance_h, start_h, swx, swy, 0.5 * robot.foot_width, robot.max_swing + _SLACK, robot.foot_width,
+           jnp.where(jnp.hypot(ghl, ghw) > robot.max_radius + _SLACK, 1.0, 0.0),
+           m.slope_weight, m.slope_limit, m.roughness_weight, m.roughness_limit, m.bump_weight, m.bump_limit,
+           m.step_weight, m.band_weight, m.band_limit]
+    par = jnp.stack([f32(q) for q in par] + [zero] * (_NUM_PAR - len(par)))
+    padded = -(-num // block) * block
+    cand = jnp.stack([steps[:, 0], steps[:, 1], steps[:, 2], robot.action_cost[action_index],
+                      robot.max_step_height[action_index], robot.clearance[action_index]]
+                     + [jnp.zeros(num, jnp.float32)] * (_NUM_CAND - 6))
+    cand = jnp.pad(cand, ((0, 0), (0, padded - num)))
+    args = [par, cand, index.obstacles_before]
+    specs = [pl.BlockSpec((_NUM_PAR,), lambda i: (0,)), pl.BlockSpec((_NUM_CAND, block), lambda i: (0, i)),
+             pl.BlockSpec(index.obstacles_before.shape, lambda i: (0, 0))]
+    if has_height:
+        args += [index.height_padded, index.height_max]
+        specs += [pl.BlockSpec(index.height_padded.shape, lambda i: (0, 0)),
+                  pl.BlockSpec(index.height_max.shape, lambda i: (0, 0, 0))]
+    kernel = functools.partial(
+        _kernel, shape=terrain.shape, res=res, pad=k, has_height=has_height,
+        has_swing=has_swing, swing_cols=window_cells(0.5 * robot.max_swing, res),
+        levels=index.height_max.shape[0])
+    out = pl.pallas_call(
+        kernel,
+        out_shape=jax.ShapeDtypeStruct((padded,), jnp.float32),
+        grid=(padded // block,),
+        in_specs=specs,
+        out_specs=pl.BlockSpec((block,), lambda i: (i,)),
+        interpret=interpret,
+        compiler_params=None if interpret else pl_triton.CompilerParams(num_warps=num_warps),
+        name="foot_cost_fused",
+    )(*args)
+    return out[:num]

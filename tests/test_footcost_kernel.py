@@ -1,0 +1,174 @@
+"""The fused Pallas FootCost kernel against the XLA FootCost (interpreted on the CPU, the same kernel code)."""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import ijoy_jax as ij
+from ijoy_jax import footcost, select
+from ijoy_jax.footcost_kernel import foot_cost_fused
+
+RES = 0.02
+SHAPE = (48, 48)
+# Totals are sums of the same float32 terms in a different order (plane-fit sums column by column instead of
+# one reduction): a few ulps of the largest term. Measured: 3e-8 on the CPU, 6e-8 on an H200.
+ATOL = 1e-5
+RTOL = 1e-5
+
+
+def _terrain(kind: str, seed: int):
+    """A small map with obstacles and, for 2.5D, a swell, a 4 cm platform and a 15 cm block."""
+    rng = np.random.default_rng(seed)
+    free = rng.random(SHAPE) > 0.003
+    if kind == "2d":
+        return ij.terrain.from_arrays(None, free, RES)
+    x = np.arange(SHAPE[0])[:, None] * RES
+    h = 0.03 * np.sin(2.0 * x + seed) + 0.002 * rng.standard_normal(SHAPE)
+    i, j = rng.integers(8, 30, 2)
+    h[i:i + 12, j:j + 14] += 0.04
+    h[j:j + 4, i:i + 5] += 0.15
+    return ij.terrain.from_arrays(h.astype(np.float32), free, RES)
+
+
+def _queries(n: int, seed: int):
+    """Stances over the map (some steps leave it) and swing starts beside them."""
+    rng = np.random.default_rng(seed)
+    size = SHAPE[0] * RES
+    stance = np.column_stack([rng.uniform(0.1, size - 0.1, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+    swing = stance + np.column_stack([rng.uniform(-0.2, 0.2, (n, 2)), np.zeros(n)])
+    return jnp.asarray(stance, jnp.float32), jnp.asarray(swing, jnp.float32)
+
+
+@functools.partial(jax.jit, static_argnames="fused")
+def _totals(terrain, robot, stance, swing, steps, fused):
+    index = footcost.index_terrain(terrain, robot)
+    n = robot.num_actions
+
+    def one(s, w):
+        cand = ij.action_steps(robot, s, -1) if steps is None else steps
+        idx = jnp.arange(cand.shape[0]) % n
+        if fused:
+            return foot_cost_fused(terrain, index, robot, s, -1, cand, w, idx)
+        return footcost.foot_cost_terms_indexed(terrain, index, robot, s, -1, cand, w, idx).total
+
+    return jax.vmap(one, in_axes=(0, 0 if swing is not None else None))(stance, swing)
+
+
+def _both(terrain, robot, stance, swing, steps=None):
+    """(XLA totals, fused totals) for every action of each stance (or the given steps); one compile per shape."""
+    return tuple(np.asarray(_totals(terrain, robot, stance, swing, steps, fused)) for fused in (False, True))
+
+
+def _assert_same(xla, fused):
+    finite = np.isfinite(xla)
+    np.testing.assert_array_equal(np.isfinite(fused), finite)
+    np.testing.assert_allclose(fused[finite], xla[finite], rtol=RTOL, atol=ATOL)
+    assert not np.any(np.isnan(fused))
+
+
+@pytest.mark.parametrize("kind, margin, max_margin, with_swing", [
+    ("2d", 0.02, 0.1, False),
+    ("25d", 0.02, 0.1, True),   # default windows: most columns span <= 16 rows
+    ("25d", 0.1, 0.1, True),    # 10 cm margin: columns of up to ~28 rows
+    ("25d", 0.0, 0.02, False),  # no margin (no safety band), tight windows, no swing corridor
+])
+def test_totals_match_the_xla_footcost(kind, margin, max_margin, with_swing):
+    robot = ij.robots.hrp2(margin=margin, max_margin=max_margin)
+    terrain = _terrain(kind, seed=1)
+    stance, swing = _queries(6, seed=2)
+    xla, fused = _both(terrain, robot, stance, swing if with_swing else None)
+    _assert_same(xla, fused)
+    valid = np.isfinite(xla)
+    assert valid.sum() >= 50 and valid.mean() < 0.95, valid.mean()  # both valid and invalid steps are probed
+
+
+def test_off_map_oversized_and_non_finite_steps_are_inf():
+    robot = ij.robots.hrp2(margin=0.02)
+    terrain = ij.terrain.from_arrays(np.zeros(SHAPE, np.float32), np.ones(SHAPE, bool), RES)
+    stance = jnp.array([[0.5, 0.5, 0.3]], jnp.float32)
+    steps = jnp.array([[0.5, 0.7, 0.3], [-0.3, 0.5, 0.0], [5.0, 5.0, 1.0], [jnp.nan, 0.5, 0.0],
+                       [0.5, jnp.inf, 0.0], [0.6, 0.6, -jnp.inf]], jnp.float32)
+    xla, fused = _both(terrain, robot, stance, stance, steps)
+    _assert_same(xla, fused)
+    assert np.isfinite(fused[0, 0]) and np.all(np.isinf(fused[0, 1:]))
+    # A margin beyond the static windows is flagged unsupported, as in the XLA path.
+    wide = robot.replace(margin=jnp.float32(0.2))
+    xla, fused = _both(terrain, wide, stance, stance, steps[:1])
+    assert np.isinf(xla).all() and np.isinf(fused).all()
+
+
+@given(seed=st.integers(0, 2**16), margin=st.sampled_from([0.0, 0.01, 0.03, 0.06]))
+def test_property_fused_equals_xla_on_random_maps(seed, margin):
+    robot = ij.robots.hrp2(margin=margin)
+    terrain = _terrain("25d", seed=seed)
+    stance, swing = _queries(1, seed=seed + 1)
+    xla, fused = _both(terrain, robot, stance, swing)
+    _assert_same(xla, fused)
+
+
+def test_vmap_over_terrains_shares_nothing_between_them():
+    robot = ij.robots.hrp2(margin=0.02)
+    terrains = [_terrain("25d", seed=s) for s in (4, 5)]
+    batch = jax.tree.map(lambda *a: jnp.stack(a), *terrains)
+    stance, swing = _queries(2, seed=6)
+    index_of = jax.vmap(lambda t: footcost.index_terrain(t, robot))
+
+    def one(t, i, s, w):
+        return foot_cost_fused(t, i, robot, s, -1, ij.action_steps(robot, s, -1), w, jnp.arange(robot.num_actions))
+
+    both = np.asarray(jax.jit(jax.vmap(one))(batch, index_of(batch), stance, swing))
+    for b, t in enumerate(terrains):
+        xla, _ = _both(t, robot, stance[b:b + 1], swing[b:b + 1])
+        _assert_same(xla[0], both[b])
+
+
+@pytest.mark.parametrize("method", ["exhaustive", "ordered"])
+def test_select_step_with_the_kernel_chooses_the_same_steps(method):
+    robot = ij.robots.hrp2(margin=0.02)
+    terrain = _terrain("25d", seed=7)  # no swing corridor here: the exhaustive/ordered agreement is the point
+    targets = ij.make_targets(robot)
+    index = footcost.index_terrain(terrain, robot)
+    rng = np.random.default_rng(8)
+    n = 6
+    stance = jnp.asarray(np.column_stack([rng.uniform(0.35, 0.6, (n, 2)), rng.uniform(-np.pi, np.pi, n)]),
+                         jnp.float32)
+    command = jnp.asarray(rng.uniform(-0.3, 0.3, (n, 3)), jnp.float32)
+
+    def one(s, c, kernel):
+        ch = select.select_step_indexed(terrain, index, robot, targets, s, -1, c, method, kernel=kernel)
+        return ch.index, ch.cost, ch.valid
+
+    run = jax.jit(jax.vmap(one, in_axes=(0, 0, None)), static_argnums=2)
+    (ia, ca, va), (ib, cb, vb) = run(stance, command, "xla"), run(stance, command, "pallas")
+    np.testing.assert_array_equal(np.asarray(ib), np.asarray(ia))
+    np.testing.assert_array_equal(np.asarray(vb), np.asarray(va))
+    assert np.asarray(va).sum() >= n // 2
+    np.testing.assert_allclose(np.asarray(cb)[np.asarray(va)], np.asarray(ca)[np.asarray(va)], rtol=RTOL, atol=ATOL)
+
+
+def test_public_select_step_kernel_option_and_no_recompile():
+    robot = ij.robots.hrp2(margin=0.02)
+    terrain = _terrain("2d", seed=9)
+    kw = dict(method="exhaustive", kernel="pallas")
+    a = ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], **kw)
+    b = ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], method="exhaustive")
+    assert int(a.index) == int(b.index) and bool(a.valid) == bool(b.valid)
+    n = select._select_jit._cache_size()
+    ij.select_step(terrain, robot.replace(w=jnp.float32(3.0), margin=jnp.float32(0.05)), [0.6, 0.4, 1.0], -1,
+                   [0.0, 0.1, -0.2], **kw)
+    assert select._select_jit._cache_size() == n
+    with pytest.raises(ValueError, match="kernel must be one of"):
+        ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], kernel="cuda")
+
+
+def test_block_must_be_a_power_of_two():
+    robot = ij.robots.hrp2(margin=0.02)
+    terrain = _terrain("2d", seed=0)
+    index = footcost.index_terrain(terrain, robot)
+    with pytest.raises(ValueError, match="power of two"):
+        foot_cost_fused(terrain, index, robot, jnp.zeros(3), -1, jnp.zeros((4, 3)), block=48)
