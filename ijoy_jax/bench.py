@@ -162,15 +162,20 @@ def bench_select(rows, quick: bool, chunk: int):
     # Closed loop: B robots walking 16 steps on the same 2.5D terrain.
     steps = 16
     cmd = jnp.array([0.2, 0.0, 0.1], jnp.float32)
-    for b in ([1, 8] if quick else ([1, 64] if _cpu() else [1, 64, 1024, 8192])):
-        y = 1.0 + 0.01 * (np.arange(b) % 50)
-        starts = jnp.asarray(np.stack([np.column_stack([np.ones(b), y + 0.095, np.zeros(b)]),
-                                       np.column_stack([np.ones(b), y - 0.095, np.zeros(b)])], axis=1), jnp.float32)
-        f = jax.jit(jax.vmap(lambda s: rollout_core(terrain, robot, s, cmd, steps, "ordered",
-                                                    targets=targets).footsteps))
-        comp, run, _, _ = _time(f, starts, repeats=3, min_seconds=0.2)
-        _emit(rows, dict(_env(), bench="rollout", method="ordered", terrain="2.5D", batch=b, steps=steps,
-                         compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
+    loops = [("ordered", "xla")] + ([] if _cpu() else [("ordered", "pallas"), ("exhaustive", "pallas")])
+    for method, kernel in loops:
+        for b in ([1, 8] if quick else ([1, 64] if _cpu() else [1, 64, 1024, 8192, 32768])):
+            if kernel == "xla" and b > 8192:
+                continue  # XLA's per-candidate windows would not fit in memory unchunked
+            y = 1.0 + 0.01 * (np.arange(b) % 50)
+            starts = jnp.asarray(np.stack([np.column_stack([np.ones(b), y + 0.095, np.zeros(b)]),
+                                           np.column_stack([np.ones(b), y - 0.095, np.zeros(b)])], axis=1),
+                                 jnp.float32)
+            f = jax.jit(jax.vmap(lambda s, method=method, kernel=kernel: rollout_core(
+                terrain, robot, s, cmd, steps, method, targets=targets, kernel=kernel).footsteps))
+            comp, run, _, _ = _time(f, starts, repeats=3, min_seconds=0.2)
+            _emit(rows, dict(_env(), bench="rollout", method=method, kernel=kernel, terrain="2.5D", batch=b,
+                             steps=steps, compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
     # The paper's algorithm in plain NumPy, same terrain and queries, one decision at a time.
     from ijoy_jax.numpy_ref import NumpyFootCost, ordered_select
 

@@ -26,7 +26,7 @@ from jax import lax
 from ijoy_jax import geometry
 from ijoy_jax.footcost import _validate, foot_cost_terms_indexed, index_terrain
 from ijoy_jax.robots import LEFT, Robot
-from ijoy_jax.select import METHODS, Targets, ideal_step, make_targets, select_step_indexed
+from ijoy_jax.select import KERNELS, METHODS, Targets, ideal_step, make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain
 
 
@@ -169,6 +169,7 @@ def rollout_core(
     swing_path: bool = True,
     quantize: bool = True,
     targets: Targets | None = None,
+    kernel: str = "xla",
 ) -> Trajectory:
     """The rollout without input checks or its own jit (call it inside your jit/vmap).
 
@@ -190,7 +191,7 @@ def rollout_core(
         info = walker.stance(state)
         choice = select_step_indexed(
             terrain, index, robot, targets, info.stance, info.stance_side, command, method,
-            info.swing_from if swing_path else None, quantize,
+            info.swing_from if swing_path else None, quantize, kernel=kernel,
         )
         go = ~stopped & (choice.valid | (method == "naive")) & ~settling
         now_stopped = stopped | (~go & ~settling)
@@ -245,7 +246,8 @@ def rollout_core(
         rec = jax.tree_util.tree_map(lambda a: a[warm:], rec)
     return Trajectory(feet=walker.feet(state), **rec)
 
-_rollout_jit = jax.jit(rollout_core, static_argnames=("num_steps", "method", "walker", "swing_path", "quantize"))
+_rollout_jit = jax.jit(rollout_core,
+                       static_argnames=("num_steps", "method", "walker", "swing_path", "quantize", "kernel"))
 
 def rollout(
     terrain: Terrain,
@@ -260,6 +262,7 @@ def rollout(
     swing_path: bool = True,
     quantize: bool = True,
     targets: Targets | None = None,
+    kernel: str = "xla",
 ) -> Trajectory:
     """Walk the robot with the joystick for ``num_steps`` steps (Algorithm 1), jitted as one scan.
 
@@ -280,6 +283,8 @@ def rollout(
         L_i); built inside the jitted rollout when None, which sorts |F| x N
         entries on every call (about 0.4 s on a 2-core CPU for HRP-2): pass
         it when calling repeatedly with the same actions and rotation weight.
+      kernel: FootCost on the GPU: "xla" (default) or "pallas", the fused
+        kernel (:func:`ijoy_jax.select_step`); the same steps.
 
     Returns:
       :class:`Trajectory`. Once no valid step exists the robot stops and
@@ -308,7 +313,9 @@ def rollout(
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if first_swing not in (LEFT, -LEFT):
         raise ValueError(f"first_swing must be +1 (left) or -1 (right), got {first_swing!r}")
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
     return _rollout_jit(terrain, robot, start, commands, int(num_steps), method, first_swing, walker,
-                        swing_path, quantize, targets)
+                        swing_path, quantize, targets, kernel)
 
 rollout_batched = functools.partial(jax.vmap, rollout_core)

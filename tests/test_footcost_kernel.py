@@ -172,3 +172,17 @@ def test_block_must_be_a_power_of_two():
     index = footcost.index_terrain(terrain, robot)
     with pytest.raises(ValueError, match="power of two"):
         foot_cost_fused(terrain, index, robot, jnp.zeros(3), -1, jnp.zeros((4, 3)), block=48)
+
+
+def test_rollout_with_the_kernel_walks_the_same_steps():
+    robot = ij.robots.hrp2(margin=0.02)
+    terrain = _terrain("25d", seed=10)
+    start = np.array([[0.3, 0.495, 0.0], [0.3, 0.305, 0.0]])
+    kw = dict(commands=[0.25, 0.05, 0.2], num_steps=4, method="ordered")
+    a = ij.rollout(terrain, robot, start, **kw)
+    b = ij.rollout(terrain, robot, start, kernel="pallas", **kw)
+    assert np.asarray(a.valid).sum() >= 2  # the walk really moves
+    np.testing.assert_array_equal(np.asarray(b.valid), np.asarray(a.valid))
+    np.testing.assert_allclose(np.asarray(b.footsteps), np.asarray(a.footsteps), atol=1e-6)
+    with pytest.raises(ValueError, match="kernel must be one of"):
+        ij.rollout(terrain, robot, start, kernel="triton", **kw)
