@@ -6,9 +6,11 @@ for margins up to 10 cm) and materialises it with its masks and residuals in
 memory: ~12 MB of traffic per 496-candidate decision on a GPU, which bounds it
 to a few hundred thousand decisions per second. This kernel computes the same
 ``total`` with every intermediate in registers: each program takes a block of
-candidates and walks the window column by column, only as many columns as its
-widest grown footprint spans (so a 2 cm margin costs less than a 10 cm one at
-the same static window size), gathering one column of heights at a time.
+candidates, one per lane, and walks the grown footprint column by column (as
+many columns as the block's widest footprint) and row by row within a column
+(as many rows as the block's longest span there), so a 2 cm margin costs less
+than a 10 cm one at the same static window size; heights are gathered one
+cell per lane at a time.
 
 Same definitions as the XLA path, term by term (exact cell coverage, the
 least-squares plane and its metrics, step height, safety band, swing corridor,
@@ -45,27 +47,46 @@ _NUM_CAND = 8
 class _Rect:
     """A rotated rectangle per candidate ((C,) vectors), prepared for column-by-column coverage.
 
-    Mirrors :func:`ijoy_jax.geometry.rect_column_spans` operation for operation, with the candidates
-    (not the columns) as the vector axis: ``spans(ix)`` gives the rows touched in grid column ``ix``.
+    The same spans as :func:`ijoy_jax.geometry.rect_column_spans`, with the candidates (not the columns)
+    as the vector axis: ``spans(ix)`` gives the rows touched in grid column ``ix``. Cheaper per column:
+    the corners run counter-clockwise, so the edges going +x form the lower chain and those going -x the
+    upper one; a rectangle has one of each in each pair of opposite edges (none if the pair is vertical).
+    The lowest y over a slab is then the lower chain at the slab's ends (the larger of its two lines) or
+    the bottom corner if it lies in the slab; likewise the highest. The lines are the geometry module's
+    (same start corner, same slope), so the spans agree with it up to float rounding at a corner.
     """
 
     def __init__(self, cx, cy, c, s, half_length, half_width, res):
         self.res = res
         lx = (half_length, -half_length, -half_length, half_length)
         ly = (half_width, half_width, -half_width, -half_width)
-        self.px = [cx + c * a - s * b for a, b in zip(lx, ly, strict=True)]
-        self.py = [cy + s * a + c * b for a, b in zip(lx, ly, strict=True)]
-        self.xmin = functools.reduce(jnp.minimum, self.px)
-        self.xmax = functools.reduce(jnp.maximum, self.px)
+        px = [cx + c * a - s * b for a, b in zip(lx, ly, strict=True)]
+        py = [cy + s * a + c * b for a, b in zip(lx, ly, strict=True)]
+        self.xmin = functools.reduce(jnp.minimum, px)
+        self.xmax = functools.reduce(jnp.maximum, px)
         self.ix_first = jnp.floor(self.xmin / res).astype(jnp.int32)
         self.ix_last = (jnp.ceil(self.xmax / res) - 1).astype(jnp.int32)
-        self.edges = []
+        lines = []
         for v in range(4):
-            qx, qy = self.px[(v + 1) % 4], self.py[(v + 1) % 4]
-            dx = qx - self.px[v]
+            qx, qy = px[(v + 1) % 4], py[(v + 1) % 4]
+            dx = qx - px[v]
             slanted = dx != 0.0
-            slope = (qy - self.py[v]) / jnp.where(slanted, dx, 1.0)
-            self.edges.append((jnp.minimum(self.px[v], qx), jnp.maximum(self.px[v], qx), slanted, slope))
+            lines.append((dx, px[v], py[v], (qy - py[v]) / jnp.where(slanted, dx, 1.0)))
+        self.lower, self.upper = [], []
+        for e, f in ((0, 2), (1, 3)):  # opposite edges: one goes +x, the other -x (or both are vertical)
+            (dx, x0, y0, k0), (_, x1, y1, k1) = lines[e], lines[f]
+            forward = dx > 0.0  # edge e goes +x: it is the lower one of the pair
+            vertical = dx == 0.0
+            self.lower.append((jnp.where(forward, x0, x1), jnp.where(vertical, -jnp.inf, jnp.where(forward, y0, y1)),
+                               jnp.where(vertical, 0.0, jnp.where(forward, k0, k1))))
+            self.upper.append((jnp.where(forward, x1, x0), jnp.where(vertical, jnp.inf, jnp.where(forward, y1, y0)),
+                               jnp.where(vertical, 0.0, jnp.where(forward, k1, k0))))
+        (xb, yb), (xt, yt) = (px[0], py[0]), (px[0], py[0])
+        for v in range(1, 4):
+            lower, higher = py[v] < yb, py[v] > yt
+            xb, yb = jnp.where(lower, px[v], xb), jnp.where(lower, py[v], yb)
+            xt, yt = jnp.where(higher, px[v], xt), jnp.where(higher, py[v], yt)
+        self.bottom, self.top = (xb, yb), (xt, yt)
 
     def overflow(self, ix0, num_columns: int):
         return (self.ix_first < ix0) | ((self.ix_last - ix0 + 1) > num_columns)
@@ -76,18 +97,16 @@ class _Rect:
         a = jnp.maximum(ix.astype(jnp.float32) * res, self.xmin)
         b = jnp.minimum((ix + 1).astype(jnp.float32) * res, self.xmax)
         has_width = a < b
-        ylo = jnp.full(a.shape, jnp.inf, jnp.float32)
-        yhi = jnp.full(a.shape, -jnp.inf, jnp.float32)
-        for v in range(4):
-            ex_lo, ex_hi, slanted, slope = self.edges[v]
-            for x in (a, b):
-                y = self.py[v] + (x - self.px[v]) * slope
-                ok = slanted & (x >= ex_lo) & (x <= ex_hi)
-                ylo = jnp.minimum(ylo, jnp.where(ok, y, jnp.inf))
-                yhi = jnp.maximum(yhi, jnp.where(ok, y, -jnp.inf))
-            inside = (self.px[v] >= a) & (self.px[v] <= b)
-            ylo = jnp.minimum(ylo, jnp.where(inside, self.py[v], jnp.inf))
-            yhi = jnp.maximum(yhi, jnp.where(inside, self.py[v], -jnp.inf))
+
+        def chain(x, lines, pick):
+            (x0, y0, k0), (x1, y1, k1) = lines
+            return pick(y0 + (x - x0) * k0, y1 + (x - x1) * k1)
+
+        ylo = jnp.minimum(chain(a, self.lower, jnp.maximum), chain(b, self.lower, jnp.maximum))
+        yhi = jnp.maximum(chain(a, self.upper, jnp.minimum), chain(b, self.upper, jnp.minimum))
+        (xb, yb), (xt, yt) = self.bottom, self.top
+        ylo = jnp.where((xb >= a) & (xb <= b), jnp.minimum(ylo, yb), ylo)
+        yhi = jnp.where((xt >= a) & (xt <= b), jnp.maximum(yhi, yt), yhi)
         touched = has_width & (yhi > ylo)
         j0 = jnp.floor(jnp.where(touched, ylo, 0.0) / res).astype(jnp.int32)
         j1 = (jnp.ceil(jnp.where(touched, yhi, 0.0) / res) - 1).astype(jnp.int32)
@@ -130,19 +149,16 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
     # Columns this block must visit: its widest grown footprint (past ix_last nothing is touched).
     num_cols = jnp.clip(jnp.max(grown.ix_last - ix0 + 1), 0, k)
 
-    # Pass 1: obstacles and off-map cells under the grown footprint; the longest column span of the block.
-    def obstacle_column(i, carry):
-        blocked, longest = carry
+    # Pass 1: obstacles and off-map cells under the grown footprint.
+    def obstacle_column(i, blocked):
         ix = ix0 + i
         j0, j1, touched = grown.spans(ix)
         ixc = jnp.clip(ix, 0, nx - 1)
         count = obs_ref[ixc, jnp.clip(j1 + 1, 0, ny)] - obs_ref[ixc, jnp.clip(j0, 0, ny)]
         off_map = (ix < 0) | (ix >= nx) | (j0 < 0) | (j1 >= ny)
-        blocked = blocked | (touched & (off_map | (count > 0)))
-        return blocked, jnp.maximum(longest, jnp.where(touched, j1 - j0 + 1, 0))
+        return blocked | (touched & (off_map | (count > 0)))
 
-    blocked, longest = lax.fori_loop(0, num_cols, obstacle_column, (finite & False, jnp.zeros_like(ix0)))
-    longest = jnp.clip(jnp.max(longest), 0, k)  # rows per column to visit (more: too big, +inf anyway)
+    blocked = lax.fori_loop(0, num_cols, obstacle_column, finite & False)
     total = cand_ref[_COST, :] + jnp.where(blocked, jnp.inf, 0.0)
 
     if has_height:
@@ -161,8 +177,12 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
             """Heights of cells (ix, j) (C,) relative to h_ref (edge-padded beyond the map)."""
             return hp_ref[jnp.clip(ix + k, 0, hp_cols - 1), jnp.clip(j + k, 0, hp_rows - 1)] - h_ref
 
+        def rows_of(j0, j1, touched):
+            """Rows the block visits in a column: its longest span there (beyond k: too big, +inf anyway)."""
+            return jnp.clip(jnp.max(jnp.where(touched, j1 - j0 + 1, 0)), 0, k)
+
         # Every quantity is a (C,) vector, one candidate per lane: the rows of a column are an inner loop
-        # (as many as the block's longest column span), so no reduction ever crosses lanes.
+        # (as many as the block's longest span in that column), so no sum ever crosses lanes.
         # Pass 2: the normal equations of the plane fit (the sums of footcost._plane_metrics).
         def sums_column(i, acc):
             ix = ix0 + i
@@ -176,7 +196,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
                 mh = jnp.where(touched & (j <= j1), relative_height(ix, j), 0.0)
                 return c1 + mh, cvh + mh * v
 
-            c1, cvh = lax.fori_loop(0, longest, row, (zero_f, zero_f))
+            c1, cvh = lax.fori_loop(0, rows_of(j0, j1, touched), row, (zero_f, zero_f))
             c0 = jnp.where(touched, jnp.maximum(j1 - j0 + 1, 0), 0).astype(jnp.float32)
             v_mid = 0.5 * (j0 + j1 + 1).astype(jnp.float32) * res - cy
             cv = c0 * v_mid
@@ -209,7 +229,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
                         jnp.maximum(top, jnp.where(m_foot, resid, -jnp.inf)),
                         jnp.maximum(band, jnp.where(m_band, jnp.abs(resid), 0.0)))
 
-            return lax.fori_loop(0, longest, row, acc)
+            return lax.fori_loop(0, rows_of(g0, g1, g_touched), row, acc)
 
         abs_sum, top, band = lax.fori_loop(0, num_cols, resid_column, (zero_f, zero_f - jnp.inf, zero_f))
         ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(cc)

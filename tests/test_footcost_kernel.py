@@ -186,3 +186,30 @@ def test_rollout_with_the_kernel_walks_the_same_steps():
     np.testing.assert_allclose(np.asarray(b.footsteps), np.asarray(a.footsteps), atol=1e-6)
     with pytest.raises(ValueError, match="kernel must be one of"):
         ij.rollout(terrain, robot, start, kernel="triton", **kw)
+
+
+def test_kernel_column_spans_equal_the_geometry_module():
+    """The kernel's chain-based spans equal geometry.rect_column_spans at random and at axis-aligned,
+    grid-aligned and zero-length rectangles (the swing corridor of a step in place)."""
+    from ijoy_jax import geometry
+    from ijoy_jax.footcost_kernel import _Rect
+
+    rng = np.random.default_rng(11)
+    n, k = 4000, 29
+    cx, cy = rng.uniform(0.3, 0.7, n), rng.uniform(0.3, 0.7, n)
+    theta = rng.uniform(-np.pi, np.pi, n)
+    special = n // 4
+    theta[:special] = rng.choice([0.0, np.pi / 2, np.pi, -np.pi / 2, np.pi / 4], special)
+    cx[:special // 2] = np.round(cx[:special // 2] / 0.01) * 0.01  # centres on cell edges and centres
+    cy[:special // 2] = np.round(cy[:special // 2] / 0.01) * 0.01
+    half_length = np.where(rng.random(n) < 0.1, 0.0, 0.141)
+    cx, cy, theta, half_length = (jnp.asarray(a, jnp.float32) for a in (cx, cy, theta, half_length))
+    ref = jax.vmap(lambda x, y, t, hl: geometry.rect_column_spans(x, y, t, hl, 0.085, RES, k))(
+        cx, cy, theta, half_length)
+    rect = _Rect(cx, cy, jnp.cos(theta), jnp.sin(theta), half_length, jnp.float32(0.085), RES)
+    np.testing.assert_array_equal(np.asarray(rect.ix_first), np.asarray(ref.ix[:, 0]))
+    for i in range(k):
+        j0, j1, touched = (np.asarray(a) for a in rect.spans(rect.ix_first + i))
+        np.testing.assert_array_equal(touched, np.asarray(ref.touched[:, i]))
+        np.testing.assert_array_equal(j0[touched], np.asarray(ref.j0[:, i])[touched])
+        np.testing.assert_array_equal(j1[touched], np.asarray(ref.j1[:, i])[touched])
