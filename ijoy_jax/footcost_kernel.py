@@ -149,19 +149,19 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
     # Columns this block must visit: its widest grown footprint (past ix_last nothing is touched).
     num_cols = jnp.clip(jnp.max(grown.ix_last - ix0 + 1), 0, k)
 
-    # Pass 1: obstacles and off-map cells under the grown footprint.
-    def obstacle_column(i, blocked):
-        ix = ix0 + i
-        j0, j1, touched = grown.spans(ix)
+    def hits_obstacle(ix, j0, j1, touched):
+        """(C,) bool: the grown footprint's cells in column ix hold an obstacle or leave the map."""
         ixc = jnp.clip(ix, 0, nx - 1)
         count = obs_ref[ixc, jnp.clip(j1 + 1, 0, ny)] - obs_ref[ixc, jnp.clip(j0, 0, ny)]
         off_map = (ix < 0) | (ix >= nx) | (j0 < 0) | (j1 >= ny)
-        return blocked | (touched & (off_map | (count > 0)))
+        return touched & (off_map | (count > 0))
 
-    blocked = lax.fori_loop(0, num_cols, obstacle_column, finite & False)
-    total = cand_ref[_COST, :] + jnp.where(blocked, jnp.inf, 0.0)
-
-    if has_height:
+    total = cand_ref[_COST, :]
+    if not has_height:  # 2D: obstacles only, one pass over the grown footprint's columns
+        blocked = lax.fori_loop(0, num_cols, lambda i, acc: acc | hits_obstacle(ix0 + i, *grown.spans(ix0 + i)),
+                                finite & False)
+        total = total + jnp.where(blocked, jnp.inf, 0.0)
+    else:
         foot = _Rect(cx, cy, c, s, p[_FHL], p[_FHW], res)
         # The cell under the foot centre; heights are taken relative to it (float32 conditioning). Within
         # the map's padded border this is footcost._plane_metrics' window cell; beyond it the step is
@@ -218,7 +218,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
             base = a + b * u
 
             def row(q, acc):
-                abs_sum, top, band = acc
+                abs_sum, top, band, blocked = acc
                 j = g0 + q
                 v = (j.astype(jnp.float32) + 0.5) * res - cy
                 resid = relative_height(ix, j) - (base + cc * v)
@@ -227,11 +227,14 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
                 m_band = m_grown & ~m_foot
                 return (abs_sum + jnp.where(m_foot, jnp.abs(resid), 0.0),
                         jnp.maximum(top, jnp.where(m_foot, resid, -jnp.inf)),
-                        jnp.maximum(band, jnp.where(m_band, jnp.abs(resid), 0.0)))
+                        jnp.maximum(band, jnp.where(m_band, jnp.abs(resid), 0.0)), blocked)
 
+            acc = (*acc[:3], acc[3] | hits_obstacle(ix, g0, g1, g_touched))  # obstacles ride along this pass
             return lax.fori_loop(0, rows_of(g0, g1, g_touched), row, acc)
 
-        abs_sum, top, band = lax.fori_loop(0, num_cols, resid_column, (zero_f, zero_f - jnp.inf, zero_f))
+        abs_sum, top, band, blocked = lax.fori_loop(0, num_cols, resid_column,
+                                                    (zero_f, zero_f - jnp.inf, zero_f, finite & False))
+        total = total + jnp.where(blocked, jnp.inf, 0.0)
         ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(cc)
         height = jnp.where(ok, a + h_ref, h_ref)
         slope = jnp.where(ok, jnp.arctan(jnp.sqrt(b * b + cc * cc)), 0.0)
