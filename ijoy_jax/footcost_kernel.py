@@ -29,11 +29,17 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
-from ijoy_jax.footcost import _SLACK, TerrainIndex, _plane_metrics, nearest_actions, window_cells
+from ijoy_jax.footcost import (
+    _SLACK,
+    TerrainIndex,
+    _limit,
+    _plane_metrics,
+    _solve3,
+    nearest_actions,
+    window_cells,
+)
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
-
-_INT_MAX = 2**31 - 1
 
 # Scalars of one decision, packed into one float32 vector (indices into ``par``).
 (_OX, _OY, _GHL, _GHW, _FHL, _FHW, _STANCE_H, _START_H, _SWX, _SWY, _HALF_FW, _SWING_MAX, _FW, _TOO_BIG,
@@ -111,21 +117,6 @@ class _Rect:
         j0 = jnp.floor(jnp.where(touched, ylo, 0.0) / res).astype(jnp.int32)
         j1 = (jnp.ceil(jnp.where(touched, yhi, 0.0) / res) - 1).astype(jnp.int32)
         return j0, j1, touched & (j1 >= j0)
-
-
-def _limit(weight, metric, limit):
-    return jnp.where(metric > limit, jnp.inf, weight * metric)
-
-
-def _solve3(a00, a01, a02, a11, a12, a22, r0, r1, r2):
-    c00 = a11 * a22 - a12 * a12
-    c01 = a02 * a12 - a01 * a22
-    c02 = a01 * a12 - a02 * a11
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    x0 = (r0 * c00 + r1 * c01 + r2 * c02) / det
-    x1 = (r0 * c01 + r1 * (a00 * a22 - a02 * a02) + r2 * (a01 * a02 - a00 * a12)) / det
-    x2 = (r0 * c02 + r1 * (a01 * a02 - a00 * a12) + r2 * (a00 * a11 - a01 * a01)) / det
-    return x0, x1, x2
 
 
 def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
@@ -310,7 +301,9 @@ def foot_cost_fused(
         backend but GPU; slow, for tests and CPU use).
 
     Returns:
-      (N,) float32: +inf where invalid, else >= 0.
+      (N,) float32: +inf where invalid, else >= 0. Not differentiable (the
+      kernel has no derivative rule): take gradients through the XLA path or
+      :mod:`ijoy_jax.tune`'s relaxation.
     """
     if block < 1 or block & (block - 1):
         raise ValueError(f"block must be a power of two, got {block}")
