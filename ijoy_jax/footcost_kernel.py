@@ -42,8 +42,8 @@ from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
 # Scalars of one decision, packed into one float32 vector (indices into ``par``).
-(_OX, _OY, _GHL, _GHW, _FHL, _FHW, _STANCE_H, _START_H, _SWX, _SWY, _HALF_FW, _SWING_MAX, _FW, _TOO_BIG,
- _SLOPE_W, _SLOPE_L, _ROUGH_W, _ROUGH_L, _BUMP_W, _BUMP_L, _STEP_W, _BAND_W, _BAND_L) = range(23)
+(_OX, _OY, _GHL, _GHW, _FHL, _FHW, _STANCE_H, _START_H, _SWX, _SWY, _SWING_MAX, _FW, _TOO_BIG,
+ _SLOPE_W, _SLOPE_L, _ROUGH_W, _ROUGH_L, _BUMP_W, _BUMP_L, _STEP_W, _BAND_W, _BAND_L) = range(22)
 _NUM_PAR = 32
 # Rows of the per-candidate block ``cand``.
 _X, _Y, _T, _COST, _STEP_LIMIT, _CLEARANCE = range(6)
@@ -140,12 +140,15 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
     # Columns this block must visit: its widest grown footprint (past ix_last nothing is touched).
     num_cols = jnp.clip(jnp.max(grown.ix_last - ix0 + 1), 0, k)
 
+    def off_map(ix, j0, j1):
+        """(C,) bool: rows j0..j1 of column ix reach beyond the map."""
+        return (ix < 0) | (ix >= nx) | (j0 < 0) | (j1 >= ny)
+
     def hits_obstacle(ix, j0, j1, touched):
         """(C,) bool: the grown footprint's cells in column ix hold an obstacle or leave the map."""
         ixc = jnp.clip(ix, 0, nx - 1)
         count = obs_ref[ixc, jnp.clip(j1 + 1, 0, ny)] - obs_ref[ixc, jnp.clip(j0, 0, ny)]
-        off_map = (ix < 0) | (ix >= nx) | (j0 < 0) | (j1 >= ny)
-        return touched & (off_map | (count > 0))
+        return touched & (off_map(ix, j0, j1) | (count > 0))
 
     total = cand_ref[_COST, :]
     if not has_height:  # 2D: obstacles only, one pass over the grown footprint's columns
@@ -157,16 +160,15 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
         # The cell under the foot centre; heights are taken relative to it (float32 conditioning). Within
         # the map's padded border this is footcost._plane_metrics' window cell; beyond it the step is
         # off the map and already +inf.
-        h_ref = hp_ref[jnp.clip(jnp.floor(cx / res).astype(jnp.int32) + k, 0, nx + 2 * k - 1),
-                       jnp.clip(jnp.floor(cy / res).astype(jnp.int32) + k, 0, ny + 2 * k - 1)]
+        def padded_height(ix, j):
+            """Heights of cells (ix, j) (C,), edge-padded by k cells beyond the map, clamped past that."""
+            return hp_ref[jnp.clip(ix + k, 0, nx + 2 * k - 1), jnp.clip(j + k, 0, ny + 2 * k - 1)]
+
+        h_ref = padded_height(jnp.floor(cx / res).astype(jnp.int32), jnp.floor(cy / res).astype(jnp.int32))
         zero_f = jnp.zeros_like(cx)
 
-        hp_cols = nx + 2 * k
-        hp_rows = ny + 2 * k
-
         def relative_height(ix, j):
-            """Heights of cells (ix, j) (C,) relative to h_ref (edge-padded beyond the map)."""
-            return hp_ref[jnp.clip(ix + k, 0, hp_cols - 1), jnp.clip(j + k, 0, hp_rows - 1)] - h_ref
+            return padded_height(ix, j) - h_ref
 
         def rows_of(j0, j1, touched):
             """Rows the block visits in a column: its longest span there (beyond k: too big, +inf anyway)."""
@@ -243,7 +245,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
             length = jnp.sqrt(dx * dx + dy * dy)
             theta = jnp.arctan2(jnp.where(length > 0, dy, 0.0), jnp.where(length > 0, dx, 1.0))
             path = _Rect(0.5 * (cx + p[_SWX]), 0.5 * (cy + p[_SWY]), jnp.cos(theta), jnp.sin(theta),
-                         0.5 * length, p[_HALF_FW], res)
+                         0.5 * length, p[_FHW], res)
             pix0 = path.ix_first
             path_cols = jnp.clip(jnp.max(path.ix_last - pix0 + 1), 0, swing_cols)
 
@@ -259,12 +261,11 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
                 for q in range(1, levels):  # floor(log2(span)), capped at the table's levels
                     lvl = lvl + (span >= (1 << q)).astype(jnp.int32)
                 hi = jnp.maximum(hmax_ref[lvl, ixc, a0], hmax_ref[lvl, ixc, a1 - (1 << lvl) + 1])
-                off_map = (ix < 0) | (ix >= nx) | (j0 < 0) | (j1 >= ny)
-                return jnp.maximum(top, jnp.where(touched, hi, -jnp.inf)), off | (touched & off_map)
+                return jnp.maximum(top, jnp.where(touched, hi, -jnp.inf)), off | (touched & off_map(ix, j0, j1))
 
-            path_top, off_map = lax.fori_loop(0, path_cols, path_column, (zero_f - jnp.inf, finite & False))
+            path_top, path_off = lax.fori_loop(0, path_cols, path_column, (zero_f - jnp.inf, finite & False))
             path_height = path_top - jnp.maximum(p[_START_H], height)
-            path_bad = off_map | (path_height > cand_ref[_CLEARANCE, :])
+            path_bad = path_off | (path_height > cand_ref[_CLEARANCE, :])
             too_big = too_big | path.overflow(pix0, swing_cols) | (length + p[_FW] > p[_SWING_MAX])
             total = total + jnp.where(path_bad, jnp.inf, 0.0)
 
@@ -295,8 +296,8 @@ def foot_cost_fused(
       block: candidates per kernel program (static, a power of two).
       num_warps: warps per program on the GPU (None: Triton's default). The
         defaults put one candidate on each lane of one warp: on an H200,
-        32 x 1 ran 1.54 M decisions/s, 128 x 4 1.42 M, 256 x 8 1.37 M,
-        128 x 1 0.73 M (BENCHMARKS.md).
+        32 x 1 ran 2.62 M decisions/s, 64 x 2 2.37 M, 128 x 4 2.33 M
+        (BENCHMARKS.md).
       interpret: run the kernel through the Pallas interpreter (None: on every
         backend but GPU; slow, for tests and CPU use).
 
@@ -333,7 +334,7 @@ def foot_cost_fused(
     ghw = 0.5 * robot.foot_width + robot.margin
     m = robot.metrics
     par = [terrain.origin[0], terrain.origin[1], ghl, ghw, 0.5 * robot.foot_length, 0.5 * robot.foot_width,
-           stance_h, start_h, swx, swy, 0.5 * robot.foot_width, robot.max_swing + _SLACK, robot.foot_width,
+           stance_h, start_h, swx, swy, robot.max_swing + _SLACK, robot.foot_width,
            jnp.where(jnp.hypot(ghl, ghw) > robot.max_radius + _SLACK, 1.0, 0.0),
            m.slope_weight, m.slope_limit, m.roughness_weight, m.roughness_limit, m.bump_weight, m.bump_limit,
            m.step_weight, m.band_weight, m.band_limit]
