@@ -10,7 +10,8 @@ candidates, one per lane, and walks the grown footprint column by column (as
 many columns as the block's widest footprint) and row by row within a column
 (as many rows as the block's longest span there), so a 2 cm margin costs less
 than a 10 cm one at the same static window size; heights are gathered one
-cell per lane at a time.
+cell per lane at a time. Candidates are grouped by rotation before they are
+split into blocks, so a block's footprints are alike and few lanes idle.
 
 Same definitions as the XLA path, term by term (exact cell coverage, the
 least-squares plane and its metrics, step height, safety band, swing corridor,
@@ -48,6 +49,9 @@ _NUM_PAR = 32
 # Rows of the per-candidate block ``cand``.
 _X, _Y, _T, _COST, _STEP_LIMIT, _CLEARANCE = range(6)
 _NUM_CAND = 8
+# Row loops run two rows per iteration (one loop test per two rows). On an H100, 1, 2 and 4 ran 3.32, 3.35 and
+# 3.40 M decisions/s: within noise; 2 wastes fewest masked rows on short spans.
+_UNROLL = 2
 
 
 class _Rect:
@@ -97,29 +101,56 @@ class _Rect:
     def overflow(self, ix0, num_columns: int):
         return (self.ix_first < ix0) | ((self.ix_last - ix0 + 1) > num_columns)
 
-    def spans(self, ix):
-        """(j0, j1, touched) of grid column ``ix`` ((C,) int32 / bool)."""
-        res = self.res
-        a = jnp.maximum(ix.astype(jnp.float32) * res, self.xmin)
-        b = jnp.minimum((ix + 1).astype(jnp.float32) * res, self.xmax)
-        has_width = a < b
+    def boundary(self, ix):
+        """The rectangle at the left edge of grid column ``ix``, clipped to its x range: (x, lowest y, highest y).
 
-        def chain(x, lines, pick):
+        Column ix spans ``boundary(ix)`` to ``boundary(ix + 1)``, so a loop over columns evaluates each
+        boundary once and carries it to the next column (the chains are the costliest part of a span).
+        """
+        x = jnp.minimum(jnp.maximum(ix.astype(jnp.float32) * self.res, self.xmin), self.xmax)
+
+        def chain(lines, pick):
             (x0, y0, k0), (x1, y1, k1) = lines
             return pick(y0 + (x - x0) * k0, y1 + (x - x1) * k1)
 
-        ylo = jnp.minimum(chain(a, self.lower, jnp.maximum), chain(b, self.lower, jnp.maximum))
-        yhi = jnp.maximum(chain(a, self.upper, jnp.minimum), chain(b, self.upper, jnp.minimum))
+        return x, chain(self.lower, jnp.maximum), chain(self.upper, jnp.minimum)
+
+    def between(self, left, right):
+        """(j0, j1, touched) ((C,) int32 / bool): the rows touched between two boundaries of one column.
+
+        The slab is [max(ix res, xmin), min((ix + 1) res, xmax)] wherever it has width, as in the geometry
+        module; the clipped boundaries differ from it only where it has none.
+        """
+        (a, lo_a, hi_a), (b, lo_b, hi_b) = left, right
+        res = self.res
+        ylo, yhi = jnp.minimum(lo_a, lo_b), jnp.maximum(hi_a, hi_b)
         (xb, yb), (xt, yt) = self.bottom, self.top
         ylo = jnp.where((xb >= a) & (xb <= b), jnp.minimum(ylo, yb), ylo)
         yhi = jnp.where((xt >= a) & (xt <= b), jnp.maximum(yhi, yt), yhi)
-        touched = has_width & (yhi > ylo)
+        touched = (a < b) & (yhi > ylo)
         j0 = jnp.floor(jnp.where(touched, ylo, 0.0) / res).astype(jnp.int32)
         j1 = (jnp.ceil(jnp.where(touched, yhi, 0.0) / res) - 1).astype(jnp.int32)
         return j0, j1, touched & (j1 >= j0)
 
+    def spans(self, ix):
+        """(j0, j1, touched) of grid column ``ix`` ((C,) int32 / bool)."""
+        return self.between(self.boundary(ix), self.boundary(ix + 1))
 
-def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
+
+def _column_loop(num_cols, ix0, rects, body, init):
+    """``acc = body(ix, spans, acc)`` for columns ix0 .. ix0 + num_cols - 1, ``spans`` one (j0, j1, touched)
+    per rectangle; each column boundary is evaluated once, carried from a column to the next."""
+    def step(i, carry):
+        left, acc = carry
+        ix = ix0 + i
+        right = tuple(r.boundary(ix + 1) for r in rects)
+        spans = tuple(r.between(a, b) for r, a, b in zip(rects, left, right, strict=True))
+        return right, body(ix, spans, acc)
+
+    return lax.fori_loop(0, num_cols, step, (tuple(r.boundary(ix0) for r in rects), init))[1]
+
+
+def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, unroll):
     """One block of C candidates: FootCost ``total`` (C,)."""
     if has_height:
         par_ref, cand_ref, obs_ref, hp_ref, hmax_ref, out_ref = refs
@@ -152,87 +183,108 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
 
     total = cand_ref[_COST, :]
     if not has_height:  # 2D: obstacles only, one pass over the grown footprint's columns
-        blocked = lax.fori_loop(0, num_cols, lambda i, acc: acc | hits_obstacle(ix0 + i, *grown.spans(ix0 + i)),
-                                finite & False)
+        blocked = _column_loop(num_cols, ix0, (grown,), lambda ix, spans, acc: acc | hits_obstacle(ix, *spans[0]),
+                               finite & False)
         total = total + jnp.where(blocked, jnp.inf, 0.0)
     else:
         foot = _Rect(cx, cy, c, s, p[_FHL], p[_FHW], res)
+        stride = ny + 2 * k  # hp_ref is the edge-padded height map, flattened row-major
+
+        reach = -(-k // unroll) * unroll  # rows a column loop may read: its longest span, rounded up
+
+        def column_start(ix, j):
+            """Flat index of cell (ix, j) in the padded map, clamped so that ``reach`` cells on stay inside.
+
+            A column's loop may read past its span (into the next map column: those rows are masked). Only
+            off-map footprints (+inf already) are ever clamped: their reads are then wrong but harmless."""
+            flat = jnp.clip(ix + k, 0, nx + 2 * k - 1) * stride + jnp.clip(j + k, 0, stride - 1)
+            return jnp.minimum(flat, (nx + 2 * k) * stride - reach)
+
+        def row_loop(rows, row, init):
+            """``row(q, acc)`` for q in [0, rows), unrolled by ``unroll`` (past ``rows`` rows must be masked)."""
+            def body(t, acc):
+                for q in range(unroll):
+                    acc = row(t * unroll + q, acc)
+                return acc
+
+            return lax.fori_loop(0, (rows + unroll - 1) // unroll, body, init)
+
         # The cell under the foot centre; heights are taken relative to it (float32 conditioning). Within
         # the map's padded border this is footcost._plane_metrics' window cell; beyond it the step is
         # off the map and already +inf.
-        def padded_height(ix, j):
-            """Heights of cells (ix, j) (C,), edge-padded by k cells beyond the map, clamped past that."""
-            return hp_ref[jnp.clip(ix + k, 0, nx + 2 * k - 1), jnp.clip(j + k, 0, ny + 2 * k - 1)]
-
-        h_ref = padded_height(jnp.floor(cx / res).astype(jnp.int32), jnp.floor(cy / res).astype(jnp.int32))
+        ic = jnp.clip(jnp.floor(cx / res).astype(jnp.int32) + k, 0, nx + 2 * k - 1)
+        jc = jnp.clip(jnp.floor(cy / res).astype(jnp.int32) + k, 0, ny + 2 * k - 1)
+        h_ref = hp_ref[ic * stride + jc]
         zero_f = jnp.zeros_like(cx)
-
-        def relative_height(ix, j):
-            return padded_height(ix, j) - h_ref
 
         def rows_of(j0, j1, touched):
             """Rows the block visits in a column: its longest span there (beyond k: too big, +inf anyway)."""
             return jnp.clip(jnp.max(jnp.where(touched, j1 - j0 + 1, 0)), 0, k)
 
         # Every quantity is a (C,) vector, one candidate per lane: the rows of a column are an inner loop
-        # (as many as the block's longest span in that column), so no sum ever crosses lanes.
-        # Pass 2: the normal equations of the plane fit (the sums of footcost._plane_metrics).
-        def sums_column(i, acc):
-            ix = ix0 + i
+        # (as many as the block's longest span in that column), so no sum ever crosses lanes. Row q of a
+        # column is its span's start + q, read at a flat address; the row bodies run some 300 times per
+        # candidate and hold nearly half its instructions, so they test one bound each and carry the
+        # plane along the column instead of re-evaluating it.
+        # Pass 1: the normal equations of the plane fit (the sums of footcost._plane_metrics).
+        def sums_column(ix, spans, acc):
             u = (ix.astype(jnp.float32) + 0.5) * res - cx
-            j0, j1, touched = foot.spans(ix)
+            ((j0, j1, touched),) = spans
+            count = jnp.where(touched, j1 - j0 + 1, 0)
+            start = column_start(ix, j0)
+            v0 = (j0.astype(jnp.float32) + 0.5) * res - cy  # v of the span's first row
 
             def row(q, sums):
                 c1, cvh = sums
-                j = j0 + q
-                v = (j.astype(jnp.float32) + 0.5) * res - cy
-                mh = jnp.where(touched & (j <= j1), relative_height(ix, j), 0.0)
-                return c1 + mh, cvh + mh * v
+                mh = jnp.where(q < count, hp_ref[start + q] - h_ref, 0.0)
+                return c1 + mh, cvh + mh * (v0 + q.astype(jnp.float32) * res)
 
-            c1, cvh = lax.fori_loop(0, rows_of(j0, j1, touched), row, (zero_f, zero_f))
-            c0 = jnp.where(touched, jnp.maximum(j1 - j0 + 1, 0), 0).astype(jnp.float32)
-            v_mid = 0.5 * (j0 + j1 + 1).astype(jnp.float32) * res - cy
+            c1, cvh = row_loop(rows_of(j0, j1, touched), row, (zero_f, zero_f))
+            c0 = count.astype(jnp.float32)
+            v_mid = v0 + 0.5 * (c0 - 1.0) * res
             cv = c0 * v_mid
             cvv = c0 * v_mid * v_mid + (res * res / 12.0) * c0 * (c0 * c0 - 1.0)
             terms = (c0, c0 * u, c0 * u * u, cv, cv * u, cvv, c1, c1 * u, cvh)
             return tuple(a + b for a, b in zip(acc, terms, strict=True))
 
-        n, su, suu, sv, suv, svv, sh, suh, svh = lax.fori_loop(0, num_cols, sums_column, (zero_f,) * 9)
+        n, su, suu, sv, suv, svv, sh, suh, svh = _column_loop(num_cols, ix0, (foot,), sums_column, (zero_f,) * 9)
         n = jnp.maximum(n, 1.0)
         ridge = 1e-6 * n * res * res
         a, b, cc = _solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
+        rise = cc * res  # the plane's rise from one row to the next
 
-        # Pass 3: residuals from the plane under the foot (roughness, bump) and in the safety band.
-        def resid_column(i, acc):
-            ix = ix0 + i
+        # Pass 2: residuals from the plane under the foot (roughness, bump) and in the safety band. The
+        # bump is max(largest residual, 0), so masked rows may count as 0 instead of -inf.
+        def resid_column(ix, spans, acc):
             u = (ix.astype(jnp.float32) + 0.5) * res - cx
-            g0, g1, g_touched = grown.spans(ix)
-            j0, j1, touched = foot.spans(ix)
-            base = a + b * u
+            (g0, g1, g_touched), (j0, j1, touched) = spans
+            grown_rows = jnp.where(g_touched, g1 - g0 + 1, 0)
+            foot_first = (j0 - g0).astype(jnp.uint32)  # foot rows: foot_first <= q < foot_first + foot_rows
+            foot_rows = jnp.where(touched, j1 - j0 + 1, 0).astype(jnp.uint32)
+            start = column_start(ix, g0)
+            plane0 = a + b * u + cc * ((g0.astype(jnp.float32) + 0.5) * res - cy)
 
             def row(q, acc):
-                abs_sum, top, band, blocked = acc
-                j = g0 + q
-                v = (j.astype(jnp.float32) + 0.5) * res - cy
-                resid = relative_height(ix, j) - (base + cc * v)
-                m_grown = g_touched & (j <= g1)
-                m_foot = touched & (j >= j0) & (j <= j1)
-                m_band = m_grown & ~m_foot
-                return (abs_sum + jnp.where(m_foot, jnp.abs(resid), 0.0),
-                        jnp.maximum(top, jnp.where(m_foot, resid, -jnp.inf)),
-                        jnp.maximum(band, jnp.where(m_band, jnp.abs(resid), 0.0)), blocked)
+                abs_sum, top, band, plane = acc
+                resid = (hp_ref[start + q] - h_ref) - plane
+                in_foot = (q.astype(jnp.uint32) - foot_first) < foot_rows  # one unsigned compare
+                r_foot = jnp.where(in_foot, resid, 0.0)
+                r_band = jnp.where((q < grown_rows) & ~in_foot, resid, 0.0)
+                return (abs_sum + jnp.abs(r_foot), jnp.maximum(top, r_foot), jnp.maximum(band, jnp.abs(r_band)),
+                        plane + rise)
 
-            acc = (*acc[:3], acc[3] | hits_obstacle(ix, g0, g1, g_touched))  # obstacles ride along this pass
-            return lax.fori_loop(0, rows_of(g0, g1, g_touched), row, acc)
+            blocked = acc[3] | hits_obstacle(ix, g0, g1, g_touched)  # obstacles ride along this pass
+            abs_sum, top, band, _ = row_loop(rows_of(g0, g1, g_touched), row, (*acc[:3], plane0))
+            return abs_sum, top, band, blocked
 
-        abs_sum, top, band, blocked = lax.fori_loop(0, num_cols, resid_column,
-                                                    (zero_f, zero_f - jnp.inf, zero_f, finite & False))
+        abs_sum, top, band, blocked = _column_loop(num_cols, ix0, (grown, foot), resid_column,
+                                                    (zero_f, zero_f, zero_f, finite & False))
         total = total + jnp.where(blocked, jnp.inf, 0.0)
         ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(cc)
         height = jnp.where(ok, a + h_ref, h_ref)
         slope = jnp.where(ok, jnp.arctan(jnp.sqrt(b * b + cc * cc)), 0.0)
         rough = jnp.where(ok, abs_sum / n, 0.0)
-        bump = jnp.where(ok, jnp.maximum(top, 0.0), 0.0)
+        bump = jnp.where(ok, top, 0.0)
         band = jnp.where(ok, band, 0.0)
         dh = height - p[_STANCE_H]
         total = (total + _limit(p[_SLOPE_W], slope, p[_SLOPE_L]) + _limit(p[_ROUGH_W], rough, p[_ROUGH_L])
@@ -249,21 +301,20 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels):
             pix0 = path.ix_first
             path_cols = jnp.clip(jnp.max(path.ix_last - pix0 + 1), 0, swing_cols)
 
-            def path_column(i, acc):
+            def path_column(ix, spans, acc):
                 top, off = acc
-                ix = pix0 + i
-                j0, j1, touched = path.spans(ix)
+                ((j0, j1, touched),) = spans
                 ixc = jnp.clip(ix, 0, nx - 1)
                 a0 = jnp.clip(j0, 0, ny - 1)
                 a1 = jnp.clip(j1, 0, ny - 1)
                 span = jnp.maximum(a1 - a0 + 1, 1)
-                lvl = jnp.zeros_like(span)
-                for q in range(1, levels):  # floor(log2(span)), capped at the table's levels
-                    lvl = lvl + (span >= (1 << q)).astype(jnp.int32)
+                # floor(log2(span)) from the exponent of span as a float (exact below 2**24), capped at the table
+                lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), 23)
+                lvl = jnp.minimum(lvl - 127, levels - 1)
                 hi = jnp.maximum(hmax_ref[lvl, ixc, a0], hmax_ref[lvl, ixc, a1 - (1 << lvl) + 1])
                 return jnp.maximum(top, jnp.where(touched, hi, -jnp.inf)), off | (touched & off_map(ix, j0, j1))
 
-            path_top, path_off = lax.fori_loop(0, path_cols, path_column, (zero_f - jnp.inf, finite & False))
+            path_top, path_off = _column_loop(path_cols, pix0, (path,), path_column, (zero_f - jnp.inf, finite & False))
             path_height = path_top - jnp.maximum(p[_START_H], height)
             path_bad = path_off | (path_height > cand_ref[_CLEARANCE, :])
             too_big = too_big | path.overflow(pix0, swing_cols) | (length + p[_FW] > p[_SWING_MAX])
@@ -295,8 +346,8 @@ def foot_cost_fused(
     Args:
       block: candidates per kernel program (static, a power of two).
       num_warps: warps per program on the GPU (None: Triton's default). The
-        defaults put one candidate on each lane of one warp: on an H200,
-        32 x 1 ran 2.62 M decisions/s, 64 x 2 2.37 M, 128 x 4 2.33 M
+        defaults put one candidate on each lane of one warp: on an H100,
+        32 x 1 ran 3.27 M decisions/s, 64 x 2 2.50 M, 128 x 4 2.43 M
         (BENCHMARKS.md).
       interpret: run the kernel through the Pallas interpreter (None: on every
         backend but GPU; slow, for tests and CPU use).
@@ -340,6 +391,14 @@ def foot_cost_fused(
            m.step_weight, m.band_weight, m.band_limit]
     par = jnp.stack([f32(q) for q in par] + [zero] * (_NUM_PAR - len(par)))
     padded = -(-num // block) * block
+    order = None
+    if num > block:
+        # Programs run their loops as long as their longest footprint needs, so a block of alike footprints
+        # wastes fewest lane-steps: order candidates by their action's rotation (every step of one rotation
+        # has one world orientation; stable, so rows within stay in action order). Unbatched, hence computed
+        # once, when the action indices are (as in select_step).
+        order = jnp.argsort(robot.actions[action_index, 2], stable=True)
+        steps, action_index = steps[order], action_index[order]
     cand = jnp.stack([steps[:, 0], steps[:, 1], steps[:, 2], robot.action_cost[action_index],
                       robot.max_step_height[action_index], robot.clearance[action_index]]
                      + [jnp.zeros(num, jnp.float32)] * (_NUM_CAND - 6))
@@ -348,13 +407,13 @@ def foot_cost_fused(
     specs = [pl.BlockSpec((_NUM_PAR,), lambda i: (0,)), pl.BlockSpec((_NUM_CAND, block), lambda i: (0, i)),
              pl.BlockSpec(index.obstacles_before.shape, lambda i: (0, 0))]
     if has_height:
-        args += [index.height_padded, index.height_max]
-        specs += [pl.BlockSpec(index.height_padded.shape, lambda i: (0, 0)),
+        args += [index.height_padded.reshape(-1), index.height_max]
+        specs += [pl.BlockSpec((index.height_padded.size,), lambda i: (0,)),
                   pl.BlockSpec(index.height_max.shape, lambda i: (0, 0, 0))]
     kernel = functools.partial(
         _kernel, shape=terrain.shape, res=res, pad=k, has_height=has_height,
         has_swing=has_swing, swing_cols=window_cells(0.5 * robot.max_swing, res),
-        levels=index.height_max.shape[0])
+        levels=index.height_max.shape[0], unroll=_UNROLL)
     out = pl.pallas_call(
         kernel,
         out_shape=jax.ShapeDtypeStruct((padded,), jnp.float32),
@@ -365,4 +424,7 @@ def foot_cost_fused(
         compiler_params=None if interpret else pl_triton.CompilerParams(num_warps=num_warps),
         name="foot_cost_fused",
     )(*args)
-    return out[:num]
+    if order is None:
+        return out[:num]
+    back = jnp.zeros_like(order).at[order].set(jnp.arange(num, dtype=order.dtype))  # the inverse permutation
+    return out[back]
