@@ -7,11 +7,13 @@ memory: ~12 MB of traffic per 496-candidate decision on a GPU, which bounds it
 to a few hundred thousand decisions per second. This kernel computes the same
 ``total`` with every intermediate in registers: each program takes a block of
 candidates, one per lane, and walks the grown footprint column by column (as
-many columns as the block's widest footprint) and row by row within a column
-(as many rows as the block's longest span there), so a 2 cm margin costs less
-than a 10 cm one at the same static window size; heights are gathered one
-cell per lane at a time. Candidates are grouped by rotation before they are
-split into blocks, so a block's footprints are alike and few lanes idle.
+many columns as the block's widest footprint). The plane fit takes each
+column's sums from block prefix sums of the height map (a few reads per
+column); the residuals, which need the plane, walk the rows of each column (as
+many as the block's longest span there), so a 2 cm margin costs less than a
+10 cm one at the same static window size. Candidates are grouped by rotation
+before they are split into blocks, so a block's footprints are alike and few
+lanes idle.
 
 Same definitions as the XLA path, term by term (exact cell coverage, the
 least-squares plane and its metrics, step height, safety band, swing corridor,
@@ -137,6 +139,30 @@ class _Rect:
         return self.between(self.boundary(ix), self.boundary(ix + 1))
 
 
+def _prefix_blocks(height_padded, block: int):
+    """Block prefix sums of each column of the padded height map, for plane fits without row loops.
+
+    Rows are cut into blocks of ``block`` (>= the longest span, so a span meets at most two blocks), the
+    last block padded with its edge row, and one more block of them after it. Heights are taken from each
+    block's first height h_b, so the sums' rounding scales with the relief within a block (as the XLA path's
+    does with the relief under a foot), not with the terrain's altitude or overall relief. Entry ``[ix, b, t]``
+    holds, over rows ``b block .. b block + t - 1`` of column ix, the sum of (h - h_b) and of
+    (h - h_b) * (row - b block - (block - 1) / 2) (the row from the block's middle: smaller terms).
+
+    Returns:
+      ((nx + 2P) * blocks * (block + 1) * 2,) float32 sums, flattened; ((nx + 2P) * blocks,) float32 h_b;
+      blocks.
+    """
+    num_x, num_y = height_padded.shape
+    blocks = -(-num_y // block) + 1
+    h = jnp.pad(height_padded, ((0, 0), (0, blocks * block - num_y)), mode="edge").reshape(num_x, blocks, block)
+    first = h[:, :, 0]
+    rel = h - first[:, :, None]  # a stored height, subtracted as the kernel will (h_b - h_ref)
+    sums = jnp.stack([rel, rel * (jnp.arange(block, dtype=h.dtype) - 0.5 * (block - 1))], -1)
+    table = jnp.concatenate([jnp.zeros_like(sums[:, :, :1]), jnp.cumsum(sums, axis=2)], axis=2)
+    return table.reshape(-1), first.reshape(-1), blocks
+
+
 def _column_loop(num_cols, ix0, rects, body, init):
     """``acc = body(ix, spans, acc)`` for columns ix0 .. ix0 + num_cols - 1, ``spans`` one (j0, j1, touched)
     per rectangle; each column boundary is evaluated once, carried from a column to the next."""
@@ -150,10 +176,10 @@ def _column_loop(num_cols, ix0, rects, body, init):
     return lax.fori_loop(0, num_cols, step, (tuple(r.boundary(ix0) for r in rects), init))[1]
 
 
-def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, unroll):
+def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, unroll, prefix_block, prefix_blocks):
     """One block of C candidates: FootCost ``total`` (C,)."""
     if has_height:
-        par_ref, cand_ref, obs_ref, hp_ref, hmax_ref, out_ref = refs
+        par_ref, cand_ref, obs_ref, hp_ref, hmax_ref, pre_ref, hb_ref, out_ref = refs
     else:
         par_ref, cand_ref, obs_ref, out_ref = refs
     nx, ny = shape
@@ -221,29 +247,43 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
             """Rows the block visits in a column: its longest span there (beyond k: too big, +inf anyway)."""
             return jnp.clip(jnp.max(jnp.where(touched, j1 - j0 + 1, 0)), 0, k)
 
-        # Every quantity is a (C,) vector, one candidate per lane: the rows of a column are an inner loop
-        # (as many as the block's longest span in that column), so no sum ever crosses lanes. Row q of a
-        # column is its span's start + q, read at a flat address; the row bodies run some 300 times per
-        # candidate and hold nearly half its instructions, so they test one bound each and carry the
-        # plane along the column instead of re-evaluating it.
-        # Pass 1: the normal equations of the plane fit (the sums of footcost._plane_metrics).
+        # Every quantity is a (C,) vector, one candidate per lane, so no sum ever crosses lanes.
+        # Pass 1: the normal equations of the plane fit (the sums of footcost._plane_metrics), a column at a
+        # time from the block prefix sums (see _prefix_blocks): a span of at most B rows lies in one block or
+        # two neighbours, so it takes three reads of each table instead of a loop over its rows.
         def sums_column(ix, spans, acc):
             u = (ix.astype(jnp.float32) + 0.5) * res - cx
             ((j0, j1, touched),) = spans
-            count = jnp.where(touched, j1 - j0 + 1, 0)
-            start = column_start(ix, j0)
-            v0 = (j0.astype(jnp.float32) + 0.5) * res - cy  # v of the span's first row
+            # Spans are at most k <= B rows unless the footprint is too big (+inf already): clamped to keep
+            # the reads inside the table.
+            count = jnp.where(touched, jnp.minimum(j1 - j0 + 1, prefix_block), 0)
+            first = jnp.clip(j0 + k, 0, stride - 1)  # the span's first row in the padded map ...
+            b0 = first >> (prefix_block.bit_length() - 1)
+            t0 = first - b0 * prefix_block  # ... in block b0
+            end0 = jnp.minimum(t0 + count, prefix_block)  # the span's end in block b0 ...
+            end1 = t0 + count - end0  # ... and in block b0 + 1 (0: none)
+            block_id = jnp.clip(ix + k, 0, nx + 2 * k - 1) * prefix_blocks + b0
+            base = block_id * (prefix_block + 1)
 
-            def row(q, sums):
-                c1, cvh = sums
-                mh = jnp.where(q < count, hp_ref[start + q] - h_ref, 0.0)
-                return c1 + mh, cvh + mh * (v0 + q.astype(jnp.float32) * res)
+            def sums(t):  # (sum of h - h_b, sum of (h - h_b) * row from the block's middle) over rows before t
+                return pre_ref[2 * t], pre_ref[2 * t + 1]
 
-            c1, cvh = row_loop(rows_of(j0, j1, touched), row, (zero_f, zero_f))
+            (s_end, m_end), (s_first, m_first) = sums(base + end0), sums(base + t0)
+            s1, m1 = sums(base + prefix_block + 1 + end1)
+            s0, m0 = s_end - s_first, m_end - m_first
+            d0, d1 = hb_ref[block_id] - h_ref, hb_ref[block_id + 1] - h_ref
+            n0, n1 = (end0 - t0).astype(jnp.float32), end1.astype(jnp.float32)
             c0 = count.astype(jnp.float32)
+            v0 = (j0.astype(jnp.float32) + 0.5) * res - cy  # v of the span's first row
             v_mid = v0 + 0.5 * (c0 - 1.0) * res
             cv = c0 * v_mid
             cvv = c0 * v_mid * v_mid + (res * res / 12.0) * c0 * (c0 * c0 - 1.0)
+            # Block b0's middle row; heights relative to the foot's centre cell: (h - h_b) + (h_b - h_ref).
+            v_b0 = ((b0 * prefix_block - k).astype(jnp.float32) + (0.5 * prefix_block)) * res - cy
+            v_b1 = v_b0 + prefix_block * res
+            c1 = s0 + n0 * d0 + s1 + n1 * d1
+            cvh = (v_b0 * s0 + res * m0 + d0 * n0 * (v0 + 0.5 * (n0 - 1.0) * res)
+                   + v_b1 * s1 + res * m1 + d1 * n1 * (v0 + (n0 + 0.5 * (n1 - 1.0)) * res))
             terms = (c0, c0 * u, c0 * u * u, cv, cv * u, cvv, c1, c1 * u, cvh)
             return tuple(a + b for a, b in zip(acc, terms, strict=True))
 
@@ -253,8 +293,11 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
         a, b, cc = _solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
         rise = cc * res  # the plane's rise from one row to the next
 
-        # Pass 2: residuals from the plane under the foot (roughness, bump) and in the safety band. The
-        # bump is max(largest residual, 0), so masked rows may count as 0 instead of -inf.
+        # Pass 2: residuals from the plane under the foot (roughness, bump) and in the safety band, row by
+        # row: the rows of a column are an inner loop (as many as the block's longest span there), row q at
+        # the span's start + q, read at a flat address. These row bodies run ~180 times per candidate, so
+        # they test one bound each and carry the plane down the column. The bump is max(largest residual,
+        # 0), so masked rows may count as 0 instead of -inf.
         def resid_column(ix, spans, acc):
             u = (ix.astype(jnp.float32) + 0.5) * res - cx
             (g0, g1, g_touched), (j0, j1, touched) = spans
@@ -347,8 +390,8 @@ def foot_cost_fused(
       block: candidates per kernel program (static, a power of two).
       num_warps: warps per program on the GPU (None: Triton's default). The
         defaults put one candidate on each lane of one warp: on an H100,
-        32 x 1 ran 3.27 M decisions/s, 64 x 2 2.50 M, 128 x 4 2.43 M
-        (BENCHMARKS.md).
+        32 x 1 ran 3.85 M decisions/s and 64 x 2 3.22 M (BENCHMARKS.md):
+        a larger block runs its loops to a longer longest footprint.
       interpret: run the kernel through the Pallas interpreter (None: on every
         backend but GPU; slow, for tests and CPU use).
 
@@ -375,7 +418,10 @@ def foot_cost_fused(
     zero = f32(0.0)
     stance_h = start_h = zero
     swx = swy = zero
+    prefix_block = 1 << max(k - 1, 1).bit_length()  # a power of two >= k, the longest span
+    prefix_blocks = 0
     if has_height:
+        prefix, block_first, prefix_blocks = _prefix_blocks(index.height_padded, prefix_block)
         stance_h = _plane_metrics(terrain, index, robot, stance).height
         if has_swing:
             swing_from = jnp.asarray(swing_from, jnp.float32)
@@ -407,13 +453,14 @@ def foot_cost_fused(
     specs = [pl.BlockSpec((_NUM_PAR,), lambda i: (0,)), pl.BlockSpec((_NUM_CAND, block), lambda i: (0, i)),
              pl.BlockSpec(index.obstacles_before.shape, lambda i: (0, 0))]
     if has_height:
-        args += [index.height_padded.reshape(-1), index.height_max]
+        args += [index.height_padded.reshape(-1), index.height_max, prefix, block_first]
         specs += [pl.BlockSpec((index.height_padded.size,), lambda i: (0,)),
-                  pl.BlockSpec(index.height_max.shape, lambda i: (0, 0, 0))]
+                  pl.BlockSpec(index.height_max.shape, lambda i: (0, 0, 0)),
+                  pl.BlockSpec(prefix.shape, lambda i: (0,)), pl.BlockSpec(block_first.shape, lambda i: (0,))]
     kernel = functools.partial(
         _kernel, shape=terrain.shape, res=res, pad=k, has_height=has_height,
         has_swing=has_swing, swing_cols=window_cells(0.5 * robot.max_swing, res),
-        levels=index.height_max.shape[0], unroll=_UNROLL)
+        levels=index.height_max.shape[0], unroll=_UNROLL, prefix_block=prefix_block, prefix_blocks=prefix_blocks)
     out = pl.pallas_call(
         kernel,
         out_shape=jax.ShapeDtypeStruct((padded,), jnp.float32),
