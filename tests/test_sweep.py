@@ -25,7 +25,7 @@ import pytest
 import scipy.stats
 
 import ijoy_jax as ij
-from ijoy_jax import cli, generators, sweep
+from ijoy_jax import cli, footcost_kernel, generators, select, sweep
 from ijoy_jax.sweep import execute
 
 # Float metrics from a vmapped chunk vs a single jitted rollout: same ops, possibly fused differently (m).
@@ -94,6 +94,7 @@ BAD = [
     ("[sweep]\nnum_steps = 0\n", "sweep.num_steps", "must be >= 1"),
     ("[sweep]\nscenarios_per_cell = 2.5\n", "sweep.scenarios_per_cell", "must be an integer"),
     ('[sweep]\nmethod = "greedy"\n', "sweep.method", "must be one of"),
+    ('[sweep]\nkernel = "cuda"\n', "sweep.kernel", "must be one of"),
     ("[robot]\nmargin = -0.01\n", "robot.margin", "must be >= 0"),
     ("[robot]\nstep_time = 0\n", "robot.step_time", "must be > 0"),
     ("[robot]\nw = true\n", "robot.w", "must be a number"),
@@ -229,6 +230,27 @@ def test_results_equal_direct_rollouts(reference, base_file):
                 assert row[k] == v, k
     # Some scenario actually walked, so the comparison is not vacuous.
     assert df["distance_along"].max() > 0.2
+
+
+def test_pallas_kernel_gives_the_same_results(reference, tmp_path, monkeypatch):
+    """``kernel = "pallas"`` (the fused FootCost kernel, interpreted on this CPU) walks the same steps: the
+    same results as the XLA path's for the plan's first 4 scenarios (2 chunks: interpreting is slow)."""
+    out, _ = reference
+    traced = []
+
+    def fused(*args, **kwargs):  # the kernel is what the chunk function traces
+        traced.append(1)
+        return footcost_kernel.foot_cost_fused(*args, **kwargs)
+
+    monkeypatch.setattr(select, "foot_cost_fused", fused)
+    text = BASE.replace('method = "exhaustive"', 'method = "exhaustive"\nkernel = "pallas"')
+    s = sweep.run(write(tmp_path, text), tmp_path / "p", chunk_size=CHUNK, progress=False, max_scenarios=4)
+    assert s.computed == 4 and s.compiles == 1 and traced
+    got, want = sweep.load(tmp_path / "p"), sweep.load(out).iloc[:4]
+    for k in ("robot.w", "robot.margin", "replicate", "command.vx", "steps_taken", "stopped", "steps_in_place",
+              "footholds_on_obstacles", "distance_along", "distance_across", "mean_foot_cost"):
+        np.testing.assert_allclose(got[k].to_numpy(float), want[k].to_numpy(float), atol=FLOAT_TOL, err_msg=k)
+    assert want["distance_along"].max() > 0.1  # they walked
 
 
 def test_parameter_values_do_not_recompile(reference, tmp_path):

@@ -11,6 +11,7 @@ A sweep file has these tables (every key optional unless noted; units in bracket
     scenarios_per_cell = 16       # replicates of every cell (terrain seed = replicate index)
     num_steps = 16                # decisions per rollout
     method = "exhaustive"         # "exhaustive", "ordered" or "naive"
+    kernel = "xla"                # FootCost: "xla" or "pallas" (the fused kernel: GPU; interpreted elsewhere)
     random_samples = 0            # cells drawn from [random] (crossed with the grid)
 
     [robot]                       # fixed robot values (HRP-2's defaults otherwise)
@@ -67,7 +68,7 @@ from typing import Any
 import numpy as np
 
 from ijoy_jax import generators
-from ijoy_jax.select import METHODS
+from ijoy_jax.select import KERNELS, METHODS
 
 __all__ = [
     "COMMAND_KEYS",
@@ -112,7 +113,8 @@ COMMAND_KEYS = ("vx", "vy", "wz")
 """Joystick command components: forward (m/s), left (m/s), turn (rad/s), in the stance foot's frame."""
 
 _SECTIONS = ("sweep", "robot", "terrain", "command", "grid", "random")
-_SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps", "method", "random_samples")
+_SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps", "method", "kernel",
+               "random_samples")
 _TERRAIN_KEYS = ("family", "shape", "resolution", "has_height", "max_count", "params")
 # Terrain parameters that are counts (ints, clipped by the generator to max_count).
 _COUNT_FIELDS = ("count", "num_steps")
@@ -133,6 +135,8 @@ class SweepConfig:
       scenarios_per_cell: replicates per cell (>= 1).
       num_steps: decisions per rollout (>= 1; static).
       method: selector, one of :data:`ijoy_jax.select.METHODS` (static).
+      kernel: FootCost path, one of :data:`ijoy_jax.select.KERNELS` (static): "pallas" runs the fused
+        kernel (the same decisions; several times faster on a GPU, slow interpreted on a CPU).
       random_samples: random cells drawn from ``random`` (0: none).
       family: terrain family name; shape (nx, ny) cells; resolution (m);
         has_height; max_count (static object slots, None: the family's default).
@@ -150,6 +154,7 @@ class SweepConfig:
     scenarios_per_cell: int = 8
     num_steps: int = 16
     method: str = "exhaustive"
+    kernel: str = "xla"
     random_samples: int = 0
     family: str = "obstacles"
     shape: tuple[int, int] = (150, 100)
@@ -328,6 +333,8 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         kw["random_samples"] = chk.integer("sweep.random_samples", sweep["random_samples"], lo=0)
     if "method" in sweep:
         kw["method"] = chk.string("sweep.method", sweep["method"], METHODS)
+    if "kernel" in sweep:
+        kw["kernel"] = chk.string("sweep.kernel", sweep["kernel"], KERNELS)
 
     terrain = chk.table("terrain", raw.get("terrain", {}))
     chk.unknown("terrain.", terrain, _TERRAIN_KEYS)

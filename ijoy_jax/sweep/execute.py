@@ -23,7 +23,7 @@ metric weights), the start stance from the terrain's start zone, and
 Compiles (measured by :func:`trace_count`, tested): parameter values never
 recompile; each density value compiles once (its action-set size is a shape;
 no padding of action sets). Static too: the terrain family, grid shape,
-resolution, 2D/2.5D flag, ``num_steps``, ``method`` and the chunk shape
+resolution, 2D/2.5D flag, ``num_steps``, ``method``, ``kernel`` and the chunk shape
 ``min(chunk_size, scenarios of that density)`` rounded up to a multiple of
 the device count. When ``robot.rotation_weight`` is not swept, the targets F
 and L_i are built once per density outside the jit and shared by every
@@ -141,6 +141,7 @@ class _Static(NamedTuple):
     max_count: int | None
     num_steps: int
     method: str
+    kernel: str
 
 
 _METRIC_NAMES = tuple(k.partition(".")[2] for k in ROBOT_DEFAULTS if k.startswith("metrics."))
@@ -160,7 +161,8 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_val
     centre = generators.start_point(params, shape=static.shape, resolution=static.resolution)
     half = 0.5 * base.p0[1]  # feet side by side at the step-in-place width, facing +x
     start = jnp.stack([jnp.stack([centre[0], centre[1] + half, 0.0]), jnp.stack([centre[0], centre[1] - half, 0.0])])
-    traj = rollout_core(terrain, robot, start, command, static.num_steps, static.method, targets=targets)
+    traj = rollout_core(terrain, robot, start, command, static.num_steps, static.method, targets=targets,
+                        kernel=static.kernel)
     summary = traj.summary()
     if static.family == "bars":  # FAMILY_METRICS: from the bars the generator rasterised
         objs = generators.objects("bars", tkey, params, shape=static.shape, resolution=static.resolution, **kw)
@@ -333,7 +335,7 @@ def _device_bytes(device) -> int | None:
 
 def _static(cfg: SweepConfig) -> _Static:
     return _Static(cfg.family, cfg.shape, cfg.resolution, cfg.has_height, cfg.static_max_count,
-                   cfg.num_steps, cfg.method)
+                   cfg.num_steps, cfg.method, cfg.kernel)
 
 
 def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot) -> tuple[int, int]:
