@@ -384,7 +384,9 @@ def foot_cost_fused(
 
     One terrain, one stance (vmap for batches: the terrain tables are shared,
     not copied, when only the queries are batched). Arguments as in
-    :func:`ijoy_jax.footcost.foot_cost_terms_indexed`.
+    :func:`ijoy_jax.footcost.foot_cost_terms_indexed`. On a 2.5D terrain each
+    call also builds block prefix sums of the padded map (about twice its
+    size; once per batch when only the queries are batched).
 
     Args:
       block: candidates per kernel program (static, a power of two).
