@@ -392,8 +392,9 @@ def foot_cost_fused(
       block: candidates per kernel program (static, a power of two).
       num_warps: warps per program on the GPU (None: Triton's default). The
         defaults put one candidate on each lane of one warp: on an H100,
-        32 x 1 ran 3.85 M decisions/s and 64 x 2 3.22 M (BENCHMARKS.md):
-        a larger block runs its loops to a longer longest footprint.
+        32 x 1 ran 3.85 M decisions/s and 64 x 2 3.22 M in one run
+        (BENCHMARKS.md): a larger block runs its loops to a longer longest
+        footprint.
       interpret: run the kernel through the Pallas interpreter (None: on every
         backend but GPU; slow, for tests and CPU use).
 
