@@ -85,12 +85,18 @@ class TerrainIndex:
     height_max: (levels, nx, ny) float32 sparse table; ``height_max[k, ix, j]``
       is the largest height in rows ``j .. j + 2**k - 1`` of column ix.
     height_padded: (nx + 2P, ny + 2P) float32 heights, edge-padded by P cells.
+    height_sums: (nx + 2P, blocks, B + 1, 2) float32 block prefix sums of the
+      padded map's columns, for the fused kernel's plane fits
+      (:func:`block_sums`; B: the smallest power of two >= P).
+    height_block_first: (nx + 2P, blocks) float32, each block's first height.
     pad: P (static).
     """
 
     obstacles_before: jax.Array
     height_max: jax.Array
     height_padded: jax.Array
+    height_sums: jax.Array
+    height_block_first: jax.Array
     pad: int = static_field()
 
 
@@ -114,7 +120,35 @@ def index_terrain(terrain: Terrain, robot: Robot) -> TerrainIndex:
         span *= 2
     pad = window_cells(robot.max_radius, terrain.resolution)
     padded = jnp.pad(h, pad, mode="edge")
-    return TerrainIndex(before, jnp.stack(levels), padded, pad)
+    sums, first = block_sums(padded, 1 << max(pad - 1, 1).bit_length())
+    return TerrainIndex(before, jnp.stack(levels), padded, sums, first, pad)
+
+
+def block_sums(height, block: int) -> tuple[jax.Array, jax.Array]:
+    """Block prefix sums of each column of a height map: a column's sum over any span of <= ``block`` rows
+    in a few reads (the fused kernel's plane fits, :mod:`ijoy_jax.footcost_kernel`).
+
+    Rows are cut into blocks of ``block``, the last padded with its edge row, and one more block of them
+    after it (so a span's next block always exists). Heights are taken from each block's first height h_b,
+    so the sums' rounding scales with the relief within a block (as the XLA path's does with the relief
+    under a foot), not with the terrain's altitude or overall relief. ``sums[ix, b, t]`` holds, over rows
+    ``b block .. b block + t - 1`` of column ix, the sum of (h - h_b) and of (h - h_b) (row - b block -
+    (block - 1) / 2) (rows from the block's middle: smaller terms).
+
+    Args:
+      height: (nx, ny) float32 heights (m).
+      block: rows per block (static, a power of two >= the longest span).
+
+    Returns:
+      ``sums`` (nx, blocks, block + 1, 2) float32 and ``first`` (nx, blocks) float32: h_b (m).
+    """
+    num_x, num_y = height.shape
+    blocks = -(-num_y // block) + 1
+    h = jnp.pad(height, ((0, 0), (0, blocks * block - num_y)), mode="edge").reshape(num_x, blocks, block)
+    first = h[:, :, 0]
+    rel = h - first[:, :, None]  # a stored height, subtracted as the kernel will (h_b - h_ref)
+    terms = jnp.stack([rel, rel * (jnp.arange(block, dtype=h.dtype) - 0.5 * (block - 1))], -1)
+    return jnp.concatenate([jnp.zeros_like(terms[:, :, :1]), jnp.cumsum(terms, axis=2)], axis=2), first
 
 
 def _column_has_obstacle(index: TerrainIndex, spans: geometry.ColumnSpans, shape) -> jax.Array:

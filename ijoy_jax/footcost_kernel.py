@@ -139,30 +139,6 @@ class _Rect:
         return self.between(self.boundary(ix), self.boundary(ix + 1))
 
 
-def _prefix_blocks(height_padded, block: int):
-    """Block prefix sums of each column of the padded height map, for plane fits without row loops.
-
-    Rows are cut into blocks of ``block`` (>= the longest span, so a span meets at most two blocks), the
-    last block padded with its edge row, and one more block of them after it. Heights are taken from each
-    block's first height h_b, so the sums' rounding scales with the relief within a block (as the XLA path's
-    does with the relief under a foot), not with the terrain's altitude or overall relief. Entry ``[ix, b, t]``
-    holds, over rows ``b block .. b block + t - 1`` of column ix, the sum of (h - h_b) and of
-    (h - h_b) * (row - b block - (block - 1) / 2) (the row from the block's middle: smaller terms).
-
-    Returns:
-      ((nx + 2P) * blocks * (block + 1) * 2,) float32 sums, flattened; ((nx + 2P) * blocks,) float32 h_b;
-      blocks.
-    """
-    num_x, num_y = height_padded.shape
-    blocks = -(-num_y // block) + 1
-    h = jnp.pad(height_padded, ((0, 0), (0, blocks * block - num_y)), mode="edge").reshape(num_x, blocks, block)
-    first = h[:, :, 0]
-    rel = h - first[:, :, None]  # a stored height, subtracted as the kernel will (h_b - h_ref)
-    sums = jnp.stack([rel, rel * (jnp.arange(block, dtype=h.dtype) - 0.5 * (block - 1))], -1)
-    table = jnp.concatenate([jnp.zeros_like(sums[:, :, :1]), jnp.cumsum(sums, axis=2)], axis=2)
-    return table.reshape(-1), first.reshape(-1), blocks
-
-
 def _column_loop(num_cols, ix0, rects, body, init):
     """``acc = body(ix, spans, acc)`` for columns ix0 .. ix0 + num_cols - 1, ``spans`` one (j0, j1, touched)
     per rectangle; each column boundary is evaluated once, carried from a column to the next."""
@@ -249,7 +225,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
 
         # Every quantity is a (C,) vector, one candidate per lane, so no sum ever crosses lanes.
         # Pass 1: the normal equations of the plane fit (the sums of footcost._plane_metrics), a column at a
-        # time from the block prefix sums (see _prefix_blocks): a span of at most B rows lies in one block or
+        # time from the block prefix sums (footcost.block_sums): a span of at most B rows lies in one block or
         # two neighbours, so it takes three reads of each table instead of a loop over its rows.
         def sums_column(ix, spans, acc):
             u = (ix.astype(jnp.float32) + 0.5) * res - cx
@@ -384,9 +360,7 @@ def foot_cost_fused(
 
     One terrain, one stance (vmap for batches: the terrain tables are shared,
     not copied, when only the queries are batched). Arguments as in
-    :func:`ijoy_jax.footcost.foot_cost_terms_indexed`. On a 2.5D terrain each
-    call also builds block prefix sums of the padded map (about twice its
-    size; once per batch when only the queries are batched).
+    :func:`ijoy_jax.footcost.foot_cost_terms_indexed`.
 
     Args:
       block: candidates per kernel program (static, a power of two).
@@ -421,10 +395,9 @@ def foot_cost_fused(
     zero = f32(0.0)
     stance_h = start_h = zero
     swx = swy = zero
-    prefix_block = 1 << max(k - 1, 1).bit_length()  # a power of two >= k, the longest span
-    prefix_blocks = 0
+    _, prefix_blocks, prefix_block, _ = index.height_sums.shape
+    prefix_block -= 1  # rows per block (>= k, the longest span)
     if has_height:
-        prefix, block_first, prefix_blocks = _prefix_blocks(index.height_padded, prefix_block)
         stance_h = _plane_metrics(terrain, index, robot, stance).height
         if has_swing:
             swing_from = jnp.asarray(swing_from, jnp.float32)
@@ -456,10 +429,12 @@ def foot_cost_fused(
     specs = [pl.BlockSpec((_NUM_PAR,), lambda i: (0,)), pl.BlockSpec((_NUM_CAND, block), lambda i: (0, i)),
              pl.BlockSpec(index.obstacles_before.shape, lambda i: (0, 0))]
     if has_height:
-        args += [index.height_padded.reshape(-1), index.height_max, prefix, block_first]
+        args += [index.height_padded.reshape(-1), index.height_max, index.height_sums.reshape(-1),
+                 index.height_block_first.reshape(-1)]
         specs += [pl.BlockSpec((index.height_padded.size,), lambda i: (0,)),
                   pl.BlockSpec(index.height_max.shape, lambda i: (0, 0, 0)),
-                  pl.BlockSpec(prefix.shape, lambda i: (0,)), pl.BlockSpec(block_first.shape, lambda i: (0,))]
+                  pl.BlockSpec((index.height_sums.size,), lambda i: (0,)),
+                  pl.BlockSpec((index.height_block_first.size,), lambda i: (0,))]
     kernel = functools.partial(
         _kernel, shape=terrain.shape, res=res, pad=k, has_height=has_height,
         has_swing=has_swing, swing_cols=window_cells(0.5 * robot.max_swing, res),
