@@ -87,7 +87,7 @@ class TerrainIndex:
     height_padded: (nx + 2P, ny + 2P) float32 heights, edge-padded by P cells.
     height_sums: (nx + 2P, blocks, B + 1, 2) float32 block prefix sums of the
       padded map's columns, for the fused kernel's plane fits
-      (:func:`block_sums`; B: the smallest power of two >= P).
+      (:func:`block_sums`; B: a power of two >= P).
     height_block_first: (nx + 2P, blocks) float32, each block's first height.
     pad: P (static).
     """
