@@ -9,7 +9,8 @@ the lent machine.
   footcost  candidate foothold evaluations per second (HRP-2, 2 cm grid, 2D and 2.5D)
   select    full decisions per second (exhaustive and ordered, 2.5D with swing path; ordered also with
             windows sized for the 2 cm margin; on a GPU both again with the fused Pallas FootCost kernel),
-            closed-loop rollout steps per second, and the NumPy implementation
+            closed-loop rollout steps per second (robots on one shared terrain, and each on its own
+            2 m x 2 m terrain as in sweeps), and the NumPy implementation
             of the paper's algorithm in the same run, for the ratio.
 """
 
@@ -176,6 +177,25 @@ def bench_select(rows, quick: bool, chunk: int):
             comp, run, _, _ = _time(f, starts, repeats=3, min_seconds=0.2)
             _emit(rows, dict(_env(), bench="rollout", method=method, kernel=kernel, terrain="2.5D", batch=b,
                              steps=steps, compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
+    # A robot per terrain, as in sweeps: B robots, each on its own 2 m x 2 m 2.5D map (the per-terrain tables are
+    # built once per rollout, in index_terrain; inside the step they would be rebuilt every step).
+    grid = (100, 100)
+    x = jnp.arange(grid[0], dtype=jnp.float32)[:, None] * RES
+    flat = ij.terrain.from_arrays(np.zeros(grid, np.float32), np.ones(grid, bool), RES)
+    for method, kernel in loops:
+        for b in ([2] if quick else ([16] if _cpu() else [64, 1024, 4096])):
+            heights = jax.vmap(lambda i: 0.03 * jnp.sin(2.0 * x + 0.1 * i)
+                               + 0.002 * jax.random.normal(jax.random.key(i), grid))(jnp.arange(b))
+            terrains = jax.vmap(lambda h: flat.replace(height=h))(heights)
+            y = 0.8 + 0.01 * (np.arange(b) % 40)
+            starts = jnp.asarray(np.stack([np.column_stack([np.full(b, 0.5), y + 0.095, np.zeros(b)]),
+                                           np.column_stack([np.full(b, 0.5), y - 0.095, np.zeros(b)])], axis=1),
+                                 jnp.float32)
+            f = jax.jit(jax.vmap(lambda t, s, method=method, kernel=kernel: rollout_core(
+                t, robot, s, cmd, steps, method, targets=targets, kernel=kernel).footsteps))
+            comp, run, _, _ = _time(f, terrains, starts, repeats=3, min_seconds=0.2)
+            _emit(rows, dict(_env(), bench="rollout", method=method, kernel=kernel, terrain="2.5D, one per robot",
+                             batch=b, steps=steps, compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
     # The paper's algorithm in plain NumPy, same terrain and queries, one decision at a time.
     from ijoy_jax.numpy_ref import NumpyFootCost, ordered_select
 
