@@ -191,13 +191,12 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
     else:
         foot = _Rect(cx, cy, c, s, p[_FHL], p[_FHW], res)
         stride = ny + 2 * k  # hp_ref is the edge-padded height map, flattened row-major
-
         reach = -(-k // unroll) * unroll  # rows a column loop may read: its longest span, rounded up
 
         def column_start(ix, j):
             """Flat index of cell (ix, j) in the padded map, clamped so that ``reach`` cells on stay inside.
 
-            A column's loop may read past its span (into the next map column: those rows are masked). Only
+            A column's loop may read past its span (into the next padded column: those rows are masked). Only
             off-map footprints (+inf already) are ever clamped: their reads are then wrong but harmless."""
             flat = jnp.clip(ix + k, 0, nx + 2 * k - 1) * stride + jnp.clip(j + k, 0, stride - 1)
             return jnp.minimum(flat, (nx + 2 * k) * stride - reach)
