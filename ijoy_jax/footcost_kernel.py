@@ -193,12 +193,16 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
         stride = ny + 2 * k  # hp_ref is the edge-padded height map, flattened row-major
         reach = -(-k // unroll) * unroll  # rows a column loop may read: its longest span, rounded up
 
+        def padded_column(ix):
+            """Map column ix as a column of the padded map (clamped: only off-map footprints, +inf already)."""
+            return jnp.clip(ix + k, 0, nx + 2 * k - 1)
+
         def column_start(ix, j):
             """Flat index of cell (ix, j) in the padded map, clamped so that ``reach`` cells on stay inside.
 
             A column's loop may read past its span (into the next padded column: those rows are masked). Only
             off-map footprints (+inf already) are ever clamped: their reads are then wrong but harmless."""
-            flat = jnp.clip(ix + k, 0, nx + 2 * k - 1) * stride + jnp.clip(j + k, 0, stride - 1)
+            flat = padded_column(ix) * stride + jnp.clip(j + k, 0, stride - 1)
             return jnp.minimum(flat, (nx + 2 * k) * stride - reach)
 
         def row_loop(rows, row, init):
@@ -213,9 +217,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
         # The cell under the foot centre; heights are taken relative to it (float32 conditioning). Within
         # the map's padded border this is footcost._plane_metrics' window cell; beyond it the step is
         # off the map and already +inf.
-        ic = jnp.clip(jnp.floor(cx / res).astype(jnp.int32) + k, 0, nx + 2 * k - 1)
-        jc = jnp.clip(jnp.floor(cy / res).astype(jnp.int32) + k, 0, ny + 2 * k - 1)
-        h_ref = hp_ref[ic * stride + jc]
+        h_ref = hp_ref[column_start(jnp.floor(cx / res).astype(jnp.int32), jnp.floor(cy / res).astype(jnp.int32))]
         zero_f = jnp.zeros_like(cx)
 
         def rows_of(j0, j1, touched):
@@ -237,7 +239,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
             t0 = first - b0 * prefix_block  # ... in block b0
             end0 = jnp.minimum(t0 + count, prefix_block)  # the span's end in block b0 ...
             end1 = t0 + count - end0  # ... and in block b0 + 1 (0: none)
-            block_id = jnp.clip(ix + k, 0, nx + 2 * k - 1) * prefix_blocks + b0
+            block_id = padded_column(ix) * prefix_blocks + b0
             base = block_id * (prefix_block + 1)
 
             def sums(t):  # (sum of h - h_b, sum of (h - h_b) * row from the block's middle) over rows before t
