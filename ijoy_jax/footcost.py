@@ -87,7 +87,7 @@ class TerrainIndex:
     height_padded: (nx + 2P, ny + 2P) float32 heights, edge-padded by P cells.
     height_sums: (nx + 2P, blocks, B + 1, 2) float32 block prefix sums of the
       padded map's columns, for the fused kernel's plane fits
-      (:func:`block_sums`; B: a power of two >= P).
+      (:func:`block_sums`; B: a power of two >= P; blocks = 0 on 2D maps).
     height_block_first: (nx + 2P, blocks) float32, each block's first height.
     pad: P (static).
     """
@@ -120,7 +120,11 @@ def index_terrain(terrain: Terrain, robot: Robot) -> TerrainIndex:
         span *= 2
     pad = window_cells(robot.max_radius, terrain.resolution)
     padded = jnp.pad(h, pad, mode="edge")
-    sums, first = block_sums(padded, 1 << max(pad - 1, 1).bit_length())
+    block = 1 << max(pad - 1, 1).bit_length()
+    if terrain.has_height:
+        sums, first = block_sums(padded, block)
+    else:  # a 2D map's kernel pass reads no heights: empty tables of the right rank and block size
+        sums, first = jnp.zeros((padded.shape[0], 0, block + 1, 2), h.dtype), jnp.zeros((padded.shape[0], 0), h.dtype)
     return TerrainIndex(before, jnp.stack(levels), padded, sums, first, pad)
 
 
