@@ -85,14 +85,17 @@ class _Rect:
             slanted = dx != 0.0
             lines.append((dx, px[v], py[v], (qy - py[v]) / jnp.where(slanted, dx, 1.0)))
         self.lower, self.upper = [], []
-        for e, f in ((0, 2), (1, 3)):  # opposite edges: one goes +x, the other -x (or both are vertical)
-            (dx, x0, y0, k0), (_, x1, y1, k1) = lines[e], lines[f]
-            forward = dx > 0.0  # edge e goes +x: it is the lower one of the pair
-            vertical = dx == 0.0
-            self.lower.append((jnp.where(forward, x0, x1), jnp.where(vertical, -jnp.inf, jnp.where(forward, y0, y1)),
-                               jnp.where(vertical, 0.0, jnp.where(forward, k0, k1))))
-            self.upper.append((jnp.where(forward, x1, x0), jnp.where(vertical, jnp.inf, jnp.where(forward, y1, y0)),
-                               jnp.where(vertical, 0.0, jnp.where(forward, k1, k0))))
+        for e, f in ((0, 2), (1, 3)):
+            # Opposite edges: exactly, one goes +x and the other -x, or both are vertical. Rounded corners keep
+            # the signs apart (the corners' x are monotone in the same products) but may leave one of a nearly
+            # vertical pair exactly vertical while the other is not, so each slot checks the edge it takes.
+            (dx_e, x0, y0, k0), (dx_f, x1, y1, k1) = lines[e], lines[f]
+            for chain, goes in ((self.lower, lambda d: d > 0.0), (self.upper, lambda d: d < 0.0)):
+                take_e = goes(dx_e)  # the edge of this chain in the pair: e if it goes that way, else f ...
+                used = take_e | goes(dx_f)  # ... if f does (neither: no line, the chain is the other pair's)
+                none = -jnp.inf if chain is self.lower else jnp.inf
+                chain.append((jnp.where(take_e, x0, x1), jnp.where(used, jnp.where(take_e, y0, y1), none),
+                              jnp.where(used, jnp.where(take_e, k0, k1), 0.0)))
         (xb, yb), (xt, yt) = (px[0], py[0]), (px[0], py[0])
         for v in range(1, 4):
             lower, higher = py[v] < yb, py[v] > yt

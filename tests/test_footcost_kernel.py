@@ -206,8 +206,8 @@ def test_rollout_with_the_kernel_walks_the_same_steps():
 
 
 def test_kernel_column_spans_equal_the_geometry_module():
-    """The kernel's chain-based spans equal geometry.rect_column_spans at random and at axis-aligned,
-    grid-aligned and zero-length rectangles (the swing corridor of a step in place)."""
+    """The kernel's chain-based spans equal geometry.rect_column_spans at random, axis-aligned, nearly
+    axis-aligned, grid-aligned and zero-length rectangles (the swing corridor of a step in place)."""
     from ijoy_jax import geometry
     from ijoy_jax.footcost_kernel import _Rect
 
@@ -220,6 +220,14 @@ def test_kernel_column_spans_equal_the_geometry_module():
     cx[:special // 2] = np.round(cx[:special // 2] / 0.01) * 0.01  # centres on cell edges and centres
     cy[:special // 2] = np.round(cy[:special // 2] / 0.01) * 0.01
     half_length = np.where(rng.random(n) < 0.1, 0.0, 0.141)
+    # Nearly axis-aligned (a swing corridor straight ahead, its angle from arctan2 of rounding noise): rounded
+    # corners may leave one of two opposite short edges exactly vertical and the other not.
+    near = np.random.default_rng(12)
+    m = 1000
+    cx, cy = np.concatenate([cx, near.uniform(0.3, 0.7, m)]), np.concatenate([cy, near.uniform(0.3, 0.7, m)])
+    theta = np.concatenate([theta, near.integers(-2, 3, m) * np.pi / 2 + near.choice([-1, 1], m)
+                            * near.choice([1e-7, 2e-7, 5e-7, 1e-6, 1e-5, 1e-4], m)])
+    half_length = np.concatenate([half_length, near.choice([0.141, 0.15, 0.2], m)])
     cx, cy, theta, half_length = (jnp.asarray(a, jnp.float32) for a in (cx, cy, theta, half_length))
     ref = jax.vmap(lambda x, y, t, hl: geometry.rect_column_spans(x, y, t, hl, 0.085, RES, k))(
         cx, cy, theta, half_length)
