@@ -85,10 +85,11 @@ class TerrainIndex:
     height_max: (levels, nx, ny) float32 sparse table; ``height_max[k, ix, j]``
       is the largest height in rows ``j .. j + 2**k - 1`` of column ix.
     height_padded: (nx + 2P, ny + 2P) float32 heights, edge-padded by P cells.
-    height_sums: (nx + 2P, blocks, B + 1, 2) float32 block prefix sums of the
-      padded map's columns, for the fused kernel's plane fits
-      (:func:`block_sums`; B: a power of two >= P; blocks = 0 on 2D maps).
-    height_block_first: (nx + 2P, blocks) float32, each block's first height.
+    height_sums: (nx + 2P, blocks, 2B + 1, 2) float32 prefix sums of the
+      padded map's columns over overlapping windows of 2B rows, for the fused
+      kernel's plane fits (:func:`block_sums`; B: a power of two >= P;
+      blocks = 0 on 2D maps).
+    height_block_first: (nx + 2P, blocks) float32, each window's first height.
     pad: P (static).
     """
 
@@ -124,34 +125,37 @@ def index_terrain(terrain: Terrain, robot: Robot) -> TerrainIndex:
     if terrain.has_height:
         sums, first = block_sums(padded, block)
     else:  # a 2D map's kernel pass reads no heights: empty tables of the right rank and block size
-        sums, first = jnp.zeros((padded.shape[0], 0, block + 1, 2), h.dtype), jnp.zeros((padded.shape[0], 0), h.dtype)
+        sums = jnp.zeros((padded.shape[0], 0, 2 * block + 1, 2), h.dtype)
+        first = jnp.zeros((padded.shape[0], 0), h.dtype)
     return TerrainIndex(before, jnp.stack(levels), padded, sums, first, pad)
 
 
 def block_sums(height, block: int) -> tuple[jax.Array, jax.Array]:
-    """Block prefix sums of each column of a height map: a column's sum over any span of <= ``block`` rows
-    in a few reads (the fused kernel's plane fits, :mod:`ijoy_jax.footcost_kernel`).
+    """Prefix sums of each column of a height map over overlapping windows: a column's sum over any span of
+    <= ``block`` rows in two reads (the fused kernel's plane fits, :mod:`ijoy_jax.footcost_kernel`).
 
-    Rows are cut into blocks of ``block``, the last padded with its edge row, and one more block of them
-    after it (so a span's next block always exists). Heights are taken from each block's first height h_b,
-    so the sums' rounding scales with the relief within a block (as the XLA path's does with the relief
-    under a foot), not with the terrain's altitude or overall relief. ``sums[ix, b, t]`` holds, over rows
-    ``b block .. b block + t - 1`` of column ix, the sum of (h - h_b) and of (h - h_b) (row - b block -
-    (block - 1) / 2) (rows from the block's middle: smaller terms).
+    Window b holds rows ``b block .. b block + 2 block - 1`` (beyond the map, its edge row), so a span of at
+    most ``block`` rows starting in rows ``b block .. b block + block - 1`` lies in window b. Heights are
+    taken from each window's first height h_b, so the sums' rounding scales with the relief within a window
+    (as the XLA path's does with the relief under a foot), not with the terrain's altitude or overall relief.
+    ``sums[ix, b, t]`` holds, over the first t rows of window b in column ix, the sum of (h - h_b) and of
+    (h - h_b) (row - b block - (block - 1/2)) (rows from the window's middle: smaller terms).
 
     Args:
       height: (nx, ny) float32 heights (m).
-      block: rows per block (static, a power of two >= the longest span).
+      block: rows per window step (static, a power of two >= the longest span).
 
     Returns:
-      ``sums`` (nx, blocks, block + 1, 2) float32 and ``first`` (nx, blocks) float32: h_b (m).
+      ``sums`` (nx, blocks, 2 block + 1, 2) float32, blocks = ceil(ny / block), and ``first`` (nx, blocks)
+      float32: h_b (m).
     """
     num_x, num_y = height.shape
-    blocks = -(-num_y // block) + 1
-    h = jnp.pad(height, ((0, 0), (0, blocks * block - num_y)), mode="edge").reshape(num_x, blocks, block)
-    first = h[:, :, 0]
-    rel = h - first[:, :, None]  # a stored height, subtracted as the kernel will (h_b - h_ref)
-    terms = jnp.stack([rel, rel * (jnp.arange(block, dtype=h.dtype) - 0.5 * (block - 1))], -1)
+    blocks = -(-num_y // block)
+    h = jnp.pad(height, ((0, 0), (0, (blocks + 1) * block - num_y)), mode="edge").reshape(num_x, blocks + 1, block)
+    window = jnp.concatenate([h[:, :-1], h[:, 1:]], axis=2)  # (nx, blocks, 2 block)
+    first = window[:, :, 0]
+    rel = window - first[:, :, None]  # a stored height, subtracted as the kernel will (h_b - h_ref)
+    terms = jnp.stack([rel, rel * (jnp.arange(2 * block, dtype=h.dtype) - (block - 0.5))], -1)
     return jnp.concatenate([jnp.zeros_like(terms[:, :, :1]), jnp.cumsum(terms, axis=2)], axis=2), first
 
 

@@ -6,14 +6,15 @@ for margins up to 10 cm) and materialises it with its masks and residuals in
 memory: ~12 MB of traffic per 496-candidate decision on a GPU, which bounds it
 to a few hundred thousand decisions per second. This kernel computes the same
 ``total`` with every intermediate in registers: each program takes a block of
-candidates, one per lane, and walks the grown footprint column by column (as
-many columns as the block's widest footprint). The plane fit takes each
-column's sums from block prefix sums of the height map (a few reads per
-column); the residuals, which need the plane, walk the rows of each column (as
-many as the block's longest span there), so a 2 cm margin costs less than a
-10 cm one at the same static window size. Candidates are grouped by rotation
-before they are split into blocks, so a block's footprints are alike and few
-lanes idle.
+candidates, one per lane, and walks the footprint column by column. The plane
+fit takes each column's sums from prefix sums of the height map over
+overlapping windows (two reads per table and column); the residuals, which need
+the plane, walk the rows of each column (as many as the block's longest span
+there), so a 2 cm margin costs less than a 10 cm one at the same static window
+size. Candidates are grouped by rotation before they are split into blocks, so
+a block's footprints are alike and few lanes idle. The swing corridor has a
+broad phase: when the highest cell of a box holding all of a block's corridors
+is within every step's clearance (on most terrain), the exact walk is skipped.
 
 Same definitions as the XLA path, term by term (exact cell coverage, the
 least-squares plane and its metrics, step height, safety band, swing corridor,
@@ -51,9 +52,26 @@ _NUM_PAR = 32
 # Rows of the per-candidate block ``cand``.
 _X, _Y, _T, _COST, _STEP_LIMIT, _CLEARANCE = range(6)
 _NUM_CAND = 8
-# Row loops run two rows per iteration (one loop test per two rows). On an H100, 1, 2 and 4 ran 3.32, 3.35 and
-# 3.40 M decisions/s: within noise; 2 wastes fewest masked rows on short spans.
-_UNROLL = 2
+# Row loops run four rows per iteration (one loop test per four rows; LLVM unrolls further). On an H100, side by
+# side (2026-11-25), 1, 2 and 4 ran 5.07, 5.37 and 5.53 M exhaustive decisions/s.
+_UNROLL = 4
+
+
+def _floor_i32(x, native: bool):
+    """floor(x) as int32 ((C,) float32 -> int32). On the GPU one ``cvt.rmi`` instead of floor, two clamps and a
+    convert (the inputs are finite and in range: coordinates in cells); interpreted, ``floor().astype``."""
+    if not native:
+        return jnp.floor(x).astype(jnp.int32)
+    return pl_triton.elementwise_inline_asm("cvt.rmi.s32.f32 $0, $1;", args=[x], constraints="=r,r", pack=1,
+                                            result_shape_dtypes=[jax.ShapeDtypeStruct(x.shape, jnp.int32)])[0]
+
+
+def _ceil_i32(x, native: bool):
+    """ceil(x) as int32, as :func:`_floor_i32` (``cvt.rpi`` on the GPU)."""
+    if not native:
+        return jnp.ceil(x).astype(jnp.int32)
+    return pl_triton.elementwise_inline_asm("cvt.rpi.s32.f32 $0, $1;", args=[x], constraints="=r,r", pack=1,
+                                            result_shape_dtypes=[jax.ShapeDtypeStruct(x.shape, jnp.int32)])[0]
 
 
 class _Rect:
@@ -68,16 +86,17 @@ class _Rect:
     (same start corner, same slope), so the spans agree with it up to float rounding at a corner.
     """
 
-    def __init__(self, cx, cy, c, s, half_length, half_width, res):
+    def __init__(self, cx, cy, c, s, half_length, half_width, res, native: bool = False):
         self.res = res
+        self.native = native
         lx = (half_length, -half_length, -half_length, half_length)
         ly = (half_width, half_width, -half_width, -half_width)
         px = [cx + c * a - s * b for a, b in zip(lx, ly, strict=True)]
         py = [cy + s * a + c * b for a, b in zip(lx, ly, strict=True)]
         self.xmin = functools.reduce(jnp.minimum, px)
         self.xmax = functools.reduce(jnp.maximum, px)
-        self.ix_first = jnp.floor(self.xmin / res).astype(jnp.int32)
-        self.ix_last = (jnp.ceil(self.xmax / res) - 1).astype(jnp.int32)
+        self.ix_first = _floor_i32(self.xmin / res, native)
+        self.ix_last = _ceil_i32(self.xmax / res, native) - 1
         lines = []
         for v in range(4):
             qx, qy = px[(v + 1) % 4], py[(v + 1) % 4]
@@ -133,8 +152,8 @@ class _Rect:
         ylo = jnp.where((xb >= a) & (xb <= b), jnp.minimum(ylo, yb), ylo)
         yhi = jnp.where((xt >= a) & (xt <= b), jnp.maximum(yhi, yt), yhi)
         touched = (a < b) & (yhi > ylo)
-        j0 = jnp.floor(jnp.where(touched, ylo, 0.0) / res).astype(jnp.int32)
-        j1 = (jnp.ceil(jnp.where(touched, yhi, 0.0) / res) - 1).astype(jnp.int32)
+        j0 = _floor_i32(jnp.where(touched, ylo, 0.0) / res, self.native)
+        j1 = _ceil_i32(jnp.where(touched, yhi, 0.0) / res, self.native) - 1
         return j0, j1, touched & (j1 >= j0)
 
     def spans(self, ix):
@@ -155,7 +174,8 @@ def _column_loop(num_cols, ix0, rects, body, init):
     return lax.fori_loop(0, num_cols, step, (tuple(r.boundary(ix0) for r in rects), init))[1]
 
 
-def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, unroll, prefix_block, prefix_blocks):
+def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, unroll, window, blocks, native,
+            broad_phase):
     """One block of C candidates: FootCost ``total`` (C,)."""
     if has_height:
         par_ref, cand_ref, obs_ref, hp_ref, hmax_ref, pre_ref, hb_ref, out_ref = refs
@@ -170,7 +190,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
     cx = x - p[_OX]
     cy = y - p[_OY]
     c, s = jnp.cos(t), jnp.sin(t)
-    grown = _Rect(cx, cy, c, s, p[_GHL], p[_GHW], res)
+    grown = _Rect(cx, cy, c, s, p[_GHL], p[_GHW], res, native)
     ix0 = grown.ix_first
     too_big = (p[_TOO_BIG] > 0.0) | grown.overflow(ix0, k)
     # Columns this block must visit: its widest grown footprint (past ix_last nothing is touched).
@@ -192,7 +212,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
                                finite & False)
         total = total + jnp.where(blocked, jnp.inf, 0.0)
     else:
-        foot = _Rect(cx, cy, c, s, p[_FHL], p[_FHW], res)
+        foot = _Rect(cx, cy, c, s, p[_FHL], p[_FHW], res, native)
         stride = ny + 2 * k  # hp_ref is the edge-padded height map, flattened row-major
         reach = -(-k // unroll) * unroll  # rows a column loop may read: its longest span, rounded up
 
@@ -220,7 +240,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
         # The cell under the foot centre; heights are taken relative to it (float32 conditioning). Within
         # the map's padded border this is footcost._plane_metrics' window cell; beyond it the step is
         # off the map and already +inf.
-        h_ref = hp_ref[column_start(jnp.floor(cx / res).astype(jnp.int32), jnp.floor(cy / res).astype(jnp.int32))]
+        h_ref = hp_ref[column_start(_floor_i32(cx / res, native), _floor_i32(cy / res, native))]
         zero_f = jnp.zeros_like(cx)
 
         def rows_of(j0, j1, touched):
@@ -229,45 +249,43 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
 
         # Every quantity is a (C,) vector, one candidate per lane, so no sum ever crosses lanes.
         # Pass 1: the normal equations of the plane fit (the sums of footcost._plane_metrics), a column at a
-        # time from the block prefix sums (footcost.block_sums): a span of at most B rows lies in one block or
-        # two neighbours, so it takes three reads of each table instead of a loop over its rows.
+        # time from window prefix sums (footcost.block_sums): a span of at most B rows starting in rows
+        # bB .. bB + B - 1 lies in window b, so it takes two reads of each table instead of a loop over its rows.
+        log2_window = window.bit_length() - 1
+
         def sums_column(ix, spans, acc):
             u = (ix.astype(jnp.float32) + 0.5) * res - cx
             ((j0, j1, touched),) = spans
             # Spans are at most k <= B rows unless the footprint is too big (+inf already): clamped to keep
             # the reads inside the table.
-            count = jnp.where(touched, jnp.minimum(j1 - j0 + 1, prefix_block), 0)
+            count = jnp.where(touched, jnp.minimum(j1 - j0 + 1, window), 0)
             first = jnp.clip(j0 + k, 0, stride - 1)  # the span's first row in the padded map ...
-            b0 = first >> (prefix_block.bit_length() - 1)
-            t0 = first - b0 * prefix_block  # ... in block b0
-            end0 = jnp.minimum(t0 + count, prefix_block)  # the span's end in block b0 ...
-            end1 = t0 + count - end0  # ... and in block b0 + 1 (0: none)
-            block_id = padded_column(ix) * prefix_blocks + b0
-            base = block_id * (prefix_block + 1)
+            b = first >> log2_window
+            t0 = first - (b << log2_window)  # ... row t0 of window b
+            block_id = padded_column(ix) * blocks + b
+            base = block_id * (2 * window + 1) + t0
 
-            def sums(t):  # (sum of h - h_b, sum of (h - h_b) * row from the block's middle) over rows before t
+            def sums(t):  # (sum of h - h_b, sum of (h - h_b) * row from the window's middle) over rows before t
                 return pre_ref[2 * t], pre_ref[2 * t + 1]
 
-            (s_end, m_end), (s_first, m_first) = sums(base + end0), sums(base + t0)
-            s1, m1 = sums(base + prefix_block + 1 + end1)
+            (s_end, m_end), (s_first, m_first) = sums(base + count), sums(base)
             s0, m0 = s_end - s_first, m_end - m_first
-            d0, d1 = hb_ref[block_id] - h_ref, hb_ref[block_id + 1] - h_ref
-            n0, n1 = (end0 - t0).astype(jnp.float32), end1.astype(jnp.float32)
+            d = hb_ref[block_id] - h_ref  # heights relative to the foot's centre cell: (h - h_b) + (h_b - h_ref)
             c0 = count.astype(jnp.float32)
             v0 = (j0.astype(jnp.float32) + 0.5) * res - cy  # v of the span's first row
             v_mid = v0 + 0.5 * (c0 - 1.0) * res
             cv = c0 * v_mid
             cvv = c0 * v_mid * v_mid + (res * res / 12.0) * c0 * (c0 * c0 - 1.0)
-            # Block b0's middle row; heights relative to the foot's centre cell: (h - h_b) + (h_b - h_ref).
-            v_b0 = ((b0 * prefix_block - k).astype(jnp.float32) + (0.5 * prefix_block)) * res - cy
-            v_b1 = v_b0 + prefix_block * res
-            c1 = s0 + n0 * d0 + s1 + n1 * d1
-            cvh = (v_b0 * s0 + res * m0 + d0 * n0 * (v0 + 0.5 * (n0 - 1.0) * res)
-                   + v_b1 * s1 + res * m1 + d1 * n1 * (v0 + (n0 + 0.5 * (n1 - 1.0)) * res))
+            v_b = ((b << log2_window) + (window - k)).astype(jnp.float32) * res - cy  # window b's middle
+            c1 = s0 + c0 * d
+            cvh = v_b * s0 + res * m0 + d * cv
             terms = (c0, c0 * u, c0 * u * u, cv, cv * u, cvv, c1, c1 * u, cvh)
             return tuple(a + b for a, b in zip(acc, terms, strict=True))
 
-        n, su, suu, sv, suv, svv, sh, suh, svh = _column_loop(num_cols, ix0, (foot,), sums_column, (zero_f,) * 9)
+        # Pass 1 visits the foot's columns only (the grown footprint's are up to two more).
+        foot_cols = jnp.clip(jnp.max(foot.ix_last - foot.ix_first + 1), 0, k)
+        n, su, suu, sv, suv, svv, sh, suh, svh = _column_loop(foot_cols, foot.ix_first, (foot,), sums_column,
+                                                              (zero_f,) * 9)
         n = jnp.maximum(n, 1.0)
         ridge = 1e-6 * n * res * res
         a, b, cc = _solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
@@ -276,28 +294,31 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
         # Pass 2: residuals from the plane under the foot (roughness, bump) and in the safety band, row by
         # row: the rows of a column are an inner loop (as many as the block's longest span there), row q at
         # the span's start + q, read at a flat address. These row bodies run ~180 times per candidate, so
-        # they test one bound each and carry the plane down the column. The bump is max(largest residual,
-        # 0), so masked rows may count as 0 instead of -inf.
+        # they test one bound each and carry the plane down the column (relative to h_ref: in map heights it
+        # would round to the terrain's altitude). The bump is max(largest residual, 0), so masked rows may
+        # count as 0 instead of -inf.
+
         def resid_column(ix, spans, acc):
             u = (ix.astype(jnp.float32) + 0.5) * res - cx
             (g0, g1, g_touched), (j0, j1, touched) = spans
-            grown_rows = jnp.where(g_touched, g1 - g0 + 1, 0)
-            foot_first = (j0 - g0).astype(jnp.uint32)  # foot rows: foot_first <= q < foot_first + foot_rows
+            # Row q of the column is the grown span's row g0 + q; each lane counts its rows from the foot's
+            # first one (rel = q - (j0 - g0)), so that both masks are one 32-bit compare of that count.
             foot_rows = jnp.where(touched, j1 - j0 + 1, 0).astype(jnp.uint32)
+            grown_end = jnp.where(g_touched, g1 - g0 + 1, 0) - (j0 - g0)  # the grown span's end, from j0
             start = column_start(ix, g0)
             plane0 = a + b * u + cc * ((g0.astype(jnp.float32) + 0.5) * res - cy)
 
             def row(q, acc):
-                abs_sum, top, band, plane = acc
+                abs_sum, top, band, plane, rel = acc
                 resid = (hp_ref[start + q] - h_ref) - plane
-                in_foot = (q.astype(jnp.uint32) - foot_first) < foot_rows  # one unsigned compare
+                in_foot = rel.astype(jnp.uint32) < foot_rows  # 0 <= rel < foot rows, one unsigned compare
                 r_foot = jnp.where(in_foot, resid, 0.0)
-                r_band = jnp.where((q < grown_rows) & ~in_foot, resid, 0.0)
+                r_band = jnp.where((rel < grown_end) & ~in_foot, resid, 0.0)
                 return (abs_sum + jnp.abs(r_foot), jnp.maximum(top, r_foot), jnp.maximum(band, jnp.abs(r_band)),
-                        plane + rise)
+                        plane + rise, rel + 1)
 
             blocked = acc[3] | hits_obstacle(ix, g0, g1, g_touched)  # obstacles ride along this pass
-            abs_sum, top, band, _ = row_loop(rows_of(g0, g1, g_touched), row, (*acc[:3], plane0))
+            abs_sum, top, band, _, _ = row_loop(rows_of(g0, g1, g_touched), row, (*acc[:3], plane0, g0 - j0))
             return abs_sum, top, band, blocked
 
         abs_sum, top, band, blocked = _column_loop(num_cols, ix0, (grown, foot), resid_column,
@@ -320,9 +341,21 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
             length = jnp.sqrt(dx * dx + dy * dy)
             theta = jnp.arctan2(jnp.where(length > 0, dy, 0.0), jnp.where(length > 0, dx, 1.0))
             path = _Rect(0.5 * (cx + p[_SWX]), 0.5 * (cy + p[_SWY]), jnp.cos(theta), jnp.sin(theta),
-                         0.5 * length, p[_FHW], res)
+                         0.5 * length, p[_FHW], res, native)
             pix0 = path.ix_first
+            too_big = too_big | path.overflow(pix0, swing_cols) | (length + p[_FW] > p[_SWING_MAX])
             path_cols = jnp.clip(jnp.max(path.ix_last - pix0 + 1), 0, swing_cols)
+            floor_h = jnp.maximum(p[_START_H], height)  # the corridor is measured from the higher foothold
+            # Broad phase: every corridor of a lane that can still be valid lies in the box from the swing
+            # start to the lanes' steps, grown by the foot's half width and a cell. If that box is on the map
+            # and its highest cell is within each such lane's clearance of its foothold, no corridor can fail:
+            # the exact walk below is skipped for the block (the test is exact, a bound, not an estimate).
+            if broad_phase:
+                open_lane = jnp.isfinite(total) & ~too_big & finite
+                box = _corridor_box(open_lane, cx, cy, p[_SWX], p[_SWY], p[_FHW], res)
+                box_top = _box_top(hmax_ref, box, shape, levels, cx.shape[0])
+                clear = box_top - floor_h <= cand_ref[_CLEARANCE, :]
+                path_cols = jnp.where(_any(open_lane & ~clear), path_cols, 0)
 
             def path_column(ix, spans, acc):
                 top, off = acc
@@ -338,12 +371,52 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
                 return jnp.maximum(top, jnp.where(touched, hi, -jnp.inf)), off | (touched & off_map(ix, j0, j1))
 
             path_top, path_off = _column_loop(path_cols, pix0, (path,), path_column, (zero_f - jnp.inf, finite & False))
-            path_height = path_top - jnp.maximum(p[_START_H], height)
+            path_height = path_top - floor_h
             path_bad = path_off | (path_height > cand_ref[_CLEARANCE, :])
-            too_big = too_big | path.overflow(pix0, swing_cols) | (length + p[_FW] > p[_SWING_MAX])
             total = total + jnp.where(path_bad, jnp.inf, 0.0)
 
     out_ref[...] = total + jnp.where(too_big | ~finite, jnp.inf, 0.0)
+
+
+def _any(flags):
+    """Whether any lane's flag is set (a scalar; Triton lowers no boolean reduction, so an integer max)."""
+    return jnp.max(flags.astype(jnp.int32)) > 0
+
+
+def _corridor_box(lane, cx, cy, sx, sy, half_width, res):
+    """Cells (ix0, ix1, iy0, iy1), inclusive, that hold every swing corridor of the lanes where ``lane``: the
+    bounding box of the swing start and those steps, grown by ``half_width`` and by one cell against rounding
+    (scalars; empty, ix1 < ix0, when no lane is set)."""
+    def cells(v, start):
+        low = jnp.minimum(start, jnp.min(jnp.where(lane, v, jnp.inf))) - half_width
+        high = jnp.maximum(start, jnp.max(jnp.where(lane, v, -jnp.inf))) + half_width
+        return jnp.floor(low / res).astype(jnp.int32) - 1, jnp.floor(high / res).astype(jnp.int32) + 1
+
+    (ix0, ix1), (iy0, iy1) = cells(cx, sx), cells(cy, sy)
+    return ix0, jnp.where(_any(lane), ix1, ix0 - 1), iy0, iy1
+
+
+def _box_top(hmax_ref, box, shape, levels: int, lanes: int):
+    """The highest height in a box of cells (:func:`_corridor_box`), +inf if it leaves the map: the box's
+    columns spread over the lanes, each column's maximum from two reads of the sparse table, then the lanes'."""
+    nx, ny = shape
+    ix0, ix1, iy0, iy1 = box
+    inside = (ix0 >= 0) & (ix1 < nx) & (iy0 >= 0) & (iy1 < ny)
+    a0, a1 = jnp.clip(iy0, 0, ny - 1), jnp.clip(iy1, 0, ny - 1)
+    span = jnp.maximum(a1 - a0 + 1, 1)
+    lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), 23)
+    lvl = jnp.minimum(lvl - 127, levels - 1)  # floor(log2(span)), as in the corridor's column walk
+    lane = lax.broadcasted_iota(jnp.int32, (lanes,), 0)
+
+    def body(r, top):
+        ix = ix0 + r * lanes + lane
+        ixc = jnp.clip(ix, 0, nx - 1)
+        hi = jnp.maximum(hmax_ref[lvl, ixc, a0], hmax_ref[lvl, ixc, a1 - (1 << lvl) + 1])
+        return jnp.maximum(top, jnp.where(ix <= ix1, hi, -jnp.inf))
+
+    rounds = (jnp.maximum(ix1 - ix0 + 1, 0) + lanes - 1) // lanes
+    top = lax.fori_loop(0, rounds, body, jnp.full((lanes,), -jnp.inf, jnp.float32))
+    return jnp.where(inside, jnp.max(top), jnp.inf)
 
 
 def foot_cost_fused(
@@ -359,6 +432,7 @@ def foot_cost_fused(
     block: int = 32,
     num_warps: int | None = 1,
     interpret: bool | None = None,
+    broad_phase: bool = True,
 ) -> jax.Array:
     """(N,) FootCost totals of candidate steps, the same numbers as ``foot_cost_terms_indexed(...).total``.
 
@@ -370,11 +444,15 @@ def foot_cost_fused(
       block: candidates per kernel program (static, a power of two).
       num_warps: warps per program on the GPU (None: Triton's default). The
         defaults put one candidate on each lane of one warp: on an H100,
-        32 x 1 ran 3.85 M decisions/s and 64 x 2 3.22 M in one run
-        (BENCHMARKS.md): a larger block runs its loops to a longer longest
-        footprint.
+        32 x 1 ran 3.85 M decisions/s and 64 x 2 3.22 M in one run of an
+        earlier version of this kernel (BENCHMARKS.md): a larger block runs
+        its loops to a longer longest footprint.
       interpret: run the kernel through the Pallas interpreter (None: on every
         backend but GPU; slow, for tests and CPU use).
+      broad_phase: skip the exact swing-corridor walk for a block of
+        candidates when a bound proves every corridor clear (the highest cell
+        of a box holding them all is within each step's clearance); the
+        totals are the same either way. False: always walk (tests, timing).
 
     Returns:
       (N,) float32: +inf where invalid, else >= 0. Not differentiable (the
@@ -399,8 +477,8 @@ def foot_cost_fused(
     zero = f32(0.0)
     stance_h = start_h = zero
     swx = swy = zero
-    _, prefix_blocks, prefix_block, _ = index.height_sums.shape
-    prefix_block -= 1  # rows per block (>= k, the longest span)
+    _, blocks, window, _ = index.height_sums.shape
+    window = (window - 1) // 2  # rows per window step (>= k, the longest span)
     if has_height:
         stance_h = _plane_metrics(terrain, index, robot, stance).height
         if has_swing:
@@ -442,7 +520,8 @@ def foot_cost_fused(
     kernel = functools.partial(
         _kernel, shape=terrain.shape, res=res, pad=k, has_height=has_height,
         has_swing=has_swing, swing_cols=window_cells(0.5 * robot.max_swing, res),
-        levels=index.height_max.shape[0], unroll=_UNROLL, prefix_block=prefix_block, prefix_blocks=prefix_blocks)
+        levels=index.height_max.shape[0], unroll=_UNROLL, window=window, blocks=blocks, native=not interpret,
+        broad_phase=broad_phase)
     out = pl.pallas_call(
         kernel,
         out_shape=jax.ShapeDtypeStruct((padded,), jnp.float32),

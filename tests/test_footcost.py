@@ -362,24 +362,32 @@ def test_fused_reductions_have_the_plain_reductions_derivatives(name):
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 2**16), altitude=st.sampled_from([0.0, 50.0, -300.0]), block=st.sampled_from([4, 8, 32]))
 def test_block_sums_against_float64_sums(seed, altitude, block):
-    """footcost.block_sums: entry [ix, b, t] is the sum over rows b*block .. b*block + t - 1 of (h - h_b) and of
-    (h - h_b)(row - b*block - (block - 1)/2), h_b the block's first height (the last block edge-padded, one more
-    after it). Against float64 sums of the same float32 heights: within float32 rounding of a block's relief
-    (16 ulps of block x relief), whatever the altitude."""
+    """footcost.block_sums: entry [ix, b, t] is the sum over rows b*block .. b*block + t - 1 (window b: 2 block
+    rows, the map edge-padded beyond its last row) of (h - h_b) and of (h - h_b)(row - b*block - (block - 1/2)),
+    h_b the window's first height. Against float64 sums of the same float32 heights: within float32 rounding
+    of a window's relief (16 ulps of 2 block x relief), whatever the altitude; and any span of at most ``block``
+    rows starting in rows b*block .. b*block + block - 1 lies in window b."""
     rng = np.random.default_rng(seed)
     nx, ny = 5, int(rng.integers(1, 3 * block))
     h = (altitude + 0.3 * rng.standard_normal((nx, ny))).astype(np.float32)
     sums, first = (np.asarray(a) for a in footcost.block_sums(jnp.asarray(h), block))
-    blocks = -(-ny // block) + 1
-    assert sums.shape == (nx, blocks, block + 1, 2) and first.shape == (nx, blocks)
-    padded = np.concatenate([h, np.repeat(h[:, -1:], blocks * block - ny, 1)], 1).astype(np.float64)
-    rows = padded.reshape(nx, blocks, block)
+    blocks = -(-ny // block)
+    assert sums.shape == (nx, blocks, 2 * block + 1, 2) and first.shape == (nx, blocks)
+    padded = np.concatenate([h, np.repeat(h[:, -1:], (blocks + 1) * block - ny, 1)], 1).astype(np.float64)
+    rows = np.stack([padded[:, b * block:(b + 2) * block] for b in range(blocks)], 1)
     np.testing.assert_array_equal(first, rows[:, :, 0])
     rel = rows - rows[:, :, :1]
-    offset = np.arange(block) - 0.5 * (block - 1)
-    want = np.zeros((nx, blocks, block + 1, 2))
+    offset = np.arange(2 * block) - (block - 0.5)
+    want = np.zeros((nx, blocks, 2 * block + 1, 2))
     want[:, :, 1:, 0] = np.cumsum(rel, 2)
     want[:, :, 1:, 1] = np.cumsum(rel * offset, 2)
     relief = np.abs(rel).max() + 1e-30
-    np.testing.assert_allclose(sums[..., 0], want[..., 0], rtol=0, atol=16 * 6e-8 * block * relief)
-    np.testing.assert_allclose(sums[..., 1], want[..., 1], rtol=0, atol=16 * 6e-8 * block * block * relief)
+    np.testing.assert_allclose(sums[..., 0], want[..., 0], rtol=0, atol=16 * 6e-8 * 2 * block * relief)
+    np.testing.assert_allclose(sums[..., 1], want[..., 1], rtol=0, atol=16 * 6e-8 * 4 * block * block * relief)
+    # The kernel's read of a span: rows j .. j + n - 1 (n <= block) from window j // block.
+    j = int(rng.integers(0, ny))
+    n = int(rng.integers(0, block + 1))
+    b, t = divmod(j, block)
+    got = sums[:, b, t + n, 0] - sums[:, b, t, 0]  # the kernel adds n (h_b - h_ref) to it
+    want_span = (padded[:, j:j + n] - first[:, b:b + 1].astype(np.float64)).sum(1)
+    np.testing.assert_allclose(got, want_span, rtol=0, atol=32 * 6e-8 * 2 * block * relief)
