@@ -240,13 +240,26 @@ def test_kernel_column_spans_equal_the_geometry_module():
         np.testing.assert_array_equal(j1[touched], np.asarray(ref.j1[:, i])[touched])
 
 
-@settings(max_examples=40, deadline=None)
+@jax.jit
+def _corridors(cx, cy, sx, sy, half_width):
+    """Column spans of the swing corridors from (sx, sy) to each (cx, cy), built as the XLA path builds them."""
+    from ijoy_jax import geometry
+
+    def one(x, y):
+        dx, dy = x - sx, y - sy
+        length = jnp.sqrt(dx * dx + dy * dy)
+        theta = jnp.arctan2(jnp.where(length > 0, dy, 0.0), jnp.where(length > 0, dx, 1.0))
+        return geometry.rect_column_spans(0.5 * (x + sx), 0.5 * (y + sy), theta, 0.5 * length, half_width, RES, 64)
+
+    return jax.vmap(one)(cx, cy)
+
+
+@settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**16))
 def test_corridor_box_holds_every_corridor_cell_and_box_top_is_its_highest_cell(seed):
     """The swing corridor's broad phase: the box of footcost_kernel._corridor_box holds every cell of the
     corridor (geometry.rect_column_spans, as the XLA path builds it) of every set lane, and _box_top is the
     brute-force highest height in that box (+inf when the box leaves the map)."""
-    from ijoy_jax import geometry
     from ijoy_jax.footcost_kernel import _box_top, _corridor_box
 
     rng = np.random.default_rng(seed)
@@ -258,14 +271,11 @@ def test_corridor_box_holds_every_corridor_cell_and_box_top_is_its_highest_cell(
     box = [int(v) for v in _corridor_box(jnp.asarray(lane), jnp.asarray(cx), jnp.asarray(cy), jnp.float32(sx),
                                          jnp.float32(sy), jnp.float32(hw), RES)]
     ix0, ix1, iy0, iy1 = box
-    for i in np.flatnonzero(lane):
-        dx, dy = np.float32(cx[i] - np.float32(sx)), np.float32(cy[i] - np.float32(sy))
-        length = np.sqrt(dx * dx + dy * dy)
-        spans = geometry.rect_column_spans(0.5 * (cx[i] + np.float32(sx)), 0.5 * (cy[i] + np.float32(sy)),
-                                           np.arctan2(dy, dx), 0.5 * length, hw, RES, 64)
-        t = np.asarray(spans.touched)
-        assert np.all(np.asarray(spans.ix)[t] >= ix0) and np.all(np.asarray(spans.ix)[t] <= ix1)
-        assert np.all(np.asarray(spans.j0)[t] >= iy0) and np.all(np.asarray(spans.j1)[t] <= iy1)
+    spans = _corridors(jnp.asarray(cx), jnp.asarray(cy), jnp.float32(sx), jnp.float32(sy), jnp.float32(hw))
+    t = np.asarray(spans.touched) & lane[:, None]
+    assert np.all(np.asarray(spans.ix)[t] >= ix0) and np.all(np.asarray(spans.ix)[t] <= ix1)
+    assert np.all(np.asarray(spans.j0)[t] >= iy0) and np.all(np.asarray(spans.j1)[t] <= iy1)
+    assert not np.any(np.asarray(spans.overflow)[lane])
     if not lane.any():
         assert ix1 < ix0
     terrain = _terrain("25d", seed=seed)
@@ -277,28 +287,29 @@ def test_corridor_box_holds_every_corridor_cell_and_box_top_is_its_highest_cell(
     assert top == want
 
 
-@pytest.mark.parametrize("wall", [False, True])
-def test_corridor_broad_phase_keeps_every_swing_path_rejection(wall):
+def test_corridor_broad_phase_keeps_every_swing_path_rejection():
     """On flat ground the broad phase proves every corridor clear; across a 15 cm wall (above the 10 cm
     clearance) between the swing start and the steps it cannot, and the exact walk must reject the steps whose
     corridor crosses the wall, as the XLA path does. Totals equal the XLA path's and the kernel's own without
-    the broad phase."""
+    the broad phase (one compile each: the maps differ only in their heights)."""
     robot = ij.robots.hrp2(margin=0.02)
-    h = np.zeros(SHAPE, np.float32)
-    if wall:
-        h[18, 24:44] = 0.15  # x = 0.36-0.38 m, y = 0.48-0.88 m
-    terrain = ij.terrain.from_arrays(h, np.ones(SHAPE, bool), RES)
-    index = footcost.index_terrain(terrain, robot)
     stance = jnp.array([0.45, 0.4, 0.0], jnp.float32)
     swing = jnp.array([0.25, 0.59, 0.0], jnp.float32)
     steps = ij.action_steps(robot, stance, -1)
     idx = jnp.arange(robot.num_actions)
-    terms = footcost.foot_cost_terms_indexed(terrain, index, robot, stance, -1, steps, swing, idx)
-    fused = {bp: np.asarray(jax.jit(functools.partial(foot_cost_fused, broad_phase=bp))(
-        terrain, index, robot, stance, -1, steps, swing, idx)) for bp in (True, False)}
-    others = sum(np.asarray(getattr(terms, f)) for f in ("action", "obstacle", "slope", "roughness", "bump", "step",
-                                                          "band", "unsupported"))
-    only_path = np.isinf(np.asarray(terms.swing_path)) & np.isfinite(others)
-    assert (only_path.sum() >= 20) == wall, only_path.sum()  # steps that only the swing path rejects
-    for got in fused.values():
-        _assert_same(np.asarray(terms.total), got)
+    xla = jax.jit(lambda t, i: footcost.foot_cost_terms_indexed(t, i, robot, stance, -1, steps, swing, idx))
+    fused = {bp: jax.jit(lambda t, i, bp=bp: foot_cost_fused(t, i, robot, stance, -1, steps, swing, idx,
+                                                             broad_phase=bp)) for bp in (True, False)}
+    for wall in (False, True):
+        h = np.zeros(SHAPE, np.float32)
+        if wall:
+            h[18, 24:44] = 0.15  # x = 0.36-0.38 m, y = 0.48-0.88 m
+        terrain = ij.terrain.from_arrays(h, np.ones(SHAPE, bool), RES)
+        index = footcost.index_terrain(terrain, robot)
+        terms = xla(terrain, index)
+        others = sum(np.asarray(getattr(terms, f)) for f in ("action", "obstacle", "slope", "roughness", "bump",
+                                                              "step", "band", "unsupported"))
+        only_path = np.isinf(np.asarray(terms.swing_path)) & np.isfinite(others)
+        assert (only_path.sum() >= 20) == wall, only_path.sum()  # steps that only the swing path rejects
+        for f in fused.values():
+            _assert_same(np.asarray(terms.total), np.asarray(f(terrain, index)))
