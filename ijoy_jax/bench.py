@@ -8,7 +8,8 @@ the lent machine.
 
   footcost  candidate foothold evaluations per second (HRP-2, 2 cm grid, 2D and 2.5D)
   select    full decisions per second (exhaustive and ordered, 2.5D with swing path; ordered also with
-            windows sized for the 2 cm margin; on a GPU both again with the fused Pallas FootCost kernel),
+            windows sized for the 2 cm margin; on a GPU both again with the fused Pallas FootCost kernel, and
+            exhaustive with it on a map of posts taller than the clearance, where its corridor broad phase fails),
             closed-loop rollout steps per second (robots on one shared terrain, and each on its own
             2 m x 2 m terrain as in sweeps), and the NumPy implementation
             of the paper's algorithm in the same run, for the ratio.
@@ -40,6 +41,19 @@ def _terrain(has_height: bool, seed: int = 0) -> ij.Terrain:
         x = np.arange(GRID[0])[:, None] * RES
         h = (0.03 * np.sin(2.0 * x) + 0.002 * rng.standard_normal(GRID)).astype(np.float32)
     return ij.terrain.from_arrays(h, free, RES)
+
+
+def _posts(seed: int = 5) -> ij.Terrain:
+    """The 2.5D benchmark map with 30 posts 12-25 cm tall and 2-12 cm wide: taller than the HRP-2 preset's 10 cm
+    clearance, so the fused kernel's swing-corridor broad phase rarely applies and its exact walk runs."""
+    base = _terrain(True)
+    rng = np.random.default_rng(seed)
+    h = np.asarray(base.height).copy()
+    for _ in range(30):
+        i, j = rng.integers(0, 195, 2)
+        a, b = rng.integers(1, 7, 2)
+        h[i:i + a, j:j + b] += rng.uniform(0.12, 0.25)
+    return ij.terrain.from_arrays(h.astype(np.float32), np.asarray(base.free), RES)
 
 
 def _queries(n: int, seed: int = 1):
@@ -144,12 +158,18 @@ def bench_select(rows, quick: bool, chunk: int):
     tight_index = jax.jit(lambda t: footcost.index_terrain(t, tight))(terrain)
     cases = [("exhaustive", "xla", robot, index, sizes), ("ordered", "xla", robot, index, sizes),
              ("ordered", "xla", tight, tight_index, sizes[:2])]
+    cases = [("2.5D", terrain, *case) for case in cases]
     if not _cpu():  # the fused Pallas kernel (on a CPU it only runs interpreted)
         big = sizes + ([] if quick else [131072])
-        cases += [("exhaustive", "pallas", robot, index, big), ("ordered", "pallas", robot, index, big)]
-    for method, kernel, rb, ix, batches in cases:
-        def one(stance, command, swing, method=method, kernel=kernel, rb=rb, ix=ix):
-            c = select.select_step_indexed(terrain, ix, rb, targets, stance, -1, command, method, swing,
+        cases += [("2.5D", terrain, "exhaustive", "pallas", robot, index, big),
+                  ("2.5D", terrain, "ordered", "pallas", robot, index, big)]
+        # Where the swing corridor's broad phase fails: the exact corridor walk runs for most blocks.
+        posts = _posts()
+        posts_index = jax.jit(lambda t: footcost.index_terrain(t, robot))(posts)
+        cases += [("2.5D posts", posts, "exhaustive", "pallas", robot, posts_index, sizes[-2:])]
+    for terrain_name, tmap, method, kernel, rb, ix, batches in cases:
+        def one(stance, command, swing, tmap=tmap, method=method, kernel=kernel, rb=rb, ix=ix):
+            c = select.select_step_indexed(tmap, ix, rb, targets, stance, -1, command, method, swing,
                                            kernel=kernel)
             return c.index, c.cost
 
@@ -163,7 +183,7 @@ def bench_select(rows, quick: bool, chunk: int):
             else:
                 comp, run, flops, nbytes = _time(f, stance, command, swing)
             _emit(rows, dict(_env(), bench="select", method=method, kernel=kernel, max_margin=max_margin,
-                             terrain="2.5D", batch=b,
+                             terrain=terrain_name, batch=b,
                              compile_s=round(comp, 3), run_s=run, decisions_per_s=b / run,
                              us_per_decision=1e6 * run / b, flops_per_decision=flops / b,
                              bytes_per_decision=nbytes / b))
