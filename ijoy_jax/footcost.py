@@ -159,6 +159,18 @@ def block_sums(height, block: int) -> tuple[jax.Array, jax.Array]:
     return jnp.concatenate([jnp.zeros_like(terms[:, :, :1]), jnp.cumsum(terms, axis=2)], axis=2), first
 
 
+def swing_corridor(sx, sy, cx, cy, half_width, res, num_columns: int) -> tuple[geometry.ColumnSpans, jax.Array]:
+    """Cells of the swing corridor from (sx, sy) to (cx, cy) (map coordinates, m): the rectangle of half width
+    ``half_width`` between the two foot centres, as exact column spans (:func:`geometry.rect_column_spans`, a
+    window of ``num_columns``), and its length (m). A zero-length corridor lies along x."""
+    dx, dy = cx - sx, cy - sy
+    length = jnp.sqrt(dx * dx + dy * dy)
+    theta = jnp.arctan2(jnp.where(length > 0, dy, 0.0), jnp.where(length > 0, dx, 1.0))
+    spans = geometry.rect_column_spans(0.5 * (cx + sx), 0.5 * (cy + sy), theta, 0.5 * length, half_width, res,
+                                       num_columns)
+    return spans, length
+
+
 def _column_has_obstacle(index: TerrainIndex, spans: geometry.ColumnSpans, shape) -> jax.Array:
     """(K,) bool: touched columns holding an obstacle cell or leaving the map."""
     nx, ny = shape
@@ -346,12 +358,7 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
         kp = window_cells(0.5 * robot.max_swing, res)
         sx = swing_from[0] - terrain.origin[0]
         sy = swing_from[1] - terrain.origin[1]
-        dx, dy = cx - sx, cy - sy
-        length = jnp.sqrt(dx * dx + dy * dy)
-        theta = jnp.arctan2(jnp.where(length > 0, dy, 0.0), jnp.where(length > 0, dx, 1.0))
-        corridor = geometry.rect_column_spans(
-            0.5 * (cx + sx), 0.5 * (cy + sy), theta, 0.5 * length, 0.5 * robot.foot_width, res, kp
-        )
+        corridor, length = swing_corridor(sx, sy, cx, cy, 0.5 * robot.foot_width, res, kp)
         top, off_map = _column_max_height(index, corridor, terrain.shape)
         path_height = top - jnp.maximum(start_plane.height, raw[5])
         path_bad = off_map | (path_height > robot.clearance[action_index])

@@ -242,16 +242,8 @@ def test_kernel_column_spans_equal_the_geometry_module():
 
 @jax.jit
 def _corridors(cx, cy, sx, sy, half_width):
-    """Column spans of the swing corridors from (sx, sy) to each (cx, cy), built as the XLA path builds them."""
-    from ijoy_jax import geometry
-
-    def one(x, y):
-        dx, dy = x - sx, y - sy
-        length = jnp.sqrt(dx * dx + dy * dy)
-        theta = jnp.arctan2(jnp.where(length > 0, dy, 0.0), jnp.where(length > 0, dx, 1.0))
-        return geometry.rect_column_spans(0.5 * (x + sx), 0.5 * (y + sy), theta, 0.5 * length, half_width, RES, 64)
-
-    return jax.vmap(one)(cx, cy)
+    """Column spans of the swing corridors from (sx, sy) to each (cx, cy), as the XLA path builds them."""
+    return jax.vmap(lambda x, y: footcost.swing_corridor(sx, sy, x, y, half_width, RES, 64)[0])(cx, cy)
 
 
 @settings(max_examples=25, deadline=None)
