@@ -448,7 +448,9 @@ def foot_cost_fused(
         earlier version of this kernel (BENCHMARKS.md): a larger block runs
         its loops to a longer longest footprint.
       interpret: run the kernel through the Pallas interpreter (None: on every
-        backend but GPU; slow, for tests and CPU use).
+        backend but GPU; slow, for tests and CPU use). Compiled, the kernel
+        uses inline PTX (float-to-int conversions): NVIDIA GPUs only; ROCm
+        was never tried.
       broad_phase: skip the exact swing-corridor walk for a block of
         candidates when a bound proves every corridor clear (the highest cell
         of a box holding them all is within each step's clearance); the
