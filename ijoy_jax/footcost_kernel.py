@@ -361,13 +361,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
                 top, off = acc
                 ((j0, j1, touched),) = spans
                 ixc = jnp.clip(ix, 0, nx - 1)
-                a0 = jnp.clip(j0, 0, ny - 1)
-                a1 = jnp.clip(j1, 0, ny - 1)
-                span = jnp.maximum(a1 - a0 + 1, 1)
-                # floor(log2(span)) from the exponent of span as a float (exact below 2**24), capped at the table
-                lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), 23)
-                lvl = jnp.minimum(lvl - 127, levels - 1)
-                hi = jnp.maximum(hmax_ref[lvl, ixc, a0], hmax_ref[lvl, ixc, a1 - (1 << lvl) + 1])
+                hi = _rows_max(hmax_ref, ixc, jnp.clip(j0, 0, ny - 1), jnp.clip(j1, 0, ny - 1), levels)
                 return jnp.maximum(top, jnp.where(touched, hi, -jnp.inf)), off | (touched & off_map(ix, j0, j1))
 
             path_top, path_off = _column_loop(path_cols, pix0, (path,), path_column, (zero_f - jnp.inf, finite & False))
@@ -376,6 +370,16 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
             total = total + jnp.where(path_bad, jnp.inf, 0.0)
 
     out_ref[...] = total + jnp.where(too_big | ~finite, jnp.inf, 0.0)
+
+
+def _rows_max(hmax_ref, ix, j0, j1, levels: int):
+    """The highest height in rows j0..j1 (on the map; if j1 < j0, of rows j0 and j1) of column ix: two reads of the
+    sparse table (footcost.TerrainIndex.height_max) at level floor(log2(span)), taken from the exponent of the
+    span as a float (exact below 2**24) and capped at the table's top level."""
+    span = jnp.maximum(j1 - j0 + 1, 1)
+    lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), 23)
+    lvl = jnp.minimum(lvl - 127, levels - 1)
+    return jnp.maximum(hmax_ref[lvl, ix, j0], hmax_ref[lvl, ix, j1 - (1 << lvl) + 1])
 
 
 def _any(flags):
@@ -403,15 +407,11 @@ def _box_top(hmax_ref, box, shape, levels: int, lanes: int):
     ix0, ix1, iy0, iy1 = box
     inside = (ix0 >= 0) & (ix1 < nx) & (iy0 >= 0) & (iy1 < ny)
     a0, a1 = jnp.clip(iy0, 0, ny - 1), jnp.clip(iy1, 0, ny - 1)
-    span = jnp.maximum(a1 - a0 + 1, 1)
-    lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), 23)
-    lvl = jnp.minimum(lvl - 127, levels - 1)  # floor(log2(span)), as in the corridor's column walk
     lane = lax.broadcasted_iota(jnp.int32, (lanes,), 0)
 
     def body(r, top):
         ix = ix0 + r * lanes + lane
-        ixc = jnp.clip(ix, 0, nx - 1)
-        hi = jnp.maximum(hmax_ref[lvl, ixc, a0], hmax_ref[lvl, ixc, a1 - (1 << lvl) + 1])
+        hi = _rows_max(hmax_ref, jnp.clip(ix, 0, nx - 1), a0, a1, levels)
         return jnp.maximum(top, jnp.where(ix <= ix1, hi, -jnp.inf))
 
     rounds = (jnp.maximum(ix1 - ix0 + 1, 0) + lanes - 1) // lanes
