@@ -2,6 +2,7 @@ import os
 import sys
 
 import hypothesis
+import jax
 
 import ijoy_jax.sim  # noqa: F401  headless: selects MUJOCO_GL=egl before any test module imports mujoco
 
@@ -10,3 +11,20 @@ sys.path.insert(0, os.path.dirname(__file__))  # tests/reference.py
 hypothesis.settings.register_profile("ci", derandomize=True, deadline=None, max_examples=40,
                                      print_blob=True)
 hypothesis.settings.load_profile("ci")
+
+# Compiled programs may be reused for this long or longer (s): below it, writing the entry costs about what it saves.
+_CACHE_MIN_COMPILE_S = "0.2"
+
+
+def pytest_configure(config):
+    """One persistent XLA compilation cache for the run and the next ones (unless the caller names another): the
+    same programs are compiled in several test files, on both xdist workers, in the notebooks' kernels and in
+    subprocess tests, which inherit it through the environment. Compiled code is keyed by its program, JAX
+    version and flags, so a hit runs the same code; the no-recompile tests count traces and jit cache entries,
+    which this cache does not change."""
+    if getattr(config, "cache", None) is None:  # -p no:cacheprovider
+        return
+    path = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(config.cache.mkdir("jax_compilation_cache")))
+    min_s = os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", _CACHE_MIN_COMPILE_S)
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_s))
