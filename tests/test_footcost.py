@@ -336,7 +336,7 @@ def test_plane_metrics_are_differentiable_in_the_terrain_heights():
         terms = ij.foot_cost_terms(t.replace(height=height), ROBOT, stance, -1, steps, swing, jnp.arange(len(steps)))
         return terms.foot_height_m, terms.slope_angle
 
-    check_grads(plane, (t.height,), order=1, modes=("fwd", "rev"), eps=1e-3)
+    check_grads(jax.jit(plane), (t.height,), order=1, modes=("fwd", "rev"), eps=1e-3)
 
 
 @pytest.mark.parametrize("name", ["_row_sums", "_totals", "_sum_max_max"])
