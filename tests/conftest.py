@@ -12,7 +12,7 @@ hypothesis.settings.register_profile("ci", derandomize=True, deadline=None, max_
                                      print_blob=True)
 hypothesis.settings.load_profile("ci")
 
-# Programs that took at least this long to compile (s) are cached; below it, writing an entry costs about what a hit saves.
+# Programs that took at least this long to compile (s) are cached; below, an entry costs about what a hit saves.
 _CACHE_MIN_COMPILE_S = "0.2"
 
 
