@@ -182,16 +182,24 @@ def _column_has_obstacle(index: TerrainIndex, spans: geometry.ColumnSpans, shape
     return spans.touched & (off_map | (count > 0))
 
 
+def _rows_max(height_max, ix, j0, j1):
+    """The highest height in rows j0..j1 (on the map; if j1 < j0, of rows j0 and j1) of column ix: two reads of the
+    sparse table (:attr:`TerrainIndex.height_max`, an array or the fused kernel's ref) at level floor(log2(span)),
+    taken from the exponent of the span as a float (exact below 2**24; Triton lowers no count of leading zeros)
+    and capped at the table's top level."""
+    span = jnp.maximum(j1 - j0 + 1, 1)
+    lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), 23)
+    lvl = jnp.minimum(lvl - 127, height_max.shape[0] - 1)
+    return jnp.maximum(height_max[lvl, ix, j0], height_max[lvl, ix, j1 - (1 << lvl) + 1])
+
+
 def _column_max_height(index: TerrainIndex, spans: geometry.ColumnSpans, shape) -> tuple[jax.Array, jax.Array]:
     """Largest height over the touched cells, and whether any touched cell is off the map."""
     nx, ny = shape
     ix = jnp.clip(spans.ix, 0, nx - 1)
     j0 = jnp.clip(spans.j0, 0, ny - 1)
     j1 = jnp.clip(spans.j1, 0, ny - 1)
-    length = jnp.maximum(j1 - j0 + 1, 1)
-    k = 31 - lax.clz(length)  # floor(log2(length))
-    k = jnp.minimum(k, index.height_max.shape[0] - 1)
-    hi = jnp.maximum(index.height_max[k, ix, j0], index.height_max[k, ix, j1 - (1 << k) + 1])
+    hi = _rows_max(index.height_max, ix, j0, j1)
     off_map = (spans.ix < 0) | (spans.ix >= nx) | (spans.j0 < 0) | (spans.j1 >= ny)
     return jnp.max(jnp.where(spans.touched, hi, -jnp.inf)), jnp.any(spans.touched & off_map)
 

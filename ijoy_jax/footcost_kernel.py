@@ -38,6 +38,7 @@ from ijoy_jax.footcost import (
     TerrainIndex,
     _limit,
     _plane_metrics,
+    _rows_max,
     _solve3,
     nearest_actions,
     window_cells,
@@ -174,7 +175,7 @@ def _column_loop(num_cols, ix0, rects, body, init):
     return lax.fori_loop(0, num_cols, step, (tuple(r.boundary(ix0) for r in rects), init))[1]
 
 
-def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, unroll, window, blocks, native,
+def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, window, blocks, native,
             broad_phase):
     """One block of C candidates: FootCost ``total`` (C,)."""
     if has_height:
@@ -353,7 +354,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
             if broad_phase:
                 open_lane = jnp.isfinite(total) & ~too_big & finite
                 box = _corridor_box(open_lane, cx, cy, p[_SWX], p[_SWY], p[_FHW], res)
-                box_top = _box_top(hmax_ref, box, shape, levels, cx.shape[0])
+                box_top = _box_top(hmax_ref, box, shape, cx.shape[0])
                 clear = box_top - floor_h <= cand_ref[_CLEARANCE, :]
                 path_cols = jnp.where(_any(open_lane & ~clear), path_cols, 0)
 
@@ -361,7 +362,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
                 top, off = acc
                 ((j0, j1, touched),) = spans
                 ixc = jnp.clip(ix, 0, nx - 1)
-                hi = _rows_max(hmax_ref, ixc, jnp.clip(j0, 0, ny - 1), jnp.clip(j1, 0, ny - 1), levels)
+                hi = _rows_max(hmax_ref, ixc, jnp.clip(j0, 0, ny - 1), jnp.clip(j1, 0, ny - 1))
                 return jnp.maximum(top, jnp.where(touched, hi, -jnp.inf)), off | (touched & off_map(ix, j0, j1))
 
             path_top, path_off = _column_loop(path_cols, pix0, (path,), path_column, (zero_f - jnp.inf, finite & False))
@@ -370,16 +371,6 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, levels, u
             total = total + jnp.where(path_bad, jnp.inf, 0.0)
 
     out_ref[...] = total + jnp.where(too_big | ~finite, jnp.inf, 0.0)
-
-
-def _rows_max(hmax_ref, ix, j0, j1, levels: int):
-    """The highest height in rows j0..j1 (on the map; if j1 < j0, of rows j0 and j1) of column ix: two reads of the
-    sparse table (footcost.TerrainIndex.height_max) at level floor(log2(span)), taken from the exponent of the
-    span as a float (exact below 2**24) and capped at the table's top level."""
-    span = jnp.maximum(j1 - j0 + 1, 1)
-    lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), 23)
-    lvl = jnp.minimum(lvl - 127, levels - 1)
-    return jnp.maximum(hmax_ref[lvl, ix, j0], hmax_ref[lvl, ix, j1 - (1 << lvl) + 1])
 
 
 def _any(flags):
@@ -400,7 +391,7 @@ def _corridor_box(lane, cx, cy, sx, sy, half_width, res):
     return ix0, jnp.where(_any(lane), ix1, ix0 - 1), iy0, iy1
 
 
-def _box_top(hmax_ref, box, shape, levels: int, lanes: int):
+def _box_top(hmax_ref, box, shape, lanes: int):
     """The highest height in a box of cells (:func:`_corridor_box`), +inf if it leaves the map: the box's
     columns spread over the lanes, each column's maximum from two reads of the sparse table, then the lanes'."""
     nx, ny = shape
@@ -411,7 +402,7 @@ def _box_top(hmax_ref, box, shape, levels: int, lanes: int):
 
     def body(r, top):
         ix = ix0 + r * lanes + lane
-        hi = _rows_max(hmax_ref, jnp.clip(ix, 0, nx - 1), a0, a1, levels)
+        hi = _rows_max(hmax_ref, jnp.clip(ix, 0, nx - 1), a0, a1)
         return jnp.maximum(top, jnp.where(ix <= ix1, hi, -jnp.inf))
 
     rounds = (jnp.maximum(ix1 - ix0 + 1, 0) + lanes - 1) // lanes
@@ -522,7 +513,7 @@ def foot_cost_fused(
     kernel = functools.partial(
         _kernel, shape=terrain.shape, res=res, pad=k, has_height=has_height,
         has_swing=has_swing, swing_cols=window_cells(0.5 * robot.max_swing, res),
-        levels=index.height_max.shape[0], unroll=_UNROLL, window=window, blocks=blocks, native=not interpret,
+        unroll=_UNROLL, window=window, blocks=blocks, native=not interpret,
         broad_phase=broad_phase)
     out = pl.pallas_call(
         kernel,

@@ -272,7 +272,7 @@ def test_corridor_box_holds_every_corridor_cell_and_box_top_is_its_highest_cell(
         assert ix1 < ix0
     terrain = _terrain("25d", seed=seed)
     index = footcost.index_terrain(terrain, ij.robots.hrp2(margin=0.02))
-    top = float(_box_top(index.height_max, box, SHAPE, index.height_max.shape[0], lanes))
+    top = float(_box_top(index.height_max, box, SHAPE, lanes))
     inside = ix0 >= 0 and iy0 >= 0 and ix1 < SHAPE[0] and iy1 < SHAPE[1]
     h = np.asarray(terrain.height)
     want = (h[ix0:ix1 + 1, iy0:iy1 + 1].max(initial=-np.inf)) if inside else np.inf
