@@ -6,8 +6,8 @@ the left foot and -1 for the right.
 
 Public API:
   Terrain, terrain.from_arrays / from_image / flat   the environment e
-  scene.rasterize                                    posed boxes/cylinders -> map
-  generators.FAMILIES / generate / batch             procedural terrains (jit/vmap)
+  terrain.scene.rasterize                            posed boxes/cylinders -> map
+  terrain.generators.FAMILIES / generate / batch     procedural terrains (jit/vmap)
   robots.hrp2 / make_robot / lattice_actions         footprint and action set S
   foot_cost, foot_cost_terms                         FootCost of candidate steps
   action_steps                                       world poses of every action
@@ -17,12 +17,11 @@ Public API:
   tune                                               tuning by gradient (relaxed selector, optax tuners)
 """
 
-from ijoy_jax import control, footcost, generators, geometry, haptics, plot, robots, scene, select, terrain, tune
+from ijoy_jax import control, footcost, geometry, haptics, plot, robots, select, terrain, tune
 from ijoy_jax.control import Trajectory, Walker, perfect_walker, rollout
 from ijoy_jax.footcost import FootCostTerms, foot_cost, foot_cost_terms
-from ijoy_jax.robots import LEFT, RIGHT, Robot, TerrainMetrics
+from ijoy_jax.robots import LEFT, RIGHT, Robot, TerrainMetrics, action_steps
 from ijoy_jax.select import StepChoice, make_targets, select_step
-from ijoy_jax.steps import action_steps
 from ijoy_jax.terrain import Terrain
 
 __version__ = "0.1.0"
@@ -42,7 +41,6 @@ __all__ = [
     "foot_cost",
     "foot_cost_terms",
     "footcost",
-    "generators",
     "geometry",
     "haptics",
     "make_targets",
@@ -50,7 +48,6 @@ __all__ = [
     "plot",
     "robots",
     "rollout",
-    "scene",
     "select",
     "select_step",
     "terrain",

@@ -24,7 +24,7 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
-from ijoy_jax.footcost import _validate, foot_cost_terms_indexed, index_terrain
+from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain, validate
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import KERNELS, METHODS, Targets, ideal_step, make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain
@@ -299,7 +299,7 @@ def rollout(
       >>> round(float(traj.summary()["distance_along"]), 2)   # 0.1 + 5 * 0.2 m
       1.1
     """
-    _validate(terrain, robot, np.zeros(3), 1, np.zeros((1, 3)), None)
+    validate(terrain, robot, np.zeros(3), 1, np.zeros((1, 3)), None)
     if np.shape(start) != (2, 3):
         raise ValueError(f"start must have shape (2, 3) (left foot, right foot), got {np.shape(start)}")
     if not isinstance(start, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(start))):

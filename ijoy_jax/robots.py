@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ijoy_jax import geometry
 from ijoy_jax._struct import pytree_dataclass, static_field
 
 LEFT = 1
@@ -374,16 +375,103 @@ def set_leaf(robot: Robot, name: str, value) -> Robot:
     return robot.replace(**{name: value})
 
 
+def side_sign(side) -> jax.Array:
+    """() float32 +1 for a side >= 0 (left), -1 otherwise (right): the one reading of a side flag."""
+    return jnp.where(jnp.asarray(side) >= 0, 1.0, -1.0).astype(jnp.float32)
+
+
+def mirror(swing_side, rel) -> jax.Array:
+    """(..., 3) a left-foot pose or action ``(dx, dy, dtheta)`` as seen by the foot on ``swing_side``.
+
+    Left (+1): unchanged; right (-1): ``(dx, -dy, -dtheta)``. Its own inverse.
+    """
+    sign = jnp.asarray(swing_side, jnp.float32)
+    return rel * jnp.stack([jnp.ones_like(sign), sign, sign])
+
+
 def side_actions(robot: Robot, swing_side) -> jax.Array:
     """(N, 3) actions of the swing foot on ``swing_side`` (+1 left, -1 right).
 
     Left: ``robot.actions``; right: their mirror (dx, -dy, -dtheta).
     """
-    sign = jnp.asarray(swing_side, jnp.float32)
-    return robot.actions * jnp.stack([jnp.ones_like(sign), sign, sign])
+    return mirror(swing_side, robot.actions)
 
 
 def side_p0(robot: Robot, swing_side) -> jax.Array:
     """(3,) step-in-place action for the swing foot on ``swing_side`` (+1 left, -1 right)."""
-    sign = jnp.asarray(swing_side, jnp.float32)
-    return robot.p0 * jnp.stack([jnp.ones_like(sign), sign, sign])
+    return mirror(swing_side, robot.p0)
+
+
+def action_steps(robot: Robot, stance, stance_side) -> jax.Array:
+    """(N, 3) world poses of the swing foot for every action of S.
+
+    Args:
+      robot: the robot model (N = robot.num_actions).
+      stance: (3,) world pose of the stance foot (m, rad).
+      stance_side: +1 for a left stance foot (the right foot swings, with the
+        mirrored actions), -1 for a right stance foot.
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> ij.action_steps(ij.robots.hrp2(), [0.0, 0.0, 0.0], -1).shape
+      (496, 3)
+    """
+    stance = jnp.asarray(stance, jnp.float32)
+    return geometry.compose(stance, side_actions(robot, -side_sign(stance_side)))
+
+
+def dist(a: jax.Array, b: jax.Array, rotation_weight) -> jax.Array:
+    """The paper's dist between poses in one frame: ``|dxy| + rotation_weight * |wrap(dtheta)|``.
+
+    Args:
+      a, b: (..., 3) poses (x, y, theta) in one frame (m, rad); broadcast.
+      rotation_weight: cost units per radian (``Robot.rotation_weight``).
+
+    Returns:
+      (...) float32 distances (cost units before ``w``).
+    """
+    d = a - b
+    return jnp.hypot(d[..., 0], d[..., 1]) + rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
+
+
+def nearest_actions(robot: Robot, stance, stance_side, steps) -> jax.Array:
+    """(N,) int32 index of the action of S nearest each world step (:func:`dist` in the stance frame).
+
+    Args:
+      robot: the robot model.
+      stance: (3,) world pose of the stance foot; stance_side: +1 left, -1 right.
+      steps: (N, 3) world poses of the swing foot.
+    """
+    rel = geometry.relative(stance, steps)  # (N, 3)
+    acts = side_actions(robot, -side_sign(stance_side))
+    return jnp.argmin(dist(rel[:, None, :], acts[None, :, :], robot.rotation_weight), axis=1).astype(jnp.int32)
+
+
+def command_range(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi), each (3,): the joystick commands (m/s, m/s, rad/s) the action set can realise.
+
+    With p_next = p0 + dt j, the commands span the actions' extent around p0:
+    xdot over [min dx - p0x, max dx - p0x] / dt, ydot over +-(max dy - p0y) / dt
+    (the lateral room beyond the step in place, either way), thetadot over
+    +-max |dtheta| / dt.
+    """
+    acts = np.asarray(robot.actions)
+    p0, dt = np.asarray(robot.p0), float(robot.step_time)
+    lo = np.array([acts[:, 0].min() - p0[0], -(acts[:, 1].max() - p0[1]), -np.abs(acts[:, 2]).max()]) / dt
+    hi = np.array([acts[:, 0].max() - p0[0], acts[:, 1].max() - p0[1], np.abs(acts[:, 2]).max()]) / dt
+    return lo, hi
+
+
+def random_commands(key, robot: Robot, batch: int, num_steps: int, hold: int = 1) -> jax.Array:
+    """(batch, num_steps, 3) joystick commands, uniform over :func:`command_range`.
+
+    Each command is held for ``hold`` steps (1: a new one every step, the
+    harshest joystick; ``num_steps``: one command per robot for the whole run).
+    """
+    if hold < 1:
+        raise ValueError(f"hold must be at least 1 step, got {hold}")
+    lo, hi = command_range(robot)
+    n = -(-num_steps // hold)
+    u = jax.random.uniform(key, (batch, n, 3), jnp.float32)
+    u = jnp.repeat(u, hold, axis=1)[:, :num_steps]
+    return jnp.asarray(lo, jnp.float32) + u * jnp.asarray(hi - lo, jnp.float32)

@@ -37,9 +37,8 @@ from jax import lax
 
 from ijoy_jax import geometry
 from ijoy_jax._struct import pytree_dataclass, static_field
-from ijoy_jax.footcost import TerrainIndex, _side_sign, foot_cost_terms_indexed, index_terrain
-from ijoy_jax.footcost_kernel import foot_cost_fused
-from ijoy_jax.robots import Robot, side_actions, side_p0
+from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms_indexed, index_terrain, validate
+from ijoy_jax.robots import Robot, dist, mirror, side_actions, side_p0, side_sign
 from ijoy_jax.terrain import Terrain
 
 METHODS = ("exhaustive", "ordered", "naive")
@@ -89,12 +88,6 @@ class Targets:
             i = jnp.round((rel_left[k] - self.lo[k]) / self.step[k])
             idx.append(jnp.clip(i, 0, self.counts[k] - 1).astype(jnp.int32))
         return (idx[0] * self.counts[1] + idx[1]) * self.counts[2] + idx[2]
-
-
-def dist(a: jax.Array, b: jax.Array, rotation_weight) -> jax.Array:
-    """Paper's dist between poses in one frame: |dxy| + rotation_weight * |wrap(dtheta)|."""
-    d = a - b
-    return jnp.hypot(d[..., 0], d[..., 1]) + rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
 
 
 def make_targets(robot: Robot) -> Targets:
@@ -152,12 +145,8 @@ def ideal_step(robot: Robot, stance_side, command) -> tuple[jax.Array, jax.Array
     command = jnp.asarray(command, jnp.float32)
     ok = jnp.all(jnp.isfinite(command))
     command = jnp.where(ok, command, 0.0)
-    swing = -_side_sign(stance_side)
+    swing = -side_sign(stance_side)
     return side_p0(robot, swing) + robot.step_time * command, ok
-
-
-def _mirror(swing_side, rel):
-    return rel * jnp.stack([jnp.ones_like(swing_side), swing_side, swing_side])
 
 
 def select_step_indexed(
@@ -180,13 +169,13 @@ def select_step_indexed(
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
     stance = jnp.asarray(stance, jnp.float32)
-    side = _side_sign(stance_side)
+    side = side_sign(stance_side)
     swing = -side
     p_next, ok = ideal_step(robot, side, command)
-    fi = targets.nearest(_mirror(swing, p_next))  # F is stored for the left foot
+    fi = targets.nearest(mirror(swing, p_next))  # F is stored for the left foot
     n = robot.num_actions
     if quantize or method == "ordered":
-        target_rel = _mirror(swing, targets.point(fi))
+        target_rel = mirror(swing, targets.point(fi))
         dists = targets.dist[fi]
     else:
         target_rel = p_next
@@ -301,7 +290,7 @@ def select_step(
       targets: a prebuilt :func:`make_targets` (F and L_i); built if None.
       chunk: actions per chunk of the ordered search (static).
       kernel: how FootCost is computed (static): "xla" (default) or "pallas",
-        one fused kernel per decision (:mod:`ijoy_jax.footcost_kernel`): the
+        one fused kernel per decision (:mod:`ijoy_jax.footcost.pallas`): the
         same costs to float32 rounding, 30x faster on a GPU (H100:
         5.5 M decisions/s exhaustive); on a CPU it is interpreted (slow, for
         checks).
@@ -318,9 +307,7 @@ def select_step(
       >>> bool(c.valid), round(float(c.pose[0]), 2)   # as far forward as the wall allows
       (True, 0.9)
     """
-    from ijoy_jax.footcost import _validate
-
-    _validate(terrain, robot, stance, stance_side, np.zeros((1, 3)), swing_from)
+    validate(terrain, robot, stance, stance_side, np.zeros((1, 3)), swing_from)
     if np.shape(command) != (3,):
         raise ValueError(f"command must have shape (3,) (xdot, ydot, thetadot), got {np.shape(command)}")
     if method not in METHODS:

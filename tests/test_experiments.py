@@ -28,8 +28,7 @@ import pytest
 
 import ijoy_jax as ij
 from ijoy_jax.control import rollout_core
-
-from reference import rect_touches_cells
+from ijoy_jax.testing import rect_touches_cells
 
 RES = 0.02
 SHAPE_2D = (200, 100)  # 4 m x 2 m
@@ -66,7 +65,7 @@ def _free(shape, boxes=(), cylinders=(), cells=()):
     t = ij.terrain.flat(shape, RES)
     boxes = [list(b) + [0.1] for b in boxes]
     cyl = [list(c) + [0.1] for c in cylinders]
-    t = ij.scene.rasterize(t, boxes=boxes or None, cylinders=cyl or None)
+    t = ij.terrain.scene.rasterize(t, boxes=boxes or None, cylinders=cyl or None)
     free = np.array(t.free)
     for i0, i1, j0, j1 in cells:
         free[i0:i1, j0:j1] = False
@@ -249,7 +248,7 @@ FULL_STEPS = ((0.02, 0.02, 1.0), (0.02, 0.02, 2.0), (0.05, 0.02, 2.0), (0.05, 0.
 
 def _height(boxes):
     t = ij.terrain.flat(SHAPE_25D, RES, has_height=True)
-    return np.array(ij.scene.rasterize(t, boxes=boxes).height)
+    return np.array(ij.terrain.scene.rasterize(t, boxes=boxes).height)
 
 
 @functools.cache

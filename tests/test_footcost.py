@@ -12,8 +12,7 @@ from jax.test_util import check_grads
 
 import ijoy_jax as ij
 from ijoy_jax import footcost
-
-from reference import foot_metrics, rect_touches_cells
+from ijoy_jax.testing import foot_metrics, rect_touches_cells
 
 RES = 0.02
 ROBOT = ij.robots.hrp2(margin=0.02)

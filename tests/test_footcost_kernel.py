@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import footcost, select
-from ijoy_jax.footcost_kernel import foot_cost_fused
+from ijoy_jax.footcost.pallas import foot_cost_fused
 
 RES = 0.02
 SHAPE = (48, 48)
@@ -209,7 +209,7 @@ def test_kernel_column_spans_equal_the_geometry_module():
     """The kernel's chain-based spans equal geometry.rect_column_spans at random, axis-aligned, nearly
     axis-aligned, grid-aligned and zero-length rectangles (the swing corridor of a step in place)."""
     from ijoy_jax import geometry
-    from ijoy_jax.footcost_kernel import _Rect
+    from ijoy_jax.footcost.pallas import _Rect
 
     rng = np.random.default_rng(11)
     n, k = 4000, 29
@@ -252,7 +252,7 @@ def test_corridor_box_holds_every_corridor_cell_and_box_top_is_its_highest_cell(
     """The swing corridor's broad phase: the box of footcost_kernel._corridor_box holds every cell of the
     corridor (geometry.rect_column_spans, as the XLA path builds it) of every set lane, and _box_top is the
     brute-force highest height in that box (+inf when the box leaves the map)."""
-    from ijoy_jax.footcost_kernel import _box_top, _corridor_box
+    from ijoy_jax.footcost.pallas import _box_top, _corridor_box
 
     rng = np.random.default_rng(seed)
     lanes, hw = 32, 0.065

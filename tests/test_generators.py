@@ -15,10 +15,9 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
-import ijoy_jax.generators as gen
 from ijoy_jax.terrain import Terrain
-
-from reference import disc_touches_cells, rect_touches_cells
+from ijoy_jax.terrain import generators as gen
+from ijoy_jax.testing import disc_touches_cells, rect_touches_cells
 
 # One small grid for (almost) every test, so each family compiles once per mode:
 # 48 x 40 cells of 5 cm = 2.4 m x 2.0 m; the default start point is (0.36, 1.0) m.

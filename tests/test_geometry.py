@@ -8,8 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from ijoy_jax import geometry
-
-from reference import enable_x64, rect_touches_cells
+from ijoy_jax.testing import enable_x64, rect_touches_cells
 
 RES = 0.02
 SHAPE = (40, 40)

@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax.haptics import bench
+from ijoy_jax.apps import bench_haptics as bench
 from ijoy_jax.haptics.leg import PAPER_Q, alduro_leg, leg_repulsive_force, leg_workspace
 from ijoy_jax.haptics.workspace import repulsive_force_decay
 

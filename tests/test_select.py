@@ -9,7 +9,7 @@ import pytest
 
 import ijoy_jax as ij
 from ijoy_jax import select
-from ijoy_jax.numpy_ref import NumpyFootCost, ordered_select
+from ijoy_jax.testing import NumpyFootCost, ordered_select
 
 RES = 0.02
 ROBOT = ij.robots.hrp2(margin=0.02)

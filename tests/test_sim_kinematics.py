@@ -10,8 +10,7 @@ from hypothesis import strategies as st
 
 from ijoy_jax.sim import kinematics as kin
 from ijoy_jax.sim import model
-
-from reference import enable_x64
+from ijoy_jax.testing import enable_x64
 
 P = model.BipedParams()
 SIDES = ("left", "right")

@@ -12,8 +12,7 @@ import scipy.linalg
 from jax import lax
 
 from ijoy_jax.sim import preview as pv
-
-from reference import enable_x64
+from ijoy_jax.testing import enable_x64
 
 # float64 gains against SciPy's DARE: both solve the same equation to machine
 # precision; 1e-8 relative leaves room for the Riccati's conditioning (~1e4).

@@ -212,7 +212,7 @@ def test_bad_inputs_are_refused_before_compiling(sim):
     (["sim", "render", "--frames", "200", "--steps", "1"], "frames_per_step"),
 ])
 def test_cli_refuses_bad_arguments_before_compiling(argv, message, capsys):
-    from ijoy_jax import cli
+    from ijoy_jax.apps import cli
 
     assert cli.main(argv) == 2
     assert message in capsys.readouterr().err

@@ -13,8 +13,7 @@ from hypothesis import given, settings
 
 import ijoy_jax as ij
 from ijoy_jax.sim import swing as sw
-
-from reference import enable_x64, rect_touches_cells
+from ijoy_jax.testing import enable_x64, rect_touches_cells
 
 FOOT_L, FOOT_W = 0.242, 0.13  # HRP-2 footprint (m)
 RES = 0.02

@@ -25,8 +25,11 @@ import pytest
 import scipy.stats
 
 import ijoy_jax as ij
-from ijoy_jax import cli, footcost_kernel, generators, select, sweep
+from ijoy_jax import select, sweep
+from ijoy_jax.apps import cli
+from ijoy_jax.footcost import pallas as footcost_kernel
 from ijoy_jax.sweep import execute
+from ijoy_jax.terrain import generators
 
 # Float metrics from a vmapped chunk vs a single jitted rollout: same ops, possibly fused differently (m).
 FLOAT_TOL = 1e-5
@@ -315,7 +318,7 @@ def slow_replace(src, dst):
     if str(dst).endswith(".parquet"):
         time.sleep(0.5)   # widen the window between chunks so the parent kills the child mid-sweep
 os.replace = slow_replace
-from ijoy_jax import cli
+from ijoy_jax.apps import cli
 sys.exit(cli.main(sys.argv[1:]))
 """
 

@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ijoy_jax import generators, sweep
+from ijoy_jax import sweep
+from ijoy_jax.terrain import generators
 
 FILE = Path(__file__).parents[1] / "sweeps" / "margin_stepping_over.toml"
 HL, HW = 0.121, 0.065  # HRP-2's half foot length and width (m)

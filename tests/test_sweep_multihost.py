@@ -78,7 +78,7 @@ def single(tiny, tmp_path_factory) -> Path:
 def _launch(tiny: Path, out: Path, pid: int, port: int, extra_env=None) -> subprocess.Popen:
     # The recipe of sweeps/README.md: one command per process, the same --out, file and coordinator.
     env = dict(os.environ, JAX_PLATFORMS="cpu", **(extra_env or {}))
-    cmd = [sys.executable, "-m", "ijoy_jax.cli", "sweep", "run", str(tiny), "--out", str(out),
+    cmd = [sys.executable, "-m", "ijoy_jax.apps.cli", "sweep", "run", str(tiny), "--out", str(out),
            "--chunk", str(CHUNK), "--num-processes", "2", "--process-id", str(pid),
            "--coordinator", f"localhost:{port}"]
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

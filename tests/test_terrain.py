@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 import ijoy_jax as ij
-
-from reference import disc_touches_cells, rect_touches_cells
+from ijoy_jax.testing import disc_touches_cells, rect_touches_cells
 
 
 def test_from_arrays_conventions():
@@ -66,7 +65,7 @@ def test_rasterize_matches_brute_force():
                              rng.uniform(0.01, 0.3, 5), rng.uniform(0.01, 0.2, 5), rng.uniform(0.01, 0.3, 5)])
     cyl = np.column_stack([rng.uniform(-0.2, 0.8, 3), rng.uniform(0.2, 1.0, 3), rng.uniform(0.005, 0.1, 3),
                            rng.uniform(0.01, 0.3, 3)])
-    t = jax.jit(ij.scene.rasterize)(base, boxes, cyl, jnp.array([True, False, False, True, False, False,
+    t = jax.jit(ij.terrain.scene.rasterize)(base, boxes, cyl, jnp.array([True, False, False, True, False, False,
                                                                    True, False]))
     ref_h = np.zeros(base.shape)
     ref_blocked = np.zeros(base.shape, bool)
@@ -85,7 +84,7 @@ def test_rasterize_matches_brute_force():
 def test_rasterize_2d_objects_are_obstacles_and_zero_rows_are_empty():
     base = ij.terrain.flat((30, 30), 0.05)
     boxes = np.array([[0.7, 0.7, 0.0, 0.2, 0.1, 0.3], [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]])
-    t = ij.scene.rasterize(base, boxes)
+    t = ij.terrain.scene.rasterize(base, boxes)
     ref = rect_touches_cells(0.7, 0.7, 0.0, 0.1, 0.05, 0.05, (30, 30))
     np.testing.assert_array_equal(~np.asarray(t.free), ref)
     assert not t.has_height and float(jnp.abs(t.height).max()) == 0.0
@@ -94,5 +93,5 @@ def test_rasterize_2d_objects_are_obstacles_and_zero_rows_are_empty():
 def test_rasterize_vmaps_over_scenes():
     base = ij.terrain.flat((20, 20), 0.05, has_height=True)
     boxes = jnp.stack([jnp.array([[0.5, 0.5, 0.0, 0.2, 0.2, h]]) for h in (0.1, 0.2, 0.3)])
-    ts = jax.vmap(lambda b: ij.scene.rasterize(base, b))(boxes)
+    ts = jax.vmap(lambda b: ij.terrain.scene.rasterize(base, b))(boxes)
     np.testing.assert_allclose(np.asarray(ts.height.max(axis=(1, 2))), [0.1, 0.2, 0.3], rtol=1e-6)

@@ -9,9 +9,8 @@ import optax
 import pytest
 
 import ijoy_jax as ij
+from ijoy_jax.testing import enable_x64, rect_corners, rect_touches_cells
 from ijoy_jax.tune import forward, loop
-
-from reference import enable_x64, rect_corners, rect_touches_cells
 
 FD_RTOL64 = 1e-5  # float64 central differences, h = 1e-6: truncation ~h^2, rounding ~1e-16 / h
 IMPROVEMENT = 0.95  # a short run on a fixed batch must bring the objective below this fraction of its start

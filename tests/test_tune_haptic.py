@@ -1,4 +1,4 @@
-"""Tests of ijoy_jax.tune.haptic: gradients vs finite differences and held-out gains over the defaults."""
+"""Tests of ijoy_jax.haptics.tuning: gradients vs finite differences and held-out gains over the defaults."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ijoy_jax.haptics import alduro_leg
-from ijoy_jax.tune import haptic
+from ijoy_jax.haptics import tuning as haptic
 
 FD_RTOL64 = 1e-5  # float64 central differences, h = 1e-6 in log-parameters (truncation ~h^2, rounding ~1e-16/h)
 NUM_SAMPLES = 3000  # 3 s at 1 kHz: 2.5 s after settling, 0.4 Hz FFT bins (10 of them in 8-12 Hz)

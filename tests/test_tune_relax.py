@@ -74,7 +74,7 @@ def _exact_all(terrain, robot, stance, command):
     n = acts.shape[0]
     fc = foot_cost_terms_indexed(terrain, index, robot, stance, -1.0, steps, None, jnp.arange(n)).total
     p_next = ij.robots.side_p0(robot, 1.0) + robot.step_time * command
-    return choice, fc + robot.w * ij.select.dist(acts, p_next, robot.rotation_weight)
+    return choice, fc + robot.w * ij.robots.dist(acts, p_next, robot.rotation_weight)
 
 
 @jax.jit

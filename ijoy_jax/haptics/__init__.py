@@ -8,7 +8,8 @@
 * :mod:`~ijoy_jax.haptics.leg`: an ALDURO-like leg (assumed geometry, cylinders by the law of cosines).
 * :mod:`~ijoy_jax.haptics.platform`: the platform's translation workspace and yaw limits.
 * :mod:`~ijoy_jax.haptics.plot`: drawings of the zonotope, planes, generators and force.
-* :mod:`~ijoy_jax.haptics.bench`: ``python -m ijoy_jax.haptics.bench``.
+* :mod:`~ijoy_jax.haptics.tuning`: gradient tuning of the filter (f0, zeta) and the repulsion constants.
+* benchmark: ``ijoy bench haptics`` (:mod:`ijoy_jax.apps.bench_haptics`).
 
 Units: metres, radians, seconds, newtons.
 """

@@ -25,9 +25,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax import generators, robots
+from ijoy_jax import robots
+from ijoy_jax.robots import command_range
 from ijoy_jax.sim import walker as W
-from ijoy_jax.sim.bench import command_range
+from ijoy_jax.terrain import generators
 
 SHAPE = (200, 100)  # 4 m x 2 m at 2 cm
 RESOLUTION = 0.02
@@ -52,7 +53,7 @@ def clutter(seed: int, batch: int, params: generators.ObstacleParams = CLUTTER, 
 
 def forward_commands(seed: int, batch: int, robot=None) -> jax.Array:
     """(batch, 3) commands held per rollout: forward at 60-100 % of the fastest the action set realises,
-    sideways and turning up to a fifth of theirs (m/s, m/s, rad/s; :func:`ijoy_jax.sim.bench.command_range`)."""
+    sideways and turning up to a fifth of theirs (m/s, m/s, rad/s; :func:`ijoy_jax.robots.command_range`)."""
     robot = robots.hrp2() if robot is None else robot
     _, top = command_range(robot)
     k_fwd, k_side = jax.random.split(jax.random.key(seed))

@@ -19,7 +19,7 @@ A sweep file has these tables (every key optional unless noted; units in bracket
     metrics.slope_weight = 0.5    # any TerrainMetrics field
 
     [terrain]
-    family = "obstacles"          # a name in ijoy_jax.generators.FAMILIES
+    family = "obstacles"          # a name in ijoy_jax.terrain.generators.FAMILIES
     shape = [150, 100]            # cells along x and y (static)
     resolution = 0.02             # [m] (static)
     has_height = false            # 2D occupancy grid or 2.5D height map (static)
@@ -67,8 +67,8 @@ from typing import Any
 
 import numpy as np
 
-from ijoy_jax import generators
 from ijoy_jax.select import KERNELS, METHODS
+from ijoy_jax.terrain import generators
 
 __all__ = [
     "COMMAND_KEYS",

@@ -96,7 +96,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from ijoy_jax import generators, robots
+from ijoy_jax import robots
 from ijoy_jax.control import rollout_core
 from ijoy_jax.select import make_targets
 from ijoy_jax.sweep import distributed
@@ -109,6 +109,7 @@ from ijoy_jax.sweep.config import (
     scenarios,
 )
 from ijoy_jax.sweep.metrics import bar_crossings
+from ijoy_jax.terrain import generators
 
 __all__ = ["DEFAULT_CHUNK", "MAX_AUTO_CHUNK", "MEMORY_FRACTION", "RunStats", "auto_chunk_size", "default_chunk_size",
            "run", "scenario_bytes", "trace_count"]

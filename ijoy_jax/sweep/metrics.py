@@ -3,7 +3,7 @@
 :meth:`ijoy_jax.Trajectory.summary` knows the rollout only; whether the robot
 got past an obstacle also needs the obstacle. :data:`FAMILY_METRICS` names the
 extra metrics each family adds to the results table (the sweep computes them
-from the same posed objects its generator rasterises, :func:`ijoy_jax.generators.objects`).
+from the same posed objects its generator rasterises, :func:`ijoy_jax.terrain.generators.objects`).
 
 ``bars``: :func:`bar_crossings` of the final stance.
 """
@@ -26,7 +26,7 @@ def bar_crossings(boxes, feet, foot_length, foot_width) -> dict[str, jax.Array]:
     """Which bars the robot has got past: both feet wholly beyond the bar's far face at the end.
 
     A bar is a box row ``(x, y, yaw, length, width, top)`` of
-    :func:`ijoy_jax.generators.objects` (``length == 0``: an empty slot). Its
+    :func:`ijoy_jax.terrain.generators.objects` (``length == 0``: an empty slot). Its
     far face (the side at larger x) is the line
     ``x_far(y) = x + (y - y_bar) cot(yaw) + (width / 2) / |sin(yaw)|``
     (an untilted bar has yaw = pi/2: ``x_far = x + width / 2``), extended

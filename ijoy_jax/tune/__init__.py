@@ -6,7 +6,6 @@ Modules:
   forward   minimise command error + obstacle risk; exact held-out evaluation
   loop      the generic tuning loop: jitted optax steps, vmapped runs, progress, save/load
   rollout   the relaxed control-loop rollout, differentiable end to end
-  haptic    force-feedback tuners: input filter (f0, zeta) and repulsion constants
 
 Top-level API (one symbol per line below):
   tune(loss_fn, params0, optimizer, steps, *, key, ...)  -> TuneResult   the generic loop
@@ -27,7 +26,6 @@ Example:
 """
 
 from ijoy_jax.tune import forward as forward
-from ijoy_jax.tune import haptic as haptic
 from ijoy_jax.tune import inverse as inverse
 from ijoy_jax.tune import loop as loop
 from ijoy_jax.tune import relax as relax
@@ -63,7 +61,6 @@ __all__ = [
     "compare",
     "fit",
     "forward",
-    "haptic",
     "interval",
     "inverse",
     "load",

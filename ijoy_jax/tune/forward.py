@@ -72,11 +72,11 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ijoy_jax import generators, geometry, robots
-from ijoy_jax.footcost import _side_sign, foot_cost_terms_indexed, index_terrain
-from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0
+from ijoy_jax import geometry, robots
+from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain
+from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
 from ijoy_jax.select import make_targets, select_step_indexed
-from ijoy_jax.terrain import Terrain
+from ijoy_jax.terrain import Terrain, generators
 from ijoy_jax.tune import loop, relax
 
 METRIC_NAMES = tuple(f"metrics.{f.name}" for f in dataclasses.fields(robots.TerrainMetrics))
@@ -92,7 +92,7 @@ class ForwardConfig:
       shape, resolution: grid of each random map (cells, m); the stance foot is
         at the map centre.
       has_height: 2.5D maps (object tops raise the ground) or 2D.
-      family: terrain family of :data:`ijoy_jax.generators.FAMILIES`; "obstacles"
+      family: terrain family of :data:`ijoy_jax.terrain.generators.FAMILIES`; "obstacles"
         (default) uses the two fields below, any other its default parameters.
       obstacle_count: obstacles per map (the ``obstacles`` family).
       obstacle_size: (min, max) box edge / cylinder diameter (m).
@@ -275,7 +275,7 @@ def sample_decisions(key, num: int, cfg: ForwardConfig) -> Decisions:
     """Draw ``num`` decisions: a map of ``cfg.family`` per decision with the stance foot at its centre.
 
     Jit-able (``num`` and the config are static). Terrains come from
-    :func:`ijoy_jax.generators.batch` (start zone at the map centre with
+    :func:`ijoy_jax.terrain.generators.batch` (start zone at the map centre with
     radius ``clear_radius``).
 
     Example:
@@ -340,7 +340,7 @@ def action_risk(terrain: Terrain, robot: Robot, probe: Robot, stance, side, nois
     Parameter-free (no gradient needed): the exact grown-footprint test of
     :func:`probe_robot` at ``foothold_i + std * noise_k``.
     """
-    swing = -_side_sign(side)
+    swing = -side_sign(side)
     steps = geometry.compose(stance, side_actions(robot, swing))  # (N, 3)
     poses = _noisy(steps, noise, cfg)  # (N, K, 3)
     n, k = poses.shape[:2]
@@ -374,7 +374,7 @@ def make_batch_fn(robot: Robot, cfg: ForwardConfig):
 
 def _errors(robot: Robot, side, command, acts_rel):
     """(N,) translation (m) and heading (rad) error of every action against p_next (stance frame)."""
-    swing = -_side_sign(side)
+    swing = -side_sign(side)
     p_next = side_p0(robot, swing) + robot.step_time * command
     d = acts_rel - p_next
     return relax._safe_norm(d[..., 0], d[..., 1]), jnp.abs(geometry.wrap_angle(d[..., 2]))
@@ -390,7 +390,7 @@ def decision_objective(uparams: dict, robot: Robot, terrain, stance, side, comma
     rb = with_params(robot, uparams)
     r = relax.relaxed_select(terrain, rb, stance, side, command, sharpness=cfg.sharpness, tau=cfg.tau,
                              barrier_weight=cfg.barrier_weight, exact=False)
-    swing = -_side_sign(side)
+    swing = -side_sign(side)
     et, er = _errors(rb, side, command, side_actions(rb, swing))
     trans = r.probs @ et
     rot = r.probs @ er

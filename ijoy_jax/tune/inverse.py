@@ -36,8 +36,8 @@ import numpy as np
 import optax
 
 from ijoy_jax import geometry
-from ijoy_jax.footcost import _side_sign, index_terrain
-from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0
+from ijoy_jax.footcost import index_terrain
+from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
 from ijoy_jax.select import make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain
 from ijoy_jax.tune import relax
@@ -134,7 +134,7 @@ def with_params(robot: Robot, log_params: dict) -> Robot:
 
 
 def _dists(robot, side, command):
-    swing = -_side_sign(side)
+    swing = -side_sign(side)
     acts = side_actions(robot, swing)
     p_next = side_p0(robot, swing) + robot.step_time * command
     return acts, p_next

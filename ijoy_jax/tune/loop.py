@@ -53,6 +53,7 @@ import platform
 import sys
 import time
 from collections.abc import Callable
+from importlib import metadata
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -380,15 +381,13 @@ def versions() -> dict[str, str]:
     """Versions of the packages a tuning result depends on."""
     import jaxlib
 
-    import ijoy_jax
-
     return {
         "python": platform.python_version(),
         "jax": jax.__version__,
         "jaxlib": jaxlib.__version__,
         "optax": optax.__version__,
         "numpy": np.__version__,
-        "ijoy_jax": ijoy_jax.__version__,
+        "ijoy_jax": metadata.version("ijoy_jax"),
         "backend": jax.default_backend(),
     }
 

@@ -45,8 +45,8 @@ import jax
 import jax.numpy as jnp
 
 from ijoy_jax import geometry
-from ijoy_jax.footcost import _side_sign, foot_cost_terms_indexed, index_terrain, window_cells
-from ijoy_jax.robots import Robot, side_actions, side_p0
+from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain, window_cells
+from ijoy_jax.robots import Robot, side_actions, side_p0, side_sign
 from ijoy_jax.select import Targets, make_targets
 from ijoy_jax.terrain import Terrain
 
@@ -485,7 +485,7 @@ def relaxed_select(
     dtype = jnp.result_type(command.dtype, robot.step_time.dtype, jnp.float32)
     command = command.astype(dtype)
     stance = jnp.asarray(stance, dtype)
-    side = _side_sign(stance_side).astype(dtype)
+    side = side_sign(stance_side).astype(dtype)
     swing = -side
     acts = side_actions(robot, swing).astype(dtype)  # (N, 3) stance frame
     p_next = side_p0(robot, swing).astype(dtype) + robot.step_time * command

@@ -1,6 +1,6 @@
 """``ijoy tune forward|inverse`` and ``ijoy bench tune``: the tuners from the command line.
 
-Kept here so that :mod:`ijoy_jax.cli` only registers the subcommand
+Kept here so that :mod:`ijoy_jax.apps.cli` only registers the subcommand
 (:func:`add_parser`) and dispatches to :func:`main`. Options follow one rule:
 a few run-level flags (``--out``, ``--steps``, ``--seed``, ``--runs``,
 ``--quiet``), every other setting through the config object
@@ -40,7 +40,7 @@ def add_parser(sub) -> None:
         "inverse", help="recover hidden selector parameters from exact demonstrations (a known-answer check)",
         description="Inverse tuner: label random decisions with the EXACT selector at hidden parameters, fit "
                     "them by maximum-entropy likelihood, and report the recovered values and the held-out "
-                    "agreement. Config fields: see ijoy_jax.tune.cli.InverseConfig.")
+                    "agreement. Config fields: see ijoy_jax.apps.tune_cli.InverseConfig.")
     for p in (fwd, inv):
         p.add_argument("--out", required=True, help="output folder (created; files in it are overwritten)")
         p.add_argument("--config", default=None, help="TOML file of config fields (top-level keys)")

@@ -1,4 +1,4 @@
-"""Benchmark the haptic force path: ``python -m ijoy_jax.haptics.bench [--quick] [--json PATH]``.
+"""Benchmark the haptic force path: ``ijoy bench haptics [--quick] [--json PATH]``.
 
 Measures, on whatever device JAX uses by default (CPU or one GPU), with plain
 JAX (no mujoco, no scipy):

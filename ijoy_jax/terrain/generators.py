@@ -21,7 +21,7 @@ recompiles and ``jax.vmap`` can batch it. Only the grid ``shape``,
 (optionally per-terrain) parameters; :data:`FAMILIES` and :func:`generate`
 name families by string for sweeps; :func:`objects` returns the posed boxes and
 cylinders of the object families (for a simulator), which the generators
-rasterise with :func:`ijoy_jax.scene.rasterize`.
+rasterise with :func:`ijoy_jax.terrain.scene.rasterize`.
 
 Conventions.
   * The robot walks along world +x; bars run across it (along y), stairs and
@@ -36,7 +36,7 @@ Conventions.
     (stepping stones), the plane (slope) or ``elevation`` (flat).
     :func:`start_point` gives the point in world coordinates.
   * 2D versus 2.5D (static ``has_height``), one mechanism for both: objects
-    follow :func:`ijoy_jax.scene.rasterize` (on a 2D map every object is an
+    follow :func:`ijoy_jax.terrain.scene.rasterize` (on a 2D map every object is an
     obstacle, a platform included); a stair's steps are a blockage on a 2D map
     (free only on the bottom landing); stepping stones are free islands among
     obstacle cells in 2D and stones among deep gaps in 2.5D; a 2D slope is a
@@ -44,7 +44,7 @@ Conventions.
     ``obstacle_above`` as obstacles in both.
   * Surfaces (stairs, slope, rough, stones) are sampled at cell centres;
     objects cover every cell their footprint overlaps (the conservative
-    exact-overlap rule of :mod:`ijoy_jax.scene`). Stepping stones are the
+    exact-overlap rule of :mod:`ijoy_jax.terrain.scene`). Stepping stones are the
     cells lying wholly on a stone (conservative for support).
   * Keys: a ``jax.random`` key (typed or raw uint32) or an int seed. Same key
     and parameters give the same terrain. ``flat``, ``slope`` and jitter-free
@@ -52,7 +52,7 @@ Conventions.
   * Heights are float32 and finite; ``free`` is bool.
 
 Example:
-  >>> import jax, ijoy_jax.generators as gen
+  >>> import jax, ijoy_jax.terrain.generators as gen
   >>> keys = jax.random.split(jax.random.key(0), 1000)
   >>> params = gen.WallParams(count=jax.numpy.arange(1000) % 5)   # per-terrain count
   >>> maps = jax.jit(lambda k, p: gen.batch("walls", k, p, shape=(100, 100)))(keys, params)
@@ -73,9 +73,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax import scene
 from ijoy_jax._struct import pytree_dataclass
-from ijoy_jax.terrain import Terrain, grid_spec
+from ijoy_jax.terrain import scene
+from ijoy_jax.terrain.grid import Terrain, grid_spec
 
 __all__ = [
     "FAMILIES",
@@ -502,7 +502,7 @@ def _place(u, grid: _Grid, params, distance: Callable[[jax.Array], jax.Array]):
 
 
 class Objects(NamedTuple):
-    """Posed objects of one terrain, in :func:`ijoy_jax.scene.rasterize`'s format.
+    """Posed objects of one terrain, in :func:`ijoy_jax.terrain.scene.rasterize`'s format.
 
     Fields (metres, radians):
       boxes: (B, 6) float32 ``x, y, yaw, length, width, top``; unused rows are zero.
@@ -647,7 +647,7 @@ def objects(
       cylinders, obstacles have ``max_count`` rows of each.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> objs = gen.objects("walls", 0, gen.WallParams(count=2), shape=(100, 100))
       >>> objs.boxes.shape, int((objs.boxes[:, 3] > 0).sum())
       ((8, 6), 2)
@@ -684,7 +684,7 @@ def walls(
       Terrain with (nx, ny) float32 ``height`` and bool ``free``.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> t = gen.walls(0, gen.WallParams(count=4), shape=(150, 100))
       >>> t.free.shape, bool(t.free.all())
       ((150, 100), False)
@@ -718,7 +718,7 @@ def obstacles(
       Terrain with (nx, ny) float32 ``height`` and bool ``free``.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> t = gen.obstacles(1, shape=(100, 100), has_height=True)
       >>> float(t.height.max()) <= 0.15
       True
@@ -753,7 +753,7 @@ def bars(
       width w covers ``ceil(w / resolution)`` or one more cells along x.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> t = gen.bars(0, gen.BarParams(count=1, position_jitter=0.0), shape=(100, 50))
       >>> int((~t.free).any(axis=1).sum())   # x in (1.175, 1.225) m: columns 58-61
       4
@@ -787,7 +787,7 @@ def platforms(
       Terrain with (nx, ny) float32 ``height`` and bool ``free``.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> p = gen.PlatformParams(height_min=0.1, height_max=0.1)
       >>> t = gen.platforms(0, p, shape=(150, 150), has_height=True)
       >>> round(float(t.height.max()), 3), bool(t.free.all())
@@ -822,7 +822,7 @@ def flat(
       Terrain, all free; height ``elevation`` (2.5D) or 0 (2D).
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> float(gen.flat(0, gen.FlatParams(elevation=0.1), shape=(4, 4), has_height=True).height[0, 0])
       0.1...
     """
@@ -867,7 +867,7 @@ def stairs(
       Terrain with (nx, ny) float32 ``height`` and bool ``free``.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> t = gen.stairs(0, gen.StairParams(num_steps=3), shape=(200, 40), has_height=True)
       >>> round(float(t.height.max()), 3)
       0.3
@@ -910,7 +910,7 @@ def slope(
       Terrain, all free, ``height = tan(angle) * (centre - start) . (cos direction, sin direction)``.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> t = gen.slope(0, gen.SlopeParams(angle=0.1), shape=(100, 10), has_height=True)
       >>> round(float(t.height[1, 0] - t.height[0, 0]) / 0.02, 4)   # tan(0.1)
       0.1003
@@ -969,7 +969,7 @@ def rough(
       field exceeds ``obstacle_above`` outside the start zone.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> t = gen.rough(0, gen.RoughParams(amplitude=0.03, start_radius=0.0), shape=(128, 128),
       ...               has_height=True)
       >>> round(float(t.height.std()), 2)
@@ -1015,7 +1015,7 @@ def stepping_stones(
       Terrain with (nx, ny) float32 ``height`` and bool ``free``.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> p = gen.SteppingStoneParams(size=0.2, spacing=0.4, jitter=0.0, start_radius=0.0)
       >>> t = gen.stepping_stones(0, p, shape=(80, 80), resolution=0.05, origin=(-0.7, -2.1))
       >>> float(t.free.mean())   # (0.2 / 0.4)**2
@@ -1120,7 +1120,7 @@ def generate(family, key, params=None, **static) -> Terrain:
       Terrain.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> t = gen.generate("stairs", 0, shape=(100, 20), has_height=True)
       >>> t.height.dtype
       dtype('float32')
@@ -1154,7 +1154,7 @@ def batch(family, keys, params=None, *, in_axes=None, **static) -> Terrain:
       float32, free (B, nx, ny) bool, origin (B, 2).
 
     Example:
-      >>> import jax, jax.numpy as jnp, ijoy_jax.generators as gen
+      >>> import jax, jax.numpy as jnp, ijoy_jax.terrain.generators as gen
       >>> keys = jax.random.split(jax.random.key(0), 4)
       >>> p = gen.StairParams(rise=jnp.array([0.05, 0.1, 0.15, 0.2]))
       >>> t = gen.batch("stairs", keys, p, shape=(100, 20), has_height=True)
@@ -1178,7 +1178,7 @@ def start_point(params, *, shape=(200, 200), resolution: float = 0.02, origin=(0
       shape, resolution, origin: the map's grid, as given to the generator.
 
     Example:
-      >>> import ijoy_jax.generators as gen
+      >>> from ijoy_jax.terrain import generators as gen
       >>> gen.start_point(gen.WallParams(), shape=(200, 100)).tolist()
       [0.6000000238418579, 1.0]
     """

@@ -20,7 +20,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ijoy_jax.terrain import Terrain
+from ijoy_jax.terrain.grid import Terrain
 
 
 def _cell_bounds(terrain: Terrain):
@@ -85,7 +85,7 @@ def rasterize(terrain: Terrain, boxes=None, cylinders=None, obstacle: bool | jax
     Example:
       >>> import ijoy_jax as ij
       >>> t = ij.terrain.flat((50, 50), 0.02, has_height=True)
-      >>> t = ij.scene.rasterize(t, boxes=[[0.5, 0.5, 0.3, 0.4, 0.2, 0.05]])
+      >>> t = ij.terrain.scene.rasterize(t, boxes=[[0.5, 0.5, 0.3, 0.4, 0.2, 0.05]])
       >>> float(t.height.max())
       0.05...
     """

@@ -33,17 +33,9 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
-from ijoy_jax.footcost import (
-    _SLACK,
-    TerrainIndex,
-    _limit,
-    _plane_metrics,
-    _rows_max,
-    _solve3,
-    nearest_actions,
-    window_cells,
-)
-from ijoy_jax.robots import Robot
+from ijoy_jax.footcost.index import TerrainIndex, rows_max, window_cells
+from ijoy_jax.footcost.xla import SLACK, metric_term, plane_metrics, solve3
+from ijoy_jax.robots import Robot, nearest_actions
 from ijoy_jax.terrain import Terrain
 
 # Scalars of one decision, packed into one float32 vector (indices into ``par``).
@@ -239,7 +231,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
             return lax.fori_loop(0, (rows + unroll - 1) // unroll, body, init)
 
         # The cell under the foot centre; heights are taken relative to it (float32 conditioning). Within
-        # the map's padded border this is footcost._plane_metrics' window cell; beyond it the step is
+        # the map's padded border this is footcost.plane_metrics' window cell; beyond it the step is
         # off the map and already +inf.
         h_ref = hp_ref[column_start(_floor_i32(cx / res, native), _floor_i32(cy / res, native))]
         zero_f = jnp.zeros_like(cx)
@@ -249,7 +241,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
             return jnp.clip(jnp.max(jnp.where(touched, j1 - j0 + 1, 0)), 0, k)
 
         # Every quantity is a (C,) vector, one candidate per lane, so no sum ever crosses lanes.
-        # Pass 1: the normal equations of the plane fit (the sums of footcost._plane_metrics), a column at a
+        # Pass 1: the normal equations of the plane fit (the sums of footcost.plane_metrics), a column at a
         # time from window prefix sums (footcost.block_sums): a span of at most B rows starting in rows
         # bB .. bB + B - 1 lies in window b, so it takes two reads of each table instead of a loop over its rows.
         log2_window = window.bit_length() - 1
@@ -289,7 +281,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
                                                               (zero_f,) * 9)
         n = jnp.maximum(n, 1.0)
         ridge = 1e-6 * n * res * res
-        a, b, cc = _solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
+        a, b, cc = solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
         rise = cc * res  # the plane's rise from one row to the next
 
         # Pass 2: residuals from the plane under the foot (roughness, bump) and in the safety band, row by
@@ -332,9 +324,10 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
         bump = jnp.where(ok, top, 0.0)
         band = jnp.where(ok, band, 0.0)
         dh = height - p[_STANCE_H]
-        total = (total + _limit(p[_SLOPE_W], slope, p[_SLOPE_L]) + _limit(p[_ROUGH_W], rough, p[_ROUGH_L])
-                 + _limit(p[_BUMP_W], bump, p[_BUMP_L]) + _limit(p[_STEP_W], jnp.abs(dh), cand_ref[_STEP_LIMIT, :])
-                 + _limit(p[_BAND_W], band, p[_BAND_L]))
+        total = (total + metric_term(p[_SLOPE_W], slope, p[_SLOPE_L])
+                 + metric_term(p[_ROUGH_W], rough, p[_ROUGH_L]) + metric_term(p[_BUMP_W], bump, p[_BUMP_L])
+                 + metric_term(p[_STEP_W], jnp.abs(dh), cand_ref[_STEP_LIMIT, :])
+                 + metric_term(p[_BAND_W], band, p[_BAND_L]))
 
         if has_swing:
             # The swing corridor: the foot-wide rectangle from the swing start to the step.
@@ -362,7 +355,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
                 top, off = acc
                 ((j0, j1, touched),) = spans
                 ixc = jnp.clip(ix, 0, nx - 1)
-                hi = _rows_max(hmax_ref, ixc, jnp.clip(j0, 0, ny - 1), jnp.clip(j1, 0, ny - 1))
+                hi = rows_max(hmax_ref, ixc, jnp.clip(j0, 0, ny - 1), jnp.clip(j1, 0, ny - 1))
                 return jnp.maximum(top, jnp.where(touched, hi, -jnp.inf)), off | (touched & off_map(ix, j0, j1))
 
             path_top, path_off = _column_loop(path_cols, pix0, (path,), path_column, (zero_f - jnp.inf, finite & False))
@@ -402,7 +395,7 @@ def _box_top(hmax_ref, box, shape, lanes: int):
 
     def body(r, top):
         ix = ix0 + r * lanes + lane
-        hi = _rows_max(hmax_ref, jnp.clip(ix, 0, nx - 1), a0, a1)
+        hi = rows_max(hmax_ref, jnp.clip(ix, 0, nx - 1), a0, a1)
         return jnp.maximum(top, jnp.where(ix <= ix1, hi, -jnp.inf))
 
     rounds = (jnp.maximum(ix1 - ix0 + 1, 0) + lanes - 1) // lanes
@@ -473,17 +466,17 @@ def foot_cost_fused(
     _, blocks, window, _ = index.height_sums.shape
     window = (window - 1) // 2  # rows per window step (>= k, the longest span)
     if has_height:
-        stance_h = _plane_metrics(terrain, index, robot, stance).height
+        stance_h = plane_metrics(terrain, index, robot, stance).height
         if has_swing:
             swing_from = jnp.asarray(swing_from, jnp.float32)
-            start_h = _plane_metrics(terrain, index, robot, swing_from).height
+            start_h = plane_metrics(terrain, index, robot, swing_from).height
             swx, swy = swing_from[0] - terrain.origin[0], swing_from[1] - terrain.origin[1]
     ghl = 0.5 * robot.foot_length + robot.margin
     ghw = 0.5 * robot.foot_width + robot.margin
     m = robot.metrics
     par = [terrain.origin[0], terrain.origin[1], ghl, ghw, 0.5 * robot.foot_length, 0.5 * robot.foot_width,
-           stance_h, start_h, swx, swy, robot.max_swing + _SLACK, robot.foot_width,
-           jnp.where(jnp.hypot(ghl, ghw) > robot.max_radius + _SLACK, 1.0, 0.0),
+           stance_h, start_h, swx, swy, robot.max_swing + SLACK, robot.foot_width,
+           jnp.where(jnp.hypot(ghl, ghw) > robot.max_radius + SLACK, 1.0, 0.0),
            m.slope_weight, m.slope_limit, m.roughness_weight, m.roughness_limit, m.bump_weight, m.bump_limit,
            m.step_weight, m.band_weight, m.band_limit]
     par = jnp.stack([f32(q) for q in par] + [zero] * (_NUM_PAR - len(par)))

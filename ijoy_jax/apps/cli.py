@@ -16,12 +16,13 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--steps", type=int, default=24, help="number of steps (default: %(default)s)")
     demo.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
     bench = sub.add_parser("bench", help="run a benchmark and print JSON lines (see BENCHMARKS.md)")
-    bench.add_argument("name", choices=["footcost", "select", "check", "tune", "sim"],
+    bench.add_argument("name", choices=["footcost", "select", "check", "tune", "sim", "haptics"],
                        help="footcost: evaluations/s; select: decisions/s, rollout steps/s and the NumPy baseline; "
                             "check: fixed decisions saved to / compared with --ref (device agreement); "
                             "tune: seconds per forward-tuning step, compile separate; "
                             "sim: MJX biped physics steps/s by batch size next to multi-threaded C MuJoCo, then "
-                            "the closed loop (selector + controller + physics) with falls and placement error")
+                            "the closed loop (selector + controller + physics) with falls and placement error; "
+                            "haptics: the ALDURO leg force and filter per call and batched")
     bench.add_argument("--ref", default=None, help="npz of reference decisions for 'check'")
     bench.add_argument("--quick", action="store_true", help="small sizes, for a smoke test")
     bench.add_argument("--json", default=None, help="also write the results to this file")
@@ -78,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     rend.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
     rend.add_argument("--seed", type=int, default=0, help="clutter map (default: %(default)s)")
     rend.add_argument("--size", default="480x320", help="WIDTHxHEIGHT in pixels (default: %(default)s)")
-    from ijoy_jax.tune import cli as tune_cli
+    from ijoy_jax.apps import tune_cli
 
     tune_cli.add_parser(sub)
     args = parser.parse_args(argv)
@@ -89,16 +90,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "sim":
         return _sim(args)
     if args.command == "demo":
-        from ijoy_jax import demo as demo_mod
+        from ijoy_jax.apps import demo as demo_mod
 
         result = demo_mod.run(args.out, args.steps, args.margin)
         print(json.dumps(result, indent=2))
         return 0
     if args.command == "bench":
-        from ijoy_jax import bench as bench_mod
+        from ijoy_jax.apps import bench as bench_mod
 
         if args.name == "sim":
-            from ijoy_jax.sim import bench as sim_bench
+            from ijoy_jax.apps import bench_sim as sim_bench
 
             rows = []
             for row in sim_bench.run(quick=args.quick):
@@ -106,6 +107,11 @@ def main(argv: list[str] | None = None) -> int:
                 rows.append(row)
         elif args.name == "tune":
             rows = tune_cli.bench(quick=args.quick)
+        elif args.name == "haptics":
+            from ijoy_jax.apps import bench_haptics
+
+            rows = bench_haptics.run(quick=args.quick)
+            print(bench_haptics.format_report(rows))
         else:
             rows = bench_mod.run(args.name, quick=args.quick, path=args.ref)
         if args.json:

@@ -19,7 +19,6 @@ the paper's early-exit rule for the ordered search relies on both.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import jax
@@ -28,11 +27,18 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import pytree_dataclass, static_field
-from ijoy_jax.robots import Robot, side_actions
+from ijoy_jax.footcost.index import (
+    TerrainIndex,
+    column_has_obstacle,
+    column_max_height,
+    index_terrain,
+    swing_corridor,
+    window_cells,
+)
+from ijoy_jax.robots import Robot, nearest_actions, side_sign
 from ijoy_jax.terrain import Terrain
 
-_SLACK = 1e-6  # m: float32 rounding allowed above the robot's float64 static window sizes
+SLACK = 1e-6  # m: float32 rounding allowed above the robot's float64 static window sizes
 
 
 class FootCostTerms(NamedTuple):
@@ -76,135 +82,8 @@ class FootCostTerms(NamedTuple):
     action_index: jax.Array
 
 
-@pytree_dataclass
-class TerrainIndex:
-    """Per-terrain tables that make FootCost O(columns) per candidate.
 
-    obstacles_before: (nx, ny + 1) int32, number of obstacle cells in column
-      ix with row index < j (prefix counts along y).
-    height_max: (levels, nx, ny) float32 sparse table; ``height_max[k, ix, j]``
-      is the largest height in rows ``j .. j + 2**k - 1`` of column ix.
-    height_padded: (nx + 2P, ny + 2P) float32 heights, edge-padded by P cells.
-    height_sums: (nx + 2P, blocks, 2B + 1, 2) float32 prefix sums of the
-      padded map's columns over overlapping windows of 2B rows, for the fused
-      kernel's plane fits (:func:`block_sums`; B: a power of two >= P;
-      blocks = 0 on 2D maps).
-    height_block_first: (nx + 2P, blocks) float32, each window's first height.
-    pad: P (static).
-    """
-
-    obstacles_before: jax.Array
-    height_max: jax.Array
-    height_padded: jax.Array
-    height_sums: jax.Array
-    height_block_first: jax.Array
-    pad: int = static_field()
-
-
-def window_cells(radius: float, resolution: float) -> int:
-    """Columns (and rows) a window needs to hold any shape of half-diagonal ``radius``."""
-    return int(math.ceil(2.0 * radius / resolution - 1e-9)) + 1
-
-
-def index_terrain(terrain: Terrain, robot: Robot) -> TerrainIndex:
-    """Build the :class:`TerrainIndex` of a terrain (once per terrain, reused across steps)."""
-    occ = (~terrain.free).astype(jnp.int32)
-    before = jnp.concatenate([jnp.zeros(occ.shape[:-1] + (1,), jnp.int32), jnp.cumsum(occ, axis=-1)], -1)
-    h = terrain.height
-    ny = h.shape[-1]
-    levels = [h]
-    span = 1
-    while 2 * span <= ny:
-        prev = levels[-1]
-        shifted = jnp.concatenate([prev[:, span:], jnp.full((h.shape[0], span), -jnp.inf, h.dtype)], axis=1)
-        levels.append(jnp.maximum(prev, shifted))
-        span *= 2
-    pad = window_cells(robot.max_radius, terrain.resolution)
-    padded = jnp.pad(h, pad, mode="edge")
-    block = 1 << max(pad - 1, 1).bit_length()
-    if terrain.has_height:
-        sums, first = block_sums(padded, block)
-    else:  # a 2D map's kernel pass reads no heights: empty tables of the right rank and block size
-        sums = jnp.zeros((padded.shape[0], 0, 2 * block + 1, 2), h.dtype)
-        first = jnp.zeros((padded.shape[0], 0), h.dtype)
-    return TerrainIndex(before, jnp.stack(levels), padded, sums, first, pad)
-
-
-def block_sums(height, block: int) -> tuple[jax.Array, jax.Array]:
-    """Prefix sums of each column of a height map over overlapping windows: a column's sum over any span of
-    <= ``block`` rows in two reads (the fused kernel's plane fits, :mod:`ijoy_jax.footcost_kernel`).
-
-    Window b holds rows ``b block .. b block + 2 block - 1`` (beyond the map, its edge row), so a span of at
-    most ``block`` rows starting in rows ``b block .. b block + block - 1`` lies in window b. Heights are
-    taken from each window's first height h_b, so the sums' rounding scales with the relief within a window
-    (as the XLA path's does with the relief under a foot), not with the terrain's altitude or overall relief.
-    ``sums[ix, b, t]`` holds, over the first t rows of window b in column ix, the sum of (h - h_b) and of
-    (h - h_b) (row - b block - (block - 1/2)) (rows from the window's middle: smaller terms).
-
-    Args:
-      height: (nx, ny) float32 heights (m).
-      block: rows per window step (static, a power of two >= the longest span).
-
-    Returns:
-      ``sums`` (nx, blocks, 2 block + 1, 2) float32, blocks = ceil(ny / block), and ``first`` (nx, blocks)
-      float32: h_b (m).
-    """
-    num_x, num_y = height.shape
-    blocks = -(-num_y // block)
-    h = jnp.pad(height, ((0, 0), (0, (blocks + 1) * block - num_y)), mode="edge").reshape(num_x, blocks + 1, block)
-    window = jnp.concatenate([h[:, :-1], h[:, 1:]], axis=2)  # (nx, blocks, 2 block)
-    first = window[:, :, 0]
-    rel = window - first[:, :, None]  # a stored height, subtracted as the kernel will (h_b - h_ref)
-    terms = jnp.stack([rel, rel * (jnp.arange(2 * block, dtype=h.dtype) - (block - 0.5))], -1)
-    return jnp.concatenate([jnp.zeros_like(terms[:, :, :1]), jnp.cumsum(terms, axis=2)], axis=2), first
-
-
-def swing_corridor(sx, sy, cx, cy, half_width, res, num_columns: int) -> tuple[geometry.ColumnSpans, jax.Array]:
-    """Cells of the swing corridor from (sx, sy) to (cx, cy) (map coordinates, m): the rectangle of half width
-    ``half_width`` between the two foot centres, as exact column spans (:func:`geometry.rect_column_spans`, a
-    window of ``num_columns``), and its length (m). A zero-length corridor lies along x."""
-    dx, dy = cx - sx, cy - sy
-    length = jnp.sqrt(dx * dx + dy * dy)
-    theta = jnp.arctan2(jnp.where(length > 0, dy, 0.0), jnp.where(length > 0, dx, 1.0))
-    spans = geometry.rect_column_spans(0.5 * (cx + sx), 0.5 * (cy + sy), theta, 0.5 * length, half_width, res,
-                                       num_columns)
-    return spans, length
-
-
-def _column_has_obstacle(index: TerrainIndex, spans: geometry.ColumnSpans, shape) -> jax.Array:
-    """(K,) bool: touched columns holding an obstacle cell or leaving the map."""
-    nx, ny = shape
-    ix = jnp.clip(spans.ix, 0, nx - 1)
-    j0 = jnp.clip(spans.j0, 0, ny)
-    j1 = jnp.clip(spans.j1 + 1, 0, ny)
-    count = index.obstacles_before[ix, j1] - index.obstacles_before[ix, j0]
-    off_map = (spans.ix < 0) | (spans.ix >= nx) | (spans.j0 < 0) | (spans.j1 >= ny)
-    return spans.touched & (off_map | (count > 0))
-
-
-def _rows_max(height_max, ix, j0, j1):
-    """The highest height in rows j0..j1 (on the map; if j1 < j0, of rows j0 and j1) of column ix: two reads of the
-    sparse table (:attr:`TerrainIndex.height_max`, an array or the fused kernel's ref) at level floor(log2(span)),
-    taken from the exponent of the span as a float (exact below 2**24; Triton lowers no count of leading zeros)
-    and capped at the table's top level."""
-    span = jnp.maximum(j1 - j0 + 1, 1)
-    lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), 23)
-    lvl = jnp.minimum(lvl - 127, height_max.shape[0] - 1)
-    return jnp.maximum(height_max[lvl, ix, j0], height_max[lvl, ix, j1 - (1 << lvl) + 1])
-
-
-def _column_max_height(index: TerrainIndex, spans: geometry.ColumnSpans, shape) -> tuple[jax.Array, jax.Array]:
-    """Largest height over the touched cells, and whether any touched cell is off the map."""
-    nx, ny = shape
-    ix = jnp.clip(spans.ix, 0, nx - 1)
-    j0 = jnp.clip(spans.j0, 0, ny - 1)
-    j1 = jnp.clip(spans.j1, 0, ny - 1)
-    hi = _rows_max(index.height_max, ix, j0, j1)
-    off_map = (spans.ix < 0) | (spans.ix >= nx) | (spans.j0 < 0) | (spans.j1 >= ny)
-    return jnp.max(jnp.where(spans.touched, hi, -jnp.inf)), jnp.any(spans.touched & off_map)
-
-
-class _Plane(NamedTuple):
+class Plane(NamedTuple):
     height: jax.Array  # plane height at the foot centre (m)
     slope: jax.Array  # angle from horizontal (rad)
     roughness: jax.Array  # mean |residual| under the foot (m)
@@ -212,7 +91,7 @@ class _Plane(NamedTuple):
     band: jax.Array  # largest |residual| in the safety band (m)
 
 
-def _solve3(a00, a01, a02, a11, a12, a22, r0, r1, r2):
+def solve3(a00, a01, a02, a11, a12, a22, r0, r1, r2):
     """Solve the symmetric 3x3 system [[a00 a01 a02] [a01 a11 a12] [a02 a12 a22]] x = r (Cramer's rule).
 
     Cheaper than a batched LU for millions of tiny systems; a singular
@@ -265,7 +144,7 @@ def _sum_max_max(a, b, c):
                       lambda x, y: (x[0] + y[0], jnp.maximum(x[1], y[1]), jnp.maximum(x[2], y[2])), (0, 1))
 
 
-def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> _Plane:
+def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> Plane:
     """Least-squares plane under the footprint at ``pose`` (world) and the metrics around it."""
     res = terrain.resolution
     k = index.pad
@@ -304,7 +183,7 @@ def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: ja
     n, su, suu, sv, suv, svv, sh, suh, svh = _totals(*cols)
     n = jnp.maximum(n, 1.0)
     ridge = 1e-6 * n * res * res  # keeps a one-column footprint well-posed (slope -> 0)
-    a, b, c = _solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
+    a, b, c = solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
     resid = hrel - (a + b * u[:, None] + c * v[None, :])
     slope = jnp.arctan(jnp.sqrt(b * b + c * c))
     abs_sum, top, band = _sum_max_max(jnp.where(m_foot, jnp.abs(resid), 0.0), jnp.where(m_foot, resid, -jnp.inf),
@@ -313,7 +192,7 @@ def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: ja
     bump = jnp.maximum(top, 0.0)
     ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(c)
     z = jnp.float32(0.0)
-    return _Plane(
+    return Plane(
         height=jnp.where(ok, a + h_ref, h_ref),
         slope=jnp.where(ok, slope, z),
         roughness=jnp.where(ok, roughness, z),
@@ -322,7 +201,7 @@ def _plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: ja
     )
 
 
-def _limit(weight, metric, limit):
+def metric_term(weight, metric, limit):
     return jnp.where(metric > limit, jnp.inf, weight * metric)
 
 
@@ -343,19 +222,19 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     grown = geometry.rect_column_spans(cx, cy, step[2], hl, hw, res, k)
     # The static sizes are float64 and the pose's float32: a footprint exactly at max_radius (max_margin ==
     # margin) would round above it, so compare with a micrometre of slack (the column spans flag real overflow).
-    too_big = (jnp.hypot(hl, hw) > robot.max_radius + _SLACK) | grown.overflow
-    blocked = jnp.any(_column_has_obstacle(index, grown, terrain.shape))
+    too_big = (jnp.hypot(hl, hw) > robot.max_radius + SLACK) | grown.overflow
+    blocked = jnp.any(column_has_obstacle(index, grown, terrain.shape))
     metrics = robot.metrics
     zero = jnp.float32(0.0)
     neg_inf = jnp.float32(-jnp.inf)
     if terrain.has_height:
-        plane = _plane_metrics(terrain, index, robot, step)
+        plane = plane_metrics(terrain, index, robot, step)
         dh = plane.height - stance_plane.height
-        slope = _limit(metrics.slope_weight, plane.slope, metrics.slope_limit)
-        rough = _limit(metrics.roughness_weight, plane.roughness, metrics.roughness_limit)
-        bump = _limit(metrics.bump_weight, plane.bump, metrics.bump_limit)
-        stepc = _limit(metrics.step_weight, jnp.abs(dh), robot.max_step_height[action_index])
-        band = _limit(metrics.band_weight, plane.band, metrics.band_limit)
+        slope = metric_term(metrics.slope_weight, plane.slope, metrics.slope_limit)
+        rough = metric_term(metrics.roughness_weight, plane.roughness, metrics.roughness_limit)
+        bump = metric_term(metrics.bump_weight, plane.bump, metrics.bump_limit)
+        stepc = metric_term(metrics.step_weight, jnp.abs(dh), robot.max_step_height[action_index])
+        band = metric_term(metrics.band_weight, plane.band, metrics.band_limit)
         raw = (plane.slope, plane.roughness, plane.bump, dh, plane.band, plane.height)
     else:
         slope = rough = bump = stepc = band = zero
@@ -367,10 +246,10 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
         sx = swing_from[0] - terrain.origin[0]
         sy = swing_from[1] - terrain.origin[1]
         corridor, length = swing_corridor(sx, sy, cx, cy, 0.5 * robot.foot_width, res, kp)
-        top, off_map = _column_max_height(index, corridor, terrain.shape)
+        top, off_map = column_max_height(index, corridor, terrain.shape)
         path_height = top - jnp.maximum(start_plane.height, raw[5])
         path_bad = off_map | (path_height > robot.clearance[action_index])
-        too_big = too_big | corridor.overflow | (length + robot.foot_width > robot.max_swing + _SLACK)
+        too_big = too_big | corridor.overflow | (length + robot.foot_width > robot.max_swing + SLACK)
     action = robot.action_cost[action_index]
     obstacle = _inf_if(blocked)
     swing = _inf_if(path_bad)
@@ -398,23 +277,6 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     )
 
 
-def nearest_actions(robot: Robot, stance, stance_side, steps) -> jax.Array:
-    """(N,) int32 index of the action of S nearest each world step (dist metric of the paper).
-
-    dist = |translation| + rotation_weight * |rotation| in the stance frame,
-    against the swing side's (mirrored) action set.
-    """
-    rel = geometry.relative(stance, steps)  # (N, 3)
-    acts = side_actions(robot, -_side_sign(stance_side))
-    d = rel[:, None, :] - acts[None, :, :]
-    dist = jnp.hypot(d[..., 0], d[..., 1]) + robot.rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
-    return jnp.argmin(dist, axis=1).astype(jnp.int32)
-
-
-def _side_sign(side) -> jax.Array:
-    return jnp.where(jnp.asarray(side) >= 0, 1.0, -1.0).astype(jnp.float32)
-
-
 def foot_cost_terms_indexed(
     terrain: Terrain,
     index: TerrainIndex,
@@ -436,10 +298,10 @@ def foot_cost_terms_indexed(
     action_index = jnp.broadcast_to(jnp.asarray(action_index, jnp.int32), steps.shape[:1])
     stance_plane = start_plane = None
     if terrain.has_height:
-        stance_plane = _plane_metrics(terrain, index, robot, stance)
+        stance_plane = plane_metrics(terrain, index, robot, stance)
         if swing_from is not None:
             swing_from = jnp.asarray(swing_from, jnp.float32)
-            start_plane = _plane_metrics(terrain, index, robot, swing_from)
+            start_plane = plane_metrics(terrain, index, robot, swing_from)
 
     def one(step, a):
         return _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, step, a)
@@ -447,7 +309,7 @@ def foot_cost_terms_indexed(
     return jax.vmap(one)(steps, action_index)
 
 
-def _validate(terrain, robot, stance, stance_side, steps, swing_from):
+def validate(terrain, robot, stance, stance_side, steps, swing_from):
     if not isinstance(terrain, Terrain):
         raise TypeError(f"terrain must be an ijoy_jax.Terrain, got {type(terrain).__name__}")
     if not isinstance(robot, Robot):
@@ -511,8 +373,8 @@ def foot_cost_terms(
       that is not +-1 (checked when called outside jit; under jit a
       non-finite step gets +inf in the ``unsupported`` term).
     """
-    _validate(terrain, robot, stance, stance_side, steps, swing_from)
-    side = _side_sign(stance_side)
+    validate(terrain, robot, stance, stance_side, steps, swing_from)
+    side = side_sign(stance_side)
     return _foot_cost_terms_jit(terrain, robot, stance, side, steps, swing_from, action_index)
 
 

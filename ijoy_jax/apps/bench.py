@@ -218,7 +218,7 @@ def bench_select(rows, quick: bool, chunk: int):
             _emit(rows, dict(_env(), bench="rollout", method=method, kernel=kernel, terrain="2.5D, one per robot",
                              batch=b, steps=steps, compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
     # The paper's algorithm in plain NumPy, same terrain and queries, one decision at a time.
-    from ijoy_jax.numpy_ref import NumpyFootCost, ordered_select
+    from ijoy_jax.testing import NumpyFootCost, ordered_select
 
     ref = NumpyFootCost(terrain, robot)
     n = 5 if quick else 20

@@ -28,7 +28,7 @@ import numpy as np
 from jax import lax
 from mujoco import mjx
 
-from ijoy_jax import terrain
+from ijoy_jax import robots, terrain
 from ijoy_jax.sim import model
 from ijoy_jax.terrain import Terrain
 
@@ -105,36 +105,6 @@ def cpu_rollout(batch: int, steps: int, params: model.BipedParams | None = None,
                 mujoco=mujoco.__version__, final_ok=bool(np.all(np.isfinite(out[:, -1]))))
 
 
-def command_range(robot) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi), each (3,): the joystick commands (m/s, m/s, rad/s) the action set can realise.
-
-    With p_next = p0 + dt j, the commands span the actions' extent around p0:
-    xdot over [min dx - p0x, max dx - p0x] / dt, ydot over +-(max dy - p0y) / dt
-    (the lateral room beyond the step in place, either way), thetadot over
-    +-max |dtheta| / dt.
-    """
-    acts = np.asarray(robot.actions)
-    p0, dt = np.asarray(robot.p0), float(robot.step_time)
-    lo = np.array([acts[:, 0].min() - p0[0], -(acts[:, 1].max() - p0[1]), -np.abs(acts[:, 2]).max()]) / dt
-    hi = np.array([acts[:, 0].max() - p0[0], acts[:, 1].max() - p0[1], np.abs(acts[:, 2]).max()]) / dt
-    return lo, hi
-
-
-def random_commands(key, robot, batch: int, num_steps: int, hold: int = 1) -> jax.Array:
-    """(batch, num_steps, 3) joystick commands, uniform over :func:`command_range`.
-
-    Each command is held for ``hold`` steps (1: a new one every step, the
-    harshest joystick; ``num_steps``: one command per robot for the whole run).
-    """
-    if hold < 1:
-        raise ValueError(f"hold must be at least 1 step, got {hold}")
-    lo, hi = command_range(robot)
-    n = -(-num_steps // hold)
-    u = jax.random.uniform(key, (batch, n, 3), jnp.float32)
-    u = jnp.repeat(u, hold, axis=1)[:, :num_steps]
-    return jnp.asarray(lo, jnp.float32) + u * jnp.asarray(hi - lo, jnp.float32)
-
-
 def closed_loop(batch: int, num_steps: int, seed: int = 0, shape=(300, 300), resolution: float = 0.04,
                 params: model.BipedParams | None = None, cfg=None, hold: int = 1) -> dict:
     """The joystick loop with the MJX biped for ``batch`` robots with random commands on flat ground.
@@ -144,9 +114,8 @@ def closed_loop(batch: int, num_steps: int, seed: int = 0, shape=(300, 300), res
     time, wall time of the run, physics steps/s of the loop, the number of
     robots that fell, and the placement error (mean and 95th percentile over
     all steps taken, m). Each random command is held for ``hold`` steps
-    (:func:`random_commands`).
+    (:func:`ijoy_jax.robots.random_commands`).
     """
-    from ijoy_jax import robots
     from ijoy_jax.sim import walker
 
     robot = robots.hrp2()
@@ -154,7 +123,7 @@ def closed_loop(batch: int, num_steps: int, seed: int = 0, shape=(300, 300), res
     origin = (-0.5 * shape[0] * resolution, -0.5 * shape[1] * resolution)
     ground = terrain.flat(shape, resolution, origin=origin, has_height=True)
     start = jnp.asarray([[0.0, 0.095, 0.0], [0.0, -0.095, 0.0]], jnp.float32)
-    commands = random_commands(jax.random.key(seed), robot, batch, num_steps, hold)
+    commands = robots.random_commands(jax.random.key(seed), robot, batch, num_steps, hold)
 
     def one(cmd):
         return walker.rollout_core(sim, ground, robot, start, cmd, num_steps)

@@ -20,7 +20,7 @@ def demo_scene() -> ij.Terrain:
         [3.75, 1.20, 0.0, 0.10, 2.40, 0.1],  # wall: the robot walks up to it and steps in place
     ])
     cylinders = np.array([[1.32, 1.12, 0.03, 0.1], [2.70, 1.10, 0.035, 0.1], [3.10, 1.32, 0.03, 0.1]])
-    return ij.scene.rasterize(t, boxes=boxes, cylinders=cylinders)
+    return ij.terrain.scene.rasterize(t, boxes=boxes, cylinders=cylinders)
 
 
 def run(out: str = "ijoy_demo.png", num_steps: int = 24, margin: float = 0.02) -> dict:

@@ -1,0 +1,38 @@
+"""FootCost: how well a terrain location serves as a foothold, plus the cost of the action.
+
+Two paths compute the same costs: :mod:`~ijoy_jax.footcost.xla` (jnp, every named term; the default) and
+:mod:`~ijoy_jax.footcost.pallas` (the totals as one fused kernel per decision, for GPUs). Both read the
+per-terrain tables of :mod:`~ijoy_jax.footcost.index`, built once per terrain.
+"""
+
+from ijoy_jax.footcost import index as index
+from ijoy_jax.footcost import pallas as pallas
+from ijoy_jax.footcost import xla as xla
+from ijoy_jax.footcost.index import TerrainIndex as TerrainIndex
+from ijoy_jax.footcost.index import block_sums as block_sums
+from ijoy_jax.footcost.index import index_terrain as index_terrain
+from ijoy_jax.footcost.index import swing_corridor as swing_corridor
+from ijoy_jax.footcost.index import window_cells as window_cells
+from ijoy_jax.footcost.pallas import foot_cost_fused as foot_cost_fused
+from ijoy_jax.footcost.xla import FootCostTerms as FootCostTerms
+from ijoy_jax.footcost.xla import foot_cost as foot_cost
+from ijoy_jax.footcost.xla import foot_cost_terms as foot_cost_terms
+from ijoy_jax.footcost.xla import foot_cost_terms_indexed as foot_cost_terms_indexed
+from ijoy_jax.footcost.xla import validate as validate
+
+__all__ = [
+    "FootCostTerms",
+    "TerrainIndex",
+    "block_sums",
+    "foot_cost",
+    "foot_cost_fused",
+    "foot_cost_terms",
+    "foot_cost_terms_indexed",
+    "index",
+    "index_terrain",
+    "pallas",
+    "swing_corridor",
+    "validate",
+    "window_cells",
+    "xla",
+]

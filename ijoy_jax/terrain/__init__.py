@@ -1,0 +1,18 @@
+"""The environment e of the paper, and the terrains it is made of.
+
+:mod:`~ijoy_jax.terrain.grid` holds the :class:`Terrain` pytree (a 2D occupancy grid or a 2.5D height map)
+and its constructors; :mod:`~ijoy_jax.terrain.scene` rasterises posed boxes and cylinders into a map;
+:mod:`~ijoy_jax.terrain.generators` makes thousands of procedural terrains of named families in one jitted
+call.
+"""
+
+from ijoy_jax.terrain import generators as generators
+from ijoy_jax.terrain import grid as grid
+from ijoy_jax.terrain import scene as scene
+from ijoy_jax.terrain.grid import Terrain as Terrain
+from ijoy_jax.terrain.grid import flat as flat
+from ijoy_jax.terrain.grid import from_arrays as from_arrays
+from ijoy_jax.terrain.grid import from_image as from_image
+from ijoy_jax.terrain.grid import grid_spec as grid_spec
+
+__all__ = ["Terrain", "flat", "from_arrays", "from_image", "generators", "grid", "grid_spec", "scene"]
