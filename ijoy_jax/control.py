@@ -40,18 +40,20 @@ class StanceInfo(NamedTuple):
 class Walker(NamedTuple):
     """A robot that executes footsteps (optax-style: a tuple of pure functions).
 
-    init(start (2, 3), first_swing ()) -> state
-    stance(state) -> StanceInfo              (ComputeStanceLocation)
-    execute(state, pose (3,), go ()) -> state (SendRobotCmd if go else StopWalking,
-                                               then WaitForNextStep)
-    feet(state) -> (2, 3) world poses, row 0 left, row 1 right.
-    log(state) -> pytree recorded after every step (optional; e.g. a physically
-        simulated robot's placement error and falls), kept in Trajectory.log.
-    warmup: loop iterations before the first decision (static int, default 0)
-        in which the robot settles: ``execute`` is called with ``go=False``,
-        the loop does not stop, and nothing of them is kept in the Trajectory.
-        A robot that must stand a step before walking uses it instead of
-        stepping in ``init``, so the step's code is traced (and compiled) once.
+    Fields::
+
+      init(start (2, 3), first_swing ()) -> state
+      stance(state) -> StanceInfo              (ComputeStanceLocation)
+      execute(state, pose (3,), go ()) -> state (SendRobotCmd if go else StopWalking,
+                                                 then WaitForNextStep)
+      feet(state) -> (2, 3) world poses, row 0 left, row 1 right.
+      log(state) -> pytree recorded after every step (optional; e.g. a physically
+          simulated robot's placement error and falls), kept in Trajectory.log.
+      warmup: loop iterations before the first decision (static int, default 0)
+          in which the robot settles: ``execute`` is called with ``go=False``,
+          the loop does not stop, and nothing of them is kept in the Trajectory.
+          A robot that must stand a step before walking uses it instead of
+          stepping in ``init``, so the step's code is traced (and compiled) once.
     """
 
     init: Callable[[jax.Array, jax.Array], Any]
@@ -87,7 +89,8 @@ def perfect_walker() -> Walker:
 class Trajectory(NamedTuple):
     """One rollout of the control loop (T = num_steps; vmapped rollouts add axes).
 
-    Per step (T,) unless noted:
+    Per step (T,) unless noted::
+
       footsteps: (T, 3) world pose of the swing foot after the step (the
         foothold put down; its old pose on steps not taken).
       sides: +1 if the left foot was the swing foot, -1 the right.
@@ -114,6 +117,7 @@ class Trajectory(NamedTuple):
       deviation: |achieved - p_next| of the swing foot in the stance frame (m).
       rotation_deviation: |wrap(achieved - p_next)| rotation (rad).
       evaluated: actions whose FootCost was computed.
+
     feet: (2, 3) final foot poses (row 0 left).
     log: the walker's per-step log (leaves with a leading T axis), or None.
     """

@@ -33,7 +33,8 @@ class TerrainMetrics:
 
     The metrics follow the biped planner the paper cites (Chestnutt et al.
     2003): a plane is fitted (least squares) to the heights of the cells under
-    the foot, and
+    the foot, and::
+
       slope      angle of that plane from horizontal (rad),
       roughness  mean absolute deviation of those cells from the plane (m),
       bump       largest height of a cell above the plane (m),
@@ -42,6 +43,7 @@ class TerrainMetrics:
       band       largest |deviation| from the plane in the safety band, the
                  cells touched by the footprint grown by the margin but not
                  by the footprint itself: catches edges and drop-offs (m).
+
     A metric beyond its limit makes the cost +inf; otherwise its term is
     ``weight * metric``. Weights are cost units per radian or per metre.
     """
@@ -79,7 +81,8 @@ def default_metrics(
 class Robot:
     """A robot model and its joystick parameters (the paper's footprint and S).
 
-    Leaves (traced; scalars unless noted; metres, radians, seconds):
+    Leaves (traced; scalars unless noted; metres, radians, seconds)::
+
       foot_length: footprint length along the foot's own x axis.
       foot_width: footprint width.
       margin: safety margin; validity uses the footprint grown by it on every
@@ -97,7 +100,9 @@ class Robot:
       rotation_weight: dist = |translation| + rotation_weight * |rotation|
         (cost units per radian before w); large, so the commanded rotation is
         preferred whenever such a step is valid.
-    Static:
+
+    Static::
+
       max_radius: largest half-diagonal of the grown footprint the fixed-size
         windows cover (m); a larger footprint or margin is flagged invalid.
       max_swing: longest swing-path segment the path window covers (m).

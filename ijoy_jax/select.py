@@ -8,7 +8,8 @@ frame; the paper quantises it to the nearest f_i of a precomputed target set F
 (:class:`Targets`, a lattice), and both selectors score against that f_i by
 default so their ``.cost`` agree.
 
-Selectors (same step on the same inputs):
+Selectors (same step on the same inputs)::
+
   "exhaustive": FootCost of every action in parallel, then the argmin.
   "ordered":    the paper's algorithm: walk L_i (the actions sorted by dist
                 to f_i, precomputed) in chunks, keeping the best so far, and
@@ -115,16 +116,18 @@ def _targets_for(robot: Robot, lo, step, counts) -> Targets:
 class StepChoice(NamedTuple):
     """Result of :func:`select_step` (one decision; vmapped calls add leading axes).
 
-    pose: (3,) world pose of the chosen swing foot (the step-in-place pose
-      when no step is valid, so it is never NaN).
-    valid: () bool, False when no valid step exists: the caller stops walking.
-    cost: () float32, FootCost + w * dist of the choice (+inf if not valid).
-    foot_cost: () float32, the FootCost part of ``cost`` (action cost plus
-      terrain terms; +inf if the foothold is invalid).
-    index: () int32 index into the action set (-1 when not valid).
-    target: (3,) world pose the choice was scored against (f_i, or p_next).
-    command_ok: () bool, False if the command had NaN/inf (treated as zero).
-    evaluated: () int32 number of actions whose FootCost was computed.
+    Fields::
+
+      pose: (3,) world pose of the chosen swing foot (the step-in-place pose
+        when no step is valid, so it is never NaN).
+      valid: () bool, False when no valid step exists: the caller stops walking.
+      cost: () float32, FootCost + w * dist of the choice (+inf if not valid).
+      foot_cost: () float32, the FootCost part of ``cost`` (action cost plus
+        terrain terms; +inf if the foothold is invalid).
+      index: () int32 index into the action set (-1 when not valid).
+      target: (3,) world pose the choice was scored against (f_i, or p_next).
+      command_ok: () bool, False if the command had NaN/inf (treated as zero).
+      evaluated: () int32 number of actions whose FootCost was computed.
     """
 
     pose: jax.Array

@@ -22,17 +22,19 @@ from ijoy_jax.terrain import Terrain
 class TerrainIndex:
     """Per-terrain tables that make FootCost O(columns) per candidate.
 
-    obstacles_before: (nx, ny + 1) int32, number of obstacle cells in column
-      ix with row index < j (prefix counts along y).
-    height_max: (levels, nx, ny) float32 sparse table; ``height_max[k, ix, j]``
-      is the largest height in rows ``j .. j + 2**k - 1`` of column ix.
-    height_padded: (nx + 2P, ny + 2P) float32 heights, edge-padded by P cells.
-    height_sums: (nx + 2P, blocks, 2B + 1, 2) float32 prefix sums of the
-      padded map's columns over overlapping windows of 2B rows, for the fused
-      kernel's plane fits (:func:`block_sums`; B: a power of two >= P;
-      blocks = 0 on 2D maps).
-    height_block_first: (nx + 2P, blocks) float32, each window's first height.
-    pad: P (static).
+    Fields::
+
+      obstacles_before: (nx, ny + 1) int32, number of obstacle cells in column
+        ix with row index < j (prefix counts along y).
+      height_max: (levels, nx, ny) float32 sparse table; ``height_max[k, ix, j]``
+        is the largest height in rows ``j .. j + 2**k - 1`` of column ix.
+      height_padded: (nx + 2P, ny + 2P) float32 heights, edge-padded by P cells.
+      height_sums: (nx + 2P, blocks, 2B + 1, 2) float32 prefix sums of the
+        padded map's columns over overlapping windows of 2B rows, for the fused
+        kernel's plane fits (:func:`block_sums`; B: a power of two >= P;
+        blocks = 0 on 2D maps).
+      height_block_first: (nx + 2P, blocks) float32, each window's first height.
+      pad: P (static).
     """
 
     obstacles_before: jax.Array

@@ -44,7 +44,8 @@ SLACK = 1e-6  # m: float32 rounding allowed above the robot's float64 static win
 class FootCostTerms(NamedTuple):
     """FootCost of N candidate steps, as a total and as named terms (all (N,) float32).
 
-    Cost terms (cost units; +inf marks the term that rejected a step):
+    Cost terms (cost units; +inf marks the term that rejected a step)::
+
       total: sum of the terms below; +inf iff the step is invalid.
       action: the action's own cost.
       obstacle: 0, or +inf if the grown footprint touches an obstacle or
@@ -55,7 +56,9 @@ class FootCostTerms(NamedTuple):
         map) for the action's clearance.
       unsupported: 0, or +inf if the pose is not finite or the footprint,
         margin or swing is larger than the robot's static windows cover.
-    Raw metrics (for plots and tests):
+
+    Raw metrics (for plots and tests)::
+
       slope_angle (rad), roughness_m, bump_m, step_height_m (signed, up is
       positive), band_m, path_height_m (corridor height above the higher
       foothold; -inf if no check), foot_height_m (plane height at the foot

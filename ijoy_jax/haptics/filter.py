@@ -247,7 +247,7 @@ def filter_signal(coeffs: FilterCoeffs, signal, state: FilterState | None = None
 
     Args:
       coeffs: from :func:`discretise`, broadcastable to the channel shape S.
-      signal: (T, *S) raw joystick samples, time on the first axis.
+      signal: ``(T, *S)`` raw joystick samples, time on the first axis.
       state: state to continue from; default at rest at each channel's first
         finite sample (0 if a channel has none).
 
@@ -291,13 +291,13 @@ def spring_damper_filter(signal, dt, natural_frequency, damping_ratio):
     :func:`filter_signal` to get the flags too).
 
     Args:
-      signal: (T, *S) raw joystick positions, time on the first axis (any unit).
+      signal: ``(T, *S)`` raw joystick positions, time on the first axis (any unit).
       dt: sample period in seconds.
       natural_frequency: w0 = sqrt(c/m) in rad/s, broadcastable to S.
       damping_ratio: zeta = d / (2 sqrt(c m)), broadcastable to S.
 
     Returns:
-      (T, *S) filtered control input, same shape as ``signal``.
+      ``(T, *S)`` filtered control input, same shape as ``signal``.
 
     Example:
       >>> t = jnp.arange(1000) * 1e-3

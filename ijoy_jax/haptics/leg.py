@@ -58,7 +58,8 @@ PAPER_X = (0.2756, -0.1561, -1.2383)
 class LegGeometry:
     """Geometry of one leg (all traced leaves: vmap over legs, differentiate, no recompiles).
 
-    Attributes (metres, radians):
+    Attributes (metres, radians)::
+
       hip_lateral: offset from the vertical rotation axis to the abduction axis.
       hip_forward: forward offset of the flexion axis from the abduction axis.
       hip_down: downward offset of the flexion axis from the abduction axis.
@@ -199,9 +200,11 @@ def leg_repulsive_force(leg: LegGeometry, q, c1, decay_length) -> jax.Array:
 def alduro_leg(lateral_sign: float = 1.0, dtype=None) -> LegGeometry:
     """The assumed ALDURO-like leg geometry (see the module docstring); +1 left, -1 right leg.
 
-    Cylinder triangles (arm_a, arm_b, gamma range over the stroke):
+    Cylinder triangles (arm_a, arm_b, gamma range over the stroke)::
+
       flexion (0.30, 0.30, 50-130 deg), abduction (0.40, 0.40, 75-105 deg),
       rotation (0.20, 0.20, 60-120 deg), knee (0.35, 0.25, 40-140 deg).
+
     Strokes 0.290, 0.148, 0.146, 0.339 m. Joint ranges that follow: flexion 13.9
     to 93.9 deg, abduction -20.5 to 9.5 deg, rotation -30.1 to 29.9 deg, knee
     101.5 down to 1.5 deg (extending the knee cylinder straightens the knee).

@@ -70,7 +70,8 @@ def nominal_q(dtype=None) -> jax.Array:
 class PlatformWorkspace(NamedTuple):
     """Linearised workspace of the platform centre for translations with the feet fixed.
 
-    Fields (L legs, R rows per leg):
+    Fields (L legs, R rows per leg)::
+
       feet: (L, 3) foot positions relative to the platform centre, metres.
       planes: Planes with leading axis L: normals (L, R, 3) in ``dp`` space
         (the legs' normals, sign flipped), offsets (L, R) metres, valid (L, R).

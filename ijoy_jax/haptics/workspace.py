@@ -68,7 +68,8 @@ class Planes(NamedTuple):
     edge rows (used only for a flat zonotope); then 6 frame rows (used only when
     all columns are parallel or zero).
 
-    Fields:
+    Fields::
+
       normals: (R, 3) unit outward normals; zero rows where not valid.
       offsets: (R,) distance d >= 0 from the current position to each plane along
         its normal, metres (0 where not valid).
@@ -83,7 +84,8 @@ class Planes(NamedTuple):
 class Workspace(NamedTuple):
     """A mechanism's linearised workspace at one configuration.
 
-    Fields (k cylinders):
+    Fields (k cylinders)::
+
       position: (3,) end-effector position x = Phi(q), metres.
       jacobian: (3, k) J = dPhi/dq.
       travel_minus: (k,) dq^- = q_min - q <= 0 (after clamping), cylinder units (m).

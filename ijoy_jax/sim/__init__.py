@@ -5,7 +5,7 @@ Modules: :mod:`.model` (the MjSpec robot and the terrain's height field),
 :mod:`.preview` (LIPM/ZMP preview control), :mod:`.swing` (swing-foot paths
 over the terrain), :mod:`.controller` (the walking pattern generator: a
 footstep to joint targets, tick by tick), :mod:`.walker` (the MJX robot as a
-:class:`ijoy_jax.control.Walker` and its rollout), :mod:`.bench` (physics
+:class:`ijoy_jax.control.Walker` and its rollout), ``ijoy bench sim`` (physics
 steps per second), :mod:`.render` (offscreen images of a rollout),
 :mod:`.margins` (safety margin against collisions under execution error).
 

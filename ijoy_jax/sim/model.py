@@ -67,7 +67,8 @@ _FOOT_THICKNESS = 0.03  # visual/inertial foot box height above the sole, metres
 class BipedParams:
     """Static parameters of the HRP-2-like biped and its terrain model (hashable; metres, kg, seconds, radians).
 
-    Geometry:
+    Geometry::
+
       hip_offset_y: lateral distance of each hip point from the pelvis origin.
       thigh, shank: hip-knee and knee-ankle lengths.
       ankle_height: ankle joint centre above the sole.
@@ -75,16 +76,21 @@ class BipedParams:
       stand_height: default height of the pelvis origin (hip joints) above the
         soles in :func:`standing_qpos` (0.68: knees bent about 32 deg, CoM 0.77 m).
       stand_width: default lateral distance between the feet (HRP-2's step in place, 0.19).
+
     Masses (kg; total 58.0): pelvis, torso, head, arm (each), thigh (with the
       hip motors), shank, foot (with the ankle motors) per leg: legs 10.0 kg each, upper body 38 kg.
-    Joints, per leg in :data:`JOINTS` order (6-tuples):
+
+    Joints, per leg in :data:`JOINTS` order (6-tuples)::
+
       range_lo, range_hi: LEFT leg joint limits (the right leg mirrors yaw and
         roll: ``(-hi, -lo)``), HRP-2-like.
       armature: reflected rotor inertia (kg m^2); damping: joint viscous damping (N m s/rad).
       kp (N m/rad), kv (N m s/rad), force (N m): position actuator gains and torque limits. Stiff
         (kp 30000 on the pitch joints): softer gains (3000) let the CoM lag the plan at ~2 Hz
         bandwidth and diverge; twice these is unstable at timestep 0.002.
-    Contacts:
+
+    Contacts::
+
       sole_grid: (n along the foot, n across) sole spheres (3 x 2: toe/middle/heel x edges).
       sole_radius: sphere radius; the spheres' bottoms lie on the sole plane. MJX collides
         a sphere with ``(ceil(2 r / res) + 1)^2`` height field cells: 0.009 keeps that 2 x 2 at
@@ -93,13 +99,17 @@ class BipedParams:
         each capsule-hfield pair costs MJX a sub-grid of prisms as large as the capsule).
       shin_radius, thigh_radius: capsule radii of the shank and thigh.
       friction: sliding friction of the sole spheres.
-    Simulation:
+
+    Simulation::
+
       timestep: physics step (0.002 s: stable with these gains and armature);
         integrator implicitfast (implicit in the actuator damping kv).
       iterations, ls_iterations: Newton solver caps (4 and 8): MJX unrolls every
         iteration for every robot, so they bound each step's cost; Newton converges
         in 2-3 iterations on this small system (nv = 18).
-    Terrain:
+
+    Terrain::
+
       obstacle_height: height given to obstacle cells of 2D terrains (0.1: a low
         obstacle a foot can be lifted over, as in the paper's stepping-over
         experiments; at 0.3 the swing path must rise 0.35 m and the simulated

@@ -55,7 +55,8 @@ CONVERGED_A = 1e-3
 class PreviewGains(NamedTuple):
     """Cart-table model and preview-servo gains (one set for both axes).
 
-    Fields:
+    Fields::
+
       dt: () float, control period (s).
       A: (3, 3) state transition of [c, cdot, cddot] over one tick.
       B: (3,) jerk input vector.

@@ -209,8 +209,8 @@ def swing_apex(
     Args:
       start, end: (4,) lift-off and touch-down poses (x, y, z, yaw); z is the
         sole height (m).
-      clearance: () height (m) of the sole above the highest swept terrain.
-      Others as in :func:`corridor_height`.
+      clearance: () height (m) of the sole above the highest swept terrain. Others as in
+        :func:`corridor_height`.
     """
     start = jnp.asarray(start)
     end = jnp.asarray(end)

@@ -1,5 +1,7 @@
 """Sweeps: declare a grid or random samples of scenarios in TOML, run them batched and resumable, load the results.
 
+Public names::
+
   load_config / parse_config / SweepConfig / SweepConfigError   the TOML schema, validated before compute
   cells / scenarios                                              the expansion into cells and scenarios
   run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks sharded over local

@@ -128,7 +128,8 @@ class SweepConfigError(ValueError):
 class SweepConfig:
     """A validated sweep (see the module docstring for the TOML schema).
 
-    Fields:
+    Fields::
+
       name: sweep name (default: the file's stem).
       description: free text.
       seed: base seed (int).

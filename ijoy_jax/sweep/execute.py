@@ -184,7 +184,8 @@ _run_chunk = jax.jit(_chunk, static_argnames=("static",))
 class RunStats:
     """What :func:`run` did (seconds are wall time).
 
-    Fields:
+    Fields::
+
       out: the output folder.
       scenarios: scenarios in the plan; computed: scenarios computed by this
         call (skipped chunks excluded); chunks, skipped: chunk counts.

@@ -212,7 +212,8 @@ class BarParams(_StartZone):
     the robot's right (-1, lower y) or left (+1, higher y), so the other foot
     walks past beside it. ``lane = 0`` (default) spans the whole map.
 
-    Fields (metres, radians):
+    Fields (metres, radians)::
+
       count: number of bars (int; clipped to ``[0, max_count]``).
       first: distance along +x from the start point to the first bar, metres.
       spacing: distance between consecutive bars, metres.
@@ -275,7 +276,8 @@ class StairParams(_StartZone):
     jitter ``rise * clip(ceil((d - first') / run), 0, num_steps)``. After the
     last riser the top landing runs to the map's edge.
 
-    Fields (metres, radians):
+    Fields (metres, radians)::
+
       rise: step height, metres (negative: a descending stair).
       run: tread depth along ``direction``, metres.
       num_steps: number of risers (int; clipped to ``[0, max_count]``).
@@ -308,7 +310,8 @@ class SteppingStoneParams(_StartZone):
     ``spacing`` is clipped to at least the resolution. Without jitter the
     stone fraction is ``(size / spacing)**2``.
 
-    Fields (metres, radians):
+    Fields (metres, radians)::
+
       size: stone edge length, metres (HRP-2's foot with a 2 cm margin needs ~0.29).
       spacing: lattice pitch (centre to centre), metres.
       jitter: maximum centre offset per axis, metres.
@@ -332,7 +335,8 @@ class SteppingStoneParams(_StartZone):
 class SlopeParams(_StartZone):
     """Parameters of :func:`slope`: ``h(p) = tan(angle) * (p - start) . (cos direction, sin direction)``.
 
-    Fields (radians):
+    Fields (radians)::
+
       angle: inclination, radians (positive rises along ``direction``;
         clipped to +-80 deg so heights stay finite).
       direction: direction of steepest ascent in the map plane, radians (0 = +x).
@@ -353,7 +357,8 @@ class RoughParams(_StartZone):
     Within ``start_radius`` the field is 0 and tapers in linearly over one
     correlation length (at least one cell) outside it.
 
-    Fields (metres):
+    Fields (metres)::
+
       amplitude: RMS height, metres (before the start taper).
       correlation_length: ``l`` of the autocorrelation above, metres (0: white noise).
       obstacle_above: cells higher than this are obstacles (2D and 2.5D),

@@ -7,10 +7,12 @@ one jitted call. A cell counts as covered by an object iff their interiors
 overlap (positive area), the same exact rule FootCost uses, so an object
 never slips between cells.
 
-Object arrays (metres, radians), one row per object:
+Object arrays (metres, radians), one row per object::
+
   boxes: (B, 6) ``x, y, yaw, length, width, top``: centre, heading of the
     length axis, full extents, and the world elevation of the top face.
   cylinders: (C, 4) ``x, y, radius, top``.
+
 Rows with a zero extent (length, width or radius) cover nothing, so a
 fixed-size array padded with zero rows holds a variable number of objects.
 """

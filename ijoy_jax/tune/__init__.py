@@ -1,13 +1,15 @@
 """Tuning by gradient: a smooth relaxation of step selection and optax tuners.
 
-Modules:
+Modules::
+
   relax     soft FootCost and the Boltzmann (softmin) selector
   inverse   recover parameters from demonstrations (maximum-entropy likelihood)
   forward   minimise command error + obstacle risk; exact held-out evaluation
   loop      the generic tuning loop: jitted optax steps, vmapped runs, progress, save/load
   rollout   the relaxed control-loop rollout, differentiable end to end
 
-Top-level API (one symbol per line below):
+Top-level API (one symbol per line below)::
+
   tune(loss_fn, params0, optimizer, steps, *, key, ...)  -> TuneResult   the generic loop
   make_tuner(loss_fn, optimizer, ...)                    -> Tuner        init/step, for your own loop
   load(out_dir)                                          -> Saved        params, losses, manifest

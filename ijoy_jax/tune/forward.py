@@ -88,7 +88,8 @@ TUNABLE = ("w", "rotation_weight", "margin", *METRIC_NAMES)
 class ForwardConfig:
     """Everything a forward tuning run depends on (saved in the run's manifest).
 
-    Decisions (:func:`sample_decisions`):
+    Decisions (:func:`sample_decisions`)::
+
       shape, resolution: grid of each random map (cells, m); the stance foot is
         at the map centre.
       has_height: 2.5D maps (object tops raise the ground) or 2D.
@@ -99,20 +100,27 @@ class ForwardConfig:
       clear_radius: cells within this radius of the stance foot are kept free (m).
       heading: stance heading uniform in [-heading, heading] (rad).
       command_low, command_high: joystick command uniform in this box (m/s, m/s, rad/s).
-    Objective:
+
+    Objective::
+
       distance: a foothold is *near* an obstacle when its footprint grown by this
         overlaps one (m).
       noise_xy, noise_theta: placement noise std (m, rad).
       num_noise_samples: Monte-Carlo draws of the noise per decision.
       rotation_scale: metres of command error per radian of heading error.
       risk_weight: metres of command error one near-obstacle foothold is worth.
-    Relaxation (:mod:`ijoy_jax.tune.relax`):
+
+    Relaxation (:mod:`ijoy_jax.tune.relax`)::
+
       sharpness, tau, barrier_weight.
-    Tuner:
+
+    Tuner::
+
       names: Robot leaves to tune (None: ``rotation_weight``, ``margin``; 2.5D
         also ``w`` and every metric weight and limit).
       batch_size: decisions per step; steps: Adam steps; learning_rate: on the
         unconstrained variables; seed: of the training decisions.
+
     Robot (:func:`make_robot`): density of HRP-2's action set, max_margin (m),
       and the starting margin (m).
     """
@@ -510,13 +518,15 @@ def _loss(uparams, batch, robot, cfg):
 class Evaluation(NamedTuple):
     """Exact-selector evaluation of B decisions with K noise draws each (per decision, (B,)).
 
-    valid: a valid step exists (else the robot stops: no foothold placed).
-    translation_error_m: |dxy| of the choice (the step-in-place pose if none) against p_next.
-    rotation_error_rad: |wrap(dtheta)| of the choice against p_next.
-    near: int32 noisy placements (of K) within ``distance`` of an obstacle (0 if not valid).
-    on_obstacle: int32 noisy placements (of K) whose footprint itself overlaps
-      an obstacle or leaves the map (0 if not valid).
-    index: int32 chosen action (-1 if none).
+    Fields::
+
+      valid: a valid step exists (else the robot stops: no foothold placed).
+      translation_error_m: |dxy| of the choice (the step-in-place pose if none) against p_next.
+      rotation_error_rad: |wrap(dtheta)| of the choice against p_next.
+      near: int32 noisy placements (of K) within ``distance`` of an obstacle (0 if not valid).
+      on_obstacle: int32 noisy placements (of K) whose footprint itself overlaps
+        an obstacle or leaves the map (0 if not valid).
+      index: int32 chosen action (-1 if none).
     """
 
     valid: jax.Array

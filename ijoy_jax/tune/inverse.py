@@ -69,11 +69,13 @@ class Demonstrations(NamedTuple):
 class FitResult(NamedTuple):
     """Result of :func:`fit`.
 
-    robot: the Robot with the fitted parameters.
-    params: dict name -> fitted value (natural units).
-    losses: (num_steps,) mean negative log-likelihood per Adam step (nats)
-      of the best start.
-    final_losses: (R,) final loss of every start (R = 1 without restarts).
+    Fields::
+
+      robot: the Robot with the fitted parameters.
+      params: dict name -> fitted value (natural units).
+      losses: (num_steps,) mean negative log-likelihood per Adam step (nats)
+        of the best start.
+      final_losses: (R,) final loss of every start (R = 1 without restarts).
     """
 
     robot: Robot

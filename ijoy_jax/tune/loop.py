@@ -24,7 +24,8 @@ Positive parameters: optimise an unconstrained variable and map it through a
 (a scaled sigmoid, for a parameter with an upper bound such as a safety
 margin that must stay within a robot's static window).
 
-Files written by :func:`save` (``out_dir``):
+Files written by :func:`save` (``out_dir``)::
+
   params.npz     final parameters, one array per leaf, named by its dotted path
                  (leading run axis when ``num_runs`` was given).
   params.json    the same as nested lists (readable).

@@ -395,18 +395,20 @@ def soft_foot_cost_terms(
 class RelaxedChoice(NamedTuple):
     """Result of :func:`relaxed_select` (one decision).
 
-    probs: (N,) Boltzmann probabilities ``softmax(-cost / tau)`` over S.
-    log_probs: (N,) their logarithms (for likelihoods).
-    cost: (N,) relaxed cost, soft FootCost + w * dist (cost units).
-    terms: :class:`SoftFootCostTerms` of (N,) arrays.
-    expected_pose: (3,) world pose sum_i p_i step_i (m, rad; angles averaged
-      linearly, fine for a set spanning well under pi).
-    expected_cost: () sum_i p_i cost_i.
-    mode: () int32 most probable action (argmin of the relaxed cost).
-    invalid_mass: () probability on steps whose exact FootCost is +inf
-      (NaN when ``exact=False``); no gradient (a constant indicator).
-    exact_valid: (N,) bool exact validity (all True when ``exact=False``).
-    target: (3,) world pose the costs were scored against.
+    Fields::
+
+      probs: (N,) Boltzmann probabilities ``softmax(-cost / tau)`` over S.
+      log_probs: (N,) their logarithms (for likelihoods).
+      cost: (N,) relaxed cost, soft FootCost + w * dist (cost units).
+      terms: :class:`SoftFootCostTerms` of (N,) arrays.
+      expected_pose: (3,) world pose sum_i p_i step_i (m, rad; angles averaged
+        linearly, fine for a set spanning well under pi).
+      expected_cost: () sum_i p_i cost_i.
+      mode: () int32 most probable action (argmin of the relaxed cost).
+      invalid_mass: () probability on steps whose exact FootCost is +inf
+        (NaN when ``exact=False``); no gradient (a constant indicator).
+      exact_valid: (N,) bool exact validity (all True when ``exact=False``).
+      target: (3,) world pose the costs were scored against.
     """
 
     probs: jax.Array
