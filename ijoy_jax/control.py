@@ -178,7 +178,7 @@ def rollout_core(
     """The rollout without input checks or its own jit (call it inside your jit/vmap).
 
     ``targets`` (:func:`ijoy_jax.make_targets`) may be prebuilt once per robot;
-    by default it is built inside, which costs a sort of |F| x N entries.
+    by default it is built inside, which costs a sort of ``|F|`` x N entries.
     """
     walker = perfect_walker() if walker is None else walker
     index = index_terrain(terrain, robot)
@@ -284,7 +284,7 @@ def rollout(
       swing_path: check the swing corridor on 2.5D terrains.
       quantize: score against F's nearest target (the paper) or p_next.
       targets: prebuilt :func:`ijoy_jax.make_targets` of this robot (F and
-        L_i); built inside the jitted rollout when None, which sorts |F| x N
+        L_i); built inside the jitted rollout when None, which sorts ``|F|`` x N
         entries on every call (about 0.4 s on a 2-core CPU for HRP-2): pass
         it when calling repeatedly with the same actions and rotation weight.
       kernel: FootCost on the GPU: "xla" (default) or "pallas", the fused

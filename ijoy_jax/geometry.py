@@ -65,7 +65,8 @@ def rect_corners(cx, cy, theta, half_length, half_width) -> jax.Array:
 class ColumnSpans(NamedTuple):
     """Cells touched by one convex shape, one row range per grid column.
 
-    Fields (K = number of columns in the window, static):
+    Fields (K = number of columns in the window, static)::
+
       ix: (K,) int32 column index of each window column (``ix0 + arange(K)``).
       j0: (K,) int32 first touched row (inclusive).
       j1: (K,) int32 last touched row (inclusive).

@@ -458,7 +458,7 @@ def command_range(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
     With p_next = p0 + dt j, the commands span the actions' extent around p0:
     xdot over [min dx - p0x, max dx - p0x] / dt, ydot over +-(max dy - p0y) / dt
     (the lateral room beyond the step in place, either way), thetadot over
-    +-max |dtheta| / dt.
+    +-max ``|dtheta|`` / dt.
     """
     acts = np.asarray(robot.actions)
     p0, dt = np.asarray(robot.p0), float(robot.step_time)

@@ -1,7 +1,7 @@
 """Step selection: the best valid step of S for a joystick command (paper section IV.B).
 
 cost(p) = FootCost(p, e) + w * dist(p, target), with
-dist(p, q) = |p_xy - q_xy| + rotation_weight * |wrap(p_theta - q_theta)|
+dist(p, q) = ``|p_xy - q_xy|`` + rotation_weight * ``|wrap(p_theta - q_theta)|``
 measured in the stance foot's frame. The ideal step is p_next = p0 + dt * j for
 the joystick command j = (xdot, ydot, thetadot) in the robot's (stance foot's)
 frame; the paper quantises it to the nearest f_i of a precomputed target set F
@@ -52,7 +52,8 @@ class Targets:
 
     F is a lattice over (dx, dy, dtheta) of the LEFT swing foot (the right
     foot uses the mirror image). Static: ``lo``, ``step``, ``counts`` (tuples
-    of 3). Leaves:
+    of 3). Leaves::
+
       order: (|F|, N) int32, L_i: action indices sorted by (dist to f_i, index).
       dist: (|F|, N) float32, dist(action, f_i) for every pair (same numbers
         in every method, so costs agree bit for bit).
@@ -65,7 +66,7 @@ class Targets:
     counts: tuple = static_field()
 
     def points(self) -> jax.Array:
-        """(|F|, 3) the target footsteps f_i (left swing foot, stance frame)."""
+        """(``|F|``, 3) the target footsteps f_i (left swing foot, stance frame)."""
         axes = [lo + st * jnp.arange(n, dtype=jnp.float32) for lo, st, n in zip(self.lo, self.step, self.counts,
                                                                                 strict=True)]
         return jnp.stack(jnp.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
@@ -81,7 +82,7 @@ class Targets:
     def nearest(self, rel_left: jax.Array) -> jax.Array:
         """Index of the f_i nearest a left-foot target (3,): rounding per axis, clamped to F.
 
-        Per-axis rounding minimises every |component| of the difference, so it
+        Per-axis rounding minimises every ``|component|`` of the difference, so it
         minimises dist for any weights.
         """
         idx = []

@@ -47,7 +47,8 @@ _REACH_TOL = 1e-6
 class LegIK(NamedTuple):
     """Result of :func:`leg_ik`.
 
-    Fields:
+    Fields::
+
       q: (6,) joint angles, radians (hip_yaw, hip_roll, hip_pitch, knee, ankle_pitch, ankle_roll).
       reachable: () bool, False when the hip-to-ankle distance is outside the
         leg's reach (straight leg, knee at its upper limit); then ``q`` points the leg at the target.

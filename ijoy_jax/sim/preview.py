@@ -371,7 +371,7 @@ def lipm_sway_amplitude(zmp_amplitude, step_time, com_height, gravity=9.81) -> j
       gravity: () (m/s^2).
 
     Returns:
-      () peak |c| (m).
+      () peak ``|c|`` (m).
     """
     w = jnp.sqrt(gravity / jnp.asarray(com_height, jnp.result_type(float)))
     return zmp_amplitude * (1.0 - 1.0 / jnp.cosh(0.5 * w * step_time))

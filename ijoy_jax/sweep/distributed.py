@@ -11,7 +11,7 @@ key-value store (so every process cuts the same plan), and a final barrier lets
 process 0 write ``aggregates.parquet`` once every process is done. Neither is
 a device collective, so the CPU backend needs no gloo/MPI collectives.
 
-Layout sources, first match wins per field:
+Layout sources, first match wins per field::
 
   flags            ``ijoy sweep run --num-processes N --process-id I --coordinator HOST:PORT``
   environment      ``IJOY_NUM_PROCESSES``, ``IJOY_PROCESS_ID``, ``IJOY_COORDINATOR``
@@ -47,7 +47,8 @@ ENV = {"num_processes": "IJOY_NUM_PROCESSES", "process_id": "IJOY_PROCESS_ID", "
 class Layout:
     """Where this process stands among the processes of one sweep.
 
-    Fields:
+    Fields::
+
       num_processes: N (>= 1), or None to let JAX's cluster detection decide.
       process_id: I in [0, N), or None (JAX's cluster detection).
       coordinator: ``"host:port"`` of process 0's coordination service, or None.

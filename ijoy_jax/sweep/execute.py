@@ -28,7 +28,7 @@ resolution, 2D/2.5D flag, ``num_steps``, ``method``, ``kernel`` and the chunk sh
 the device count. When ``robot.rotation_weight`` is not swept, the targets F
 and L_i are built once per density outside the jit and shared by every
 scenario; when it is, each scenario sorts its own
-(|F| x N entries), a different compiled function.
+(``|F|`` x N entries), a different compiled function.
 
 Devices. A chunk's scenario batch is sharded over the local devices (all of
 them by default, or the first ``devices``): a 1-D

@@ -23,11 +23,14 @@ from ijoy_jax._struct import pytree_dataclass, static_field
 class Terrain:
     """A terrain map (the paper's environment e).
 
-    Leaves (traced):
+    Leaves (traced)::
+
       height: (nx, ny) float32, elevation of each cell in metres (zeros in 2D).
       free: (nx, ny) bool, True where a foot may stand, False for obstacles.
       origin: (2,) float32, world (x, y) of the map's lower corner, metres.
-    Static:
+
+    Static::
+
       resolution: cell edge length in metres (Python float; fixes window sizes).
       has_height: False for a 2D occupancy grid, True for a 2.5D height map.
         2D terrains skip the height metrics (they would all be zero).

@@ -264,12 +264,14 @@ def natural_values(robot: Robot, uparams: dict) -> dict:
 class Decisions(NamedTuple):
     """B decisions to score (leading batch axis on every leaf).
 
-    terrains: Terrain with (B, nx, ny) leaves.
-    stances: (B, 3) stance foot poses (m, rad).
-    sides: (B,) stance side, +1 left / -1 right.
-    commands: (B, 3) joystick commands (m/s, m/s, rad/s).
-    noise: (B, K, 3) standard-normal placement-noise draws (scaled by the
-      config's std when used).
+    Fields::
+
+      terrains: Terrain with (B, nx, ny) leaves.
+      stances: (B, 3) stance foot poses (m, rad).
+      sides: (B,) stance side, +1 left / -1 right.
+      commands: (B, 3) joystick commands (m/s, m/s, rad/s).
+      noise: (B, K, 3) standard-normal placement-noise draws (scaled by the
+        config's std when used).
     """
 
     terrains: Terrain

@@ -66,7 +66,7 @@ class RelaxedTrajectory(NamedTuple):
     expected_cost: (T,) expected relaxed cost (cost units).
     target: (T, 3) world pose p_next each decision was scored against.
     error: (T, 3) footstep minus p_next in the stance frame (m, m, rad wrapped).
-    deviation: (T,) |error_xy| (m), zero gradient (not NaN) at 0.
+    deviation: (T,) ``|error_xy|`` (m), zero gradient (not NaN) at 0.
     feet: (2, 3) final foot poses (row 0 left).
     """
 
