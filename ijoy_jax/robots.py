@@ -364,6 +364,25 @@ def hrp2(margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
     return make_robot(lattice_actions(density_counts(density)), **kwargs)
 
 
+def start_stance(robot: Robot, x, y, theta=0.0, *, width=None) -> jax.Array:
+    """(2, 3) float32 world poses of the feet standing side by side: row 0 left, row 1 right (m, m, rad).
+
+    Both feet face ``theta``; their midpoint is ``(x, y)`` and they stand
+    ``width`` metres apart across that heading (default ``robot.p0[1]``, the
+    step in place, so the first decision can step in place). Pure JAX: the
+    arguments may be traced.
+
+    Example:
+      >>> import numpy as np, ijoy_jax as ij
+      >>> np.round(ij.robots.start_stance(ij.robots.hrp2(), 0.3, 1.0), 3).tolist()
+      [[0.3, 1.095, 0.0], [0.3, 0.905, 0.0]]
+    """
+    half = 0.5 * (robot.p0[1] if width is None else jnp.asarray(width, jnp.float32))
+    x, y, theta = (jnp.asarray(v, jnp.float32) for v in (x, y, theta))
+    dx, dy = -half * jnp.sin(theta), half * jnp.cos(theta)  # the half-width along the heading's left
+    return jnp.stack([jnp.stack([x + dx, y + dy, theta]), jnp.stack([x - dx, y - dy, theta])])
+
+
 def get_leaf(robot: Robot, name: str):
     """The leaf of ``robot`` named by a dotted path, e.g. ``"w"`` or ``"metrics.slope_limit"``."""
     obj = robot

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import functools
 import math
@@ -31,8 +30,6 @@ BATCH = 3
 GEOM_TOL = 1e-4
 # Heights from a vmapped and a single call may differ by float32 rounding only.
 HEIGHT_ATOL = 1e-6
-
-TRACES: collections.Counter = collections.Counter()
 
 # Parameters that exercise every random draw (jitters on) and fit the small grid.
 BUSY = {
@@ -75,17 +72,29 @@ def _batched(params, b=BATCH):
 
 
 @functools.cache
-def compiled(name: str, has_height: bool, batched: bool = False):
-    """A jitted generator (single or vmapped) that counts its traces in TRACES."""
-    tag = (name, has_height, batched)
+def _counted(name: str, has_height: bool, batched: bool):
+    """A jitted generator (single or vmapped) and a function returning how many times it was traced (the
+    count lives in this closure)."""
+    count = 0
 
     def fn(keys, params):
-        TRACES[tag] += 1
+        nonlocal count
+        count += 1  # runs once per trace
         if batched:
             return gen.batch(name, keys, params, in_axes=0, has_height=has_height, **GRID)
         return gen.generate(name, keys, params, has_height=has_height, **GRID)
 
-    return jax.jit(fn)
+    return jax.jit(fn), lambda: count
+
+
+def compiled(name: str, has_height: bool, batched: bool = False):
+    """The jitted generator (single or vmapped), one per family and flags for the whole file."""
+    return _counted(name, has_height, batched)[0]
+
+
+def traces(name: str, has_height: bool, batched: bool = False) -> int:
+    """How many times :func:`compiled` of these arguments has been traced."""
+    return _counted(name, has_height, batched)[1]()
 
 
 def _np(t: Terrain):
@@ -149,9 +158,9 @@ def test_jit_no_recompile_determinism(name, has_height):
     differs = not (np.array_equal(_np(d)[0], h) and np.array_equal(_np(d)[1], free))
     assert differs == (name in RANDOM_FAMILIES and (has_height or name != "stairs"))
     # New parameter values: no retrace (counted by a side effect in the traced function).
-    traces, cached = TRACES[(name, has_height, False)], f._cache_size()
+    before, cached = traces(name, has_height), f._cache_size()
     f(jax.random.key(1), _other_values(p)).height.block_until_ready()
-    assert TRACES[(name, has_height, False)] == traces >= 1 and f._cache_size() == cached == 1
+    assert traces(name, has_height) == before >= 1 and f._cache_size() == cached == 1
 
 
 @pytest.mark.parametrize("name", list(gen.FAMILIES))
@@ -169,7 +178,7 @@ def test_vmap_matches_single_calls(name):
         np.testing.assert_array_equal(np.asarray(out.free[i]), np.asarray(one.free))
     # Different parameter values, same shapes and dtypes: no retrace.
     fb(keys, _batched(_other_values(BUSY[name]))).height.block_until_ready()
-    assert TRACES[(name, True, True)] == 1 and fb._cache_size() == 1
+    assert traces(name, True, True) == 1 and fb._cache_size() == 1
 
 
 def test_eager_and_int_seed_match_jit():
@@ -603,9 +612,9 @@ def test_single_lane_bar_defaults_and_tracing():
     yc = ORIGIN[1] + (np.arange(SHAPE[1]) + 0.5) * RES
     assert (free[1][:, yc > sy - 0.2 + RES]).all() and not free[1][:, yc < sy - 0.2 - RES].all()
     assert (free[2][:, yc < sy + 0.2 - RES]).all() and not free[2][:, yc > sy + 0.2 + RES].all()
-    before = TRACES[("bars", False, True)]
+    before = traces("bars", False, True)
     fn(keys, dataclasses.replace(params, lane_gap=jnp.array([0.1, 0.3, 0.0])))
-    assert TRACES[("bars", False, True)] == before
+    assert traces("bars", False, True) == before
     objs = gen.objects("bars", keys[1], jax.tree.map(lambda x: x[1], params), **GRID)
     x, y, yaw, length = (float(v) for v in objs.boxes[0, :4])
     assert y + 0.5 * length == pytest.approx(sy - 0.2, abs=1e-5) and yaw == pytest.approx(math.pi / 2)

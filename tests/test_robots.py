@@ -139,3 +139,19 @@ def test_random_commands_stay_in_range_and_are_held(hold):
 def test_random_commands_rejects_a_hold_below_one_step():
     with pytest.raises(ValueError, match="hold"):
         robots.random_commands(jax.random.key(0), robots.hrp2(), 2, 5, 0)
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.7, -2.5])
+def test_start_stance_puts_the_feet_side_by_side_at_the_step_in_place_width(theta):
+    robot = robots.hrp2()
+    feet = np.asarray(robots.start_stance(robot, 1.5, -0.4, theta))
+    assert feet.shape == (2, 3) and feet.dtype == np.float32
+    np.testing.assert_allclose(feet[:, 2], theta, atol=1e-6)
+    np.testing.assert_allclose(feet[:, :2].mean(0), [1.5, -0.4], atol=1e-6)
+    # the right foot, in the left foot's frame, is the mirrored step in place: straight across, -p0[1] in y
+    rel = np.asarray(ij.geometry.relative(feet[0], feet[1]))
+    np.testing.assert_allclose(rel, [0.0, -float(robot.p0[1]), 0.0], atol=1e-6)
+    wide = np.asarray(robots.start_stance(robot, 0.0, 0.0, theta, width=0.3))
+    np.testing.assert_allclose(np.ptp(wide[:, :2], axis=0), 0.3 * np.abs([np.sin(theta), np.cos(theta)]), atol=1e-6)
+    traced = jax.jit(lambda x, y, t: robots.start_stance(robot, x, y, t))(1.5, -0.4, theta)
+    np.testing.assert_allclose(np.asarray(traced), feet, atol=1e-6)

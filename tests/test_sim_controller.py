@@ -88,7 +88,8 @@ class _Native:
         self.m = model.build_model(self.params, terr)
         self.d = mujoco.MjData(self.m)
         self.planned = np.array([[0.0, 0.095, 0.0, 0.0], [0.0, -0.095, 0.0, 0.0]], np.float32)
-        self.d.qpos[:] = np.asarray(W.standing_qpos(self.params, self.cfg, self.planned[:, :3], jnp.zeros(2)))
+        self.d.qpos[:] = np.asarray(model.stand_pose(self.params, self.planned[:, :3], jnp.zeros(2),
+                                                     self.cfg.pelvis_height)[0])
         self.d.ctrl[:] = self.d.qpos[7:]
         mujoco.mj_forward(self.m, self.d)
         self.pg = controller.gains(self.cfg)

@@ -185,7 +185,7 @@ def test_mjx_put_terrains_ball_contact_and_standing():
     def run(mm, d):
         def body(d, _):  # step() collides at the state it starts from: dist[0] is the initial state's
             d = mjx.step(mm, d)
-            c = d._impl.contact
+            c = model.contacts(d)
             return d, jnp.min(jnp.where((c.geom1 == ball) | (c.geom2 == ball), c.dist, 1.0))
 
         d, dist = jax.lax.scan(body, d, None, length=steps)
@@ -220,3 +220,21 @@ def test_put_terrain_places_the_height_field_on_the_terrains_grid():
     assert axes.geom_pos == 0
     for k, t in enumerate(terrains):
         np.testing.assert_allclose(mb.geom_pos[k, gid], model.build_model(params, t).geom_pos[gid], atol=1e-6)
+
+
+def test_contacts_accessor_reads_mjx_3_17_contacts():
+    """model.contacts reaches into mjx.Data's private _impl: pinned to the mujoco-mjx version we depend on."""
+    from importlib import metadata
+
+    from mujoco import mjx
+
+    assert metadata.version("mujoco-mjx") == "3.17.0", "re-check model.contacts against this mujoco-mjx"
+    m = model.build_model(P, ij.terrain.flat(SHAPE, RES, ORIGIN))
+    ix = model.model_index(m)
+    ncon = 4 * ix.sole_geoms.size  # each sole sphere meets a 2 x 2 sub-grid of the height field's prisms
+    mx = mjx.put_model(m)
+    for c in (model.contacts(mjx.make_data(m)), jax.eval_shape(lambda d: model.contacts(mjx.step(mx, d)),
+                                                               mjx.make_data(m))):
+        shapes = {k: getattr(c, k).shape for k in ("dist", "pos", "frame", "geom", "geom1", "geom2")}
+        assert shapes == dict(dist=(ncon,), pos=(ncon, 3), frame=(ncon, 3, 3), geom=(ncon, 2), geom1=(ncon,),
+                              geom2=(ncon,))

@@ -57,7 +57,7 @@ def runs(sim):
     scs = scenarios_2d()
     scs = {k: scs[k] for k in NAMES[:3]}
     scs["flat-forward"] = scenario(np.ones(SHAPE_2D, bool), start=_start(), command=FORWARD_CMDS)
-    traj = W.rollout_batch(sim, *_batch(scs.values()), STEPS_2D, "ordered", frames_per_step=FRAMES)
+    traj = W.rollout_batch(sim, *_batch(scs.values()), num_steps=STEPS_2D, method="ordered", frames_per_step=FRAMES)
     traj = jax.tree_util.tree_map(np.asarray, traj)
     return {k: (sc, jax.tree_util.tree_map(lambda a, i=i: a[i], traj)) for i, (k, sc) in enumerate(scs.items())}
 

@@ -18,7 +18,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from ijoy_jax import cli, sweep
+from ijoy_jax import sweep
+from ijoy_jax.apps import cli
 
 TINY = """
 [sweep]
@@ -196,3 +197,31 @@ def test_layout_from_flags_and_environment():
     # --distributed leaves unset fields to JAX's cluster detection (SLURM, Open MPI, ...).
     lay = sweep.distributed.layout(env={"IJOY_DISTRIBUTED": "1"})
     assert lay.multi and lay.num_processes is None and lay.coordinator is None
+
+
+ACCESSOR_SCRIPT = """
+import sys
+import jax
+from ijoy_jax.sweep import distributed
+assert distributed.client() is None  # before initialize: no client, agree and barrier work alone
+assert distributed.agree("solo", lambda: 3, 0) == 3 and distributed.barrier("solo", 1.0) is False
+jax.distributed.initialize(f"localhost:{sys.argv[1]}", 1, 0)
+c = distributed.client()
+assert c is not None and all(hasattr(c, f) for f in ("key_value_set", "blocking_key_value_get", "wait_at_barrier"))
+assert distributed.agree("answer", lambda: 42, 0) == 42  # through the key-value store
+assert int(c.blocking_key_value_get("answer", 1000)) == 42
+assert distributed.barrier("all_here", 10.0) is True
+print("ok")
+"""
+
+
+def test_distributed_client_accessor_pinned_to_jax():
+    """sweep.distributed.client reaches into jax._src.distributed (the public API has no key-value store or
+    barrier): pinned to the jax versions we run, 0.10.x here and 0.11.x on the GPU machines."""
+    import jax
+
+    assert jax.__version__.startswith(("0.10.", "0.11.")), f"re-check distributed.client against jax {jax.__version__}"
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    proc = subprocess.run([sys.executable, "-c", ACCESSOR_SCRIPT, str(_free_port())], env=env, capture_output=True,
+                          text=True, timeout=PROC_TIMEOUT)
+    assert proc.returncode == 0 and proc.stdout.strip().endswith("ok"), proc.stderr[-2000:]

@@ -68,11 +68,10 @@ def _queries(n: int, seed: int = 1):
     return f(stance), f(command), f(swing)
 
 
-def _starts(b: int, x: float, y0: float, rows: int):
+def _starts(robot, b: int, x: float, y0: float, rows: int):
     """(b, 2, 3) start poses, feet side by side facing +x at ``x``, staggered in y from ``y0`` in ``rows`` rows."""
     y = y0 + 0.01 * (np.arange(b) % rows)
-    foot = lambda dy: np.column_stack([np.full(b, x), y + dy, np.zeros(b)])  # noqa: E731
-    return jnp.asarray(np.stack([foot(0.095), foot(-0.095)], axis=1), jnp.float32)
+    return jax.vmap(lambda yi: ij.robots.start_stance(robot, x, yi))(jnp.asarray(y, jnp.float32))
 
 
 def _time(fn, *args, repeats: int = 10, min_seconds: float = 0.5, max_seconds: float = 8.0):
@@ -195,7 +194,7 @@ def bench_select(rows, quick: bool, chunk: int):
         for b in ([1, 8] if quick else ([1, 64] if _cpu() else [1, 64, 1024, 8192, 32768])):
             if kernel == "xla" and b > 8192:
                 continue  # XLA materialises per-candidate windows: its rows stop at the sizes of earlier runs
-            starts = _starts(b, 1.0, 1.0, 50)
+            starts = _starts(robot, b, 1.0, 1.0, 50)
             f = jax.jit(jax.vmap(lambda s, method=method, kernel=kernel: rollout_core(
                 terrain, robot, s, cmd, steps, method, targets=targets, kernel=kernel).footsteps))
             comp, run, _, _ = _time(f, starts, repeats=3, min_seconds=0.2)
@@ -210,7 +209,7 @@ def bench_select(rows, quick: bool, chunk: int):
         heights = jax.vmap(lambda i: 0.03 * jnp.sin(2.0 * x + 0.1 * i)
                            + 0.002 * jax.random.normal(jax.random.key(i), grid))(jnp.arange(b))
         terrains = jax.vmap(lambda h: flat.replace(height=h))(heights)
-        starts = _starts(b, 0.5, 0.8, 40)
+        starts = _starts(robot, b, 0.5, 0.8, 40)
         for method, kernel in loops:
             f = jax.jit(jax.vmap(lambda t, s, method=method, kernel=kernel: rollout_core(
                 t, robot, s, cmd, steps, method, targets=targets, kernel=kernel).footsteps))

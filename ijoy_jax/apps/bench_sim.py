@@ -122,11 +122,11 @@ def closed_loop(batch: int, num_steps: int, seed: int = 0, shape=(300, 300), res
     sim = walker.make_sim(shape, resolution, params, cfg, robot=robot)
     origin = (-0.5 * shape[0] * resolution, -0.5 * shape[1] * resolution)
     ground = terrain.flat(shape, resolution, origin=origin, has_height=True)
-    start = jnp.asarray([[0.0, 0.095, 0.0], [0.0, -0.095, 0.0]], jnp.float32)
+    start = robots.start_stance(robot, 0.0, 0.0)
     commands = robots.random_commands(jax.random.key(seed), robot, batch, num_steps, hold)
 
     def one(cmd):
-        return walker.rollout_core(sim, ground, robot, start, cmd, num_steps)
+        return walker.rollout(sim, ground, robot, start, cmd, num_steps=num_steps)
 
     fn = jax.jit(jax.vmap(one))
     t0 = time.perf_counter()

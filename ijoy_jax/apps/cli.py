@@ -161,7 +161,7 @@ def _sim(args) -> int:
         terrains, starts = margins.clutter(args.seed, 1)
         command = margins.forward_commands(args.seed + 1, 1, robot)[0]
         terrain = jax.tree_util.tree_map(lambda a: a[0], terrains)
-        traj = W.rollout(sim, terrain, robot, starts[0], command, args.steps, frames_per_step=args.frames)
+        traj = W.rollout(sim, terrain, robot, starts[0], command, num_steps=args.steps, frames_per_step=args.frames)
     except ValueError as e:
         print(f"ijoy sim render: error: {e}", file=sys.stderr)
         return 2

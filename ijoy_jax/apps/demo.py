@@ -32,7 +32,7 @@ def run(out: str = "ijoy_demo.png", num_steps: int = 24, margin: float = 0.02) -
 
     terrain = demo_scene()
     robot = ij.robots.hrp2(margin=margin)
-    start = np.array([[0.3, 1.295, 0.0], [0.3, 1.105, 0.0]])  # left, right
+    start = ij.robots.start_stance(robot, 0.3, 1.2)  # left, right: 0.19 m apart, facing +x
     command = np.array([0.25, 0.0, 0.0])  # forward at full speed (m/s, m/s, rad/s)
     t0 = time.perf_counter()
     smart = ij.rollout(terrain, robot, start, command, num_steps)

@@ -5,8 +5,8 @@ Modules: :mod:`.model` (the MjSpec robot and the terrain's height field),
 :mod:`.preview` (LIPM/ZMP preview control), :mod:`.swing` (swing-foot paths
 over the terrain), :mod:`.controller` (the walking pattern generator: a
 footstep to joint targets, tick by tick), :mod:`.walker` (the MJX robot as a
-:class:`ijoy_jax.control.Walker` and its rollout), ``ijoy bench sim`` (physics
-steps per second), :mod:`.render` (offscreen images of a rollout),
+:class:`ijoy_jax.control.Walker` and its rollout), :mod:`.render`
+(offscreen images of a rollout),
 :mod:`.margins` (safety margin against collisions under execution error).
 
 Importing this package on a Linux machine without a display that has

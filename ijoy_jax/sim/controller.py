@@ -43,33 +43,26 @@ from ijoy_jax.sim import dynamics, kinematics, preview, swing
 class WalkConfig:
     """Static settings of the walking controller (seconds, metres, radians).
 
-    The fall counts quoted for ``ds_fraction`` and the stabiliser's settings
-    were measured with the pelvis at 0.68 m, before ``pelvis_height`` was
-    lowered to 0.65 (which removed the remaining flat-ground falls); they rank
-    the settings, they are not today's rates.
+    The defaults are the settings that fell least in the closed-loop
+    measurements of BENCHMARKS.md (MJX, random commands on flat ground, and
+    the paper's scenarios); the figures, and the settings they rank, are
+    there.
 
     Fields::
 
       step_time: duration of one step; must equal the selector's
         ``robot.step_time`` (the Delta t of p_next).
-      ds_fraction: fraction of a step spent in double support, at its start.
-        0.1 (80 ms at 0.8 s steps): 1024 MJX robots with random commands for
-        30 steps fell 2 % of the time against 9 % at 0.15, 26 % at 0.2 (the
-        swing is slower and gentler) and 83 % at 0.05 (the ZMP jumps between
-        the feet too fast); BENCHMARKS.md.
+      ds_fraction: fraction of a step spent in double support, at its start
+        (0.1: 80 ms at 0.8 s steps). Longer makes the swing faster and harsher,
+        shorter moves the ZMP between the feet too fast.
       control_dt: controller period; physics runs ``control_dt / timestep``
         steps per tick with the targets held.
       preview_time: preview horizon of the LIPM controller.
       com_height: z_c of the LIPM, the CoM's height above the ground.
       pelvis_height: the pelvis origin's height above the ground at that CoM
-        (0.65: knees bent 0.85 rad standing). At 0.68 (0.57 rad) a wide
-        step combined with a long one left the legs out of reach: the knee
-        straightened before the swing foot was down, the weight moved onto a
-        foot still in the air, it slammed down, slipped and turned, and fast
-        backward sidesteps while turning fell in 11 % of 30-step rollouts. MJX,
-        4096 robots x 30 random-command steps on flat ground (one H200,
-        BENCHMARKS.md): 0.65 and 0.62 fell 0 times, with commands held for the
-        whole run and with a new one every step; 0.68 fell 24-32 and 5-11.
+        (0.65: knees bent 0.85 rad standing). Higher, a wide step combined with
+        a long one leaves the legs out of reach: the knee straightens before
+        the swing foot is down and the weight moves onto a foot still in the air.
       clearance: the swing sole rises this far above the highest terrain under
         its swept footprint.
       swing_lift: fraction of the swing spent rising (and as much descending)
@@ -85,21 +78,15 @@ class WalkConfig:
       preview_q, preview_r: weights of the preview controller's cost.
       land_gain: the stabiliser's swing-leg feedback (0 = off; :func:`stabilise`):
         the fraction of the measured body attitude and position error the swing
-        leg compensates, so the foot lands level where it was sent. MJX, 1024
-        robots x 30 random-command steps on flat ground (BENCHMARKS.md): 0.5
-        fell 0-2 times (7-12 of 4096; placement error 0.25 cm mean, 0.43
-        without), 0: 21 (99 of 4096), 0.3: 6, 0.7: 3, 1.0: 3 (one H200).
+        leg compensates, so the foot lands level where it was sent.
       land_ramp: fraction of the swing over which that feedback fades in (none
         at lift-off, so the targets do not jump).
       land_decay: time constant (s) with which a leg's compensation fades once
-        it has touched down and carries the body (0.05 s: 18 of 4096 fell
-        against 7-12 at 0.1 and 8 at 0.25).
+        it has touched down and carries the body.
       stance_gain: the same feedback on the legs that carry the body (0 = the
         offsets only fade), low-passed with ``land_decay``: the soles are held
-        partly level against the measured body tilt (foot compliance). 0.3 cut
-        flat-ground falls from 7-12 to 3-5 of 4096 but in one run of the paper's
-        scenarios three fell (side-ell, around, the 2 cm straddle) against one
-        (around) at 0, so it stays off by default; 0.6: 34 of 4096.
+        partly level against the measured body tilt (foot compliance). Off by
+        default: it helped on flat ground but not in the paper's scenarios.
     """
 
     step_time: float = 0.8

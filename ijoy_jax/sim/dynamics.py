@@ -7,10 +7,10 @@ joint trajectory differs. :func:`motion_zmp` measures that: it takes a joint
 trajectory (qpos at a fixed period), differentiates it twice, runs MuJoCo
 XLA's inverse dynamics with the constraints switched off, and reads the
 ground-reaction wrench the free joint would need, whose centre of pressure on
-the ground is the ZMP. On today's pattern generator it finds the ZMP up to
-19 cm (rms 6 cm) off the reference on forward 0.2 m steps, toe and heel in
-turn: the reason those steps fall (see issue 7's notes), and the error a
-dynamics filter (Kajita et al. 2003, second preview stage) has to remove.
+the ground is the ZMP. Without correction the pattern's ZMP lies up to 19 cm
+(rms 6 cm) off the reference on forward 0.2 m steps, toe and heel in turn,
+enough to fall: the error that :func:`ijoy_jax.sim.controller.zmp_correction`
+(a dynamics filter, Kajita et al. 2003, second preview stage) removes.
 """
 
 from __future__ import annotations

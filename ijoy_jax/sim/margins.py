@@ -12,8 +12,8 @@ landed on one, falls, and the progress made. :func:`plot` draws the result.
     res = margins.run(margins=[0.0, 0.02, 0.05, 0.1], batch=64, num_steps=16)
     margins.plot(res, "margins.png")
 
-``ijoy sim margins`` runs it from the command line (on a GPU: 256 maps x 11
-margins x 16 steps in about two minutes on one H100).
+``ijoy sim margins`` runs it from the command line (timings and results of the
+paper's 11 margins on 256 maps: BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -37,18 +37,19 @@ CLUTTER = generators.ObstacleParams(count=14, size_min=0.04, size_max=0.12)  # 2
 
 
 def clutter(seed: int, batch: int, params: generators.ObstacleParams = CLUTTER, shape=SHAPE,
-            resolution: float = RESOLUTION, max_count: int = 16):
+            resolution: float = RESOLUTION, max_count: int = 16, *, robot: robots.Robot | None = None):
     """``batch`` random 2D clutter maps (a Terrain with a leading batch axis) and each map's start (B, 2, 3).
 
-    The robot starts in the generator's keep-clear zone, facing +x, feet 0.19 m apart.
+    The robot (default HRP-2) starts in the generator's keep-clear zone, facing +x, its feet its step in place
+    apart (:func:`ijoy_jax.robots.start_stance`; 0.19 m for HRP-2).
     """
     keys = jax.random.split(jax.random.key(seed), batch)
     terrains = jax.vmap(lambda k: generators.obstacles(k, params, shape=shape, resolution=resolution,
                                                        max_count=max_count))(keys)
     x0 = float(params.start_x) * shape[0] * resolution
     y0 = float(params.start_y) * shape[1] * resolution
-    start = np.array([[x0, y0 + 0.095, 0.0], [x0, y0 - 0.095, 0.0]], np.float32)
-    return terrains, jnp.asarray(np.broadcast_to(start, (batch, 2, 3)))
+    start = robots.start_stance(robots.hrp2() if robot is None else robot, x0, y0)
+    return terrains, jnp.broadcast_to(start, (batch, 2, 3))
 
 
 def forward_commands(seed: int, batch: int, robot=None) -> jax.Array:
@@ -113,13 +114,13 @@ def run(margins=MARGINS, batch: int = 64, num_steps: int = 16, seed: int = 0, si
         chunk = 32 if jax.default_backend() == "cpu" else 512
     chunk = max(1, min(int(chunk), total))
     parts, t0 = [], time.perf_counter()
-    before = W._rollout_batch_jit._cache_size()
+    before = W.compiled_programs()
     for lo in range(0, total, chunk):
         idx = np.arange(lo, lo + chunk) % total  # the last chunk wraps round to keep one shape (one compile)
         take = lambda x, idx=idx: x[idx]  # noqa: E731
         traj = W.rollout_batch(sim, jax.tree_util.tree_map(take, all_terrains),
                                jax.tree_util.tree_map(take, all_robots), all_starts[idx], all_commands[idx],
-                               num_steps, method, frames_per_step=frames_per_step)
+                               num_steps=num_steps, method=method, frames_per_step=frames_per_step)
         parts.append(jax.tree_util.tree_map(lambda a, n=min(chunk, total - lo): np.asarray(a)[:n], traj))
     wall = time.perf_counter() - t0
     traj = jax.tree_util.tree_map(lambda *a: np.concatenate(a), *parts)
@@ -143,7 +144,7 @@ def run(margins=MARGINS, batch: int = 64, num_steps: int = 16, seed: int = 0, si
         fall_rate=out["fell"].mean(1),
         mean_progress=out["progress"].mean(1),
         wall_s=wall,
-        compiles=W._rollout_batch_jit._cache_size() - before,
+        compiles=W.compiled_programs() - before,
         terrains=terrains,
         starts=np.asarray(starts),
         commands=np.asarray(commands),

@@ -49,6 +49,7 @@ __all__ = [
     "biped_params",
     "build_model",
     "build_spec",
+    "contacts",
     "hfield_data",
     "model_index",
     "physical_heights",
@@ -388,7 +389,7 @@ def hfield_data(params: BipedParams, terrain) -> jax.Array:
     return data.T.reshape(-1).astype(jnp.float32)
 
 
-def build_model(params: BipedParams, terrain) -> mujoco.MjModel:
+def build_model(params: BipedParams, terrain, *, edit=None) -> mujoco.MjModel:
     """The compiled :class:`mujoco.MjModel` of the biped on ``terrain`` (concrete).
 
     The height field data is written into the compiled model (``hfield_data``
@@ -396,8 +397,12 @@ def build_model(params: BipedParams, terrain) -> mujoco.MjModel:
     let MuJoCo's compiler rescale it to span [0, 1] (user hfield data is
     min-max normalised at compile time, which would lose the absolute heights).
     Keyframe 0 ("stand") is :func:`standing_qpos` on flat ground at z = 0 with matching ``ctrl``.
+    ``edit``, when given, changes the ``mujoco.MjSpec`` in place before it is
+    compiled (e.g. textures for :mod:`ijoy_jax.sim.render`).
     """
     spec = build_spec(params, terrain.shape, terrain.resolution, np.asarray(terrain.origin))
+    if edit is not None:
+        edit(spec)
     m = spec.compile()
     m.hfield_data[:] = np.asarray(hfield_data(params, terrain), np.float32)
     return m
@@ -611,3 +616,16 @@ def standing_qpos(params: BipedParams, feet=None, ground=(0.0, 0.0), com_height:
         raise ValueError(f"feet {feet.tolist()} at ground {ground.tolist()} are out of the legs' reach "
                          f"from a pelvis at z = {pelvis_z:.3f} m")
     return qpos
+
+
+def contacts(d) -> Any:
+    """The contacts of an ``mjx.Data`` (an ``mjx.Contact``, one row per potential contact).
+
+    ``dist`` (ncon,) m (negative: penetrating), ``pos`` (ncon, 3) m, ``frame``
+    (ncon, 3, 3) (row 0 the normal), ``geom`` (ncon, 2) and ``geom1``,
+    ``geom2`` (ncon,) geom ids. mujoco-mjx 3.17 keeps them in its JAX
+    implementation's private ``Data._impl`` (its public fields hold no
+    contacts), so this one accessor, pinned by a test to that version, is the
+    only place that reads it.
+    """
+    return d._impl.contact

@@ -53,10 +53,8 @@ def _check_gl() -> None:
                            "ijoy_jax.sim before mujoco")
 
 
-def _host_model(sim, terrain, width: int, height: int) -> mujoco.MjModel:
-    """The biped on ``terrain`` as :func:`ijoy_jax.sim.model.build_model` makes it, plus a sky and a 0.5 m checker
-    on the ground (looks only: the physics' model has neither)."""
-    spec = model.build_spec(sim.params, terrain.shape, terrain.resolution, np.asarray(terrain.origin))
+def _add_looks(spec: mujoco.MjSpec) -> None:
+    """A sky and a 0.5 m checker on the ground (looks only: the physics' model has neither)."""
     spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
                      rgb1=[0.6, 0.75, 0.9], rgb2=[0.15, 0.17, 0.2], width=64, height=384)
     spec.add_texture(name="checker", type=mujoco.mjtTexture.mjTEXTURE_2D,
@@ -66,8 +64,12 @@ def _host_model(sim, terrain, width: int, height: int) -> mujoco.MjModel:
     mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "checker"
     spec.geom("terrain").material = "ground"
     spec.geom("terrain").rgba = [1.0, 1.0, 1.0, 1.0]
-    m = spec.compile()
-    m.hfield_data[:] = np.asarray(model.hfield_data(sim.params, terrain), np.float32)
+
+
+def _host_model(sim, terrain, width: int, height: int) -> mujoco.MjModel:
+    """The biped on ``terrain`` as :func:`ijoy_jax.sim.model.build_model` makes it, with :func:`_add_looks` and an
+    offscreen buffer of at least ``width`` x ``height`` pixels."""
+    m = model.build_model(sim.params, terrain, edit=_add_looks)
     m.vis.global_.offwidth = max(int(width), m.vis.global_.offwidth)
     m.vis.global_.offheight = max(int(height), m.vis.global_.offheight)
     return m

@@ -33,6 +33,7 @@ import jax
 import jax.numpy as jnp
 
 from ijoy_jax import geometry
+from ijoy_jax.footcost import window_cells
 from ijoy_jax.terrain import Terrain
 
 
@@ -53,7 +54,7 @@ def _window(foot_length, foot_width, margin, max_radius, resolution: float) -> i
     max_radius = float(max_radius)
     if not math.isfinite(max_radius) or max_radius <= 0.0:
         raise ValueError(f"max_radius must be a positive number of metres, got {max_radius}")
-    return int(math.ceil(2.0 * max_radius / resolution - 1e-9)) + 1
+    return window_cells(max_radius, resolution)
 
 
 def _footprint_height_impl(terrain: Terrain, pose, hl, hw, k: int, off_map_height):

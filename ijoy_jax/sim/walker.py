@@ -13,9 +13,9 @@ sole (:func:`ijoy_jax.sim.controller.stabilise`). The robot stands one step befo
 first decision (the Walker's ``warmup`` iteration, so that the step's
 physics and dynamics filter are traced and compiled once, not twice).
 :func:`rollout` is the control loop of :func:`ijoy_jax.rollout` (the same
-selector code) with this walker, jitted as one scan; :func:`rollout_batch`
-runs B of them in one jitted vmap (terrains, robots, starts, commands), and
-:func:`rollout_core` is the unjitted loop to vmap inside your own code.
+selector code) with this walker, jitted as one scan (and usable inside your
+own jit or vmap); :func:`rollout_batch` runs B of them in one jitted vmap
+(terrains, robots, starts, commands).
 """
 
 from __future__ import annotations
@@ -93,8 +93,9 @@ def make_sim(shape, resolution: float, params: model.BipedParams | None = None, 
     idx = model.model_index(mj_model)
 
     def com_of(shift):
-        qpos = standing_qpos(params, cfg, jnp.asarray([[0.0, half, 0.0], [0.0, -half, 0.0]], jnp.float32),
-                             jnp.zeros(2), shift=jnp.asarray(shift, jnp.float32))
+        feet = jnp.asarray([[0.0, half, 0.0], [0.0, -half, 0.0]], jnp.float32)
+        qpos = model.stand_pose(params, feet, jnp.zeros(2), jnp.float32(cfg.pelvis_height),
+                                jnp.asarray(shift, jnp.float32))[0]
         data.qpos[:] = np.asarray(qpos)
         mujoco.mj_forward(mj_model, data)
         return data.subtree_com[idx.pelvis].copy()
@@ -118,15 +119,6 @@ def check_robot(robot: Robot, cfg: WalkConfig) -> None:
     if np.any(np.abs(st - cfg.step_time) > 1e-6):
         shown = float(st) if st.ndim == 0 else st
         raise ValueError(f"robot.step_time {shown} s differs from the walking controller's {cfg.step_time} s")
-
-
-def standing_qpos(params: model.BipedParams, cfg: WalkConfig, feet, ground, shift=None) -> jax.Array:
-    """(7 + 12,) qpos standing on soles ``feet`` (2, 3) at heights ``ground`` (2,), the pelvis
-    ``cfg.pelvis_height`` above the lower one (as the controller holds it) and above their midpoint (moved by
-    ``shift`` (2,) m when given)."""
-    ground = jnp.asarray(ground, jnp.float32)
-    return model.stand_pose(params, jnp.asarray(feet, jnp.float32), ground, jnp.min(ground) + cfg.pelvis_height,
-                            shift)[0]
 
 
 class StepLog(NamedTuple):
@@ -170,7 +162,7 @@ def _tilt(quat) -> jax.Array:
 
 def _obstacle_contact(sim: Sim, terrain: Terrain, d: mjx.Data) -> jax.Array:
     """A robot geom touches the terrain inside an obstacle cell (looked up half a cell into the ground)."""
-    con = d._impl.contact
+    con = model.contacts(d)
     robot_geoms = jnp.asarray(np.concatenate([sim.index.sole_geoms.ravel(), sim.index.shin_geom]))
     g = con.geom  # (ncon, 2)
     involves = jnp.any(g[:, :, None] == robot_geoms[None, None, :], axis=(1, 2))
@@ -260,7 +252,8 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
     def init(start, first_swing):
         start = jnp.asarray(start, jnp.float32)
         ground = jax.vmap(ground_of)(start)
-        qpos = standing_qpos(params, cfg, start, ground)
+        # the pelvis cfg.pelvis_height above the lower sole, as the controller holds it
+        qpos = model.stand_pose(params, start, ground, jnp.min(ground) + cfg.pelvis_height)[0]
         d = mjx.make_data(m)
         d = d.replace(qpos=qpos, ctrl=qpos[7:])
         d = mjx.kinematics(m, d)
@@ -317,38 +310,53 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
     return control.Walker(init, stance, execute, feet, lambda s: s.last, warmup=1)
 
 
-def rollout_core(sim: Sim, terrain: Terrain, robot: Robot, start, commands, num_steps: int,
-                 method: str = "exhaustive", first_swing=LEFT, targets: Targets | None = None,
-                 swing_path: bool = True, quantize: bool = True, frames_per_step: int = 0) -> control.Trajectory:
-    """The joystick loop with the simulated biped, without checks or jit (vmap it for batches)."""
+_OPTIONS = ("num_steps", "method", "swing_path", "quantize", "frames_per_step")
+
+
+@functools.partial(jax.jit, static_argnames=("sim",) + _OPTIONS)
+def _rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, first_swing, targets, *, num_steps: int,
+             method: str, swing_path: bool, quantize: bool, frames_per_step: int) -> control.Trajectory:
+    """The loop of :func:`rollout`, jitted, its inputs checked by the caller."""
     walker = mjx_walker(sim, terrain, frames_per_step=frames_per_step)
     return control.rollout_core(terrain, robot, start, commands, num_steps, method, first_swing, walker,
                                 swing_path, quantize, targets)
 
 
-_STATIC = ("sim", "num_steps", "method", "swing_path", "quantize", "frames_per_step")
+@functools.partial(jax.jit, static_argnames=("sim",) + _OPTIONS)
+def _rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, first_swing, targets, *,
+                   num_steps: int, method: str, swing_path: bool, quantize: bool,
+                   frames_per_step: int) -> control.Trajectory:
+    """:func:`_rollout` vmapped over terrains, robots, starts, commands and first swings, as one jitted program."""
 
-
-@functools.partial(jax.jit, static_argnames=_STATIC)
-def _rollout_jit(sim, terrain, robot, start, commands, num_steps, method, first_swing, targets, swing_path, quantize,
-                 frames_per_step):
-    return rollout_core(sim, terrain, robot, start, commands, num_steps, method, first_swing, targets,
-                        swing_path, quantize, frames_per_step)
-
-
-@functools.partial(jax.jit, static_argnames=_STATIC)
-def _rollout_batch_jit(sim, terrain, robot, start, commands, num_steps, method, first_swing, targets, swing_path,
-                       quantize, frames_per_step):
     def one(t, r, s, c, f):
-        return rollout_core(sim, t, r, s, c, num_steps, method, f, targets, swing_path, quantize, frames_per_step)
+        return _rollout(sim, t, r, s, c, f, targets, num_steps=num_steps, method=method, swing_path=swing_path,
+                        quantize=quantize, frames_per_step=frames_per_step)
 
-    return jax.vmap(one)(terrain, robot, start, commands, first_swing)
+    return jax.vmap(one)(terrains, robots, starts, commands, first_swing)
 
 
-def _check(sim: Sim, terrain: Terrain, robot: Robot, num_steps, method: str, frames_per_step: int, batched: bool):
-    lead = 1 if batched else 0
-    if tuple(terrain.free.shape[lead:]) != sim.shape or terrain.resolution != sim.resolution:
-        raise ValueError(f"terrain grid {tuple(terrain.free.shape[lead:])} at {terrain.resolution} m does not match "
+def compiled_programs() -> int:
+    """How many programs :func:`rollout` and :func:`rollout_batch` hold compiled (in this process).
+
+    Read it before and after a loop of calls to learn how many compiles the
+    loop caused: each new Sim, input shape or static option compiles once,
+    new terrain heights, robot parameters or commands reuse the program.
+    """
+    return _rollout._cache_size() + _rollout_batch._cache_size()
+
+
+def _is_traced(x) -> bool:
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(x))
+
+
+def _check(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_steps, method: str, first_swing,
+           frames_per_step: int, batch: int | None) -> None:
+    """The inputs of one rollout (``batch`` None) or of ``batch`` rollouts: shapes and static options always,
+    values only where they are concrete (so the checks pass through a caller's jit or vmap)."""
+    lead = () if batch is None else (batch,)
+    grid = tuple(np.shape(terrain.free)[len(lead):])
+    if grid != sim.shape or terrain.resolution != sim.resolution:
+        raise ValueError(f"terrain grid {grid} at {terrain.resolution} m does not match "
                          f"the Sim's {sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid")
     check_robot(robot, sim.cfg)
     if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
@@ -356,10 +364,23 @@ def _check(sim: Sim, terrain: Terrain, robot: Robot, num_steps, method: str, fra
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     frame_ticks(sim, frames_per_step)
+    if np.shape(first_swing) not in ((), lead) or (
+            not _is_traced(first_swing) and not np.all(np.isin(np.asarray(first_swing), (LEFT, -LEFT)))):
+        raise ValueError(f"first_swing must be +1 (left) or -1 (right) (one, or one per rollout), got {first_swing!r}")
+    if batch is None and np.shape(start) != (2, 3):
+        raise ValueError(f"start must have shape (2, 3) (left foot, right foot), got {np.shape(start)}")
+    if batch is not None and np.shape(start) != (batch, 2, 3):
+        raise ValueError(f"starts must have shape (B, 2, 3) with B = the terrains' batch {batch}, "
+                         f"got {np.shape(start)}")
+    if not _is_traced(start) and not np.all(np.isfinite(np.asarray(start))):
+        raise ValueError("start must be finite")
+    shapes = (lead + (3,), lead + (num_steps, 3))
+    if np.shape(commands) not in shapes:
+        raise ValueError(f"commands must have shape {shapes[0]} or {shapes[1]}, got {np.shape(commands)}")
 
 
-def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, num_steps: int, method: str = "exhaustive",
-            *, first_swing: int = LEFT, targets: Targets | None = None, swing_path: bool = True,
+def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_steps: int, method: str = "exhaustive",
+            first_swing: int = LEFT, targets: Targets | None = None, swing_path: bool = True,
             quantize: bool = True, frames_per_step: int = 0) -> control.Trajectory:
     """Walk the simulated biped with the joystick for ``num_steps`` steps (jitted as one scan).
 
@@ -369,18 +390,32 @@ def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, num_steps
     (placement error, falls, obstacle contacts; ``frames_per_step`` states of
     each step in ``log.qpos`` for :func:`ijoy_jax.sim.render.render`).
     :func:`summary` condenses it.
+
+    Call it inside your own ``jax.jit`` or ``jax.vmap`` as well: the checks
+    read shapes and skip traced values (``jax.vmap(lambda c: rollout(sim,
+    terrain, robot, start, c, num_steps=n))(commands)`` is one batch).
+
+    Args:
+      sim: the :class:`Sim` of the terrain's grid shape.
+      terrain: one :class:`Terrain` of ``sim.shape`` cells at ``sim.resolution`` m.
+      robot: a :class:`Robot` whose step time is the controller's.
+      start: (2, 3) world foot poses, row 0 left, row 1 right (m, rad; :func:`ijoy_jax.robots.start_stance`).
+      commands: (3,) or (num_steps, 3) joystick commands (m/s, m/s, rad/s).
+      num_steps: steps (static).
+      method, first_swing, targets, swing_path, quantize: as in :func:`ijoy_jax.rollout`.
+      frames_per_step: states kept per step in ``log.qpos`` (static; at most the control ticks per step).
+
+    Returns:
+      A :class:`ijoy_jax.control.Trajectory` whose ``log`` is a :class:`StepLog` per step.
     """
-    _check(sim, terrain, robot, num_steps, method, frames_per_step, batched=False)
-    if np.shape(start) != (2, 3):
-        raise ValueError(f"start must have shape (2, 3) (left foot, right foot), got {np.shape(start)}")
-    if np.shape(commands) not in ((3,), (num_steps, 3)):
-        raise ValueError(f"commands must have shape (3,) or ({num_steps}, 3), got {np.shape(commands)}")
-    return _rollout_jit(sim, terrain, robot, start, commands, int(num_steps), method, first_swing, targets,
-                        swing_path, quantize, int(frames_per_step))
+    _check(sim, terrain, robot, start, commands, num_steps=num_steps, method=method, first_swing=first_swing,
+           frames_per_step=frames_per_step, batch=None)
+    return _rollout(sim, terrain, robot, start, commands, first_swing, targets, num_steps=int(num_steps),
+                    method=method, swing_path=swing_path, quantize=quantize, frames_per_step=int(frames_per_step))
 
 
-def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, num_steps: int,
-                  method: str = "exhaustive", *, first_swing=LEFT, targets: Targets | None = None,
+def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, *, num_steps: int,
+                  method: str = "exhaustive", first_swing=LEFT, targets: Targets | None = None,
                   swing_path: bool = True, quantize: bool = True, frames_per_step: int = 0) -> control.Trajectory:
     """:func:`rollout` for B robots at once: one jitted ``vmap`` of the simulated joystick loop.
 
@@ -392,24 +427,25 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, 
       commands: (B, 3) or (B, num_steps, 3) joystick commands (m/s, m/s, rad/s).
       num_steps: steps per rollout (static).
       first_swing: () or (B,), +1 for the left foot first.
+      method, targets, swing_path, quantize, frames_per_step: as in :func:`rollout`.
 
     Returns:
       A :class:`ijoy_jax.control.Trajectory` with a leading axis B on every leaf.
 
     Shapes and static arguments key the compile cache: batches of the same B,
     grid and ``num_steps`` reuse one compiled program whatever the terrains,
-    robots' parameters (margins, weights) or commands.
+    robots' parameters (margins, weights) or commands (:func:`compiled_programs`
+    counts them).
     """
-    _check(sim, terrains, robots, num_steps, method, frames_per_step, batched=True)
-    b = np.shape(starts)[0] if np.ndim(starts) == 3 else None
-    if np.shape(starts) != (b, 2, 3) or np.shape(terrains.free)[0] != b:
-        raise ValueError(f"starts must have shape (B, 2, 3) with B = the terrains' batch {np.shape(terrains.free)[0]},"
-                         f" got {np.shape(starts)}")
-    if np.shape(commands) not in ((b, 3), (b, num_steps, 3)):
-        raise ValueError(f"commands must have shape ({b}, 3) or ({b}, {num_steps}, 3), got {np.shape(commands)}")
+    b = np.shape(terrains.free)[0] if np.ndim(terrains.free) == 3 else None
+    if b is None:
+        raise ValueError(f"terrains must have a leading batch axis, got a grid of shape {np.shape(terrains.free)}")
+    _check(sim, terrains, robots, starts, commands, num_steps=num_steps, method=method, first_swing=first_swing,
+           frames_per_step=frames_per_step, batch=b)
     first = jnp.broadcast_to(jnp.asarray(first_swing, jnp.float32), (b,))
-    return _rollout_batch_jit(sim, terrains, robots, starts, commands, int(num_steps), method, first, targets,
-                              swing_path, quantize, int(frames_per_step))
+    return _rollout_batch(sim, terrains, robots, starts, commands, first, targets, num_steps=int(num_steps),
+                          method=method, swing_path=swing_path, quantize=quantize,
+                          frames_per_step=int(frames_per_step))
 
 
 def summary(traj: control.Trajectory) -> dict[str, jax.Array]:

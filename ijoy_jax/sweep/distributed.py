@@ -133,7 +133,12 @@ def initialize(lay: Layout) -> tuple[int, int]:
 
 
 def client():
-    """The coordination-service client of ``jax.distributed`` (None when it is not initialized)."""
+    """The coordination-service client of ``jax.distributed`` (None when it is not initialized).
+
+    The one reach into JAX's private ``jax._src.distributed`` (the public API
+    exposes no key-value store or barrier); a test pins it to the JAX versions
+    we run (0.10 and 0.11).
+    """
     if not jax.distributed.is_initialized():
         return None
     from jax._src import distributed as _dist  # the public API exposes no key-value store or barrier

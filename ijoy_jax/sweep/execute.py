@@ -81,6 +81,7 @@ chunks whose part exists and computes the rest. Nothing is lost or duplicated.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import platform
@@ -124,14 +125,6 @@ MAX_AUTO_CHUNK = 4096
 
 _PART = "part-{:05d}.parquet"
 _PROC = "process-{:05d}.json"
-_TRACES = {"count": 0}
-
-
-def trace_count() -> int:
-    """How many times the chunk function has been traced (compiled) in this process."""
-    return _TRACES["count"]
-
-
 class _Static(NamedTuple):
     """Everything about a chunk that is static under jit (hashable)."""
 
@@ -160,8 +153,7 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_val
     metrics = base.metrics.replace(**{m: robot_vals[f"metrics.{m}"] for m in _METRIC_NAMES})
     robot = base.replace(metrics=metrics, **{k: robot_vals[k] for k in _LEAF_NAMES})
     centre = generators.start_point(params, shape=static.shape, resolution=static.resolution)
-    half = 0.5 * base.p0[1]  # feet side by side at the step-in-place width, facing +x
-    start = jnp.stack([jnp.stack([centre[0], centre[1] + half, 0.0]), jnp.stack([centre[0], centre[1] - half, 0.0])])
+    start = robots.start_stance(base, centre[0], centre[1])  # side by side at the step-in-place width, facing +x
     traj = rollout_core(terrain, robot, start, command, static.num_steps, static.method, targets=targets,
                         kernel=static.kernel)
     summary = traj.summary()
@@ -171,13 +163,32 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_val
     return summary
 
 
+def _counting_traces(fn):
+    """``fn`` wrapped to count its own traces, and the function that reads that count (the count lives in
+    this closure, not in module state)."""
+    traces = 0
+
+    @functools.wraps(fn)  # jit reads the wrapped signature (static_argnames)
+    def counted(*args, **kwargs):
+        nonlocal traces
+        traces += 1  # the wrapped function runs once per trace: counts compiles
+        return fn(*args, **kwargs)
+
+    return counted, lambda: traces
+
+
 def _chunk(static: _Static, base, targets, key, seeds, robot_vals, terrain_vals, commands):
-    _TRACES["count"] += 1  # runs once per trace: counts compiles
     fn = lambda s, r, t, c: _scenario(static, base, targets, key, s, r, t, c)  # noqa: E731
     return jax.vmap(fn)(seeds, robot_vals, terrain_vals, commands)
 
 
-_run_chunk = jax.jit(_chunk, static_argnames=("static",))
+_counted_chunk, _chunk_traces = _counting_traces(_chunk)
+_run_chunk = jax.jit(_counted_chunk, static_argnames=("static",))
+
+
+def trace_count() -> int:
+    """How many times the chunk function has been traced (compiled) in this process."""
+    return _chunk_traces()
 
 
 @dataclasses.dataclass
@@ -346,9 +357,8 @@ def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot) -> tuple[int, in
     ``jit(...).lower(...).compile().memory_analysis()`` of a one-scenario chunk with ``base`` (pass
     the largest action set: memory grows with it), split into what every scenario adds (its inputs,
     outputs and XLA temporaries) and what the chunk holds once (the shared base robot, target tables
-    and key, e.g. 27 MB for 496 actions, 0.9 GB for 3307). On an H100 the per-scenario part of the
-    one-scenario compile (about 1 MB for ``sweeps/w_sweep.toml``) bounds the measured slope of the
-    temporaries over batch sizes 8 and 64 (0.75 MB per scenario) from above.
+    and key, e.g. 27 MB for 496 actions, 0.9 GB for 3307). The per-scenario part is an upper bound
+    of the temporaries' measured slope over batch sizes (BENCHMARKS.md has the figures).
 
     Returns:
       ``(per_scenario, shared)`` in bytes.
