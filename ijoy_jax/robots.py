@@ -22,6 +22,7 @@ import numpy as np
 
 from ijoy_jax import geometry
 from ijoy_jax._struct import pytree_dataclass, static_field
+from ijoy_jax.prng import as_key
 
 LEFT = 1
 RIGHT = -1
@@ -467,11 +468,12 @@ def random_commands(key, robot: Robot, batch: int, num_steps: int, hold: int = 1
 
     Each command is held for ``hold`` steps (1: a new one every step, the
     harshest joystick; ``num_steps``: one command per robot for the whole run).
+    ``key``: PRNG key or int seed.
     """
     if hold < 1:
         raise ValueError(f"hold must be at least 1 step, got {hold}")
     lo, hi = command_range(robot)
     n = -(-num_steps // hold)
-    u = jax.random.uniform(key, (batch, n, 3), jnp.float32)
+    u = jax.random.uniform(as_key(key), (batch, n, 3), jnp.float32)
     u = jnp.repeat(u, hold, axis=1)[:, :num_steps]
     return jnp.asarray(lo, jnp.float32) + u * jnp.asarray(hi - lo, jnp.float32)

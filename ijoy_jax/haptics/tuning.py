@@ -61,6 +61,7 @@ import optax
 from ijoy_jax.haptics.filter import SpringDamper, discretise, filter_signal, init_state
 from ijoy_jax.haptics.leg import LegGeometry, alduro_leg, forward_kinematics
 from ijoy_jax.haptics.workspace import linearise, plane_forces
+from ijoy_jax.prng import as_key
 
 TREMOR_BAND_HZ = (8.0, 12.0)
 SETTLE_S = 0.5  # s of start-up transient excluded from every metric
@@ -71,10 +72,6 @@ DEFAULT_FILTER = (
 )
 #: Default repulsion: (C1 N, decay length m).
 DEFAULT_REPULSION = (1.0, 0.05)
-
-
-def _key(key):
-    return jax.random.key(key) if isinstance(key, int) else key
 
 
 def _band_noise(key, n: int, dt: float, lo_hz: float, hi_hz: float, rms, dtype):
@@ -118,7 +115,7 @@ def synthetic_joystick(key, num_samples: int = 4000, dt: float = 1e-3, *, intend
       >>> s.raw.shape, round(float(jnp.sqrt(jnp.mean(s.tremor ** 2))), 3)
       ((1000,), 0.05)
     """
-    k_f, k_p, k_a, k_t, k_n = jax.random.split(_key(key), 5)
+    k_f, k_p, k_a, k_t, k_n = jax.random.split(as_key(key), 5)
     t = jnp.arange(num_samples, dtype=dtype) * dt
     f = jax.random.uniform(k_f, (3,), dtype, 0.1, 1.0)
     phase = jax.random.uniform(k_p, (3,), dtype, 0.0, 2 * jnp.pi)
@@ -220,7 +217,7 @@ def tune_filter(key, *, num_signals: int = 4, num_samples: int = 4000, dt: float
       >>> r.losses.shape
       (3,)
     """
-    keys = jax.random.split(_key(key), num_signals)
+    keys = jax.random.split(as_key(key), num_signals)
     signals = jax.vmap(lambda k: synthetic_joystick(k, num_samples, dt))(keys)
     init = jnp.log(jnp.asarray(init, jnp.float32))
     return _tune_filter_jit(init, signals, dt, lam, steps, learning_rate)
@@ -234,7 +231,7 @@ def _tune_filter_jit(init, signals, dt, lam, steps, learning_rate):
 def evaluate_filter(log_params, key, *, num_signals: int = 8, num_samples: int = 4000, dt: float = 1e-3,
                     lam=1.0) -> dict[str, float]:
     """Mean :func:`filter_objective` terms over held-out synthetic signals (host floats)."""
-    keys = jax.random.split(_key(key), num_signals)
+    keys = jax.random.split(as_key(key), num_signals)
     signals = jax.vmap(lambda k: synthetic_joystick(k, num_samples, dt))(keys)
     return {k: float(v) for k, v in _filter_terms(jnp.asarray(log_params), signals, dt, lam).items()}
 
@@ -268,7 +265,7 @@ def operator_intent(key, num_steps: int = 200, dt: float = 0.02, *, speed_rms=0.
     The drift (``drift`` times ``speed_rms``, random direction) makes the operator lean on a workspace
     limit within a few seconds: the force must hold the leg there against the push.
     """
-    k_f, k_p, k_a, k_d = jax.random.split(_key(key), 4)
+    k_f, k_p, k_a, k_d = jax.random.split(as_key(key), 4)
     t = jnp.arange(num_steps, dtype=dtype) * dt
     f = jax.random.uniform(k_f, (2, 3), dtype, 0.05, 0.5)
     ph = jax.random.uniform(k_p, (2, 3), dtype, 0.0, 2 * jnp.pi)
@@ -337,7 +334,7 @@ def repulsion_objective(log_params, leg: LegGeometry, q0, intent, *, dt: float =
 def operator_batch(key, num: int, num_steps: int = 200, dt: float = 0.02, leg: LegGeometry | None = None):
     """``(q0 (B, 4), intent (B, T, 3))``: random starts in the middle 20-80 % of the strokes and intents."""
     leg = alduro_leg(-1.0) if leg is None else leg
-    kq, ki = jax.random.split(_key(key))
+    kq, ki = jax.random.split(as_key(key))
     u = jax.random.uniform(kq, (num, 4), leg.stroke.dtype, 0.2, 0.8)
     q0 = leg.q_min + u * (leg.q_max - leg.q_min)
     intent = jax.vmap(lambda k: operator_intent(k, num_steps, dt))(jax.random.split(ki, num))

@@ -74,6 +74,7 @@ import optax
 
 from ijoy_jax import geometry, robots
 from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain
+from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
 from ijoy_jax.select import make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain, generators
@@ -284,7 +285,7 @@ def sample_decisions(key, num: int, cfg: ForwardConfig) -> Decisions:
       >>> d.terrains.free.shape, d.noise.shape
       ((3, 40, 40), (3, 4, 3))
     """
-    key = loop._as_key(key)
+    key = as_key(key)
     kt, kh, ks, kc, kn = jax.random.split(key, 5)
     fam = generators.FAMILIES[cfg.family]
     zone = dict(start_x=0.5, start_y=0.5, start_radius=cfg.clear_radius)
@@ -611,7 +612,7 @@ def compare(tuned: Robot, cfg: ForwardConfig, *, num: int = 200, key=12345, base
       ``{"tuned": {...}, "paper": {...}, "num": num}``.
     """
     baseline = make_robot(cfg) if baseline is None else baseline
-    held = jax.jit(sample_decisions, static_argnums=(1, 2))(loop._as_key(key), int(num), cfg)
+    held = jax.jit(sample_decisions, static_argnums=(1, 2))(as_key(key), int(num), cfg)
     return {
         "tuned": summarize(evaluate(tuned, held, cfg), cfg),
         "paper": summarize(evaluate(baseline, held, cfg), cfg),

@@ -62,6 +62,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ijoy_jax.prng import as_key
+
 # --------------------------------------------------------------------------- transforms
 
 
@@ -135,15 +137,6 @@ class Tuner(NamedTuple):
 
     init: Callable[[Any], TuneState]
     step: Callable[[TuneState, jax.Array], tuple[TuneState, StepMetrics]]
-
-
-def _as_key(key) -> jax.Array:
-    if isinstance(key, (int, np.integer)):
-        return jax.random.key(int(key))
-    key = jnp.asarray(key) if not isinstance(key, jax.Array) else key
-    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        return key
-    return jax.random.wrap_key_data(key)
 
 
 def make_tuner(
@@ -322,7 +315,7 @@ def tune(
         raise ValueError(f"log_every must be a positive int, got {log_every!r}")
     if num_runs is not None and (not isinstance(num_runs, (int, np.integer)) or num_runs < 1):
         raise ValueError(f"num_runs must be None or a positive int, got {num_runs!r}")
-    key = _as_key(key)
+    key = as_key(key)
     tuner = make_tuner(loss_fn, optimizer, batch_fn=batch_fn, hparams=hparams, num_runs=num_runs, has_aux=has_aux)
     state = tuner.init(params0)
     metrics = []

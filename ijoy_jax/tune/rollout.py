@@ -46,6 +46,7 @@ import jax
 import jax.numpy as jnp
 
 from ijoy_jax import geometry
+from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot, side_actions, side_p0
 from ijoy_jax.terrain import Terrain
 from ijoy_jax.tune import relax
@@ -144,7 +145,7 @@ def relaxed_rollout(
         commands = jnp.broadcast_to(commands, (num_steps, 3))
     commands = commands[:num_steps]
     if estimator == "gumbel":
-        key = jax.random.key(key) if isinstance(key, int) else key
+        key = as_key(key)
         keys = jax.random.split(key, num_steps)
     else:
         keys = jnp.zeros((num_steps,), jnp.uint32)  # unused placeholder, keeps one scan signature
