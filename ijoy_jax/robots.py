@@ -421,18 +421,28 @@ def action_steps(robot: Robot, stance, stance_side) -> jax.Array:
     return geometry.compose(stance, side_actions(robot, -side_sign(stance_side)))
 
 
-def dist(a: jax.Array, b: jax.Array, rotation_weight) -> jax.Array:
+def dist(a: jax.Array, b: jax.Array, rotation_weight, *, grad_safe: bool = False) -> jax.Array:
     """The paper's dist between poses in one frame: ``|dxy| + rotation_weight * |wrap(dtheta)|``.
 
     Args:
       a, b: (..., 3) poses (x, y, theta) in one frame (m, rad); broadcast.
       rotation_weight: cost units per radian (``Robot.rotation_weight``).
+      grad_safe: static. False (the exact selector): ``|dxy|`` by ``jnp.hypot``.
+        True (what is differentiated, :mod:`ijoy_jax.tune`): by
+        :func:`ijoy_jax.geometry.safe_norm`, whose gradient at dxy = 0 is 0, not NaN.
 
     Returns:
       (...) float32 distances (cost units before ``w``).
+
+    Example:
+      >>> import jax.numpy as jnp
+      >>> from ijoy_jax.robots import dist
+      >>> float(dist(jnp.array([0.3, 0.4, 0.1]), jnp.zeros(3), 2.0))
+      0.7
     """
     d = a - b
-    return jnp.hypot(d[..., 0], d[..., 1]) + rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
+    norm = geometry.safe_norm if grad_safe else jnp.hypot
+    return norm(d[..., 0], d[..., 1]) + rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
 
 
 def nearest_actions(robot: Robot, stance, stance_side, steps) -> jax.Array:

@@ -378,7 +378,7 @@ def _errors(robot: Robot, side, command, acts_rel):
     swing = -side_sign(side)
     p_next = side_p0(robot, swing) + robot.step_time * command
     d = acts_rel - p_next
-    return relax._safe_norm(d[..., 0], d[..., 1]), jnp.abs(geometry.wrap_angle(d[..., 2]))
+    return geometry.safe_norm(d[..., 0], d[..., 1]), jnp.abs(geometry.wrap_angle(d[..., 2]))
 
 
 def decision_objective(uparams: dict, robot: Robot, terrain, stance, side, command, risk, cfg: ForwardConfig) -> dict:

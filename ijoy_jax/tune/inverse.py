@@ -37,7 +37,7 @@ import optax
 
 from ijoy_jax import geometry
 from ijoy_jax.footcost import index_terrain
-from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
+from ijoy_jax.robots import Robot, dist, get_leaf, set_leaf, side_actions, side_p0, side_sign
 from ijoy_jax.select import make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain
 from ijoy_jax.tune import relax
@@ -181,7 +181,7 @@ def negative_log_likelihood(
             lp = r.log_probs
         else:
             acts, p_next = _dists(rb, side, command)
-            cost = fc + rb.w * relax.soft_dist(acts, p_next, rb.rotation_weight)
+            cost = fc + rb.w * dist(acts, p_next, rb.rotation_weight, grad_safe=True)
             lp = jax.nn.log_softmax(-cost / tau)
         lp = lp[jnp.maximum(action, 0)]
         if noise > 0:

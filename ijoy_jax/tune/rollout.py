@@ -187,7 +187,7 @@ def relaxed_rollout(
             expected_cost=choice.expected_cost,
             target=geometry.compose(stance, p_next),
             error=err,
-            deviation=relax._safe_norm(err[0], err[1]),
+            deviation=geometry.safe_norm(err[0], err[1]),
         )
         return (new_feet, -swing), record
 
