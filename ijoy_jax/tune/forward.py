@@ -80,9 +80,9 @@ from ijoy_jax.select import make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain, generators
 from ijoy_jax.tune import loop, relax
 
-METRIC_NAMES = tuple(f"metrics.{f.name}" for f in dataclasses.fields(robots.TerrainMetrics))
-TUNABLE = ("w", "rotation_weight", "margin", *METRIC_NAMES)
-"""Names of the Robot leaves :func:`tune_forward` may tune."""
+METRIC_NAMES = tuple(n for n in robots.SELECTOR_LEAVES if n.startswith("metrics."))
+TUNABLE = robots.SELECTOR_LEAVES
+"""Names of the Robot leaves :func:`tune_forward` may tune: the selector's (:data:`ijoy_jax.robots.SELECTOR_LEAVES`)."""
 
 
 @dataclasses.dataclass(frozen=True)
