@@ -62,6 +62,7 @@ from ijoy_jax.haptics.filter import SpringDamper, discretise, filter_signal, ini
 from ijoy_jax.haptics.leg import LegGeometry, alduro_leg, forward_kinematics
 from ijoy_jax.haptics.workspace import linearise, plane_forces
 from ijoy_jax.prng import as_key
+from ijoy_jax.tune import loop
 
 TREMOR_BAND_HZ = (8.0, 12.0)
 SETTLE_S = 0.5  # s of start-up transient excluded from every metric
@@ -172,25 +173,19 @@ def filter_objective(log_params, signal: JoystickSignal, dt: float = 1e-3, lam=1
     }
 
 
-class TuneResult(NamedTuple):
-    """A tuning run: final log-parameters (2,), and per-step loss (steps,) and log-parameters (steps, 2)."""
+class HapticTuneResult(NamedTuple):
+    """A haptic tuning run: final log-parameters (2,), and per-step loss (steps,) and log-parameters (steps, 2)."""
 
     log_params: jax.Array
     losses: jax.Array
     trajectory: jax.Array
 
 
-def _adam_run(loss_fn, init, steps: int, learning_rate: float) -> TuneResult:
-    opt = optax.adam(learning_rate)
-
-    def body(carry, _):
-        p, s = carry
-        loss, g = jax.value_and_grad(loss_fn)(p)
-        upd, s = opt.update(g, s, p)
-        return (optax.apply_updates(p, upd), s), (loss, p)
-
-    (p, _), (losses, traj) = jax.lax.scan(body, (init, opt.init(init)), None, length=steps)
-    return TuneResult(p, losses, traj)
+def _adam_run(loss_fn, init, steps: int, learning_rate: float) -> HapticTuneResult:
+    """Adam on ``loss_fn(log_params)`` by the one tuning loop (:func:`ijoy_jax.tune.loop.run_steps`)."""
+    tuner = loop.make_tuner(lambda p, _: loss_fn(p), optax.adam(learning_rate))
+    state, metrics, trajectory = loop.run_steps(tuner, tuner.init(init), steps, trace_params=True)
+    return HapticTuneResult(state.params, metrics.loss, trajectory)
 
 
 def filter_batch_loss(log_params, signals: JoystickSignal, dt: float = 1e-3, lam=1.0) -> jax.Array:
@@ -199,7 +194,7 @@ def filter_batch_loss(log_params, signals: JoystickSignal, dt: float = 1e-3, lam
 
 
 def tune_filter(key, *, num_signals: int = 4, num_samples: int = 4000, dt: float = 1e-3, lam=1.0,
-                steps: int = 150, learning_rate: float = 0.05, init=DEFAULT_FILTER) -> TuneResult:
+                steps: int = 150, learning_rate: float = 0.05, init=DEFAULT_FILTER) -> HapticTuneResult:
     """Tune (f0, zeta) by Adam on a batch of synthetic joystick signals.
 
     Args:
@@ -210,7 +205,7 @@ def tune_filter(key, *, num_signals: int = 4, num_samples: int = 4000, dt: float
       init: (f0 Hz, zeta) starting point.
 
     Returns:
-      :class:`TuneResult`; ``filter_params(result.log_params)`` is the tuned SpringDamper.
+      :class:`HapticTuneResult`; ``filter_params(result.log_params)`` is the tuned SpringDamper.
 
     Example:
       >>> r = tune_filter(0, num_signals=1, num_samples=1500, steps=3)
@@ -350,7 +345,7 @@ def repulsion_batch_terms(log_params, leg, q0, intent, *, dt=0.02, admittance=0.
 
 def tune_repulsion(key, *, num_trajectories: int = 8, num_steps: int = 200, dt: float = 0.02, admittance=0.05,
                    force_weight=0.1, steps: int = 60, learning_rate: float = 0.1, init=DEFAULT_REPULSION,
-                   leg: LegGeometry | None = None) -> TuneResult:
+                   leg: LegGeometry | None = None) -> HapticTuneResult:
     """Tune (C1, decay length) by Adam on simulated operator trajectories of the ALDURO-like leg.
 
     Args:
@@ -362,7 +357,7 @@ def tune_repulsion(key, *, num_trajectories: int = 8, num_steps: int = 200, dt: 
       leg: default ``alduro_leg(-1.0)`` (the paper's right leg).
 
     Returns:
-      :class:`TuneResult`; ``jnp.exp(result.log_params)`` = (C1, decay length).
+      :class:`HapticTuneResult`; ``jnp.exp(result.log_params)`` = (C1, decay length).
     """
     leg = alduro_leg(-1.0) if leg is None else leg
     q0, intent = operator_batch(key, num_trajectories, num_steps, dt, leg)
