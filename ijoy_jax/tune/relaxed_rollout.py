@@ -126,11 +126,11 @@ def relaxed_rollout(
 
     Example:
       >>> import numpy as np, ijoy_jax as ij
-      >>> from ijoy_jax.tune import rollout
+      >>> from ijoy_jax.tune import relaxed_rollout
       >>> t = ij.terrain.flat((60, 40), 0.02)
       >>> robot = ij.robots.hrp2(density=0.25)
       >>> start = np.array([[0.2, 0.495, 0.0], [0.2, 0.305, 0.0]])
-      >>> tr = rollout.relaxed_rollout(t, robot, start, [0.25, 0.0, 0.0], 3, sharpness=100.0, tau=0.01)
+      >>> tr = relaxed_rollout.relaxed_rollout(t, robot, start, [0.25, 0.0, 0.0], 3, sharpness=100.0, tau=0.01)
       >>> tr.footsteps.shape, round(float(tr.feet[0, 0]), 2)
       ((3, 3), 0.8)
     """
@@ -260,10 +260,11 @@ def memory_report(terrain, robot, start, commands, lengths=(5, 10, 20, 40), **kw
 
     Example:
       >>> import numpy as np, ijoy_jax as ij
-      >>> from ijoy_jax.tune import rollout
+      >>> from ijoy_jax.tune import relaxed_rollout
       >>> t = ij.terrain.flat((40, 30), 0.02)
       >>> rb = ij.robots.hrp2(density=0.1)
-      >>> r = rollout.memory_report(t, rb, np.array([[0.2, 0.395, 0.0], [0.2, 0.205, 0.0]]), [0.2, 0.0, 0.0], (2, 8))
+      >>> r = relaxed_rollout.memory_report(t, rb, np.array([[0.2, 0.395, 0.0], [0.2, 0.205, 0.0]]), [0.2, 0.0, 0.0],
+      ...                                   (2, 8))
       >>> r[True][8] - r[True][2] < r[False][8] - r[False][2]
       True
     """
