@@ -14,7 +14,11 @@ Python floats) are static.
 
 from __future__ import annotations
 
+import inspect
 import math
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -22,6 +26,7 @@ import numpy as np
 
 from ijoy_jax import geometry
 from ijoy_jax._struct import pytree_dataclass, static_field
+from ijoy_jax.prng import as_key
 
 LEFT = 1
 RIGHT = -1
@@ -337,6 +342,9 @@ def density_counts(density: float) -> tuple[int, int, int]:
     return n_dx, n_dy, n_dt
 
 
+_HRP2_BODY = {"foot_length": 0.242, "foot_width": 0.13, "step_time": 0.8, "p0": (0.0, 0.19, 0.0)}
+
+
 def hrp2(margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
     """The paper's HRP-2: footprint 24.2 x 13 cm, 496 actions per foot.
 
@@ -359,7 +367,7 @@ def hrp2(margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
       >>> robot.actions.shape
       (496, 3)
     """
-    kwargs = dict(foot_length=0.242, foot_width=0.13, margin=margin, step_time=0.8, p0=(0.0, 0.19, 0.0))
+    kwargs = dict(_HRP2_BODY, margin=margin)
     kwargs.update(overrides)
     return make_robot(lattice_actions(density_counts(density)), **kwargs)
 
@@ -383,6 +391,69 @@ def start_stance(robot: Robot, x, y, theta=0.0, *, width=None) -> jax.Array:
     return jnp.stack([jnp.stack([x + dx, y + dy, theta]), jnp.stack([x - dx, y - dy, theta])])
 
 
+class LeafSpec(NamedTuple):
+    """What a scalar Robot leaf means: its unit, its lower bound and whether the selector's cost uses it.
+
+    unit: of the value (m, s, rad; ``cost/m``: cost units per metre, ``m/rad``: dist metres per radian).
+    positive: True: must be > 0 (sizes, times); False: must be >= 0.
+    selector: True for the parameters of the choice (FootCost + w dist), the ones
+      :mod:`ijoy_jax.tune` may tune; False for the robot's body (footprint, step time).
+    """
+
+    unit: str
+    positive: bool
+    selector: bool
+
+
+SCALAR_LEAVES: Mapping[str, LeafSpec] = MappingProxyType(
+    {
+        "w": LeafSpec("1", False, True),
+        "rotation_weight": LeafSpec("m/rad", False, True),
+        "margin": LeafSpec("m", False, True),
+        "step_time": LeafSpec("s", True, False),
+        "foot_length": LeafSpec("m", True, False),
+        "foot_width": LeafSpec("m", True, False),
+        "metrics.slope_weight": LeafSpec("cost/rad", False, True),
+        "metrics.slope_limit": LeafSpec("rad", False, True),
+        "metrics.roughness_weight": LeafSpec("cost/m", False, True),
+        "metrics.roughness_limit": LeafSpec("m", False, True),
+        "metrics.bump_weight": LeafSpec("cost/m", False, True),
+        "metrics.bump_limit": LeafSpec("m", False, True),
+        "metrics.step_weight": LeafSpec("cost/m", False, True),
+        "metrics.band_weight": LeafSpec("cost/m", False, True),
+        "metrics.band_limit": LeafSpec("m", False, True),
+    }
+)
+"""Every scalar Robot leaf a user may sweep or tune, by dotted name (:func:`get_leaf`), in a fixed order."""
+
+SELECTOR_LEAVES = tuple(n for n, spec in SCALAR_LEAVES.items() if spec.selector)
+"""The names of :data:`SCALAR_LEAVES` that parameterise the choice (w, rotation_weight, margin, metrics.*)."""
+
+
+def _signature_defaults(fn) -> dict:
+    params = inspect.signature(fn).parameters.values()
+    return {p.name: p.default for p in params if p.default is not inspect.Parameter.empty}
+
+
+def hrp2_defaults() -> dict[str, float]:
+    """name -> value of every :data:`SCALAR_LEAVES` leaf of ``hrp2()``, and its ``density``, without building it.
+
+    Read from the one source of each number: :func:`hrp2`'s arguments and body,
+    :func:`make_robot`'s and :func:`default_metrics`' keyword defaults.
+
+    Example:
+      >>> from ijoy_jax import robots
+      >>> d = robots.hrp2_defaults()
+      >>> d["foot_length"], d["margin"], d["density"], float(robots.get_leaf(robots.hrp2(), "w")) == d["w"]
+      (0.242, 0.02, 1.0, True)
+    """
+    top = {**_signature_defaults(make_robot), **_HRP2_BODY, **_signature_defaults(hrp2)}
+    metrics = _signature_defaults(default_metrics)
+    out = {n: float(metrics[n.partition(".")[2]] if n.startswith("metrics.") else top[n]) for n in SCALAR_LEAVES}
+    out["density"] = float(top["density"])
+    return out
+
+
 def get_leaf(robot: Robot, name: str):
     """The leaf of ``robot`` named by a dotted path, e.g. ``"w"`` or ``"metrics.slope_limit"``."""
     obj = robot
@@ -397,6 +468,20 @@ def set_leaf(robot: Robot, name: str, value) -> Robot:
     if tail:
         return robot.replace(**{head: set_leaf(getattr(robot, head), tail, value)})
     return robot.replace(**{name: value})
+
+
+def set_leaves(robot: Robot, values: Mapping[str, Any]) -> Robot:
+    """A copy of ``robot`` with every dotted name of ``values`` set (:func:`set_leaf` for each; traceable).
+
+    Example:
+      >>> from ijoy_jax import robots
+      >>> r = robots.set_leaves(robots.hrp2(), {"w": 2.0, "metrics.bump_limit": 0.03})
+      >>> float(r.w), float(r.metrics.bump_limit)
+      (2.0, 0.03)
+    """
+    for name, value in values.items():
+        robot = set_leaf(robot, name, value)
+    return robot
 
 
 def side_sign(side) -> jax.Array:
@@ -444,18 +529,28 @@ def action_steps(robot: Robot, stance, stance_side) -> jax.Array:
     return geometry.compose(stance, side_actions(robot, -side_sign(stance_side)))
 
 
-def dist(a: jax.Array, b: jax.Array, rotation_weight) -> jax.Array:
+def dist(a: jax.Array, b: jax.Array, rotation_weight, *, grad_safe: bool = False) -> jax.Array:
     """The paper's dist between poses in one frame: ``|dxy| + rotation_weight * |wrap(dtheta)|``.
 
     Args:
       a, b: (..., 3) poses (x, y, theta) in one frame (m, rad); broadcast.
       rotation_weight: cost units per radian (``Robot.rotation_weight``).
+      grad_safe: static. False (the exact selector): ``|dxy|`` by ``jnp.hypot``.
+        True (what is differentiated, :mod:`ijoy_jax.tune`): by
+        :func:`ijoy_jax.geometry.safe_norm`, whose gradient at dxy = 0 is 0, not NaN.
 
     Returns:
       (...) float32 distances (cost units before ``w``).
+
+    Example:
+      >>> import jax.numpy as jnp
+      >>> from ijoy_jax.robots import dist
+      >>> round(float(dist(jnp.array([0.3, 0.4, 0.1]), jnp.zeros(3), 2.0)), 6)
+      0.7
     """
     d = a - b
-    return jnp.hypot(d[..., 0], d[..., 1]) + rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
+    norm = geometry.safe_norm if grad_safe else jnp.hypot
+    return norm(d[..., 0], d[..., 1]) + rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
 
 
 def nearest_actions(robot: Robot, stance, stance_side, steps) -> jax.Array:
@@ -491,11 +586,12 @@ def random_commands(key, robot: Robot, batch: int, num_steps: int, hold: int = 1
 
     Each command is held for ``hold`` steps (1: a new one every step, the
     harshest joystick; ``num_steps``: one command per robot for the whole run).
+    ``key``: PRNG key or int seed.
     """
     if hold < 1:
         raise ValueError(f"hold must be at least 1 step, got {hold}")
     lo, hi = command_range(robot)
     n = -(-num_steps // hold)
-    u = jax.random.uniform(key, (batch, n, 3), jnp.float32)
+    u = jax.random.uniform(as_key(key), (batch, n, 3), jnp.float32)
     u = jnp.repeat(u, hold, axis=1)[:, :num_steps]
     return jnp.asarray(lo, jnp.float32) + u * jnp.asarray(hi - lo, jnp.float32)

@@ -1,5 +1,6 @@
 """Robot models and action sets."""
 
+import dataclasses
 import math
 
 import jax
@@ -104,6 +105,36 @@ def test_dotted_leaf_access():
     assert float(robots.get_leaf(r2, "metrics.slope_limit")) == 0.5
     assert float(robots.get_leaf(r, "metrics.slope_limit")) != 0.5  # the original is untouched
     assert float(robots.get_leaf(robots.set_leaf(r, "w", 3.0), "w")) == 3.0
+
+
+def test_scalar_leaf_table_names_every_scalar_leaf():
+    r = ij.robots.hrp2(density=0.25)
+    scalars = {"foot_length", "foot_width", "margin", "step_time", "w", "rotation_weight"}
+    scalars |= {f"metrics.{f.name}" for f in dataclasses.fields(robots.TerrainMetrics)}
+    assert set(robots.SCALAR_LEAVES) == scalars
+    for name, spec in robots.SCALAR_LEAVES.items():
+        assert np.shape(robots.get_leaf(r, name)) == (), name
+        assert spec.unit and isinstance(spec.positive, bool), name
+    assert robots.SELECTOR_LEAVES == tuple(n for n in robots.SCALAR_LEAVES if n not in
+                                           ("foot_length", "foot_width", "step_time"))
+
+
+def test_hrp2_defaults_are_hrp2s_leaves():
+    d = robots.hrp2_defaults()
+    r = ij.robots.hrp2()
+    assert set(d) == set(robots.SCALAR_LEAVES) | {"density"}
+    for name in robots.SCALAR_LEAVES:
+        assert float(robots.get_leaf(r, name)) == pytest.approx(d[name], rel=1e-6), name
+    assert r.num_actions == ij.robots.hrp2(density=d["density"]).num_actions == 496
+
+
+def test_set_leaves_sets_every_named_leaf_under_jit():
+    r = ij.robots.hrp2(density=0.25)
+    vals = {n: float(robots.get_leaf(r, n)) * 1.5 + 0.01 for n in robots.SCALAR_LEAVES}
+    r2 = jax.jit(robots.set_leaves)(r, vals)
+    for n, v in vals.items():
+        assert float(robots.get_leaf(r2, n)) == pytest.approx(v, rel=1e-6), n
+    assert float(r.w) == 1.0  # the original is untouched
 
 
 def test_command_range_spans_the_action_set_around_step_in_place():

@@ -26,7 +26,7 @@ def _float_leaves(tree, dtype):
 def test_objective_gradient_matches_finite_differences_float64():
     cfg = forward.ForwardConfig(shape=(40, 40), density=0.1, has_height=True, batch_size=3, num_noise_samples=4,
                                 sharpness=5.0, tau=1.0)  # warm: every action keeps some probability
-    robot = forward.make_robot(cfg)
+    robot = forward.paper_robot(cfg)
     batch = jax.jit(forward.make_batch_fn(robot, cfg))(jax.random.key(4))
     assert float(jnp.sum(batch.risk)) > 0  # the risk term takes part
     with enable_x64():
@@ -57,7 +57,7 @@ def test_short_tuning_run_lowers_the_objective():
     # nearly piecewise constant; the check is that the optimiser descends the smooth relaxed objective.
     cfg = forward.ForwardConfig(shape=(40, 40), density=0.1, batch_size=6, num_noise_samples=4, tau=0.3,
                                 learning_rate=0.3)
-    robot = forward.make_robot(cfg)
+    robot = forward.paper_robot(cfg)
     fixed = jax.jit(forward.make_batch_fn(robot, cfg))(jax.random.key(1))  # a fixed batch: a deterministic check
     u0 = forward.to_unconstrained(robot, cfg.tuned_names())
     loss = lambda p, _: forward.objective(p, fixed, robot, cfg)  # noqa: E731
@@ -70,7 +70,7 @@ def test_short_tuning_run_lowers_the_objective():
 
 
 def test_tune_forward_runs_batched_and_saves(tmp_path):
-    robot = forward.make_robot(TINY)
+    robot = forward.paper_robot(TINY)
     fit = forward.tune_forward(robot, TINY, key=0, init={"margin": np.array([0.01, 0.05])}, num_runs=2,
                                progress=False, out_dir=tmp_path)
     assert fit.result.losses.shape == (2, TINY.steps)

@@ -138,3 +138,56 @@ def test_bijectors_round_trip_and_stay_in_range():
         np.testing.assert_allclose(float(b.forward(b.inverse(x))), x, rtol=1e-6)
     with pytest.raises(ValueError):
         loop.interval(1.0, 1.0)
+
+
+def _reference_adam_scan(loss_fn, init, steps, learning_rate):
+    """The hand-written Adam scan the haptic tuner and the inverse fit used before sharing the loop."""
+    opt = optax.adam(learning_rate)
+
+    def body(carry, _):
+        p, s = carry
+        loss, g = jax.value_and_grad(loss_fn)(p)
+        upd, s = opt.update(g, s, p)
+        return (optax.apply_updates(p, upd), s), (loss, p)
+
+    (p, _), (losses, traj) = jax.lax.scan(body, (init, opt.init(init)), None, length=steps)
+    return p, losses, traj
+
+
+def test_run_steps_is_the_hand_written_adam_scan():
+    def loss(p):
+        return jnp.sum(jnp.sin(3.0 * p) + (p - 0.5) ** 2)
+
+    init = jnp.array([0.1, -0.4], jnp.float32)
+
+    @jax.jit
+    def shared(init):
+        tuner = loop.make_tuner(lambda p, _: loss(p), optax.adam(0.05))
+        state, metrics, traj = loop.run_steps(tuner, tuner.init(init), 20, trace_params=True)
+        return state.params, metrics.loss, traj
+
+    got = shared(init)
+    want = jax.jit(lambda i: _reference_adam_scan(loss, i, 20, 0.05))(init)
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_array_equal(np.asarray(g), np.asarray(w))
+    assert got[2].shape == (20, 2) and np.array_equal(np.asarray(got[2][0]), np.asarray(init))
+
+
+def test_run_steps_matches_the_host_loop_with_minibatches_and_runs():
+    p0 = {"mu": jnp.stack([jnp.zeros(3), jnp.ones(3)])}
+    host = loop.tune(_quadratic, p0, optax.adam(0.1), 6, key=3, batch_fn=_batch_fn, num_runs=2, progress=False)
+    tuner = loop.make_tuner(_quadratic, optax.adam(0.1), batch_fn=_batch_fn, num_runs=2)
+    run = jax.jit(lambda s, k: loop.run_steps(tuner, s, 6, key=k))
+    state, metrics, traj = run(tuner.init(p0), jax.random.key(3))
+    assert traj is None and metrics.loss.shape == (6, 2)
+    np.testing.assert_allclose(np.asarray(metrics.loss).T, host.losses, rtol=TOL)
+    np.testing.assert_allclose(np.asarray(state.params["mu"]), host.params["mu"], rtol=TOL)
+    run(tuner.init(p0), jax.random.key(4))
+    assert run._cache_size() == 1  # a new key does not recompile
+
+
+@pytest.mark.parametrize("steps", [0, -1, 1.5])
+def test_run_steps_rejects_bad_step_counts(steps):
+    tuner = loop.make_tuner(lambda p, _: jnp.sum(p**2), optax.sgd(0.1))
+    with pytest.raises(ValueError, match="steps"):
+        loop.run_steps(tuner, tuner.init(jnp.ones(2)), steps)

@@ -136,7 +136,7 @@ def _forward(args) -> int:
         raise ValueError(f"--runs must be >= 1, got {args.runs}")
     if args.held_out < 0:
         raise ValueError(f"--held-out must be >= 0, got {args.held_out}")
-    robot = forward.make_robot(cfg)
+    robot = forward.paper_robot(cfg)
     init = None
     if args.runs:
         hi = forward.max_margin_of(robot)
@@ -214,8 +214,8 @@ def bench(quick: bool = False) -> list:
     sizes = [(8, 0.5)] if quick else [(8, 0.5), (32, 0.5), (8, 1.0)]
     for batch, density in sizes:
         cfg = forward.ForwardConfig(batch_size=batch, density=density)
-        robot = forward.make_robot(cfg)
-        tuner = loop.make_tuner(functools.partial(forward._loss, robot=robot, cfg=cfg),
+        robot = forward.paper_robot(cfg)
+        tuner = loop.make_tuner(functools.partial(forward.objective, robot=robot, cfg=cfg),
                                 optax.adam(cfg.learning_rate), batch_fn=forward.make_batch_fn(robot, cfg),
                                 has_aux=True)
         state = tuner.init(forward.to_unconstrained(robot, cfg.tuned_names()))

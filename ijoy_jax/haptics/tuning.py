@@ -61,6 +61,8 @@ import optax
 from ijoy_jax.haptics.filter import SpringDamper, discretise, filter_signal, init_state
 from ijoy_jax.haptics.leg import LegGeometry, alduro_leg, forward_kinematics
 from ijoy_jax.haptics.workspace import linearise, plane_forces
+from ijoy_jax.prng import as_key
+from ijoy_jax.tune import loop
 
 TREMOR_BAND_HZ = (8.0, 12.0)
 SETTLE_S = 0.5  # s of start-up transient excluded from every metric
@@ -71,10 +73,6 @@ DEFAULT_FILTER = (
 )
 #: Default repulsion: (C1 N, decay length m).
 DEFAULT_REPULSION = (1.0, 0.05)
-
-
-def _key(key):
-    return jax.random.key(key) if isinstance(key, int) else key
 
 
 def _band_noise(key, n: int, dt: float, lo_hz: float, hi_hz: float, rms, dtype):
@@ -118,7 +116,7 @@ def synthetic_joystick(key, num_samples: int = 4000, dt: float = 1e-3, *, intend
       >>> s.raw.shape, round(float(jnp.sqrt(jnp.mean(s.tremor ** 2))), 3)
       ((1000,), 0.05)
     """
-    k_f, k_p, k_a, k_t, k_n = jax.random.split(_key(key), 5)
+    k_f, k_p, k_a, k_t, k_n = jax.random.split(as_key(key), 5)
     t = jnp.arange(num_samples, dtype=dtype) * dt
     f = jax.random.uniform(k_f, (3,), dtype, 0.1, 1.0)
     phase = jax.random.uniform(k_p, (3,), dtype, 0.0, 2 * jnp.pi)
@@ -175,25 +173,19 @@ def filter_objective(log_params, signal: JoystickSignal, dt: float = 1e-3, lam=1
     }
 
 
-class TuneResult(NamedTuple):
-    """A tuning run: final log-parameters (2,), and per-step loss (steps,) and log-parameters (steps, 2)."""
+class HapticTuneResult(NamedTuple):
+    """A haptic tuning run: final log-parameters (2,), and per-step loss (steps,) and log-parameters (steps, 2)."""
 
     log_params: jax.Array
     losses: jax.Array
     trajectory: jax.Array
 
 
-def _adam_run(loss_fn, init, steps: int, learning_rate: float) -> TuneResult:
-    opt = optax.adam(learning_rate)
-
-    def body(carry, _):
-        p, s = carry
-        loss, g = jax.value_and_grad(loss_fn)(p)
-        upd, s = opt.update(g, s, p)
-        return (optax.apply_updates(p, upd), s), (loss, p)
-
-    (p, _), (losses, traj) = jax.lax.scan(body, (init, opt.init(init)), None, length=steps)
-    return TuneResult(p, losses, traj)
+def _adam_run(loss_fn, init, steps: int, learning_rate: float) -> HapticTuneResult:
+    """Adam on ``loss_fn(log_params)`` by the one tuning loop (:func:`ijoy_jax.tune.loop.run_steps`)."""
+    tuner = loop.make_tuner(lambda p, _: loss_fn(p), optax.adam(learning_rate))
+    state, metrics, trajectory = loop.run_steps(tuner, tuner.init(init), steps, trace_params=True)
+    return HapticTuneResult(state.params, metrics.loss, trajectory)
 
 
 def filter_batch_loss(log_params, signals: JoystickSignal, dt: float = 1e-3, lam=1.0) -> jax.Array:
@@ -202,7 +194,7 @@ def filter_batch_loss(log_params, signals: JoystickSignal, dt: float = 1e-3, lam
 
 
 def tune_filter(key, *, num_signals: int = 4, num_samples: int = 4000, dt: float = 1e-3, lam=1.0,
-                steps: int = 150, learning_rate: float = 0.05, init=DEFAULT_FILTER) -> TuneResult:
+                steps: int = 150, learning_rate: float = 0.05, init=DEFAULT_FILTER) -> HapticTuneResult:
     """Tune (f0, zeta) by Adam on a batch of synthetic joystick signals.
 
     Args:
@@ -213,14 +205,14 @@ def tune_filter(key, *, num_signals: int = 4, num_samples: int = 4000, dt: float
       init: (f0 Hz, zeta) starting point.
 
     Returns:
-      :class:`TuneResult`; ``filter_params(result.log_params)`` is the tuned SpringDamper.
+      :class:`HapticTuneResult`; ``filter_params(result.log_params)`` is the tuned SpringDamper.
 
     Example:
       >>> r = tune_filter(0, num_signals=1, num_samples=1500, steps=3)
       >>> r.losses.shape
       (3,)
     """
-    keys = jax.random.split(_key(key), num_signals)
+    keys = jax.random.split(as_key(key), num_signals)
     signals = jax.vmap(lambda k: synthetic_joystick(k, num_samples, dt))(keys)
     init = jnp.log(jnp.asarray(init, jnp.float32))
     return _tune_filter_jit(init, signals, dt, lam, steps, learning_rate)
@@ -234,7 +226,7 @@ def _tune_filter_jit(init, signals, dt, lam, steps, learning_rate):
 def evaluate_filter(log_params, key, *, num_signals: int = 8, num_samples: int = 4000, dt: float = 1e-3,
                     lam=1.0) -> dict[str, float]:
     """Mean :func:`filter_objective` terms over held-out synthetic signals (host floats)."""
-    keys = jax.random.split(_key(key), num_signals)
+    keys = jax.random.split(as_key(key), num_signals)
     signals = jax.vmap(lambda k: synthetic_joystick(k, num_samples, dt))(keys)
     return {k: float(v) for k, v in _filter_terms(jnp.asarray(log_params), signals, dt, lam).items()}
 
@@ -268,7 +260,7 @@ def operator_intent(key, num_steps: int = 200, dt: float = 0.02, *, speed_rms=0.
     The drift (``drift`` times ``speed_rms``, random direction) makes the operator lean on a workspace
     limit within a few seconds: the force must hold the leg there against the push.
     """
-    k_f, k_p, k_a, k_d = jax.random.split(_key(key), 4)
+    k_f, k_p, k_a, k_d = jax.random.split(as_key(key), 4)
     t = jnp.arange(num_steps, dtype=dtype) * dt
     f = jax.random.uniform(k_f, (2, 3), dtype, 0.05, 0.5)
     ph = jax.random.uniform(k_p, (2, 3), dtype, 0.0, 2 * jnp.pi)
@@ -337,7 +329,7 @@ def repulsion_objective(log_params, leg: LegGeometry, q0, intent, *, dt: float =
 def operator_batch(key, num: int, num_steps: int = 200, dt: float = 0.02, leg: LegGeometry | None = None):
     """``(q0 (B, 4), intent (B, T, 3))``: random starts in the middle 20-80 % of the strokes and intents."""
     leg = alduro_leg(-1.0) if leg is None else leg
-    kq, ki = jax.random.split(_key(key))
+    kq, ki = jax.random.split(as_key(key))
     u = jax.random.uniform(kq, (num, 4), leg.stroke.dtype, 0.2, 0.8)
     q0 = leg.q_min + u * (leg.q_max - leg.q_min)
     intent = jax.vmap(lambda k: operator_intent(k, num_steps, dt))(jax.random.split(ki, num))
@@ -353,7 +345,7 @@ def repulsion_batch_terms(log_params, leg, q0, intent, *, dt=0.02, admittance=0.
 
 def tune_repulsion(key, *, num_trajectories: int = 8, num_steps: int = 200, dt: float = 0.02, admittance=0.05,
                    force_weight=0.1, steps: int = 60, learning_rate: float = 0.1, init=DEFAULT_REPULSION,
-                   leg: LegGeometry | None = None) -> TuneResult:
+                   leg: LegGeometry | None = None) -> HapticTuneResult:
     """Tune (C1, decay length) by Adam on simulated operator trajectories of the ALDURO-like leg.
 
     Args:
@@ -365,7 +357,7 @@ def tune_repulsion(key, *, num_trajectories: int = 8, num_steps: int = 200, dt: 
       leg: default ``alduro_leg(-1.0)`` (the paper's right leg).
 
     Returns:
-      :class:`TuneResult`; ``jnp.exp(result.log_params)`` = (C1, decay length).
+      :class:`HapticTuneResult`; ``jnp.exp(result.log_params)`` = (C1, decay length).
     """
     leg = alduro_leg(-1.0) if leg is None else leg
     q0, intent = operator_batch(key, num_trajectories, num_steps, dt, leg)

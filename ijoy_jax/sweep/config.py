@@ -67,6 +67,7 @@ from typing import Any
 
 import numpy as np
 
+from ijoy_jax import robots
 from ijoy_jax.select import KERNELS, METHODS
 from ijoy_jax.terrain import generators
 
@@ -81,31 +82,17 @@ __all__ = [
     "scenarios",
 ]
 
-# HRP-2's values (ijoy_jax.robots.hrp2 and default_metrics); tests check they agree.
-ROBOT_DEFAULTS: Mapping[str, float] = MappingProxyType(
-    {
-        "w": 1.0,
-        "rotation_weight": 100.0,
-        "margin": 0.02,
-        "step_time": 0.8,
-        "foot_length": 0.242,
-        "foot_width": 0.13,
-        "density": 1.0,
-        "metrics.slope_weight": 0.5,
-        "metrics.slope_limit": math.radians(20.0),
-        "metrics.roughness_weight": 20.0,
-        "metrics.roughness_limit": 0.01,
-        "metrics.bump_weight": 10.0,
-        "metrics.bump_limit": 0.02,
-        "metrics.step_weight": 1.0,
-        "metrics.band_weight": 5.0,
-        "metrics.band_limit": 0.03,
-    }
-)
+def _robot_defaults() -> dict[str, float]:
+    d = robots.hrp2_defaults()  # the one source of HRP-2's numbers; order: body and selector, density, metrics
+    body = {k: v for k, v in d.items() if k != "density" and not k.startswith("metrics.")}
+    return {**body, "density": d["density"], **{k: v for k, v in d.items() if k.startswith("metrics.")}}
+
+
+ROBOT_DEFAULTS: Mapping[str, float] = MappingProxyType(_robot_defaults())
 """Every sweepable robot parameter and its default (m, s, rad, cost units)."""
 
 # Lower bounds: (bound, strict). Every robot parameter is >= 0; sizes and times > 0.
-_POSITIVE = {"step_time", "foot_length", "foot_width", "density"}
+_POSITIVE = {n for n, spec in robots.SCALAR_LEAVES.items() if spec.positive} | {"density"}
 # Largest margin the sweep accepts (m): the static footprint window grows with it.
 _MAX_MARGIN = 0.5
 

@@ -138,10 +138,6 @@ class _Static(NamedTuple):
     kernel: str
 
 
-_METRIC_NAMES = tuple(k.partition(".")[2] for k in ROBOT_DEFAULTS if k.startswith("metrics."))
-_LEAF_NAMES = tuple(k for k in ROBOT_DEFAULTS if not k.startswith("metrics.") and k != "density")
-
-
 def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_vals, terrain_vals, command):
     """One scenario: terrain, robot, start and rollout; returns the trajectory's summary (scalars)."""
     fam = generators.FAMILIES[static.family]
@@ -150,8 +146,7 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_val
     tkey = jax.random.fold_in(key, seed)
     terrain = fam.generator(tkey, params, shape=static.shape, resolution=static.resolution,
                             has_height=static.has_height, **kw)
-    metrics = base.metrics.replace(**{m: robot_vals[f"metrics.{m}"] for m in _METRIC_NAMES})
-    robot = base.replace(metrics=metrics, **{k: robot_vals[k] for k in _LEAF_NAMES})
+    robot = robots.set_leaves(base, {k: robot_vals[k] for k in robots.SCALAR_LEAVES})
     centre = generators.start_point(params, shape=static.shape, resolution=static.resolution)
     start = robots.start_stance(base, centre[0], centre[1])  # side by side at the step-in-place width, facing +x
     traj = rollout_core(terrain, robot, start, command, static.num_steps, static.method, targets=targets,

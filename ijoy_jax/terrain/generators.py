@@ -74,6 +74,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax._struct import pytree_dataclass
+from ijoy_jax.prng import as_key
 from ijoy_jax.terrain import scene
 from ijoy_jax.terrain.grid import Terrain, grid_spec
 
@@ -451,12 +452,6 @@ def _check_params(params, cls, allow_inf: tuple[str, ...] = ()):
     return params
 
 
-def _key(key):
-    if isinstance(key, (int, np.integer)):
-        return jax.random.key(int(key))
-    return key
-
-
 def _f32(x) -> jax.Array:
     return jnp.asarray(x, jnp.float32)
 
@@ -662,7 +657,7 @@ def objects(
     make, cls = _OBJECT_FAMILIES[family]
     params = _check_params(params, cls)
     n = _check_max(FAMILIES[family].max_count if max_count is None else max_count)
-    return make(_key(key), params, _grid(shape, resolution, origin, True), n)
+    return make(as_key(key), params, _grid(shape, resolution, origin, True), n)
 
 
 def walls(
@@ -696,7 +691,7 @@ def walls(
     """
     params = _check_params(params, WallParams)
     grid = _grid(shape, resolution, origin, has_height)
-    return _rasterize(grid, _walls_objects(_key(key), params, grid, _check_max(max_count)))
+    return _rasterize(grid, _walls_objects(as_key(key), params, grid, _check_max(max_count)))
 
 
 def obstacles(
@@ -730,7 +725,7 @@ def obstacles(
     """
     params = _check_params(params, ObstacleParams)
     grid = _grid(shape, resolution, origin, has_height)
-    return _rasterize(grid, _obstacles_objects(_key(key), params, grid, _check_max(max_count)))
+    return _rasterize(grid, _obstacles_objects(as_key(key), params, grid, _check_max(max_count)))
 
 
 def bars(
@@ -765,7 +760,7 @@ def bars(
     """
     params = _check_params(params, BarParams)
     grid = _grid(shape, resolution, origin, has_height)
-    return _rasterize(grid, _bars_objects(_key(key), params, grid, _check_max(max_count)))
+    return _rasterize(grid, _bars_objects(as_key(key), params, grid, _check_max(max_count)))
 
 
 def platforms(
@@ -800,7 +795,7 @@ def platforms(
     """
     params = _check_params(params, PlatformParams)
     grid = _grid(shape, resolution, origin, has_height)
-    return _rasterize(grid, _platforms_objects(_key(key), params, grid, _check_max(max_count)))
+    return _rasterize(grid, _platforms_objects(as_key(key), params, grid, _check_max(max_count)))
 
 
 # --------------------------------------------------------------------------- surface families
@@ -880,7 +875,7 @@ def stairs(
     params = _check_params(params, StairParams)
     grid = _grid(shape, resolution, origin, has_height)
     n = _check_max(max_count)
-    u = 2.0 * _random(_key(key), (n, 2)) - 1.0  # U[-1, 1)
+    u = 2.0 * _random(as_key(key), (n, 2)) - 1.0  # U[-1, 1)
     rise = _f32(params.rise) + u[:, 0] * _f32(params.rise_jitter)
     run = jnp.maximum(_f32(params.run) + u[:, 1] * _f32(params.run_jitter), 0.0)
     first = jnp.maximum(_f32(params.first), _f32(params.start_radius))
@@ -982,7 +977,7 @@ def rough(
     """
     params = _check_params(params, RoughParams, allow_inf=("obstacle_above",))
     grid = _grid(shape, resolution, origin, has_height)
-    field = _f32(params.amplitude) * _gaussian_field(_key(key), grid, params.correlation_length)
+    field = _f32(params.amplitude) * _gaussian_field(as_key(key), grid, params.correlation_length)
     r = _f32(params.start_radius)
     dist = jnp.sqrt(jnp.sum((grid.centres() - grid.start(params)) ** 2, axis=-1))
     ramp = jnp.maximum(jnp.abs(_f32(params.correlation_length)), grid.res)
@@ -1041,7 +1036,7 @@ def stepping_stones(
     # As spacing >= resolution a map holds at most nx x ny sites: one table entry each.
     ix = jnp.clip(sx - sx[0], 0, nx - 1).astype(jnp.int32)
     iy = jnp.clip(sy - sy[0], 0, ny - 1).astype(jnp.int32)
-    table = 2.0 * _random(_key(key), (nx, ny, 4)) - 1.0  # U[-1, 1)
+    table = 2.0 * _random(as_key(key), (nx, ny, 4)) - 1.0  # U[-1, 1)
     u = table[ix[:, None], iy[None, :]]  # (nx, ny, 4): x, y offsets, yaw, top
     yaw = u[..., 2] * _f32(params.yaw_jitter)
     c, s = jnp.cos(yaw), jnp.sin(yaw)

@@ -5,13 +5,14 @@ Modules::
   relax     soft FootCost and the Boltzmann (softmin) selector
   inverse   recover parameters from demonstrations (maximum-entropy likelihood)
   forward   minimise command error + obstacle risk; exact held-out evaluation
-  loop      the generic tuning loop: jitted optax steps, vmapped runs, progress, save/load
-  rollout   the relaxed control-loop rollout, differentiable end to end
+  loop      the one tuning loop: jitted optax steps, vmapped runs, in-graph scans, progress, save/load
+  relaxed_rollout  the relaxed control-loop rollout, differentiable end to end
 
 Top-level API (one symbol per line below)::
 
   tune(loss_fn, params0, optimizer, steps, *, key, ...)  -> TuneResult   the generic loop
   make_tuner(loss_fn, optimizer, ...)                    -> Tuner        init/step, for your own loop
+  run_steps(tuner, state, steps, ...)                    -> (state, metrics, trajectory)  in one lax.scan
   load(out_dir)                                          -> Saved        params, losses, manifest
   positive(), interval(lo, hi)                           -> Bijector     constrained parameters
   ForwardConfig, tune_forward(robot, cfg, ...)           -> ForwardResult
@@ -31,7 +32,7 @@ from ijoy_jax.tune import forward as forward
 from ijoy_jax.tune import inverse as inverse
 from ijoy_jax.tune import loop as loop
 from ijoy_jax.tune import relax as relax
-from ijoy_jax.tune import rollout as rollout
+from ijoy_jax.tune import relaxed_rollout as relaxed_rollout
 from ijoy_jax.tune.forward import ForwardConfig as ForwardConfig
 from ijoy_jax.tune.forward import ForwardResult as ForwardResult
 from ijoy_jax.tune.forward import compare as compare
@@ -46,6 +47,7 @@ from ijoy_jax.tune.loop import interval as interval
 from ijoy_jax.tune.loop import load as load
 from ijoy_jax.tune.loop import make_tuner as make_tuner
 from ijoy_jax.tune.loop import positive as positive
+from ijoy_jax.tune.loop import run_steps as run_steps
 from ijoy_jax.tune.loop import save as save
 from ijoy_jax.tune.loop import tune as tune
 from ijoy_jax.tune.relax import RelaxedChoice as RelaxedChoice
@@ -70,8 +72,9 @@ __all__ = [
     "make_tuner",
     "positive",
     "relax",
+    "relaxed_rollout",
     "relaxed_select",
-    "rollout",
+    "run_steps",
     "save",
     "tune",
     "tune_forward",

@@ -39,7 +39,7 @@ Tunable parameters (traced Robot leaves, optimised unconstrained):
 (``"metrics.slope_weight"``, ...) in log space (:func:`ijoy_jax.tune.loop.positive`);
 ``margin`` through a scaled sigmoid into (0, max_margin)
 (:func:`ijoy_jax.tune.loop.interval`), max_margin being the margin the
-robot's static windows were built for (``make_robot(max_margin=...)``), so the
+robot's static windows were built for (``robots.make_robot(max_margin=...)``), so the
 window sizes never change and nothing recompiles. On 2D maps FootCost is 0
 or +inf, so the exact choice does not depend on ``w`` (zero action costs)
 nor the metric terms: the default tunables are then ``rotation_weight`` and
@@ -53,7 +53,7 @@ Example:
   >>> import ijoy_jax as ij
   >>> from ijoy_jax.tune import forward
   >>> cfg = forward.ForwardConfig(shape=(40, 40), density=0.1, batch_size=2, steps=3, num_noise_samples=2)
-  >>> robot = forward.make_robot(cfg)
+  >>> robot = forward.paper_robot(cfg)
   >>> fit = forward.tune_forward(robot, cfg, key=0, progress=False)
   >>> fit.result.losses.shape
   (3,)
@@ -74,14 +74,15 @@ import optax
 
 from ijoy_jax import geometry, robots
 from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain
+from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
 from ijoy_jax.select import make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain, generators
 from ijoy_jax.tune import loop, relax
 
-METRIC_NAMES = tuple(f"metrics.{f.name}" for f in dataclasses.fields(robots.TerrainMetrics))
-TUNABLE = ("w", "rotation_weight", "margin", *METRIC_NAMES)
-"""Names of the Robot leaves :func:`tune_forward` may tune."""
+METRIC_NAMES = tuple(n for n in robots.SELECTOR_LEAVES if n.startswith("metrics."))
+TUNABLE = robots.SELECTOR_LEAVES
+"""Names of the Robot leaves :func:`tune_forward` may tune: the selector's (:data:`ijoy_jax.robots.SELECTOR_LEAVES`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,7 +122,7 @@ class ForwardConfig:
       batch_size: decisions per step; steps: Adam steps; learning_rate: on the
         unconstrained variables; seed: of the training decisions.
 
-    Robot (:func:`make_robot`): density of HRP-2's action set, max_margin (m),
+    Robot (:func:`paper_robot`): density of HRP-2's action set, max_margin (m),
       and the starting margin (m).
     """
 
@@ -195,7 +196,7 @@ def _check_config(cfg: ForwardConfig) -> None:
         need(not bad and len(cfg.names) > 0, f"names must be a non-empty subset of {TUNABLE}, got {bad or cfg.names}")
 
 
-def make_robot(cfg: ForwardConfig, **overrides) -> Robot:
+def paper_robot(cfg: ForwardConfig, **overrides) -> Robot:
     """HRP-2 with the paper's hand-set selector parameters (w = 1, rotation_weight = 100,
     ``cfg.margin``), action-set ``cfg.density`` and windows sized for ``cfg.max_margin``."""
     return robots.hrp2(margin=cfg.margin, density=cfg.density, max_margin=cfg.max_margin, **overrides)
@@ -294,7 +295,7 @@ def sample_decisions(key, num: int, cfg: ForwardConfig) -> Decisions:
       >>> d.terrains.free.shape, d.noise.shape
       ((3, 40, 40), (3, 4, 3))
     """
-    key = loop._as_key(key)
+    key = as_key(key)
     kt, kh, ks, kc, kn = jax.random.split(key, 5)
     fam = generators.FAMILIES[cfg.family]
     zone = dict(start_x=0.5, start_y=0.5, start_radius=cfg.clear_radius)
@@ -387,7 +388,7 @@ def _errors(robot: Robot, side, command, acts_rel):
     swing = -side_sign(side)
     p_next = side_p0(robot, swing) + robot.step_time * command
     d = acts_rel - p_next
-    return relax._safe_norm(d[..., 0], d[..., 1]), jnp.abs(geometry.wrap_angle(d[..., 2]))
+    return geometry.safe_norm(d[..., 0], d[..., 1]), jnp.abs(geometry.wrap_angle(d[..., 2]))
 
 
 def decision_objective(uparams: dict, robot: Robot, terrain, stance, side, command, risk, cfg: ForwardConfig) -> dict:
@@ -427,7 +428,7 @@ def objective(uparams: dict, batch: Batch, robot: Robot, cfg: ForwardConfig) -> 
     Example:
       >>> from ijoy_jax.tune import forward
       >>> cfg = forward.ForwardConfig(shape=(40, 40), density=0.1, batch_size=2, num_noise_samples=2)
-      >>> robot = forward.make_robot(cfg)
+      >>> robot = forward.paper_robot(cfg)
       >>> batch = forward.make_batch_fn(robot, cfg)(jax.random.key(0))
       >>> loss, terms = forward.objective(forward.to_unconstrained(robot, cfg.tuned_names()), batch, robot, cfg)
       >>> bool(loss > 0), sorted(terms)[:2]
@@ -473,7 +474,7 @@ def tune_forward(
     """Minimise the relaxed forward objective with Adam over fresh minibatches each step.
 
     Args:
-      robot: starting Robot (e.g. :func:`make_robot`); untuned leaves stay fixed.
+      robot: starting Robot (e.g. :func:`paper_robot`); untuned leaves stay fixed.
       cfg: :class:`ForwardConfig`.
       key: int or PRNG key of the training minibatches (default ``cfg.seed``).
       init: optional dict name -> starting value(s) (natural units); (R,) arrays
@@ -493,7 +494,7 @@ def tune_forward(
         u0 = {n: jnp.broadcast_to(v, (num_runs,)) for n, v in u0.items()}
     elif any(np.ndim(v) for v in u0.values()):
         raise ValueError("init has per-run values: pass num_runs")
-    loss = functools.partial(_loss, robot=robot, cfg=cfg)
+    loss = functools.partial(objective, robot=robot, cfg=cfg)
     res = loop.tune(loss, u0, optax.adam(cfg.learning_rate), int(cfg.steps), key=key,
                     batch_fn=make_batch_fn(robot, cfg), num_runs=num_runs, has_aux=True,
                     progress=progress, log_every=log_every)
@@ -508,10 +509,6 @@ def tune_forward(
         extra = {"tuned": values, "best_run": best, "all_runs": natural_values(robot, res.params)}
         res = res._replace(out_dir=loop.save(out_dir, res, config=cfg, extra=extra))
     return ForwardResult(tuned, values, res, best)
-
-
-def _loss(uparams, batch, robot, cfg):
-    return objective(uparams, batch, robot, cfg)
 
 
 # --------------------------------------------------------------------------- exact evaluation
@@ -543,7 +540,7 @@ def evaluate(robot: Robot, decisions: Decisions, cfg: ForwardConfig) -> Evaluati
     """Score the EXACT exhaustive selector (against p_next) on decisions, with sampled placement noise.
 
     Args:
-      robot: the parameters to evaluate (tuned, or the paper's :func:`make_robot`).
+      robot: the parameters to evaluate (tuned, or the paper's :func:`paper_robot`).
       decisions: :class:`Decisions` (e.g. held out: :func:`sample_decisions` with another key).
       cfg: supplies distance, noise std (the decisions carry the draws).
 
@@ -553,7 +550,7 @@ def evaluate(robot: Robot, decisions: Decisions, cfg: ForwardConfig) -> Evaluati
     Example:
       >>> from ijoy_jax.tune import forward
       >>> cfg = forward.ForwardConfig(shape=(40, 40), density=0.1, num_noise_samples=4)
-      >>> ev = forward.evaluate(forward.make_robot(cfg), forward.sample_decisions(1, 3, cfg), cfg)
+      >>> ev = forward.evaluate(forward.paper_robot(cfg), forward.sample_decisions(1, 3, cfg), cfg)
       >>> ev.near.shape
       (3,)
     """
@@ -616,14 +613,14 @@ def compare(tuned: Robot, cfg: ForwardConfig, *, num: int = 200, key=12345, base
       cfg: the config it was tuned with.
       num: held-out decisions (use a key not used in training).
       key: int or PRNG key of the held-out decisions.
-      baseline: default :func:`make_robot` (HRP-2 with the paper's w = 1,
+      baseline: default :func:`paper_robot` (HRP-2 with the paper's w = 1,
         rotation_weight = 100 and ``cfg.margin``).
 
     Returns:
       ``{"tuned": {...}, "paper": {...}, "num": num}``.
     """
-    baseline = make_robot(cfg) if baseline is None else baseline
-    held = jax.jit(sample_decisions, static_argnums=(1, 2))(loop._as_key(key), int(num), cfg)
+    baseline = paper_robot(cfg) if baseline is None else baseline
+    held = jax.jit(sample_decisions, static_argnums=(1, 2))(as_key(key), int(num), cfg)
     return {
         "tuned": summarize(evaluate(tuned, held, cfg), cfg),
         "paper": summarize(evaluate(baseline, held, cfg), cfg),

@@ -37,10 +37,10 @@ import optax
 
 from ijoy_jax import geometry
 from ijoy_jax.footcost import index_terrain
-from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
+from ijoy_jax.robots import Robot, dist, get_leaf, set_leaf, side_actions, side_p0, side_sign
 from ijoy_jax.select import make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain
-from ijoy_jax.tune import relax
+from ijoy_jax.tune import loop, relax
 
 _SELECTOR_ONLY = frozenset({"w", "rotation_weight"})  # soft FootCost does not depend on these
 
@@ -183,7 +183,7 @@ def negative_log_likelihood(
             lp = r.log_probs
         else:
             acts, p_next = _dists(rb, side, command)
-            cost = fc + rb.w * relax.soft_dist(acts, p_next, rb.rotation_weight)
+            cost = fc + rb.w * dist(acts, p_next, rb.rotation_weight, grad_safe=True)
             lp = jax.nn.log_softmax(-cost / tau)
         lp = lp[jnp.maximum(action, 0)]
         if noise > 0:
@@ -237,7 +237,7 @@ def fit(
       sharpness, tau, barrier_weight: of the relaxation.
       noise: demonstration noise of :func:`negative_log_likelihood` (robust fit).
       learning_rate: Adam step on the log-parameters.
-      num_steps: number of Adam steps, run in one ``lax.scan`` under jit.
+      num_steps: number of Adam steps, run in one ``lax.scan`` under jit (:func:`ijoy_jax.tune.loop.run_steps`).
 
     Returns:
       :class:`FitResult` with the fitted Robot, the values and the loss curve.
@@ -254,21 +254,16 @@ def fit(
 
     @jax.jit
     def run(log0, fc):
-        def loss(p):
+        def loss(p, _):
             return negative_log_likelihood(
                 p, demos, robot, sharpness=sharpness, tau=tau, barrier_weight=barrier_weight, footcost=fc, noise=noise
             )
 
-        def step(carry, _):
-            p, state = carry
-            value, g = jax.value_and_grad(loss)(p)
-            updates, state = opt.update(g, state, p)
-            return (optax.apply_updates(p, updates), state), value
+        tuner = loop.make_tuner(loss, opt, num_runs=num_starts)  # the R starts vmapped
+        state, metrics, _ = loop.run_steps(tuner, tuner.init(log0), num_steps)
+        return state.params, metrics.loss.T
 
-        (p, _), losses = jax.lax.scan(step, (log0, opt.init(log0)), None, length=num_steps)
-        return p, losses
-
-    logp, losses = jax.vmap(run, (0, None))(log0, fc)  # (R,) params, (R, num_steps) losses
+    logp, losses = run(log0, fc)  # (R,) params, (R, num_steps) losses
     best = int(jnp.argmin(losses[:, -1]))
     logp = {n: v[best] for n, v in logp.items()}
     values = {n: float(jnp.exp(v)) for n, v in logp.items()}

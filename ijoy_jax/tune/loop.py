@@ -6,6 +6,9 @@ The pieces, optax-style:
   functions: ``init(params0) -> TuneState`` and the jitted
   ``step(state, key) -> (state, StepMetrics)``. One compile serves every step
   (the step number, the key and the parameters are traced).
+* :func:`run_steps` runs ``step`` in one ``lax.scan`` (pure, jit-able): the
+  driver for fits that live inside a jitted function (the inverse problem,
+  the haptic tuners).
 * :func:`tune` is the (impure, host-side) loop around them: it calls ``step``
   ``steps`` times, prints progress (steps/s, loss, ETA), collects the loss
   curves and optionally saves everything with :func:`save`; :func:`load`
@@ -62,6 +65,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+
+from ijoy_jax.prng import as_key
 
 # --------------------------------------------------------------------------- transforms
 
@@ -136,15 +141,6 @@ class Tuner(NamedTuple):
 
     init: Callable[[Any], TuneState]
     step: Callable[[TuneState, jax.Array], tuple[TuneState, StepMetrics]]
-
-
-def _as_key(key) -> jax.Array:
-    if isinstance(key, (int, np.integer)):
-        return jax.random.key(int(key))
-    key = jnp.asarray(key) if not isinstance(key, jax.Array) else key
-    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        return key
-    return jax.random.wrap_key_data(key)
 
 
 def make_tuner(
@@ -225,6 +221,47 @@ def make_tuner(
         return TuneState(params, opt_state, state.step + 1), metrics
 
     return Tuner(init, step)
+
+
+def run_steps(
+    tuner: Tuner, state: TuneState, steps: int, *, key=None, trace_params: bool = False
+) -> tuple[TuneState, StepMetrics, Any]:
+    """``steps`` updates of ``tuner.step`` in one ``lax.scan``: pure and jit-able (the in-graph twin of :func:`tune`).
+
+    Use it where the whole run belongs inside one jitted function (a fit
+    vmapped or differentiated as a whole, or one that takes traced data);
+    :func:`tune` is the host loop with progress, timing and saving.
+
+    Args:
+      tuner: from :func:`make_tuner`.
+      state: the starting :class:`TuneState` (``tuner.init(params0)``).
+      steps: number of updates (static, >= 1).
+      key: PRNG key (or int seed) of the minibatches; None only without ``batch_fn``.
+      trace_params: static; also return the parameters before each update.
+
+    Returns:
+      ``(state, metrics, trajectory)``: the final state; :class:`StepMetrics`
+      with a leading (steps,) axis (then the run axis, if any); the (steps, ...)
+      parameters before each update, or None without ``trace_params``.
+
+    Example:
+      >>> import jax.numpy as jnp, optax
+      >>> from ijoy_jax.tune import loop
+      >>> t = loop.make_tuner(lambda p, b: jnp.sum(p ** 2), optax.sgd(0.1))
+      >>> s, m, traj = loop.run_steps(t, t.init(jnp.ones(2)), 3, trace_params=True)
+      >>> m.loss.shape, traj.shape, round(float(s.params[0]), 3)
+      ((3,), (3, 2), 0.512)
+    """
+    if not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise ValueError(f"steps must be a positive int, got {steps!r}")
+    key = None if key is None else as_key(key)
+
+    def body(state, _):
+        new, metrics = tuner.step(state, key)
+        return new, (metrics, state.params if trace_params else None)
+
+    state, (metrics, trajectory) = jax.lax.scan(body, state, None, length=int(steps))
+    return state, metrics, trajectory
 
 
 def _check_run_axis(name, tree, num_runs):
@@ -323,7 +360,7 @@ def tune(
         raise ValueError(f"log_every must be a positive int, got {log_every!r}")
     if num_runs is not None and (not isinstance(num_runs, (int, np.integer)) or num_runs < 1):
         raise ValueError(f"num_runs must be None or a positive int, got {num_runs!r}")
-    key = _as_key(key)
+    key = as_key(key)
     tuner = make_tuner(loss_fn, optimizer, batch_fn=batch_fn, hparams=hparams, num_runs=num_runs, has_aux=has_aux)
     state = tuner.init(params0)
     metrics = []

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 
 from ijoy_jax import geometry
 from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain, window_cells
-from ijoy_jax.robots import Robot, side_actions, side_p0, side_sign
+from ijoy_jax.robots import Robot, dist, side_actions, side_p0, side_sign
 from ijoy_jax.select import Targets, make_targets
 from ijoy_jax.terrain import Terrain
 
@@ -58,13 +58,6 @@ _RIDGE = 1e-6  # plane-fit ridge per (cell count + 1), in cell units, as footcos
 def _smooth_abs(x, eps):
     """|x| smoothed at 0: ``sqrt(x^2 + eps^2) - eps`` (within eps of |x|, smooth gradient)."""
     return jnp.sqrt(x * x + eps * eps) - eps
-
-
-def _safe_norm(x, y):
-    """sqrt(x^2 + y^2) with a zero (not NaN) gradient at the origin (double-where)."""
-    sq = x * x + y * y
-    pos = sq > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
 
 
 def _box(x, half, k):
@@ -223,7 +216,7 @@ def _soft_plane(patch: _Patch, m_foot, m_grown, res: float, temp) -> _SoftPlane:
     c = (svh * suu - suh * suv) / det
     resid = hc - (b * uc + c * vc)
     height = h_ref + mh - b * mu - c * mv  # plane height at the pose (m)
-    slope = jnp.arctan(_safe_norm(b, c) / res)
+    slope = jnp.arctan(geometry.safe_norm(b, c) / res)
     roughness = jnp.sum(m_foot * _smooth_abs(resid, temp)) / n_safe
     # Memberships scale the values, not the log-sum-exp weights: a weight m only shifts a value by
     # temp * log(m), about minus the cell's distance outside the foot, which never vanishes as the
@@ -267,7 +260,7 @@ def _swing_path(terrain: Terrain, robot: Robot, on_pad, h_pad, kp: int, start, s
     dx, dy = step[0] - start[0], step[1] - start[1]
     eps = res / sharpness
     smooth_len = jnp.sqrt(dx * dx + dy * dy + eps * eps)
-    length = _safe_norm(dx, dy)
+    length = geometry.safe_norm(dx, dy)
     mid = 0.5 * (start + step)
     patch = _patch(terrain, on_pad, h_pad, kp, mid)
     m = _soft_coverage_cs(
@@ -423,12 +416,6 @@ class RelaxedChoice(NamedTuple):
     target: jax.Array
 
 
-def soft_dist(a, b, rotation_weight):
-    """The paper's dist ``|dxy| + rotation_weight |wrap(dtheta)|`` with a NaN-free gradient at dxy = 0."""
-    d = a - b
-    return _safe_norm(d[..., 0], d[..., 1]) + rotation_weight * jnp.abs(geometry.wrap_angle(d[..., 2]))
-
-
 def relaxed_select(
     terrain: Terrain,
     robot: Robot,
@@ -507,7 +494,7 @@ def relaxed_select(
     terms = soft_foot_cost_terms(
         terrain, robot, stance, steps, idx, sharpness=sharpness, barrier_weight=barrier_weight, swing_from=swing_from
     )
-    cost = terms.total + robot.w * soft_dist(acts, target_rel, robot.rotation_weight)
+    cost = terms.total + robot.w * dist(acts, target_rel, robot.rotation_weight, grad_safe=True)
     log_probs = jax.nn.log_softmax(-cost / tau)
     probs = jnp.exp(log_probs)
     if exact:

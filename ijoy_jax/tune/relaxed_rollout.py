@@ -46,6 +46,7 @@ import jax
 import jax.numpy as jnp
 
 from ijoy_jax import geometry
+from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot, side_actions, side_p0
 from ijoy_jax.terrain import Terrain
 from ijoy_jax.tune import relax
@@ -125,11 +126,11 @@ def relaxed_rollout(
 
     Example:
       >>> import numpy as np, ijoy_jax as ij
-      >>> from ijoy_jax.tune import rollout
+      >>> from ijoy_jax.tune import relaxed_rollout
       >>> t = ij.terrain.flat((60, 40), 0.02)
       >>> robot = ij.robots.hrp2(density=0.25)
       >>> start = np.array([[0.2, 0.495, 0.0], [0.2, 0.305, 0.0]])
-      >>> tr = rollout.relaxed_rollout(t, robot, start, [0.25, 0.0, 0.0], 3, sharpness=100.0, tau=0.01)
+      >>> tr = relaxed_rollout.relaxed_rollout(t, robot, start, [0.25, 0.0, 0.0], 3, sharpness=100.0, tau=0.01)
       >>> tr.footsteps.shape, round(float(tr.feet[0, 0]), 2)
       ((3, 3), 0.8)
     """
@@ -144,7 +145,7 @@ def relaxed_rollout(
         commands = jnp.broadcast_to(commands, (num_steps, 3))
     commands = commands[:num_steps]
     if estimator == "gumbel":
-        key = jax.random.key(key) if isinstance(key, int) else key
+        key = as_key(key)
         keys = jax.random.split(key, num_steps)
     else:
         keys = jnp.zeros((num_steps,), jnp.uint32)  # unused placeholder, keeps one scan signature
@@ -186,7 +187,7 @@ def relaxed_rollout(
             expected_cost=choice.expected_cost,
             target=geometry.compose(stance, p_next),
             error=err,
-            deviation=relax._safe_norm(err[0], err[1]),
+            deviation=geometry.safe_norm(err[0], err[1]),
         )
         return (new_feet, -swing), record
 
@@ -259,10 +260,11 @@ def memory_report(terrain, robot, start, commands, lengths=(5, 10, 20, 40), **kw
 
     Example:
       >>> import numpy as np, ijoy_jax as ij
-      >>> from ijoy_jax.tune import rollout
+      >>> from ijoy_jax.tune import relaxed_rollout
       >>> t = ij.terrain.flat((40, 30), 0.02)
       >>> rb = ij.robots.hrp2(density=0.1)
-      >>> r = rollout.memory_report(t, rb, np.array([[0.2, 0.395, 0.0], [0.2, 0.205, 0.0]]), [0.2, 0.0, 0.0], (2, 8))
+      >>> r = relaxed_rollout.memory_report(t, rb, np.array([[0.2, 0.395, 0.0], [0.2, 0.205, 0.0]]), [0.2, 0.0, 0.0],
+      ...                                   (2, 8))
       >>> r[True][8] - r[True][2] < r[False][8] - r[False][2]
       True
     """

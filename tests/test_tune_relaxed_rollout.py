@@ -1,4 +1,4 @@
-"""Tests of ijoy_jax.tune.rollout: gradients vs finite differences, the exact limit, memory with remat."""
+"""Tests of ijoy_jax.tune.relaxed_rollout: gradients vs finite differences, the exact limit, memory with remat."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 import ijoy_jax as ij
 from ijoy_jax.robots import get_leaf, set_leaf
-from ijoy_jax.tune import rollout
+from ijoy_jax.tune import relaxed_rollout
 
 RES = 0.02
 FD_RTOL64 = 1e-5  # float64 central differences, h = 1e-6 (truncation ~h^2, rounding ~1e-16 / h), as test_tune_relax
@@ -48,31 +48,31 @@ def test_relaxed_rollout_tends_to_exact_rollout(robot):
     assert bool(np.all(exact.valid))
     assert len(set(np.asarray(exact.index).tolist())) > 2  # not a plain straight walk: the block matters
     ref = np.asarray(exact.footsteps)
-    st = rollout.relaxed_rollout_jit(terrain, robot, START, cmd, 8, sharpness=1000.0, tau=1e-3,
+    st = relaxed_rollout.relaxed_rollout_jit(terrain, robot, START, cmd, 8, sharpness=1000.0, tau=1e-3,
                                      estimator="straight_through")
     np.testing.assert_array_equal(np.asarray(st.mode), np.asarray(exact.index))
     np.testing.assert_allclose(np.asarray(st.footsteps), ref, atol=ST_ATOL)
     errors = []
     for tau in (1.0, 0.1, 1e-3):
-        ex = rollout.relaxed_rollout_jit(terrain, robot, START, cmd, 8, sharpness=1000.0, tau=tau)
+        ex = relaxed_rollout.relaxed_rollout_jit(terrain, robot, START, cmd, 8, sharpness=1000.0, tau=tau)
         errors.append(float(np.max(np.abs(np.asarray(ex.footsteps) - ref))))
         if tau == 1.0:
-            cache = rollout.relaxed_rollout_jit._cache_size()
-    assert rollout.relaxed_rollout_jit._cache_size() == cache  # new tau / sharpness values do not recompile
+            cache = relaxed_rollout.relaxed_rollout_jit._cache_size()
+    assert relaxed_rollout.relaxed_rollout_jit._cache_size() == cache  # new tau / sharpness values do not recompile
     # Gumbel-softmax: at tau -> 0 the log-probability gaps (cost gap / tau) swamp the O(1) Gumbel noise.
-    gs = rollout.relaxed_rollout_jit(terrain, robot, START, cmd, 8, sharpness=1000.0, tau=1e-3, estimator="gumbel",
-                                     key=jax.random.key(0))
+    gs = relaxed_rollout.relaxed_rollout_jit(terrain, robot, START, cmd, 8, sharpness=1000.0, tau=1e-3,
+                                             estimator="gumbel", key=jax.random.key(0))
     assert float(np.max(np.abs(np.asarray(gs.footsteps) - ref))) < EXPECTED_ATOL
     with pytest.raises(ValueError, match="PRNG key"):
-        rollout.relaxed_rollout(terrain, robot, START, cmd, 2, sharpness=1.0, tau=1.0, estimator="gumbel")
+        relaxed_rollout.relaxed_rollout(terrain, robot, START, cmd, 2, sharpness=1.0, tau=1.0, estimator="gumbel")
     print(f"max |relaxed - exact| footstep (expected estimator) at tau 1, 0.1, 1e-3: {errors}")
     assert errors[0] > errors[-1]
     assert errors[-1] < EXPECTED_ATOL
 
 
 def _loss(terrain, robot, start, command):
-    tr = rollout.relaxed_rollout(terrain, robot, start, command, 3, sharpness=10.0, tau=1.0, remat=True)
-    return rollout.command_error(tr) + 0.01 * jnp.mean(tr.expected_cost) + jnp.sum(tr.feet)
+    tr = relaxed_rollout.relaxed_rollout(terrain, robot, start, command, 3, sharpness=10.0, tau=1.0, remat=True)
+    return relaxed_rollout.command_error(tr) + 0.01 * jnp.mean(tr.expected_cost) + jnp.sum(tr.feet)
 
 
 def test_rollout_gradients_match_finite_differences_float64(robot):
@@ -117,7 +117,7 @@ def test_remat_memory_grows_more_slowly():
     terrain = ij.terrain.from_arrays(None, np.ones((40, 30), bool), RES)
     rb = ij.robots.hrp2(density=0.1)
     start = np.array([[0.2, 0.395, 0.0], [0.2, 0.205, 0.0]], np.float32)
-    report = rollout.memory_report(terrain, rb, start, [0.2, 0.0, 0.0], lengths=(2, 8))
+    report = relaxed_rollout.memory_report(terrain, rb, start, [0.2, 0.0, 0.0], lengths=(2, 8))
     print(f"temp bytes of jit(grad): {report}")
     grow_plain = report[False][8] - report[False][2]
     grow_remat = report[True][8] - report[True][2]
