@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import math
 
 import jax
@@ -618,3 +619,36 @@ def test_single_lane_bar_defaults_and_tracing():
     objs = gen.objects("bars", keys[1], jax.tree.map(lambda x: x[1], params), **GRID)
     x, y, yaw, length = (float(v) for v in objs.boxes[0, :4])
     assert y + 0.5 * length == pytest.approx(sy - 0.2, abs=1e-5) and yaw == pytest.approx(math.pi / 2)
+
+
+# --------------------------------------------------------------------------- unchanged by the registry split
+
+# Seed 11, each family's defaults (stairs with jitter, rough with an obstacle threshold) on GRID:
+# sha256 prefix of the 2D free mask, and the sum and sum of squares of the 2.5D heights, as
+# produced by the single-module generators before the split into family/objects/surfaces
+# (commit 3272893). The masks must match bit for bit; the height sums are float64 sums of
+# float32 heights, equal to the last bit on one machine (a tolerance of 1e-12 relative leaves
+# room for summation order only).
+BEFORE_SPLIT = [
+    ("walls", "3b930ac7f7e43914", 325.0, 325.0),
+    ("obstacles", "bb071335034e2cd5", 4.691975601017475, 0.49647539919068684),
+    ("bars", "ad72cf357da7c337", 8.00000011920929, 0.40000001192092904),
+    ("platforms", "5b689a435626474a", 22.202828086912632, 2.0485290903575395),
+    ("stairs", "a52d37851c787af9", 383.71531158685684, 142.38512673756432),
+    ("stepping_stones", "c8c6cd0be667283f", -533.0, 266.5),
+    ("rough", "16a2c1eb9efd1277", 1.6219200804316642, 0.6781256519344423),
+]
+
+
+@pytest.mark.parametrize("name, free_sha, h_sum, h_sq", BEFORE_SPLIT, ids=[b[0] for b in BEFORE_SPLIT])
+def test_same_terrains_as_before_the_split(name, free_sha, h_sum, h_sq):
+    p = gen.FAMILIES[name].params()
+    if name == "stairs":
+        p = p.replace(rise_jitter=0.02, run_jitter=0.05)
+    if name == "rough":
+        p = p.replace(obstacle_above=0.02)
+    free = np.asarray(gen.generate(name, 11, p, has_height=False, **GRID).free)
+    assert hashlib.sha256(free.tobytes()).hexdigest()[:16] == free_sha
+    h = np.asarray(gen.generate(name, 11, p, has_height=True, **GRID).height, np.float64)
+    assert float(h.sum()) == pytest.approx(h_sum, rel=1e-12, abs=1e-12)
+    assert float((h * h).sum()) == pytest.approx(h_sq, rel=1e-12, abs=1e-12)

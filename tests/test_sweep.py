@@ -366,6 +366,7 @@ def test_load_round_trip_and_aggregates(reference, base_file):
     for m in sweep.METRICS:
         assert m in df.columns
     assert {"robot.w", "robot.margin", "terrain.count", "command.vx", "cell", "replicate", "chunk"} <= set(df.columns)
+    assert not set(sweep.EXTRA_METRICS) & set(df.columns)  # obstacles adds no metric (its registry entry has none)
     agg = sweep.load_aggregates(out)
     pd.testing.assert_frame_equal(agg, pd.read_parquet(out / "aggregates.parquet"))
     assert list(agg["robot.w"]) == [0.5, 0.5, 2.0, 2.0] and (agg["n"] == 3).all()

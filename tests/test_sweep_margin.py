@@ -15,6 +15,7 @@ import pytest
 
 from ijoy_jax import sweep
 from ijoy_jax.terrain import generators
+from ijoy_jax.terrain.objects import bar_crossings
 
 FILE = Path(__file__).parents[1] / "sweeps" / "margin_stepping_over.toml"
 HL, HW = 0.121, 0.065  # HRP-2's half foot length and width (m)
@@ -46,7 +47,7 @@ def test_shipped_file_declares_the_papers_stepping_over_geometry():
 def test_bar_crossings_metric():
     bar = np.array([[1.0, -3.0, np.pi / 2, 7.0, 0.1, 0.05], [0, 0, 0, 0, 0, 0]], np.float32)  # far face x = 1.05
     feet = lambda xl, xr: np.array([[xl, 0.7, 0.0], [xr, 0.5, 0.0]], np.float32)  # noqa: E731
-    got = lambda f: {k: int(v) for k, v in sweep.bar_crossings(bar, f, 0.242, 0.13).items()}  # noqa: E731
+    got = lambda f: {k: int(v) for k, v in bar_crossings(bar, f, 0.242, 0.13).items()}  # noqa: E731
     assert got(feet(1.2, 1.2)) == {"bars_crossed": 1, "crossed": 1}
     assert got(feet(1.05 + HL + 1e-3, 1.4)) == {"bars_crossed": 1, "crossed": 1}
     assert got(feet(1.4, 1.05 + HL - 1e-3)) == {"bars_crossed": 0, "crossed": 0}  # one foot's heel on it
@@ -55,10 +56,10 @@ def test_bar_crossings_metric():
     tilted[0, 2] = np.pi / 2 - 0.3  # the face recedes by tan(0.3) per metre of y below the bar's centre
     shift = (0.5 - (-3.0)) * np.tan(0.3)
     assert got(feet(1.4, 1.2))["crossed"] == 1
-    assert sweep.bar_crossings(tilted, feet(1.4 + shift, 1.2 + shift), 0.242, 0.13)["crossed"]
-    assert not sweep.bar_crossings(tilted, feet(1.4, 1.2), 0.242, 0.13)["crossed"]
+    assert bar_crossings(tilted, feet(1.4 + shift, 1.2 + shift), 0.242, 0.13)["crossed"]
+    assert not bar_crossings(tilted, feet(1.4, 1.2), 0.242, 0.13)["crossed"]
     empty = np.zeros((2, 6), np.float32)
-    assert bool(sweep.bar_crossings(empty, feet(0, 0), 0.242, 0.13)["crossed"])  # no bar: nothing to cross
+    assert bool(bar_crossings(empty, feet(0, 0), 0.242, 0.13)["crossed"])  # no bar: nothing to cross
 
 
 def test_short_bars_are_crossed_and_long_ones_are_not_at_a_2cm_margin(tmp_path):
@@ -72,6 +73,7 @@ def test_short_bars_are_crossed_and_long_ones_are_not_at_a_2cm_margin(tmp_path):
     assert stats.scenarios == 20
     df = sweep.load(tmp_path / "out")
     assert {"crossed", "bars_crossed"} <= set(df.columns)
+    assert set(generators.FAMILIES["bars"].metric_names) == {"crossed", "bars_crossed"}  # the registry's columns
     assert (df["footholds_on_obstacles"] == 0).all()
     bound = sweep.b_max(0.02)  # 0.118 m
     by_b = df.groupby("terrain.width")["crossed"].mean()

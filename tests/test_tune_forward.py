@@ -148,3 +148,18 @@ def test_config_validation():
         forward.ForwardConfig(names=("foot_length",))
     assert forward.ForwardConfig(has_height=True).tuned_names()[:3] == ("w", "rotation_weight", "margin")
     assert hash(forward.ForwardConfig(shape=[40, 40])) == hash(forward.ForwardConfig(shape=(40, 40)))
+
+
+def test_terrain_params_are_checked_by_the_family():
+    with pytest.raises(ValueError, match=r"ObstacleParams.size_min: impossible range"):
+        forward.ForwardConfig(terrain_params={"size_min": 0.3})
+    with pytest.raises(ValueError, match=r"ObstacleParams.count: must be an integer"):
+        forward.ForwardConfig(terrain_params={"count": 2.5})
+    with pytest.raises(ValueError, match=r"RoughParams.count: unknown field"):
+        forward.ForwardConfig(family="rough", terrain_params={"count": 3})
+    with pytest.raises(ValueError, match="clear_radius"):
+        forward.ForwardConfig(terrain_params={"start_radius": 0.1})
+    cfg = forward.ForwardConfig(shape=(40, 40), num_noise_samples=2, terrain_params={"count": 3, "size_max": 0.1})
+    assert cfg.terrain_params == (("count", 3), ("size_max", 0.1)) and hash(cfg)
+    d = forward.sample_decisions(0, 2, cfg)
+    assert d.terrains.free.shape == (2, 40, 40) and not bool(d.terrains.free.all())

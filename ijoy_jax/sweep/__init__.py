@@ -10,7 +10,8 @@ Public names::
   distributed                                                    several processes/hosts (jax.distributed)
   load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table (union of processes), 95% CIs, plot
   IncompleteSweepError / action_counts / PAPER_ACTIONS           missing chunks; density as action counts
-  FAMILY_METRICS / bar_crossings / plot_crossing / b_max        bars: crossing rate vs the paper's bound
+  EXTRA_METRICS / plot_crossing / b_max                          family metrics (bars: crossing rate vs the
+                                                                 paper's bound; see terrain.family.Family.metrics)
 
 Example:
   >>> from ijoy_jax import sweep
@@ -43,7 +44,6 @@ from ijoy_jax.sweep.execute import (
     scenario_bytes,
     trace_count,
 )
-from ijoy_jax.sweep.metrics import FAMILY_METRICS, bar_crossings
 from ijoy_jax.sweep.results import (
     EXTRA_METRICS,
     METRICS,
@@ -64,7 +64,6 @@ __all__ = [
     "COMMAND_KEYS",
     "DEFAULT_CHUNK",
     "EXTRA_METRICS",
-    "FAMILY_METRICS",
     "MAX_AUTO_CHUNK",
     "MEMORY_FRACTION",
     "METRICS",
@@ -79,7 +78,6 @@ __all__ = [
     "aggregate",
     "auto_chunk_size",
     "b_max",
-    "bar_crossings",
     "cells",
     "default_chunk_size",
     "distributed",

@@ -70,6 +70,7 @@ import numpy as np
 from ijoy_jax import robots
 from ijoy_jax.select import KERNELS, METHODS
 from ijoy_jax.terrain import generators
+from ijoy_jax.terrain.family import Family, ParamError
 
 __all__ = [
     "COMMAND_KEYS",
@@ -103,8 +104,6 @@ _SECTIONS = ("sweep", "robot", "terrain", "command", "grid", "random")
 _SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps", "method", "kernel",
                "random_samples")
 _TERRAIN_KEYS = ("family", "shape", "resolution", "has_height", "max_count", "params")
-# Terrain parameters that are counts (ints, clipped by the generator to max_count).
-_COUNT_FIELDS = ("count", "num_steps")
 
 
 class SweepConfigError(ValueError):
@@ -261,20 +260,12 @@ def _robot_value(chk: _Checker, key: str, name: str, value) -> float:
     return v
 
 
-def _terrain_value(chk: _Checker, key: str, name: str, value, max_count: int | None):
-    """Check one terrain parameter value (``name`` a field of the family's parameter class)."""
-    if name in _COUNT_FIELDS:
-        v = chk.integer(key, value, lo=0)
-        if max_count is not None and v > max_count:
-            chk.fail(key, f"{v} exceeds [terrain] max_count = {max_count} (raise max_count)")
-        return v
-    v = chk.number(key, value)
-    if name == "start_radius" and v < 0:
-        chk.fail(key, f"must be >= 0, got {v}")
-    if name.endswith(("_min", "_max")) or name in ("size", "spacing", "width", "run", "length"):
-        if name not in ("yaw_min", "yaw_max") and v < 0:
-            chk.fail(key, f"must be >= 0, got {v}")
-    return v
+def _terrain_value(chk: _Checker, key: str, fam: Family, name: str, value, max_count: int | None):
+    """Check one terrain parameter value by its family's rule (:meth:`ijoy_jax.terrain.family.Family.check`)."""
+    try:
+        return fam.check(name, value, max_count=max_count, max_count_key="[terrain] max_count")
+    except ParamError as e:
+        chk.fail(key, e.reason)
 
 
 def parse_config(text: str, source: str = "<string>") -> SweepConfig:
@@ -351,7 +342,8 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     fields = tuple(f.name for f in dataclasses.fields(fam.params))
     tparams = chk.table("terrain.params", terrain.get("params", {}))
     chk.unknown("terrain.params.", tparams, fields)
-    kw["terrain_params"] = {k: _terrain_value(chk, f"terrain.params.{k}", k, v, max_count) for k, v in tparams.items()}
+    kw["terrain_params"] = {k: _terrain_value(chk, f"terrain.params.{k}", fam, k, v, max_count)
+                            for k, v in tparams.items()}
 
     robot = _flatten(chk.table("robot", raw.get("robot", {})))
     chk.unknown("robot.", robot, tuple(ROBOT_DEFAULTS))
@@ -369,7 +361,7 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         head, _, name = dotted.partition(".")
         if head == "robot":
             return _robot_value(chk, key, name, value)
-        return _terrain_value(chk, key, name, value, max_count)
+        return _terrain_value(chk, key, fam, name, value, max_count)
 
     def check_name(section: str, key: str) -> None:
         head, _, name = key.partition(".")
@@ -399,7 +391,7 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
             chk.fail(f"random.{k}", "also in [grid]; sweep it in one place")
         if k == "robot.density":
             chk.fail(f"random.{k}", "density changes array shapes (one compile per value): sweep it in [grid]")
-        if k.partition(".")[2] in _COUNT_FIELDS:
+        if k.startswith("terrain.") and fam.rules[k.partition(".")[2]].integer:
             chk.fail(f"random.{k}", "counts are integers: sweep them in [grid]")
         lo, hi = chk.range(f"random.{k}", rng)
         out_rand[k] = (param(k, f"random.{k}[0]", lo), param(k, f"random.{k}[1]", hi))
@@ -410,14 +402,12 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         chk.fail("sweep.random_samples", "is set but [random] is empty")
 
     cfg = SweepConfig(**kw)
-    # Cross-field checks on every cell's resolved values, still before any compute.
-    for _, row in cells(cfg).iterrows():
-        for lo_name in fields:
-            if lo_name.endswith("_min"):
-                hi_name = lo_name[:-4] + "_max"
-                lo_v, hi_v = _terrain_of(cfg, row, lo_name), _terrain_of(cfg, row, hi_name)
-                if lo_v > hi_v:
-                    chk.fail(f"terrain.params.{lo_name}", f"impossible range: {lo_name} ({lo_v}) > {hi_name} ({hi_v})")
+    # Cross-field checks (the family's ordered ranges) on every cell's resolved values, still before any compute.
+    for row in cells(cfg).to_dict("records"):  # records keep each column's type (counts stay ints)
+        try:
+            fam.validate({name: _terrain_of(cfg, row, name) for name in fields})
+        except ParamError as e:
+            chk.fail(f"terrain.params.{e.field}", e.reason)
     return cfg
 
 
@@ -510,9 +500,10 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None):
         else:
             cols[key] = np.full(len(cell_idx), float(cfg.robot.get(name, default)))
     defaults = cfg.params_class()
+    rules = generators.FAMILIES[cfg.family].rules
     for f in dataclasses.fields(cfg.params_class):
         key = f"terrain.{f.name}"
-        is_int = f.name in _COUNT_FIELDS
+        is_int = rules[f.name].integer
         if key in c:
             v = c[key].to_numpy()[cell_idx]
         else:

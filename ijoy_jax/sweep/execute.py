@@ -18,7 +18,7 @@ scenario's traced leaves (w, rotation weight, margin, step time, footprint,
 metric weights), the start stance from the terrain's start zone, and
 :func:`ijoy_jax.control.rollout_core` with the scenario's command, returning
 :meth:`ijoy_jax.Trajectory.summary` plus the family's extra metrics
-(:data:`ijoy_jax.sweep.metrics.FAMILY_METRICS`; bars: whether the robot got past them).
+(:meth:`ijoy_jax.terrain.family.Family.metrics`; bars: whether the robot got past them).
 
 Compiles (measured by :func:`trace_count`, tested): parameter values never
 recompile; each density value compiles once (its action-set size is a shape;
@@ -109,7 +109,6 @@ from ijoy_jax.sweep.config import (
     load_config,
     scenarios,
 )
-from ijoy_jax.sweep.metrics import bar_crossings
 from ijoy_jax.terrain import generators
 
 __all__ = ["DEFAULT_CHUNK", "MAX_AUTO_CHUNK", "MEMORY_FRACTION", "RunStats", "auto_chunk_size", "default_chunk_size",
@@ -152,9 +151,9 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_val
     traj = rollout_core(terrain, robot, start, command, static.num_steps, static.method, targets=targets,
                         kernel=static.kernel)
     summary = traj.summary()
-    if static.family == "bars":  # FAMILY_METRICS: from the bars the generator rasterised
-        objs = generators.objects("bars", tkey, params, shape=static.shape, resolution=static.resolution, **kw)
-        summary.update(bar_crossings(objs.boxes, traj.feet, robot.foot_length, robot.foot_width))
+    # The family's extra metrics (bars: whether the robot got past them), from the terrain it generated.
+    summary.update(fam.metrics(tkey, params, traj.feet, robot.foot_length, robot.foot_width, shape=static.shape,
+                               resolution=static.resolution, max_count=static.max_count))
     return summary
 
 

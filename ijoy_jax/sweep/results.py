@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ijoy_jax.terrain import generators
+
 __all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "UNITS", "IncompleteSweepError", "action_counts", "aggregate",
            "b_max", "load", "load_aggregates", "plot", "plot_crossing", "t_quantile"]
 
@@ -32,9 +34,10 @@ METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "foot
            "distance_along", "distance_across", "mean_deviation", "mean_foot_cost")
 """Rollout metrics (:meth:`ijoy_jax.Trajectory.summary`) in every results table."""
 
-EXTRA_METRICS = ("bars_crossed", "crossed")
-"""Family-specific metrics (:data:`ijoy_jax.sweep.metrics.FAMILY_METRICS`), aggregated when present:
-``bars_crossed`` bars passed by both feet, ``crossed`` every bar passed (fraction of scenarios)."""
+EXTRA_METRICS = generators.METRIC_NAMES
+"""Family-specific metrics (every family's ``metric_names``, :data:`ijoy_jax.terrain.generators.METRIC_NAMES`),
+aggregated when present; bars: ``bars_crossed`` bars passed by both feet, ``crossed`` every bar passed
+(fraction of scenarios)."""
 
 UNITS = {
     "steps_taken": "steps", "steps_in_place": "steps", "steps_stationary": "steps", "stopped": "fraction",

@@ -3,7 +3,9 @@
 :mod:`~ijoy_jax.terrain.grid` holds the :class:`Terrain` pytree (a 2D occupancy grid or a 2.5D height map)
 and its constructors; :mod:`~ijoy_jax.terrain.scene` rasterises posed boxes and cylinders into a map;
 :mod:`~ijoy_jax.terrain.generators` makes thousands of procedural terrains of named families in one jitted
-call.
+call. Each family's registry record (:mod:`~ijoy_jax.terrain.family`) carries its generator, parameters,
+validation and extra metrics; the families live in :mod:`~ijoy_jax.terrain.objects` (walls, obstacles, bars,
+platforms) and :mod:`~ijoy_jax.terrain.surfaces` (flat, stairs, stepping stones, slope, rough).
 """
 
 from ijoy_jax.terrain import generators as generators

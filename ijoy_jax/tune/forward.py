@@ -78,6 +78,7 @@ from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
 from ijoy_jax.select import make_targets, select_step_indexed
 from ijoy_jax.terrain import Terrain, generators
+from ijoy_jax.terrain.family import ParamError
 from ijoy_jax.tune import loop, relax
 
 METRIC_NAMES = tuple(n for n in robots.SELECTOR_LEAVES if n.startswith("metrics."))
@@ -94,10 +95,11 @@ class ForwardConfig:
       shape, resolution: grid of each random map (cells, m); the stance foot is
         at the map centre.
       has_height: 2.5D maps (object tops raise the ground) or 2D.
-      family: terrain family of :data:`ijoy_jax.terrain.generators.FAMILIES`; "obstacles"
-        (default) uses the two fields below, any other its default parameters.
-      obstacle_count: obstacles per map (the ``obstacles`` family).
-      obstacle_size: (min, max) box edge / cylinder diameter (m).
+      family: terrain family of :data:`ijoy_jax.terrain.generators.FAMILIES` (default
+        "obstacles": 8 boxes and cylinders of 4-15 cm per map).
+      terrain_params: ``{field: value}`` (or pairs) of the family's parameter class
+        over its defaults, checked by the family (the start zone is set below);
+        a family with object slots gets just enough for its count (at least 1).
       clear_radius: cells within this radius of the stance foot are kept free (m).
       heading: stance heading uniform in [-heading, heading] (rad).
       command_low, command_high: joystick command uniform in this box (m/s, m/s, rad/s).
@@ -130,8 +132,7 @@ class ForwardConfig:
     resolution: float = 0.02
     has_height: bool = False
     family: str = "obstacles"
-    obstacle_count: int = 8
-    obstacle_size: tuple = (0.04, 0.15)
+    terrain_params: tuple = ()
     clear_radius: float = 0.15
     heading: float = 0.5
     command_low: tuple = (-0.25, -0.1, -0.4)
@@ -155,10 +156,11 @@ class ForwardConfig:
     margin: float = 0.02
 
     def __post_init__(self):
-        for name in ("shape", "obstacle_size", "command_low", "command_high", "names"):  # hashable (jit static)
+        for name in ("shape", "command_low", "command_high", "names"):  # hashable (jit static)
             v = getattr(self, name)
             if v is not None:
                 object.__setattr__(self, name, (v,) if isinstance(v, str) else tuple(v))
+        object.__setattr__(self, "terrain_params", tuple(sorted(dict(self.terrain_params).items())))
         _check_config(self)
 
     def tuned_names(self) -> tuple:
@@ -177,10 +179,15 @@ def _check_config(cfg: ForwardConfig) -> None:
 
     need(len(cfg.shape) == 2 and all(int(s) >= 8 for s in cfg.shape), f"shape must be 2 ints >= 8, got {cfg.shape}")
     need(cfg.resolution > 0, f"resolution must be > 0, got {cfg.resolution}")
-    need(int(cfg.obstacle_count) >= 0, "obstacle_count must be >= 0")
     need(cfg.family in generators.FAMILIES, f"family must be one of {sorted(generators.FAMILIES)}, got {cfg.family!r}")
-    need(len(cfg.obstacle_size) == 2 and 0 < cfg.obstacle_size[0] <= cfg.obstacle_size[1],
-         f"obstacle_size must be (min, max) with 0 < min <= max, got {cfg.obstacle_size}")
+    fam = generators.FAMILIES[cfg.family]
+    given = dict(cfg.terrain_params)
+    need(not any(k.startswith("start_") for k in given), "terrain_params: the start zone is set by clear_radius")
+    try:
+        fam.validate(given)  # each value (and unknown names), then the ordered ranges over the defaults
+        fam.validate(_terrain_params(cfg))
+    except ParamError as e:
+        need(False, f"terrain_params: {e}")
     need(len(cfg.command_low) == 3 and len(cfg.command_high) == 3, "command_low/high must have 3 entries")
     need(all(lo <= hi for lo, hi in zip(cfg.command_low, cfg.command_high, strict=True)),
          "command_low must be <= command_high")
@@ -282,6 +289,12 @@ class Decisions(NamedTuple):
     noise: jax.Array
 
 
+def _terrain_params(cfg: ForwardConfig):
+    """The family's parameters: its defaults, ``cfg.terrain_params``, the start zone at the map centre."""
+    fam = generators.FAMILIES[cfg.family]
+    return fam.params(**dict(cfg.terrain_params), start_x=0.5, start_y=0.5, start_radius=cfg.clear_radius)
+
+
 def sample_decisions(key, num: int, cfg: ForwardConfig) -> Decisions:
     """Draw ``num`` decisions: a map of ``cfg.family`` per decision with the stance foot at its centre.
 
@@ -297,15 +310,9 @@ def sample_decisions(key, num: int, cfg: ForwardConfig) -> Decisions:
     """
     key = as_key(key)
     kt, kh, ks, kc, kn = jax.random.split(key, 5)
-    fam = generators.FAMILIES[cfg.family]
-    zone = dict(start_x=0.5, start_y=0.5, start_radius=cfg.clear_radius)
-    static = {}
-    if cfg.family == "obstacles":
-        params = fam.params(count=cfg.obstacle_count, size_min=cfg.obstacle_size[0], size_max=cfg.obstacle_size[1],
-                            **zone)
-        static["max_count"] = max(int(cfg.obstacle_count), 1)
-    else:
-        params = fam.params(**zone)
+    params = _terrain_params(cfg)
+    slots = generators.FAMILIES[cfg.family].slots(params)
+    static = {} if slots is None else {"max_count": slots}
     shape = tuple(int(s) for s in cfg.shape)
     terrains = generators.batch(cfg.family, jax.random.split(kt, num), params, shape=shape,
                                 resolution=cfg.resolution, has_height=cfg.has_height, **static)
