@@ -394,10 +394,12 @@ def start_stance(robot: Robot, x, y, theta=0.0, *, width=None) -> jax.Array:
 class LeafSpec(NamedTuple):
     """What a scalar Robot leaf means: its unit, its lower bound and whether the selector's cost uses it.
 
-    unit: of the value (m, s, rad; ``cost/m``: cost units per metre, ``m/rad``: dist metres per radian).
-    positive: True: must be > 0 (sizes, times); False: must be >= 0.
-    selector: True for the parameters of the choice (FootCost + w dist), the ones
-      :mod:`ijoy_jax.tune` may tune; False for the robot's body (footprint, step time).
+    Fields::
+
+      unit: of the value (m, s, rad; cost/m: cost units per metre, m/rad: dist metres per radian).
+      positive: True: must be > 0 (sizes, times); False: must be >= 0.
+      selector: True for the parameters of the choice (FootCost + w dist), the ones
+        ijoy_jax.tune may tune; False for the robot's body (footprint, step time).
     """
 
     unit: str

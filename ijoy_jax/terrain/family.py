@@ -72,7 +72,8 @@ class ParamError(ValueError):
 class Rule:
     """The values one parameter field accepts (checked on concrete values, before any compute).
 
-    Fields:
+    Fields::
+
       lo, hi: closed range of the value (units of the field).
       integer: an integer (a count); floats are refused.
       count: the count the static ``max_count`` bounds (its generator clips to it).
@@ -122,7 +123,8 @@ class StartZone:
 class Family:
     """A registered terrain family: everything a caller needs to know about it.
 
-    Fields:
+    Fields::
+
       name: the family's name in :data:`ijoy_jax.terrain.generators.FAMILIES`.
       generator: ``generator(key, params, *, shape, resolution, has_height, origin[, max_count]) -> Terrain``.
       params: the parameter pytree class; ``params()`` builds fresh defaults.

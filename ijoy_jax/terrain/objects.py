@@ -74,7 +74,8 @@ class WallParams(StartZone):
     and a centre uniform over the map, kept clear of the start zone. A thin
     box is a wall, a thick one a blockage.
 
-    Fields (metres, radians):
+    Fields (metres, radians)::
+
       count: number of boxes (int; clipped to ``[0, max_count]``).
       length_min, length_max: extent along the box's yaw, metres.
       thickness_min, thickness_max: extent across it, metres.
@@ -103,7 +104,8 @@ class ObstacleParams(StartZone):
     ``[top_min, top_max]``. Defaults suit HRP-2 (foot 24.2 x 13 cm, steps up
     to 20 cm): small enough to step over or around.
 
-    Fields (metres, radians):
+    Fields (metres, radians)::
+
       count: number of objects (int; clipped to ``[0, max_count]``).
       size_min, size_max: box edge or cylinder diameter, metres.
       top_min, top_max: top elevation, metres (2.5D).
@@ -138,7 +140,8 @@ class BarParams(StartZone):
     the robot's right (-1, lower y) or left (+1, higher y), so the other foot
     walks past beside it. ``lane = 0`` (default) spans the whole map.
 
-    Fields (metres, radians):
+    Fields (metres, radians)::
+
       count: number of bars (int; clipped to ``[0, max_count]``).
       first: distance along +x from the start point to the first bar, metres.
       spacing: distance between consecutive bars, metres.
@@ -171,7 +174,8 @@ class PlatformParams(StartZone):
     On 2.5D maps platforms are surfaces (free, raised to their height); where
     they overlap the higher wins. On 2D maps they are obstacles.
 
-    Fields (metres, radians):
+    Fields (metres, radians)::
+
       count: number of platforms (int; clipped to ``[0, max_count]``).
       length_min, length_max, width_min, width_max: extents, metres.
       height_min, height_max: top elevation, metres (set equal for a given height).
@@ -196,7 +200,8 @@ class PlatformParams(StartZone):
 class Objects(NamedTuple):
     """Posed objects of one terrain, in :func:`ijoy_jax.terrain.scene.rasterize`'s format.
 
-    Fields (metres, radians):
+    Fields (metres, radians)::
+
       boxes: (B, 6) float32 ``x, y, yaw, length, width, top``; unused rows are zero.
       cylinders: (C, 4) float32 ``x, y, radius, top``; unused rows are zero.
       obstacle: (B + C,) bool, boxes first: True for obstacles, False for surfaces.

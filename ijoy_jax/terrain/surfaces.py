@@ -65,7 +65,8 @@ _MAX_STEPS = 16
 class FlatParams(StartZone):
     """Parameters of :func:`flat` (all leaves scalars per terrain).
 
-    Fields:
+    Fields::
+
       elevation: height of the floor, metres (2.5D only).
       start_x, start_y, start_radius: start zone (fractions, fractions, metres).
     """
@@ -85,7 +86,8 @@ class StairParams(StartZone):
     jitter ``rise * clip(ceil((d - first') / run), 0, num_steps)``. After the
     last riser the top landing runs to the map's edge.
 
-    Fields (metres, radians):
+    Fields (metres, radians)::
+
       rise: step height, metres (negative: a descending stair).
       run: tread depth along ``direction``, metres.
       num_steps: number of risers (int; clipped to ``[0, max_count]``).
@@ -119,7 +121,8 @@ class SteppingStoneParams(StartZone):
     ``spacing`` is clipped to at least the resolution. Without jitter the
     stone fraction is ``(size / spacing)**2``.
 
-    Fields (metres, radians):
+    Fields (metres, radians)::
+
       size: stone edge length, metres (HRP-2's foot with a 2 cm margin needs ~0.29).
       spacing: lattice pitch (centre to centre), metres.
       jitter: maximum centre offset per axis, metres.
@@ -144,7 +147,8 @@ class SteppingStoneParams(StartZone):
 class SlopeParams(StartZone):
     """Parameters of :func:`slope`: ``h(p) = tan(angle) * (p - start) . (cos direction, sin direction)``.
 
-    Fields (radians):
+    Fields (radians)::
+
       angle: inclination, radians (positive rises along ``direction``;
         clipped to +-80 deg so heights stay finite).
       direction: direction of steepest ascent in the map plane, radians (0 = +x).
@@ -166,7 +170,8 @@ class RoughParams(StartZone):
     Within ``start_radius`` the field is 0 and tapers in linearly over one
     correlation length (at least one cell) outside it.
 
-    Fields (metres):
+    Fields (metres)::
+
       amplitude: RMS height, metres (before the start taper).
       correlation_length: ``l`` of the autocorrelation above, metres (0: white noise).
       obstacle_above: cells higher than this are obstacles (2D and 2.5D),
