@@ -18,7 +18,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from ijoy_jax import cli, sweep
+from ijoy_jax import sweep
+from ijoy_jax.apps import cli
 
 TINY = """
 [sweep]
