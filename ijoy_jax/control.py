@@ -145,20 +145,30 @@ class Trajectory(NamedTuple):
     log: Any = None
 
     def summary(self) -> dict[str, jax.Array]:
-        """Per-rollout totals: steps taken, in place, stopped, footholds on obstacles, distances (m),
-        mean deviation from p_next (m) and mean FootCost of the valid footholds taken."""
+        """Per-rollout totals over the last axis (jit- and vmap-friendly; 0-d arrays for one rollout).
+
+        Counts are int32: ``steps_taken``, ``steps_in_place``, ``steps_stationary``,
+        ``footholds_on_obstacles`` and ``invalid_footholds`` (steps taken onto a foothold with
+        FootCost = +inf, e.g. the naive joystick stepping on an obstacle). ``stopped`` is bool.
+        Floats: ``distance_along``, ``distance_across`` (m), ``mean_deviation`` from p_next (m)
+        and ``mean_foot_cost``, the mean FootCost over every foothold taken: +inf as soon as one
+        of them was invalid (infinite cost means impossible; it is never averaged away), 0 if no
+        step was taken.
+        """
         taken = self.taken
+        count = lambda b: jnp.sum(b, axis=-1, dtype=jnp.int32)  # noqa: E731
+        n_taken = count(taken)
         return {
-            "steps_taken": jnp.sum(taken, axis=-1),
-            "steps_in_place": jnp.sum(self.in_place & taken, axis=-1),
-            "steps_stationary": jnp.sum(self.stationary & taken, axis=-1),
+            "steps_taken": n_taken,
+            "steps_in_place": count(self.in_place & taken),
+            "steps_stationary": count(self.stationary & taken),
             "stopped": jnp.any(self.stopped, axis=-1),
-            "footholds_on_obstacles": jnp.sum(self.on_obstacle & taken, axis=-1),
+            "footholds_on_obstacles": count(self.on_obstacle & taken),
+            "invalid_footholds": count(taken & ~self.valid),
             "distance_along": jnp.sum(self.along, axis=-1),
             "distance_across": jnp.sum(self.across, axis=-1),
-            "mean_deviation": jnp.sum(self.deviation * taken, axis=-1) / jnp.maximum(jnp.sum(taken, axis=-1), 1),
-            "mean_foot_cost": jnp.sum(jnp.where(taken & self.valid, self.foot_cost, 0.0), axis=-1)
-            / jnp.maximum(jnp.sum(taken & self.valid, axis=-1), 1),
+            "mean_deviation": jnp.sum(self.deviation * taken, axis=-1) / jnp.maximum(n_taken, 1),
+            "mean_foot_cost": jnp.sum(jnp.where(taken, self.foot_cost, 0.0), axis=-1) / jnp.maximum(n_taken, 1),
         }
 
 def rollout_core(

@@ -563,6 +563,7 @@ def nearest_actions(robot: Robot, stance, stance_side, steps) -> jax.Array:
       stance: (3,) world pose of the stance foot; stance_side: +1 left, -1 right.
       steps: (N, 3) world poses of the swing foot.
     """
+    stance, steps = jnp.asarray(stance, jnp.float32), jnp.asarray(steps, jnp.float32)
     rel = geometry.relative(stance, steps)  # (N, 3)
     acts = side_actions(robot, -side_sign(stance_side))
     return jnp.argmin(dist(rel[:, None, :], acts[None, :, :], robot.rotation_weight), axis=1).astype(jnp.int32)

@@ -1,3 +1,4 @@
+import gc
 import os
 
 import hypothesis
@@ -25,3 +26,19 @@ def pytest_configure(config):
     min_s = os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", _CACHE_MIN_COMPILE_S)
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_s))
+
+
+def pytest_sessionfinish(session):
+    """Free JAX's compiled programs and collect the garbage while an xdist worker still counts as running.
+
+    Under xdist the worker reports "finished" at the end of this hook; from then on the controller gives it
+    5 s to return (execnet's ``_terminate_execution``) before it sends the worker a SIGINT. What the worker
+    still did then was pytest's unraisable-exception check, a ``gc.collect()`` in ``pytest_unconfigure``,
+    which after a few hundred tests frees the JAX/XLA executables and buffers in one long collection. A
+    SIGINT during a collection is delivered to the first Python code that runs, hypothesis's ``gc.callbacks``
+    timer (installed by any ``@given`` test), hence the stray "Exception ignored in gc_callback ...
+    KeyboardInterrupt" at the end of a clean run. Doing the expensive part here, before the worker reports,
+    leaves the late collection nothing to do.
+    """
+    jax.clear_caches()
+    gc.collect()

@@ -7,6 +7,7 @@ import pytest
 
 import ijoy_jax as ij
 from ijoy_jax import control
+from ijoy_jax.testing import enable_x64
 
 RES = 0.02
 ROBOT = ij.robots.hrp2(margin=0.02)
@@ -163,3 +164,38 @@ def test_marking_time_with_staggered_feet_counts_as_stationary():
     fs = np.asarray(traj.footsteps)
     np.testing.assert_allclose(fs[-1], fs[-3], atol=1e-6)  # the same foothold again and again
     assert fs[fs[:, 1] < 1.0, 0].max() < 1.0  # the right foot never gets past the block
+
+
+COUNTS = ("steps_taken", "steps_in_place", "steps_stationary", "footholds_on_obstacles", "invalid_footholds")
+
+
+def test_summary_counts_are_int32_under_jit_and_vmap():
+    t = ij.terrain.flat(SHAPE, RES)
+    traj = ij.rollout(t, ROBOT, START, [0.25, 0.0, 0.0], STEPS)
+    one = jax.jit(lambda tr: tr.summary())(traj)
+    batched = jax.vmap(lambda tr: tr.summary())(jax.tree_util.tree_map(lambda a: jnp.stack([a, a]), traj))
+    for k in COUNTS:
+        assert one[k].dtype == jnp.int32 and one[k].shape == (), k
+        assert batched[k].dtype == jnp.int32 and batched[k].shape == (2,), k
+    assert one["stopped"].dtype == jnp.bool_ and int(one["steps_taken"]) == STEPS
+    with enable_x64():  # int32 also when x64 would make a plain sum int64
+        assert traj.summary()["steps_taken"].dtype == jnp.int32
+
+
+def test_naive_summary_does_not_average_invalid_footholds_away():
+    """The naive joystick walks onto a block: its invalid footholds are counted and its mean FootCost is +inf
+    (not the mean over the valid ones only); the intelligent joystick's is the mean over every step taken."""
+    free = np.ones((200, 100), bool)
+    free[50:56, :50] = False
+    t = ij.terrain.from_arrays(None, free, RES)
+    start = np.array([[0.3, 1.095, 0.0], [0.3, 0.905, 0.0]])
+    naive = ij.rollout(t, ROBOT, start, [0.25, 0.0, 0.0], 16, method="naive")
+    s = naive.summary()
+    taken, valid = np.asarray(naive.taken), np.asarray(naive.valid)
+    assert int(s["invalid_footholds"]) == int(np.sum(taken & ~valid)) > 0
+    assert int(s["footholds_on_obstacles"]) > 0 and float(s["mean_foot_cost"]) == np.inf
+    smart = ij.rollout(t, ROBOT, start, [0.25, 0.0, 0.0], 16)
+    s = smart.summary()
+    taken, cost = np.asarray(smart.taken), np.asarray(smart.foot_cost, np.float64)
+    assert int(s["invalid_footholds"]) == 0 and taken.sum() > 0
+    assert float(s["mean_foot_cost"]) == pytest.approx(cost[taken].mean(), abs=1e-6)

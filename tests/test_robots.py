@@ -4,8 +4,11 @@ import dataclasses
 import math
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import robots
@@ -186,3 +189,79 @@ def test_start_stance_puts_the_feet_side_by_side_at_the_step_in_place_width(thet
     np.testing.assert_allclose(np.ptp(wide[:, :2], axis=0), 0.3 * np.abs([np.sin(theta), np.cos(theta)]), atol=1e-6)
     traced = jax.jit(lambda x, y, t: robots.start_stance(robot, x, y, t))(1.5, -0.4, theta)
     np.testing.assert_allclose(np.asarray(traced), feet, atol=1e-6)
+
+
+# The stance-frame helpers against NumPy (float64) re-derivations.
+POSE_TOL = 1e-5  # m and rad: float32 sin/cos of angles up to ~10 rad times poses of a few metres
+stance_pose = st.tuples(st.floats(-3, 3), st.floats(-3, 3), st.floats(-7, 7))
+
+
+def np_compose(base, rel):
+    c, s = np.cos(base[2]), np.sin(base[2])
+    return np.stack([base[0] + c * rel[..., 0] - s * rel[..., 1], base[1] + s * rel[..., 0] + c * rel[..., 1],
+                     base[2] + rel[..., 2]], -1)
+
+
+def np_wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+@pytest.mark.parametrize("side, sign", [(1, 1.0), (0, 1.0), (2.5, 1.0), (-1, -1.0), (-0.1, -1.0)])
+def test_side_sign_reads_any_flag(side, sign):
+    s = robots.side_sign(side)
+    assert s.dtype == np.float32 and float(s) == sign
+    np.testing.assert_array_equal(np.asarray(robots.side_sign(np.array([1, -1, 0]))), [1.0, -1.0, 1.0])
+
+
+@given(st.lists(st.floats(-5, 5, allow_subnormal=False), min_size=3, max_size=3),  # XLA flushes subnormals
+       st.sampled_from([1.0, -1.0]))
+def test_mirror_flips_y_and_theta_for_the_right_foot_and_is_its_own_inverse(rel, side):
+    rel = np.array(rel, np.float32)
+    got = np.asarray(robots.mirror(side, rel))
+    np.testing.assert_array_equal(got, rel if side > 0 else rel * [1, -1, -1])
+    np.testing.assert_array_equal(np.asarray(robots.mirror(side, got)), rel)
+
+
+@given(stance_pose, st.sampled_from([1, -1]))
+def test_action_steps_compose_the_mirrored_actions_onto_the_stance(stance, stance_side):
+    r = ij.robots.hrp2(density=0.25)
+    acts = np.asarray(r.actions, np.float64) * ([1, 1, 1] if stance_side < 0 else [1, -1, -1])  # swing side
+    want = np_compose(np.array(stance), acts)
+    got = np.asarray(ij.action_steps(r, stance, stance_side), np.float64)
+    assert got.shape == (r.num_actions, 3)
+    np.testing.assert_allclose(got[:, :2], want[:, :2], atol=POSE_TOL)
+    np.testing.assert_allclose(np_wrap(got[:, 2] - want[:, 2]), 0.0, atol=POSE_TOL)
+
+
+@given(st.lists(st.floats(-4, 4), min_size=6, max_size=6), st.floats(0, 3))
+def test_dist_is_planar_distance_plus_weighted_wrapped_rotation(ab, rw):
+    a, b = np.array(ab[:3]), np.array(ab[3:])
+    want = np.hypot(*(a[:2] - b[:2])) + rw * abs(np_wrap(a[2] - b[2]))
+    got = float(robots.dist(jnp.asarray(a, jnp.float32), jnp.asarray(b, jnp.float32), rw))
+    assert got == pytest.approx(want, abs=POSE_TOL * (1 + rw))
+
+
+def test_dist_broadcasts():
+    a = jnp.zeros((4, 1, 3))
+    b = jnp.ones((5, 3))
+    assert robots.dist(a, b, 0.5).shape == (4, 5)
+
+
+@given(stance_pose, st.sampled_from([1, -1]), st.integers(0, 2**31 - 1))
+def test_nearest_actions_is_the_brute_force_argmin(stance, stance_side, seed):
+    r = ij.robots.hrp2(density=0.25)
+    rng = np.random.default_rng(seed)
+    acts = np.asarray(r.actions, np.float64) * ([1, 1, 1] if stance_side < 0 else [1, -1, -1])
+    # Every action exactly, and random steps near the action set.
+    picks = rng.integers(0, r.num_actions, 8)
+    rel = np.concatenate([acts, acts[picks] + rng.normal(0, [0.03, 0.03, 0.1], (8, 3))])
+    steps = np_compose(np.array(stance), rel)
+    got = np.asarray(robots.nearest_actions(r, stance, stance_side, steps))
+    assert got.dtype == np.int32
+    np.testing.assert_array_equal(got[: r.num_actions], np.arange(r.num_actions))
+    rw = float(r.rotation_weight)
+    d = np.hypot(rel[:, None, 0] - acts[None, :, 0], rel[:, None, 1] - acts[None, :, 1]) + rw * np.abs(
+        np_wrap(rel[:, None, 2] - acts[None, :, 2]))
+    best = d.min(1)
+    # float32 ties: the chosen action is within the tolerance of the brute-force minimum.
+    np.testing.assert_array_less(d[np.arange(len(rel)), got] - best, POSE_TOL * (1 + rw) * 4)

@@ -1,27 +1,81 @@
-"""The sweep files shipped in sweeps/ are valid and say what their comments claim."""
+"""The sweep files shipped in sweeps/ are valid, hold the grids their comments and sweeps/README.md describe,
+and run: a tiny slice of each through ``sweep.run`` gives the documented metrics."""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import ijoy_jax as ij
 from ijoy_jax import sweep
 
-SWEEPS = sorted((Path(__file__).parents[1] / "sweeps").glob("*.toml"))
+DIR = Path(__file__).parents[1] / "sweeps"
+SWEEPS = sorted(DIR.glob("*.toml"))
+
+# What each file's comments and sweeps/README.md say it is: swept grid, family, sizes, scenario count.
+EXPECTED = {
+    "w_sweep.toml": dict(
+        grid={"robot.w": (0.0, 0.1, 0.3, 1.0, 2.0, 3.0, 5.0, 10.0)}, family="rough", has_height=True,
+        shape=(150, 100), resolution=0.02, scenarios_per_cell=64, num_steps=20, method="ordered",
+        num_scenarios=512, extra_metrics=()),
+    "action_set_size.toml": dict(
+        grid={"robot.density": (0.4, 0.5, 0.75, 1.0, 1.5, 2.0)}, family="obstacles", has_height=False,
+        shape=(150, 100), resolution=0.02, scenarios_per_cell=32, num_steps=16, method="ordered",
+        num_scenarios=192, extra_metrics=()),
+    "margin_stepping_over.toml": dict(
+        grid={"robot.margin": (0.0, 0.02, 0.04, 0.06, 0.08, 0.10),
+              "terrain.width": tuple(round(0.01 * i, 2) for i in range(1, 17))},
+        family="bars", has_height=False, shape=(120, 60), resolution=0.02, scenarios_per_cell=40, num_steps=10,
+        method="ordered", num_scenarios=6 * 16 * 40, extra_metrics=("bars_crossed", "crossed")),
+}
 
 
-def test_there_are_shipped_sweeps():
-    assert {p.name for p in SWEEPS} >= {"w_sweep.toml", "action_set_size.toml"}
+def test_every_shipped_sweep_is_described_here_and_in_the_readme():
+    assert {p.name for p in SWEEPS} == set(EXPECTED)
+    readme = (DIR / "README.md").read_text()
+    for name in EXPECTED:
+        assert f"`{name}`" in readme, name
 
 
-@pytest.mark.parametrize("path", SWEEPS, ids=[p.name for p in SWEEPS])
-def test_shipped_sweep_validates(path):
-    cfg = sweep.load_config(path)
-    assert cfg.num_scenarios >= 100
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_shipped_sweep_validates_with_its_documented_grid(name):
+    want = EXPECTED[name]
+    cfg = sweep.load_config(DIR / name)
+    assert cfg.name == name.removesuffix(".toml") and cfg.description
+    assert cfg.swept == tuple(want["grid"])
+    for k, values in want["grid"].items():
+        np.testing.assert_allclose(cfg.grid[k], values, rtol=1e-12, err_msg=k)
+    for field in ("family", "has_height", "shape", "resolution", "scenarios_per_cell", "num_steps", "method",
+                  "num_scenarios"):
+        assert getattr(cfg, field) == want[field], field
+    assert cfg.kernel == "xla"  # runs on a CPU as shipped (the README says to add pallas on a GPU)
 
 
 def test_action_set_sizes_span_fifty_to_thousands_around_the_papers_496():
-    cfg = sweep.load_config(Path(__file__).parents[1] / "sweeps" / "action_set_size.toml")
+    cfg = sweep.load_config(DIR / "action_set_size.toml")
     assert cfg.swept == ("robot.density",)
     sizes = [ij.robots.hrp2(density=d).num_actions for d in cfg.grid["robot.density"]]
     assert sizes == [52, 117, 202, 496, 1279, 3307]
+
+
+def test_margin_sweep_brackets_the_papers_bound():
+    """b_max(m) = 0.158 - 2 m: 11.8 cm at 2 cm, 0 from 7.9 cm; the bar lengths straddle it at every margin."""
+    cfg = sweep.load_config(DIR / "margin_stepping_over.toml")
+    assert sweep.b_max(0.02) == pytest.approx(0.118, abs=1e-3) and sweep.b_max(0.08) <= 0
+    widths = np.array(cfg.grid["terrain.width"])
+    for m in cfg.grid["robot.margin"]:
+        b = sweep.b_max(m)
+        assert widths.max() > b and (b <= 0 or widths.min() < b), m
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_a_tiny_slice_of_the_shipped_sweep_runs(name, tmp_path):
+    cfg = sweep.load_config(DIR / name)
+    stats = sweep.run(cfg, tmp_path / "o", chunk_size=2, max_scenarios=2, progress=False)
+    assert (stats.computed, stats.chunks) == (2, 1)
+    df = sweep.load(tmp_path / "o", partial=True)
+    assert len(df) == 2
+    for m in sweep.METRICS + EXPECTED[name]["extra_metrics"]:
+        assert m in df.columns and df[m].notna().all(), m
+    assert (df["steps_taken"] > 0).all() and (df["distance_along"] > 0).all()  # they walked
+    assert (df["steps_taken"] <= cfg.num_steps).all()

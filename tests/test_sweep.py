@@ -553,3 +553,32 @@ def test_density_axis_is_drawn_in_action_counts_with_the_papers_496(tmp_path, mo
         marks = [ln for ln in ax.lines if "496" in str(ln.get_label())]
         assert len(marks) == 1 and marks[0].get_xdata()[0] == sweep.PAPER_ACTIONS
         assert "496" in [t.get_text() for t in ax.get_xticklabels()]
+
+
+def test_summary_plot_is_a_grid_of_distinct_panels(tmp_path, monkeypatch):
+    """The default six metrics: 2 rows x 3 columns (not one 2772 px row), each panel titled with its metric
+    and unit, one line per value of the other swept parameter."""
+    from PIL import Image
+
+    from ijoy_jax.sweep import results
+
+    metrics = results.plot.__defaults__[1]
+    w = [0.0, 0.3, 1.0, 3.0, 10.0]
+    agg = pd.DataFrame({"cell": range(10), "robot.w": w * 2, "robot.margin": [0.0] * 5 + [0.04] * 5, "n": 8})
+    for i, m in enumerate(metrics):
+        agg[f"{m}.mean"], agg[f"{m}.ci95"] = np.linspace(0, 1, 10) + i, 0.1
+    figs = []
+    finish = results._finish
+    monkeypatch.setattr(results, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
+    png = sweep.plot(agg, tmp_path / "summary.png", title="w sweep")
+    (fig,) = figs
+    assert len(fig.axes) == 6
+    assert [ax.get_subplotspec().get_geometry()[:2] for ax in fig.axes] == [(2, 3)] * 6
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles == [f"{m.replace('_', ' ')} ({sweep.UNITS[m]})" for m in metrics] and len(set(titles)) == 6
+    for ax in fig.axes:
+        assert ax.get_xlabel() == "w (cost units per m)" and len(ax.containers) == 2  # margin 0 and 0.04
+    legend = {t.get_text() for t in fig.axes[0].get_legend().get_texts()}
+    assert legend == {"margin = 0", "margin = 0.04", "library default (1)"}
+    width, height = Image.open(png).size
+    assert width <= 1600 and height >= 0.45 * width

@@ -21,6 +21,9 @@ import os
 import platform
 import time
 
+import ijoy_jax.sim  # noqa: F401  before mujoco: headless EGL, and mjx imported without the warp lines
+
+# isort: split
 import jax
 import jax.numpy as jnp
 import mujoco

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 
@@ -83,6 +84,17 @@ def main(argv: list[str] | None = None) -> int:
 
     tune_cli.add_parser(sub)
     args = parser.parse_args(argv)
+    try:
+        return _run(args)
+    except (ValueError, TypeError, FileNotFoundError) as e:  # bad input: one line, like argparse's own errors
+        print(f"ijoy: error: {e}", file=sys.stderr)
+        return 2
+
+
+def _run(args) -> int:
+    """Dispatch a parsed command line; bad input raises ValueError, TypeError or FileNotFoundError."""
+    from ijoy_jax.apps import tune_cli
+
     if args.command == "tune":
         return tune_cli.main(args)
     if args.command == "sweep":
@@ -98,6 +110,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "bench":
         from ijoy_jax.apps import bench as bench_mod
 
+        if args.ref is not None and args.name != "check":
+            raise ValueError(f"--ref is read or written by 'ijoy bench check' only, not by '{args.name}'")
+        for path in (args.ref, args.json):  # refused before the benchmark runs, not after
+            if path is not None and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
+                raise FileNotFoundError(f"no folder for {path!r}")
         if args.name == "sim":
             from ijoy_jax.apps import bench_sim as sim_bench
 
@@ -128,12 +145,8 @@ def _sim(args) -> int:
     from ijoy_jax.sim import margins
 
     if args.sim_command == "margins":
-        try:
-            values = [float(v) for v in args.margins.split(",") if v.strip()]
-            res = margins.run(values, batch=args.batch, num_steps=args.steps, seed=args.seed, chunk=args.chunk)
-        except ValueError as e:
-            print(f"ijoy sim margins: error: {e}", file=sys.stderr)
-            return 2
+        values = [float(v) for v in args.margins.split(",") if v.strip()]
+        res = margins.run(values, batch=args.batch, num_steps=args.steps, seed=args.seed, chunk=args.chunk)
         rows = [dict(margin=float(m), collision_rate=float(c), contacts_per_step=float(p), fall_rate=float(f),
                      mean_progress=float(g), footholds_on_obstacles=int(o.sum()), batch=args.batch,
                      steps=args.steps) for m, c, p, f, g, o in zip(res["margin"], res["collision_rate"],
@@ -154,17 +167,13 @@ def _sim(args) -> int:
     from ijoy_jax.sim import render
     from ijoy_jax.sim import walker as W
 
-    try:
-        width, height = (int(v) for v in args.size.lower().split("x"))
-        robot = robots.hrp2(margin=args.margin)
-        sim = W.make_sim(margins.SHAPE, margins.RESOLUTION, robot=robot)
-        terrains, starts = margins.clutter(args.seed, 1)
-        command = margins.forward_commands(args.seed + 1, 1, robot)[0]
-        terrain = jax.tree_util.tree_map(lambda a: a[0], terrains)
-        traj = W.rollout(sim, terrain, robot, starts[0], command, num_steps=args.steps, frames_per_step=args.frames)
-    except ValueError as e:
-        print(f"ijoy sim render: error: {e}", file=sys.stderr)
-        return 2
+    width, height = (int(v) for v in args.size.lower().split("x"))
+    robot = robots.hrp2(margin=args.margin)
+    sim = W.make_sim(margins.SHAPE, margins.RESOLUTION, robot=robot)
+    terrains, starts = margins.clutter(args.seed, 1)
+    command = margins.forward_commands(args.seed + 1, 1, robot)[0]
+    terrain = jax.tree_util.tree_map(lambda a: a[0], terrains)
+    traj = W.rollout(sim, terrain, robot, starts[0], command, num_steps=args.steps, frames_per_step=args.frames)
     frames = render.render(sim, terrain, render.states(traj), width=width, height=height,
                            footsteps=traj.commanded, sides=traj.sides, smooth=args.frames)
     render.write_gif(args.out, frames, fps=args.frames / sim.cfg.step_time)
@@ -178,36 +187,25 @@ def _sim(args) -> int:
 
 
 def _sweep(args) -> int:
-    """``ijoy sweep run`` / ``ijoy sweep summarize``; bad sweep files exit with status 2 and one message."""
+    """``ijoy sweep run`` / ``ijoy sweep summarize`` (bad sweep files raise SweepConfigError, a ValueError)."""
     from pathlib import Path
 
     from ijoy_jax import sweep
 
     if args.sweep_command == "run":
-        try:
-            cfg = sweep.load_config(args.file)
-        except sweep.SweepConfigError as e:
-            print(f"ijoy sweep: error: {e}", file=sys.stderr)
-            return 2
-        try:  # the layout is checked before jax.distributed starts and before any compute
-            lay = sweep.distributed.layout(args.num_processes, args.process_id, args.coordinator, args.distributed)
-            sweep.distributed.initialize(lay)
-            stats = sweep.run(cfg, args.out, chunk_size=args.chunk, max_scenarios=args.max_scenarios,
-                              devices=args.devices)
-        except ValueError as e:
-            print(f"ijoy sweep: error: {e}", file=sys.stderr)
-            return 2
+        cfg = sweep.load_config(args.file)  # validated before any compute
+        # the layout is checked before jax.distributed starts and before any compute
+        lay = sweep.distributed.layout(args.num_processes, args.process_id, args.coordinator, args.distributed)
+        sweep.distributed.initialize(lay)
+        stats = sweep.run(cfg, args.out, chunk_size=args.chunk, max_scenarios=args.max_scenarios,
+                          devices=args.devices)
         print(json.dumps({"out": str(stats.out), "scenarios": stats.scenarios, "computed": stats.computed,
                           "chunks": stats.chunks, "skipped_chunks": stats.skipped, "compiles": stats.compiles,
                           "first_chunk_s": stats.first_chunk_s, "run_s": round(stats.run_s, 3)}, indent=2))
         return 0
     import pandas as pd
 
-    try:
-        agg = sweep.load_aggregates(args.dir)
-    except (FileNotFoundError, sweep.IncompleteSweepError) as e:
-        print(f"ijoy sweep: error: {e}", file=sys.stderr)
-        return 2
+    agg = sweep.load_aggregates(args.dir)  # FileNotFoundError, or IncompleteSweepError (a ValueError)
     show = [c for c in agg.columns if c.startswith(("robot.", "terrain.")) or c == "n"]
     table = agg[show].copy()
     for m in ("distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles"):

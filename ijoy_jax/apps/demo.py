@@ -23,13 +23,31 @@ def demo_scene() -> ij.Terrain:
     return ij.terrain.scene.rasterize(t, boxes=boxes, cylinders=cylinders)
 
 
+def plain(summary: dict) -> dict:
+    """A :meth:`ijoy_jax.Trajectory.summary` of one rollout as Python numbers: ints for counts, bool, floats."""
+    out = {}
+    for k, v in summary.items():
+        v = np.asarray(v)
+        out[k] = bool(v) if v.dtype == bool else int(v) if np.issubdtype(v.dtype, np.integer) else float(v)
+    return out
+
+
 def run(out: str = "ijoy_demo.png", num_steps: int = 24, margin: float = 0.02) -> dict:
-    """Run both joysticks on :func:`demo_scene`, write a PNG to ``out``, return their summaries."""
+    """Run both joysticks on :func:`demo_scene`, write a PNG to ``out``, return their summaries.
+
+    Raises ValueError for a negative margin or fewer than one step (before any compute).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
+    if not num_steps >= 1:
+        raise ValueError(f"num_steps must be at least 1, got {num_steps}")
+    if not margin >= 0:  # also rejects NaN
+        raise ValueError(f"margin must be >= 0 metres, got {margin}")
     terrain = demo_scene()
     robot = ij.robots.hrp2(margin=margin)
     start = ij.robots.start_stance(robot, 0.3, 1.2)  # left, right: 0.19 m apart, facing +x
@@ -40,19 +58,23 @@ def run(out: str = "ijoy_demo.png", num_steps: int = 24, margin: float = 0.02) -
     seconds = time.perf_counter() - t0
     fig, axes = plt.subplots(2, 1, figsize=(10, 9), sharex=True)
     length, width = float(robot.foot_length), float(robot.foot_width)
+    legend = [Patch(facecolor="none", edgecolor="tab:blue", lw=1.5, label="left foot"),
+              Patch(facecolor="none", edgecolor="tab:red", lw=1.5, label="right foot"),
+              Patch(facecolor="0.5", alpha=0.3, label="start stance"),
+              Line2D([], [], color="k", marker="x", ls="none", ms=8, mew=2, label="foothold on an obstacle"),
+              Patch(facecolor="0.3", label="obstacle")]
     for ax, traj, name in ((axes[0], naive, "naive joystick"), (axes[1], smart, "intelligent joystick")):
         ij.plot.draw_terrain(ax, terrain)
         ij.plot.draw_footsteps(ax, start, [1, -1], length, width, style=dict(fill=True, alpha=0.3))
         ij.plot.draw_footsteps(ax, traj.footsteps, traj.sides, length, width, mask=traj.taken,
                                bad=np.asarray(traj.on_obstacle))
-        s = {k: float(v) for k, v in traj.summary().items()}
-        ax.set_title(f"{name}: {int(s['steps_taken'])} steps, {int(s['footholds_on_obstacles'])} on obstacles, "
-                     f"{int(s['steps_in_place'])} in place, {s['distance_along']:.2f} m forward")
-    axes[1].text(0.01, 0.02, f"HRP-2, margin {margin * 100:.0f} cm, command forward 0.25 m/s; "
-                 "blue = left, red = right, x = foot on an obstacle", transform=axes[1].transAxes, fontsize=8)
+        s = plain(traj.summary())
+        ax.set_title(f"{name}: {s['steps_taken']} steps, {s['footholds_on_obstacles']} on obstacles, "
+                     f"{s['steps_in_place']} in place, {s['distance_along']:.2f} m forward")
+        ax.legend(handles=legend, loc="lower left", fontsize=8, ncol=5, framealpha=0.9)
+    fig.suptitle(f"HRP-2 walking forward at 0.25 m/s, safety margin {margin * 100:g} cm: "
+                 "naive joystick (top) and intelligent joystick (bottom)", fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)
-    return {"intelligent": {k: float(v) for k, v in smart.summary().items()},
-            "naive": {k: float(v) for k, v in naive.summary().items()},
-            "seconds": seconds, "png": out}
+    return {"intelligent": plain(smart.summary()), "naive": plain(naive.summary()), "seconds": seconds, "png": out}

@@ -10,7 +10,6 @@ from ``--config FILE.toml`` and/or repeated ``--set KEY=VALUE``.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -116,14 +115,11 @@ def _build_config(cls, args, extra: dict):
 
 
 def main(args) -> int:
-    """Run ``ijoy tune ...`` from parsed arguments; bad options exit with status 2 and one message."""
-    try:
-        if args.tune_command == "forward":
-            return _forward(args)
-        return _inverse(args)
-    except (ValueError, TypeError, FileNotFoundError) as e:
-        print(f"ijoy tune: error: {e}", file=sys.stderr)
-        return 2
+    """Run ``ijoy tune ...`` from parsed arguments; bad options raise ValueError, TypeError or FileNotFoundError
+    (:func:`ijoy_jax.apps.cli.main` prints them as one line and exits with status 2)."""
+    if args.tune_command == "forward":
+        return _forward(args)
+    return _inverse(args)
 
 
 def _forward(args) -> int:
@@ -240,6 +236,6 @@ def bench(quick: bool = False) -> list:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    parser = argparse.ArgumentParser(prog="ijoy")
-    add_parser(parser.add_subparsers(dest="command", required=True))
-    sys.exit(main(parser.parse_args()))
+    from ijoy_jax.apps import cli
+
+    sys.exit(cli.main(["tune", *sys.argv[1:]]))

@@ -22,3 +22,31 @@ import sys as _sys
 if (_sys.platform.startswith("linux") and "MUJOCO_GL" not in _os.environ and not _os.environ.get("DISPLAY")
         and "mujoco" not in _sys.modules and _ctypes_util.find_library("EGL")):
     _os.environ["MUJOCO_GL"] = "egl"
+
+
+def _import_mjx_warp_quietly() -> None:
+    """Import ``mujoco.mjx.warp`` with its two "Failed to import ..." lines dropped.
+
+    When the optional Warp backend is not installed (we use MJX's JAX backend), that module
+    ``print``s ``Failed to import warp: ...`` and ``Failed to import mujoco_warp: ...`` to stdout
+    at import time (a bare print, neither logging nor warnings). It is imported here once, with
+    stdout captured for the duration of that import only and every other line passed through.
+    """
+    import contextlib
+    import io
+
+    if "mujoco.mjx.warp" in _sys.modules:
+        return
+    buf = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buf):
+            import mujoco.mjx.warp  # noqa: F401
+    except ImportError:  # no mujoco: the modules that need it say so when imported
+        pass
+    finally:
+        for line in buf.getvalue().splitlines(keepends=True):
+            if not line.startswith(("Failed to import warp:", "Failed to import mujoco_warp:")):
+                _sys.stdout.write(line)
+
+
+_import_mjx_warp_quietly()

@@ -31,7 +31,7 @@ __all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "UNITS", "IncompleteSwee
            "b_max", "load", "load_aggregates", "plot", "plot_crossing", "t_quantile"]
 
 METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
-           "distance_along", "distance_across", "mean_deviation", "mean_foot_cost")
+           "invalid_footholds", "distance_along", "distance_across", "mean_deviation", "mean_foot_cost")
 """Rollout metrics (:meth:`ijoy_jax.Trajectory.summary`) in every results table."""
 
 EXTRA_METRICS = generators.METRIC_NAMES
@@ -41,7 +41,8 @@ aggregated when present; bars: ``bars_crossed`` bars passed by both feet, ``cros
 
 UNITS = {
     "steps_taken": "steps", "steps_in_place": "steps", "steps_stationary": "steps", "stopped": "fraction",
-    "footholds_on_obstacles": "footholds", "distance_along": "m", "distance_across": "m",
+    "footholds_on_obstacles": "footholds", "invalid_footholds": "footholds", "distance_along": "m",
+    "distance_across": "m",
     "mean_deviation": "m", "mean_foot_cost": "cost units", "robot.w": "cost units per m",
     "robot.rotation_weight": "cost units per rad",
     "robot.margin": "m", "robot.step_time": "s", "robot.foot_length": "m", "robot.foot_width": "m",
@@ -222,7 +223,8 @@ def action_counts(densities) -> np.ndarray:
 
 def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_foot_cost", "steps_in_place",
                                      "steps_stationary", "footholds_on_obstacles"), title: str = ""):
-    """Plot aggregates against one swept parameter, one panel per metric, with 95% CI error bars.
+    """Plot aggregates against one swept parameter, one panel per metric (up to 3 columns, titled with the
+    metric and its unit), points at the mean over scenarios with 95% CI error bars.
 
     Args:
       agg: :func:`aggregate` output.
@@ -255,11 +257,15 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
     if x is None:
         x = max(params, key=lambda c: agg[c].nunique()) if params else "cell"
     others = [c for c in params if c != x]
-    fig, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.6), squeeze=False)
+    ncols = min(3, len(metrics))  # a readable grid, not one long row
+    nrows = -(-len(metrics) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.7 * nrows), squeeze=False)
+    for ax in axes.ravel()[len(metrics):]:
+        ax.remove()
     groups = agg.groupby(others, sort=True) if others else [((), agg)]
     # Density is drawn as what it means: the number of actions in the set (HRP-2's lattice), 496 the paper's.
     xv = action_counts if x == "robot.density" else (lambda v: np.asarray(v, np.float64))
-    for ax, m in zip(axes[0], metrics, strict=True):
+    for ax, m in zip(axes.ravel(), metrics, strict=False):
         for key, g in groups:
             g = g.sort_values(x)
             key = key if isinstance(key, tuple) else (key,)
@@ -281,8 +287,8 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
                 ax.set_xscale("symlog", linthresh=float(pos.min()), linscale=0.5)
                 ax.set_xlim(min(0.0, float(agg[x].min())) - 0.3 * float(pos.min()), 1.5 * float(agg[x].max()))
             ax.set_xlabel(f"{x.partition('.')[2] or x} ({UNITS.get(x, '-')})")
-        ax.set_ylabel(f"{m.replace('_', ' ')} ({UNITS[m]})")
-        ax.set_title("mean and 95% CI over scenarios", fontsize=9)
+        ax.set_ylabel(f"mean ({UNITS[m]})")
+        ax.set_title(f"{m.replace('_', ' ')} ({UNITS[m]})", fontsize=10)
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=8)
     return _finish(fig, agg, title, out)
@@ -293,7 +299,7 @@ def _finish(fig, agg, title, out):
     import matplotlib.pyplot as plt
 
     n = int(agg["n"].min()) if len(agg) else 0
-    fig.suptitle(f"{title}  ({n} scenarios per point)".strip())
+    fig.suptitle(f"{title}  (mean and 95% CI over {n} scenarios per point)".strip())
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)
