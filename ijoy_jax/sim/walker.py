@@ -322,8 +322,8 @@ def rollout_core(sim: Sim, terrain: Terrain, robot: Robot, start, commands, num_
                  swing_path: bool = True, quantize: bool = True, frames_per_step: int = 0) -> control.Trajectory:
     """The joystick loop with the simulated biped, without checks or jit (vmap it for batches)."""
     walker = mjx_walker(sim, terrain, frames_per_step=frames_per_step)
-    return control.rollout_core(terrain, robot, start, commands, num_steps, method, first_swing, walker,
-                                swing_path, quantize, targets)
+    return control.rollout(terrain, robot, start, commands, num_steps, method=method, first_swing=first_swing,
+                           walker=walker, swing_path=swing_path, quantize=quantize, targets=targets)
 
 
 _STATIC = ("sim", "num_steps", "method", "swing_path", "quantize", "frames_per_step")

@@ -16,7 +16,7 @@ one call of a jitted ``vmap`` over scenarios of: generate the terrain (its
 family's parameters are traced per scenario), ``robot.replace`` with the
 scenario's traced leaves (w, rotation weight, margin, step time, footprint,
 metric weights), the start stance from the terrain's start zone, and
-:func:`ijoy_jax.control.rollout_core` with the scenario's command, returning
+:func:`ijoy_jax.control.rollout` with the scenario's command, returning
 :meth:`ijoy_jax.Trajectory.summary` plus the family's extra metrics
 (:data:`ijoy_jax.sweep.metrics.FAMILY_METRICS`; bars: whether the robot got past them).
 
@@ -97,7 +97,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ijoy_jax import robots
-from ijoy_jax.control import rollout_core
+from ijoy_jax.control import rollout
 from ijoy_jax.select import make_targets
 from ijoy_jax.sweep import distributed
 from ijoy_jax.sweep.config import (
@@ -162,8 +162,8 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_val
     centre = generators.start_point(params, shape=static.shape, resolution=static.resolution)
     half = 0.5 * base.p0[1]  # feet side by side at the step-in-place width, facing +x
     start = jnp.stack([jnp.stack([centre[0], centre[1] + half, 0.0]), jnp.stack([centre[0], centre[1] - half, 0.0])])
-    traj = rollout_core(terrain, robot, start, command, static.num_steps, static.method, targets=targets,
-                        kernel=static.kernel)
+    traj = rollout(terrain, robot, start, command, static.num_steps, method=static.method, targets=targets,
+                   kernel=static.kernel)
     summary = traj.summary()
     if static.family == "bars":  # FAMILY_METRICS: from the bars the generator rasterised
         objs = generators.objects("bars", tkey, params, shape=static.shape, resolution=static.resolution, **kw)
