@@ -229,6 +229,7 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     if index is None:
         index = index_terrain(terrain, robot)
     stance = jnp.asarray(stance, jnp.float32)
+    swing_from = None if swing_from is None else jnp.asarray(swing_from, jnp.float32)
     side = side_sign(stance_side)
     swing = -side
     p_next, ok = ideal_step(robot, side, command)
