@@ -39,3 +39,13 @@ def pytree_dataclass(cls: type[T]) -> type[T]:
 
     cls.replace = replace  # type: ignore[attr-defined]
     return cls
+
+
+def is_traced(*trees: Any) -> bool:
+    """Whether any leaf of ``trees`` is a JAX tracer (the call is inside a user's jit, vmap or grad).
+
+    A public function that is also called inside traces uses it to pick its path: traced, it inlines its
+    implementation into the caller's trace; concrete, it calls its own module-level jit, so an eager loop
+    compiles once.
+    """
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))

@@ -14,7 +14,6 @@ same three functions, and the selector is untouched.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -23,10 +22,10 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ijoy_jax import geometry
-from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain, validate
+from ijoy_jax import geometry, select
+from ijoy_jax._struct import is_traced
 from ijoy_jax.robots import LEFT, Robot
-from ijoy_jax.select import KERNELS, METHODS, Targets, ideal_step, make_targets, select_step_indexed
+from ijoy_jax.select import Targets
 from ijoy_jax.terrain import Terrain
 
 
@@ -171,29 +170,11 @@ class Trajectory(NamedTuple):
             "mean_foot_cost": jnp.sum(jnp.where(taken, self.foot_cost, 0.0), axis=-1) / jnp.maximum(n_taken, 1),
         }
 
-def rollout_core(
-    terrain: Terrain,
-    robot: Robot,
-    start,
-    commands,
-    num_steps: int,
-    method: str = "exhaustive",
-    first_swing=LEFT,
-    walker: Walker | None = None,
-    swing_path: bool = True,
-    quantize: bool = True,
-    targets: Targets | None = None,
-    kernel: str = "xla",
-) -> Trajectory:
-    """The rollout without input checks or its own jit (call it inside your jit/vmap).
-
-    ``targets`` (:func:`ijoy_jax.make_targets`) may be prebuilt once per robot;
-    by default it is built inside, which costs a sort of ``|F|`` x N entries.
-    """
+def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, method, walker, swing_path, quantize,
+             kernel) -> Trajectory:
+    """The body of :func:`rollout`, run through :data:`_rollout_jit` or inlined into a caller's trace."""
     walker = perfect_walker() if walker is None else walker
-    index = index_terrain(terrain, robot)
-    targets = make_targets(robot) if targets is None else targets
-    clear = robot.replace(margin=jnp.zeros_like(robot.margin))
+    index, targets = select.prepare(terrain, robot, targets=targets)
     commands = jnp.asarray(commands, jnp.float32)
     if commands.ndim == 1:
         commands = jnp.broadcast_to(commands, (num_steps, 3))
@@ -203,9 +184,10 @@ def rollout_core(
         command, settling = xs
         state, stopped = carry
         info = walker.stance(state)
-        choice = select_step_indexed(
-            terrain, index, robot, targets, info.stance, info.stance_side, command, method,
-            info.swing_from if swing_path else None, quantize, kernel=kernel,
+        choice = select.select_step(
+            terrain, robot, info.stance, info.stance_side, command, method=method,
+            swing_from=info.swing_from if swing_path else None, quantize=quantize, targets=targets, index=index,
+            kernel=kernel,
         )
         go = ~stopped & (choice.valid | (method == "naive")) & ~settling
         now_stopped = stopped | (~go & ~settling)
@@ -214,10 +196,9 @@ def rollout_core(
         after = walker.feet(new_state)
         swing_row = jnp.where(info.stance_side > 0, 1, 0)
         landed = after[swing_row]
-        on_obs = foot_cost_terms_indexed(terrain, index, clear, info.stance, info.stance_side, landed[None],
-                                         None, jnp.zeros(1, jnp.int32)).obstacle[0] > 0
+        on_obs = select.on_obstacle(terrain, robot, landed, index=index)
         # Command-following metrics in the stance foot's frame at decision time.
-        p_next, _ = ideal_step(robot, info.stance_side, command)
+        p_next, _ = select.ideal_step(robot, info.stance_side, command)
         achieved = geometry.relative(info.stance, landed)
         err = achieved - p_next
         cmd = jnp.where(jnp.all(jnp.isfinite(command)), command, 0.0)
@@ -260,8 +241,7 @@ def rollout_core(
         rec = jax.tree_util.tree_map(lambda a: a[warm:], rec)
     return Trajectory(feet=walker.feet(state), **rec)
 
-_rollout_jit = jax.jit(rollout_core,
-                       static_argnames=("num_steps", "method", "walker", "swing_path", "quantize", "kernel"))
+_rollout_jit = jax.jit(_rollout, static_argnames=("num_steps", "method", "walker", "swing_path", "quantize", "kernel"))
 
 def rollout(
     terrain: Terrain,
@@ -269,9 +249,9 @@ def rollout(
     start,
     commands,
     num_steps: int,
-    method: str = "exhaustive",
     *,
-    first_swing: int = LEFT,
+    method: str = "exhaustive",
+    first_swing=LEFT,
     walker: Walker | None = None,
     swing_path: bool = True,
     quantize: bool = True,
@@ -289,7 +269,8 @@ def rollout(
       num_steps: number of decisions (static).
       method: "exhaustive", "ordered" (same steps) or "naive" (the
         conventional joystick: always steps to the action nearest p_next).
-      first_swing: +1 if the left foot swings first (default), -1 the right.
+      first_swing: +1 if the left foot swings first (default), -1 the right
+        (traced: a vmapped batch may mix both).
       walker: the robot executing the steps; default :func:`perfect_walker`.
       swing_path: check the swing corridor on 2.5D terrains.
       quantize: score against F's nearest target (the paper) or p_next.
@@ -304,6 +285,14 @@ def rollout(
       :class:`Trajectory`. Once no valid step exists the robot stops and
       stays stopped (``stopped``), as Algorithm 1 stops walking.
 
+    The public entry point and the function to call inside your own jit or
+    vmap (a batch of terrains, robots, starts or commands): the checks skip
+    traced values (``num_steps``, ``method``, ``walker``, ``swing_path``,
+    ``quantize`` and ``kernel`` are static), and the work runs through one
+    module-level jit (an eager loop compiles once; inside your jit it is
+    inlined), except that a ``walker`` given with traced arguments is traced
+    inline (it may close over the caller's traced values).
+
     Example:
       >>> import numpy as np, ijoy_jax as ij
       >>> terrain = ij.terrain.flat((150, 100), 0.02)
@@ -313,7 +302,7 @@ def rollout(
       >>> round(float(traj.summary()["distance_along"]), 2)   # 0.1 + 5 * 0.2 m
       1.1
     """
-    validate(terrain, robot, np.zeros(3), 1, np.zeros((1, 3)), None)
+    select.validate(terrain, robot, np.zeros(3), 1, np.zeros(3), method=method, targets=targets, kernel=kernel)
     if np.shape(start) != (2, 3):
         raise ValueError(f"start must have shape (2, 3) (left foot, right foot), got {np.shape(start)}")
     if not isinstance(start, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(start))):
@@ -323,13 +312,13 @@ def rollout(
     cs = np.shape(commands)
     if cs not in ((3,), (num_steps, 3)):
         raise ValueError(f"commands must have shape (3,) or ({num_steps}, 3), got {cs}")
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    if first_swing not in (LEFT, -LEFT):
+    if not isinstance(first_swing, jax.core.Tracer) and (np.shape(first_swing) != ()
+                                                         or float(first_swing) not in (LEFT, -LEFT)):
         raise ValueError(f"first_swing must be +1 (left) or -1 (right), got {first_swing!r}")
-    if kernel not in KERNELS:
-        raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
-    return _rollout_jit(terrain, robot, start, commands, int(num_steps), method, first_swing, walker,
-                        swing_path, quantize, targets, kernel)
-
-rollout_batched = functools.partial(jax.vmap, rollout_core)
+    args = (terrain, robot, start, commands, first_swing, targets)
+    static = dict(num_steps=int(num_steps), method=method, walker=walker, swing_path=swing_path, quantize=quantize,
+                  kernel=kernel)
+    # A walker built inside the caller's trace may close over its values (the MJX walker holds the traced
+    # terrain): it is traced inline, not made a static key of the module jit's cache.
+    inline = walker is not None and is_traced(args)
+    return (_rollout if inline else _rollout_jit)(*args, **static)

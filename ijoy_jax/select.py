@@ -28,7 +28,6 @@ differ only by float rounding may be decided differently by the two methods.
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import jax
@@ -38,7 +37,8 @@ from jax import lax
 
 from ijoy_jax import geometry
 from ijoy_jax._struct import pytree_dataclass, static_field
-from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms_indexed, index_terrain, validate
+from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain
+from ijoy_jax.footcost import validate as validate_foot_cost
 from ijoy_jax.robots import Robot, dist, mirror, side_actions, side_p0, side_sign
 from ijoy_jax.terrain import Terrain
 
@@ -153,26 +153,87 @@ def ideal_step(robot: Robot, stance_side, command) -> tuple[jax.Array, jax.Array
     return side_p0(robot, swing) + robot.step_time * command, ok
 
 
-def select_step_indexed(
-    terrain: Terrain,
-    index: TerrainIndex,
-    robot: Robot,
-    targets: Targets,
-    stance,
-    stance_side,
-    command,
-    method: str = "exhaustive",
-    swing_from=None,
-    quantize: bool = True,
-    chunk: int = 32,
-    kernel: str = "xla",
-) -> StepChoice:
-    """:func:`select_step` with a prebuilt terrain index and target set (the jit-friendly core)."""
+class Prepared(NamedTuple):
+    """What a selector needs of one terrain and one robot, built once for many decisions (:func:`prepare`).
+
+    index: the terrain's :class:`~ijoy_jax.footcost.TerrainIndex` for this
+      robot's static windows (height tables padded by ``index.pad`` cells,
+      obstacle prefix counts, kernel window sums; float32 / int32 arrays
+      sized by the terrain grid).
+    targets: the robot's :class:`Targets`: F and L_i, ``order`` (|F|, N)
+      int32 and ``dist`` (|F|, N) float32.
+    """
+
+    index: TerrainIndex
+    targets: Targets
+
+
+def prepare(terrain: Terrain, robot: Robot, *, targets: Targets | None = None) -> Prepared:
+    """Build the per-terrain and per-robot tables once, for many decisions on one terrain.
+
+    Pass ``index=p.index, targets=p.targets`` to :func:`select_step` (the
+    rollout, the tuners and the sweeps do). Traceable: call it inside your jit
+    (it is what :func:`select_step` builds when not given them).
+
+    Args:
+      terrain: one Terrain.
+      robot: the robot model (its windows size the index; its actions and
+        rotation weight give L_i).
+      targets: a prebuilt :func:`make_targets` of this robot, reused as is;
+        None: built here (a sort of |F| x N entries).
+
+    Returns:
+      :class:`Prepared`.
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> terrain, robot = ij.terrain.flat((100, 100), 0.02), ij.robots.hrp2()
+      >>> p = ij.select.prepare(terrain, robot)
+      >>> c = ij.select_step(terrain, robot, [1.0, 1.0, 0.0], -1, [0.2, 0.0, 0.0], index=p.index, targets=p.targets)
+      >>> bool(c.valid)
+      True
+    """
+    return Prepared(index_terrain(terrain, robot), make_targets(robot) if targets is None else targets)
+
+
+def on_obstacle(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None = None) -> jax.Array:
+    """() bool: the bare footprint (no safety margin) at world ``pose`` (3,) overlaps an obstacle or leaves the map.
+
+    How the rollout scores a foothold once taken (``Trajectory.on_obstacle``): a
+    naive joystick steps onto obstacles, the selector never does. ``index``:
+    the terrain's prebuilt index (:func:`prepare`), built inside when None.
+    """
+    bare = robot.replace(margin=jnp.zeros_like(robot.margin))
+    pose = jnp.asarray(pose, jnp.float32)
+    terms = foot_cost_terms(terrain, bare, pose, 1, pose[None], action_index=jnp.zeros(1, jnp.int32), index=index)
+    return terms.obstacle[0] > 0
+
+
+def validate(terrain, robot, stance, stance_side, command, *, method="exhaustive", swing_from=None, targets=None,
+             index=None, kernel="xla"):
+    """Check the arguments of :func:`select_step` (raises ValueError / TypeError).
+
+    Values of tracers are not checked (their shapes are), so it costs nothing
+    inside a trace; :func:`ijoy_jax.rollout` runs it on its own arguments.
+    """
+    validate_foot_cost(terrain, robot, stance, stance_side, np.zeros((1, 3)), swing_from, index)
+    if np.shape(command) != (3,):
+        raise ValueError(f"command must have shape (3,) (xdot, ydot, thetadot), got {np.shape(command)}")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
+    if targets is not None and not isinstance(targets, Targets):
+        raise TypeError(f"targets must be an ijoy_jax.select.Targets (make_targets), got {type(targets).__name__}")
+
+
+def _select(terrain, robot, stance, stance_side, command, swing_from, targets, index, method, quantize, chunk,
+            kernel) -> StepChoice:
+    """The body of :func:`select_step` (always run through :data:`_select_jit`)."""
+    if index is None:
+        index = index_terrain(terrain, robot)
     stance = jnp.asarray(stance, jnp.float32)
+    swing_from = None if swing_from is None else jnp.asarray(swing_from, jnp.float32)
     side = side_sign(stance_side)
     swing = -side
     p_next, ok = ideal_step(robot, side, command)
@@ -187,9 +248,9 @@ def select_step_indexed(
     steps = geometry.compose(stance, side_actions(robot, swing))  # (N, 3)
 
     def terms_of(idx):
-        if kernel == "pallas":
-            return foot_cost_fused(terrain, index, robot, stance, side, steps[idx], swing_from, idx)
-        return foot_cost_terms_indexed(terrain, index, robot, stance, side, steps[idx], swing_from, idx).total
+        cost = foot_cost_fused if kernel == "pallas" else foot_cost_terms
+        out = cost(terrain, robot, stance, side, steps[idx], swing_from=swing_from, action_index=idx, index=index)
+        return out if kernel == "pallas" else out.total
 
     if method == "naive":
         best = jnp.argmin(dists).astype(jnp.int32)  # lowest dist, then lowest index
@@ -268,11 +329,12 @@ def select_step(
     stance,
     stance_side,
     command,
-    method: str = "exhaustive",
     *,
+    method: str = "exhaustive",
     swing_from=None,
     quantize: bool = True,
     targets: Targets | None = None,
+    index: TerrainIndex | None = None,
     chunk: int = 32,
     kernel: str = "xla",
 ) -> StepChoice:
@@ -292,6 +354,9 @@ def select_step(
       quantize: score against the nearest f_i of F (default, as the paper);
         False scores the exhaustive/naive methods against p_next itself.
       targets: a prebuilt :func:`make_targets` (F and L_i); built if None.
+      index: the terrain's prebuilt :class:`~ijoy_jax.footcost.TerrainIndex`;
+        built if None. For many decisions on one terrain build both once
+        with :func:`prepare`.
       chunk: actions per chunk of the ordered search (static).
       kernel: how FootCost is computed (static): "xla" (default) or "pallas",
         one fused kernel per decision (:mod:`ijoy_jax.footcost.pallas`): the
@@ -302,6 +367,11 @@ def select_step(
     Returns:
       :class:`StepChoice`.
 
+    The public entry point and the function to call inside your own jit or
+    vmap: the checks skip traced values (``method``, ``quantize``, ``chunk``
+    and ``kernel`` are static), and the work runs through one module-level
+    jit (an eager loop compiles once; inside your jit it is inlined).
+
     Example:
       >>> import numpy as np, ijoy_jax as ij
       >>> free = np.ones((100, 100), bool); free[55:, :] = False      # wall at x = 1.1 m
@@ -311,21 +381,11 @@ def select_step(
       >>> bool(c.valid), round(float(c.pose[0]), 2)   # as far forward as the wall allows
       (True, 0.9)
     """
-    validate(terrain, robot, stance, stance_side, np.zeros((1, 3)), swing_from)
-    if np.shape(command) != (3,):
-        raise ValueError(f"command must have shape (3,) (xdot, ydot, thetadot), got {np.shape(command)}")
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    if kernel not in KERNELS:
-        raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
-    if targets is None:
-        targets = make_targets(robot)
-    return _select_jit(terrain, robot, targets, stance, stance_side, command, swing_from, method, quantize, chunk,
-                       kernel)
+    validate(terrain, robot, stance, stance_side, command, method=method, swing_from=swing_from, targets=targets,
+             index=index, kernel=kernel)
+    targets = make_targets(robot) if targets is None else targets  # outside the jit: one program with or without
+    return _select_jit(terrain, robot, stance, stance_side, command, swing_from, targets, index, method=method,
+                       quantize=quantize, chunk=chunk, kernel=kernel)
 
 
-@functools.partial(jax.jit, static_argnames=("method", "quantize", "chunk", "kernel"))
-def _select_jit(terrain, robot, targets, stance, stance_side, command, swing_from, method, quantize, chunk, kernel):
-    index = index_terrain(terrain, robot)
-    return select_step_indexed(terrain, index, robot, targets, stance, stance_side, command, method,
-                               swing_from, quantize, chunk, kernel)
+_select_jit = jax.jit(_select, static_argnames=("method", "quantize", "chunk", "kernel"))

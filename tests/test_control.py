@@ -79,7 +79,7 @@ def test_vmaps_over_terrains_commands_starts_and_robot_parameters():
     starts = jnp.asarray(START[None] + rng.uniform(-0.02, 0.02, (n, 1, 3)) * [1, 1, 0], jnp.float32)
     robots = jax.vmap(lambda w, m: ROBOT.replace(w=w, margin=m))(jnp.array([0.5, 1.0, 2.0, 4.0]),
                                                                   jnp.array([0.02, 0.03, 0.04, 0.05]))
-    f = jax.jit(jax.vmap(lambda t, r, s, c: control.rollout_core(t, r, s, c, STEPS)))
+    f = jax.jit(jax.vmap(lambda t, r, s, c: ij.rollout(t, r, s, c, STEPS)))
     batch = f(terrains, robots, starts, commands)
     for i in range(n):
         one = ij.rollout(jax.tree_util.tree_map(lambda x, i=i: x[i], terrains),
@@ -150,6 +150,17 @@ def test_bad_input_at_the_boundary():
         ij.rollout(t, ROBOT, START, [0.1, 0, 0], 3, first_swing=0)
     with pytest.raises(ValueError, match="start must be finite"):
         ij.rollout(t, ROBOT, START * np.nan, [0.1, 0, 0], 3)
+
+
+def test_the_same_checks_run_inside_a_users_jit_and_vmap():
+    """``ij.rollout`` is also the function to trace: shapes and static options are checked at trace time."""
+    t = ij.terrain.flat(SHAPE, RES)
+    with pytest.raises(ValueError, match="commands"):
+        jax.jit(jax.vmap(lambda s: ij.rollout(t, ROBOT, s, jnp.zeros(2), 3)))(jnp.stack([START] * 2))
+    with pytest.raises(ValueError, match="method"):
+        jax.jit(lambda s: ij.rollout(t, ROBOT, s, jnp.zeros(3), 3, method="astar"))(START)
+    with pytest.raises(ValueError, match="kernel"):
+        jax.jit(lambda s: ij.rollout(t, ROBOT, s, jnp.zeros(3), 3, kernel="cuda"))(START)
 
 
 def test_marking_time_with_staggered_feet_counts_as_stationary():

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 import ijoy_jax as ij
-from ijoy_jax.control import rollout_core
+from ijoy_jax.control import rollout
 from ijoy_jax.testing import rect_touches_cells
 
 RES = 0.02
@@ -289,7 +289,7 @@ def _rollouts(terrains, margins, ws, starts, commands, targets, num_steps, metho
     robots = ROBOT.replace(margin=margins, w=ws)
 
     def run(t, r, s, c):
-        return rollout_core(t, r, s, c, num_steps, method, targets=targets)
+        return rollout(t, r, s, c, num_steps, method=method, targets=targets)
 
     return jax.vmap(run, in_axes=(0, ROBOT_AXES, 0, 0))(terrains, robots, starts, commands)
 

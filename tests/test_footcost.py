@@ -293,7 +293,7 @@ def test_no_recompile_when_parameters_or_terrain_values_change():
     steps = np.asarray(ij.action_steps(ROBOT, stance, -1))
     kw = dict(swing_from=np.array([0.6, 0.18, 0.0]), action_index=np.arange(496))
     ij.foot_cost(t, ROBOT, stance, -1, steps, **kw)
-    n = footcost._foot_cost_terms_jit._cache_size()
+    n = footcost.xla._foot_cost_terms_jit._cache_size()
     variants = [
         ROBOT.replace(margin=jnp.float32(0.05)),
         ROBOT.replace(w=jnp.float32(3.0), rotation_weight=jnp.float32(5.0)),
@@ -303,7 +303,7 @@ def test_no_recompile_when_parameters_or_terrain_values_change():
     for r in variants:
         ij.foot_cost(t, r, stance, -1, steps, **kw)
     ij.foot_cost(t.replace(height=t.height * 2), ROBOT, stance + 0.01, 1, steps, **kw)
-    assert footcost._foot_cost_terms_jit._cache_size() == n
+    assert footcost.xla._foot_cost_terms_jit._cache_size() == n
 
 
 def test_vmaps_over_terrains_and_robot_parameters():
@@ -332,7 +332,8 @@ def test_plane_metrics_are_differentiable_in_the_terrain_heights():
     swing = jnp.array([0.75, 0.55, 0.0])
 
     def plane(height):  # linear and smooth in the heights (roughness, bump, band have kinks)
-        terms = ij.foot_cost_terms(t.replace(height=height), ROBOT, stance, -1, steps, swing, jnp.arange(len(steps)))
+        terms = ij.foot_cost_terms(t.replace(height=height), ROBOT, stance, -1, steps, swing_from=swing,
+                                   action_index=jnp.arange(len(steps)))
         return terms.foot_height_m, terms.slope_angle
 
     check_grads(jax.jit(plane), (t.height,), order=1, modes=("fwd", "rev"), eps=1e-3)
@@ -344,7 +345,7 @@ def test_fused_reductions_have_the_plain_reductions_derivatives(name):
     rng = np.random.default_rng(3)
     shape = (13,) if name == "_totals" else (7, 9)
     args = tuple(jnp.asarray(rng.standard_normal(shape), jnp.float32) for _ in range(9 if name == "_totals" else 3))
-    fused = getattr(footcost, name)
+    fused = getattr(footcost.xla, name)
     plain = {"_row_sums": lambda a, b, c: (jnp.sum(a, 1), jnp.sum(b, 1)),
              "_totals": lambda *xs: tuple(jnp.sum(x) for x in xs),
              "_sum_max_max": lambda a, b, c: (jnp.sum(a), jnp.max(b), jnp.max(c))}[name]

@@ -53,8 +53,8 @@ def _totals(terrain, robot, stance, swing, steps, fused):
         cand = ij.action_steps(robot, s, -1) if steps is None else steps
         idx = jnp.arange(cand.shape[0]) % n
         if fused:
-            return foot_cost_fused(terrain, index, robot, s, -1, cand, w, idx)
-        return footcost.foot_cost_terms_indexed(terrain, index, robot, s, -1, cand, w, idx).total
+            return foot_cost_fused(terrain, robot, s, -1, cand, swing_from=w, action_index=idx, index=index)
+        return footcost.foot_cost_terms(terrain, robot, s, -1, cand, swing_from=w, action_index=idx, index=index).total
 
     return jax.vmap(one, in_axes=(0, 0 if swing is not None else None))(stance, swing)
 
@@ -136,7 +136,8 @@ def test_vmap_over_terrains_shares_nothing_between_them():
     index_of = jax.vmap(lambda t: footcost.index_terrain(t, robot))
 
     def one(t, i, s, w):
-        return foot_cost_fused(t, i, robot, s, -1, ij.action_steps(robot, s, -1), w, jnp.arange(robot.num_actions))
+        return foot_cost_fused(t, robot, s, -1, ij.action_steps(robot, s, -1), swing_from=w,
+                               action_index=jnp.arange(robot.num_actions), index=i)
 
     both = np.asarray(jax.jit(jax.vmap(one))(batch, index_of(batch), stance, swing))
     for b, t in enumerate(terrains):
@@ -157,7 +158,7 @@ def test_select_step_with_the_kernel_chooses_the_same_steps(method):
     command = jnp.asarray(rng.uniform(-0.3, 0.3, (n, 3)), jnp.float32)
 
     def one(s, c, kernel):
-        ch = select.select_step_indexed(terrain, index, robot, targets, s, -1, c, method, kernel=kernel)
+        ch = select.select_step(terrain, robot, s, -1, c, method=method, targets=targets, index=index, kernel=kernel)
         return ch.index, ch.cost, ch.valid
 
     run = jax.jit(jax.vmap(one, in_axes=(0, 0, None)), static_argnums=2)
@@ -188,7 +189,7 @@ def test_block_must_be_a_power_of_two():
     terrain = _terrain("2d", seed=0)
     index = footcost.index_terrain(terrain, robot)
     with pytest.raises(ValueError, match="power of two"):
-        foot_cost_fused(terrain, index, robot, jnp.zeros(3), -1, jnp.zeros((4, 3)), block=48)
+        foot_cost_fused(terrain, robot, jnp.zeros(3), -1, jnp.zeros((4, 3)), index=index, block=48)
 
 
 def test_rollout_with_the_kernel_walks_the_same_steps():
@@ -289,9 +290,11 @@ def test_corridor_broad_phase_keeps_every_swing_path_rejection():
     swing = jnp.array([0.25, 0.59, 0.0], jnp.float32)
     steps = ij.action_steps(robot, stance, -1)
     idx = jnp.arange(robot.num_actions)
-    xla = jax.jit(lambda t, i: footcost.foot_cost_terms_indexed(t, i, robot, stance, -1, steps, swing, idx))
-    fused = {bp: jax.jit(lambda t, i, bp=bp: foot_cost_fused(t, i, robot, stance, -1, steps, swing, idx,
-                                                             broad_phase=bp)) for bp in (True, False)}
+    xla = jax.jit(lambda t, i: footcost.foot_cost_terms(t, robot, stance, -1, steps, swing_from=swing,
+                                                        action_index=idx, index=i))
+    fused = {bp: jax.jit(lambda t, i, bp=bp: foot_cost_fused(t, robot, stance, -1, steps, swing_from=swing,
+                                                             action_index=idx, index=i, broad_phase=bp))
+             for bp in (True, False)}
     for wall in (False, True):
         h = np.zeros(SHAPE, np.float32)
         if wall:

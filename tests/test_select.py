@@ -51,7 +51,7 @@ def _random_queries(seed, n):
 
 def _batched(method, with_path):
     def one(t, st, sd, cmd, sw):
-        return ij.select_step(t, ROBOT, st, sd, cmd, method, swing_from=sw if with_path else None,
+        return ij.select_step(t, ROBOT, st, sd, cmd, method=method, swing_from=sw if with_path else None,
                               targets=TARGETS)
 
     # lax.map in vmapped chunks: 2.5D windows of thousands of decisions at once would not fit in memory.
@@ -132,7 +132,7 @@ def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost():
 def test_no_valid_step_is_explicit_and_finite():
     t = ij.terrain.from_arrays(None, np.zeros(SHAPE, bool), RES)  # all obstacle
     for method in select.METHODS:
-        ch = ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], method)
+        ch = ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], method=method)
         assert not bool(ch.valid) and np.isinf(float(ch.cost))
         assert np.all(np.isfinite(np.asarray(ch.pose)))
         if method != "naive":
@@ -190,7 +190,7 @@ def test_naive_takes_the_nearest_action_whatever_the_terrain():
     free = np.ones(SHAPE, bool)
     free[int(0.55 / RES):int(0.7 / RES), :] = False
     t = ij.terrain.from_arrays(None, free, RES)
-    ch = ij.select_step(t, ROBOT, [0.4, 0.4, 0.0], -1, [0.25, 0.0, 0.0], "naive")
+    ch = ij.select_step(t, ROBOT, [0.4, 0.4, 0.0], -1, [0.25, 0.0, 0.0], method="naive")
     np.testing.assert_allclose(np.asarray(ch.pose), [0.6, 0.59, 0.0], atol=1e-6)
     assert not bool(ch.valid) and int(ch.index) >= 0
 
@@ -206,6 +206,38 @@ def test_no_recompile_across_parameters_and_commands():
                    (ROBOT.replace(step_time=jnp.float32(0.5)), [np.nan, 0.0, 0.0])]:
         ij.select_step(t, r, *args, cmd, targets=TARGETS)
     assert select._select_jit._cache_size() == n
+
+
+def test_prepared_tables_give_the_same_choice_and_checks_run_inside_jit():
+    """``prepare`` builds what select_step builds by itself; the checks also run when select_step is traced."""
+    t = jax.tree_util.tree_map(lambda x: x[0], _random_terrains(6, 1, True))
+    p = select.prepare(t, ROBOT)
+    assert isinstance(p.index, ij.footcost.TerrainIndex) and p.targets.order.shape == TARGETS.order.shape
+    args = ([0.5, 0.5, 0.1], -1, [0.2, 0.05, 0.1])
+    a = ij.select_step(t, ROBOT, *args, method="ordered", swing_from=[0.45, 0.7, 0.0])
+    b = ij.select_step(t, ROBOT, *args, method="ordered", swing_from=[0.45, 0.7, 0.0], index=p.index,
+                       targets=p.targets)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    with pytest.raises(ValueError, match="command"):
+        jax.jit(lambda s: ij.select_step(t, ROBOT, s, -1, jnp.zeros(2)))(jnp.zeros(3))
+    with pytest.raises(ValueError, match="method"):
+        jax.jit(lambda s: ij.select_step(t, ROBOT, s, -1, jnp.zeros(3), method="astar"))(jnp.zeros(3))
+    with pytest.raises(TypeError, match="index"):
+        ij.select_step(t, ROBOT, *args, index=p.targets)
+
+
+def test_on_obstacle_is_the_bare_footprint_against_the_map():
+    free = np.ones(SHAPE, bool)
+    free[30:, :] = False  # obstacle from x = 0.6 m
+    t = ij.terrain.from_arrays(None, free, RES)
+    half = 0.5 * float(ROBOT.foot_length)
+    # The bare footprint's front edge 1 mm before the obstacle: clear, although the margin would touch it.
+    clear = [0.6 - half - 0.001, 0.5, 0.0]
+    assert not bool(select.on_obstacle(t, ROBOT, clear))
+    assert bool(select.on_obstacle(t, ROBOT, [0.6 - half + 0.005, 0.5, 0.0]))
+    assert bool(select.on_obstacle(t, ROBOT, [0.05, 0.5, 0.0]))  # leaves the map
+    assert np.isinf(float(ij.foot_cost(t, ROBOT, [0.3, 0.6, 0.0], -1, [clear], action_index=[0])[0]))
 
 
 def test_bad_input_at_the_boundary():

@@ -9,9 +9,9 @@ import pytest
 from jax.test_util import check_grads
 
 import ijoy_jax as ij
-from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain
+from ijoy_jax.footcost import foot_cost_terms
 from ijoy_jax.robots import get_leaf, set_leaf
-from ijoy_jax.select import make_targets, select_step_indexed
+from ijoy_jax.select import prepare, select_step
 from ijoy_jax.tune import relax
 
 RES = 0.02
@@ -67,12 +67,12 @@ def _batch(has_height):
 @jax.jit
 def _exact_all(terrain, robot, stance, command):
     """Exact choice (quantize=False) and the exact cost of every action of one query."""
-    index = index_terrain(terrain, robot)
-    choice = select_step_indexed(terrain, index, robot, make_targets(robot), stance, -1.0, command, quantize=False)
+    index, targets = prepare(terrain, robot)
+    choice = select_step(terrain, robot, stance, -1.0, command, quantize=False, targets=targets, index=index)
     acts = ij.robots.side_actions(robot, 1.0)
     steps = ij.geometry.compose(stance, acts)
     n = acts.shape[0]
-    fc = foot_cost_terms_indexed(terrain, index, robot, stance, -1.0, steps, None, jnp.arange(n)).total
+    fc = foot_cost_terms(terrain, robot, stance, -1.0, steps, action_index=jnp.arange(n), index=index).total
     p_next = ij.robots.side_p0(robot, 1.0) + robot.step_time * command
     return choice, fc + robot.w * ij.robots.dist(acts, p_next, robot.rotation_weight)
 
@@ -114,7 +114,7 @@ def test_relaxed_cost_converges_to_exact_finite_costs(robot):
     acts = ij.robots.side_actions(robot, 1.0)
     steps = ij.geometry.compose(jnp.asarray(stance), acts)
     idx = jnp.arange(acts.shape[0])
-    exact = jax.jit(lambda t, r, s, x, i: foot_cost_terms_indexed(t, index_terrain(t, r), r, s, -1.0, x, None, i).total)
+    exact = jax.jit(lambda t, r, s, x, i: foot_cost_terms(t, r, s, -1.0, x, action_index=i).total)
     exact = np.asarray(exact(terrain, robot, jnp.asarray(stance), steps, idx))
     ok = np.isfinite(exact)
     assert ok.sum() > 10
@@ -278,7 +278,7 @@ def _exact_and_soft_paths(terrain, robot, stance, swing_from, sharpness):
     acts = ij.robots.side_actions(robot, 1.0)
     steps = ij.geometry.compose(stance, acts)
     idx = jnp.arange(acts.shape[0])
-    e = foot_cost_terms_indexed(terrain, index_terrain(terrain, robot), robot, stance, -1.0, steps, swing_from, idx)
+    e = foot_cost_terms(terrain, robot, stance, -1.0, steps, swing_from=swing_from, action_index=idx)
     s = relax.soft_foot_cost_terms(terrain, robot, stance, steps, idx, sharpness=sharpness, swing_from=swing_from)
     return e, s
 

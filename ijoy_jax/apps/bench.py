@@ -27,7 +27,7 @@ import numpy as np
 
 import ijoy_jax as ij
 from ijoy_jax import footcost, select
-from ijoy_jax.control import rollout_core
+from ijoy_jax.control import rollout
 
 GRID = (200, 200)  # 4 m x 4 m
 RES = 0.02
@@ -132,8 +132,8 @@ def bench_footcost(rows, quick: bool, chunk: int):
 
         def one(stance, swing, terrain=terrain, index=index):
             steps = ij.action_steps(robot, stance, -1)
-            return footcost.foot_cost_terms_indexed(terrain, index, robot, stance, -1, steps, swing,
-                                                    jnp.arange(n_act)).total
+            return footcost.foot_cost_terms(terrain, robot, stance, -1, steps, swing_from=swing,
+                                            action_index=jnp.arange(n_act), index=index).total
 
         f = _batched(one, chunk)
         for b in sizes:
@@ -168,8 +168,8 @@ def bench_select(rows, quick: bool, chunk: int):
         cases += [("2.5D posts", posts, "exhaustive", "pallas", robot, posts_index, sizes[-2:])]
     for terrain_name, tmap, method, kernel, rb, ix, batches in cases:
         def one(stance, command, swing, tmap=tmap, method=method, kernel=kernel, rb=rb, ix=ix):
-            c = select.select_step_indexed(tmap, ix, rb, targets, stance, -1, command, method, swing,
-                                           kernel=kernel)
+            c = select.select_step(tmap, rb, stance, -1, command, method=method, swing_from=swing, targets=targets,
+                                   index=ix, kernel=kernel)
             return c.index, c.cost
 
         # The kernel keeps its intermediates on chip, so a whole batch fits at once.
@@ -195,8 +195,8 @@ def bench_select(rows, quick: bool, chunk: int):
             if kernel == "xla" and b > 8192:
                 continue  # XLA materialises per-candidate windows: its rows stop at the sizes of earlier runs
             starts = _starts(robot, b, 1.0, 1.0, 50)
-            f = jax.jit(jax.vmap(lambda s, method=method, kernel=kernel: rollout_core(
-                terrain, robot, s, cmd, steps, method, targets=targets, kernel=kernel).footsteps))
+            f = jax.jit(jax.vmap(lambda s, method=method, kernel=kernel: rollout(
+                terrain, robot, s, cmd, steps, method=method, targets=targets, kernel=kernel).footsteps))
             comp, run, _, _ = _time(f, starts, repeats=3, min_seconds=0.2)
             _emit(rows, dict(_env(), bench="rollout", method=method, kernel=kernel, terrain="2.5D", batch=b,
                              steps=steps, compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
@@ -211,8 +211,8 @@ def bench_select(rows, quick: bool, chunk: int):
         terrains = jax.vmap(lambda h: flat.replace(height=h))(heights)
         starts = _starts(robot, b, 0.5, 0.8, 40)
         for method, kernel in loops:
-            f = jax.jit(jax.vmap(lambda t, s, method=method, kernel=kernel: rollout_core(
-                t, robot, s, cmd, steps, method, targets=targets, kernel=kernel).footsteps))
+            f = jax.jit(jax.vmap(lambda t, s, method=method, kernel=kernel: rollout(
+                t, robot, s, cmd, steps, method=method, targets=targets, kernel=kernel).footsteps))
             comp, run, _, _ = _time(f, terrains, starts, repeats=3, min_seconds=0.2)
             _emit(rows, dict(_env(), bench="rollout", method=method, kernel=kernel, terrain="2.5D, one per robot",
                              batch=b, steps=steps, compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
@@ -249,8 +249,8 @@ def check(rows, quick: bool, chunk: int, path: str | None = None):
         for method in ("exhaustive", "ordered"):
             for kernel in kernels:
                 def one(st, cmd, sw, method=method, kernel=kernel, terrain=terrain, index=index):
-                    c = select.select_step_indexed(terrain, index, robot, targets, st, -1, cmd, method, sw,
-                                                   kernel=kernel)
+                    c = select.select_step(terrain, robot, st, -1, cmd, method=method, swing_from=sw,
+                                           targets=targets, index=index, kernel=kernel)
                     return c.index, c.cost
 
                 i, c = _batched(one, chunk)(stance, command, swing)

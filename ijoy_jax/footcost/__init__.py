@@ -17,7 +17,6 @@ from ijoy_jax.footcost.pallas import foot_cost_fused as foot_cost_fused
 from ijoy_jax.footcost.xla import FootCostTerms as FootCostTerms
 from ijoy_jax.footcost.xla import foot_cost as foot_cost
 from ijoy_jax.footcost.xla import foot_cost_terms as foot_cost_terms
-from ijoy_jax.footcost.xla import foot_cost_terms_indexed as foot_cost_terms_indexed
 from ijoy_jax.footcost.xla import validate as validate
 
 __all__ = [
@@ -27,7 +26,6 @@ __all__ = [
     "foot_cost",
     "foot_cost_fused",
     "foot_cost_terms",
-    "foot_cost_terms_indexed",
     "index",
     "index_terrain",
     "pallas",

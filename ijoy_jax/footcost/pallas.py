@@ -1,6 +1,6 @@
 """FootCost of a decision's candidates in one fused Pallas kernel (GPU: Triton; CPU: interpreted).
 
-The XLA path (:func:`ijoy_jax.footcost.foot_cost_terms_indexed`) gathers a fixed
+The XLA path (:func:`ijoy_jax.footcost.foot_cost_terms`) gathers a fixed
 K x K height window per candidate (K = 29 cells with the default windows, sized
 for margins up to 10 cm) and materialises it with its masks and residuals in
 memory: ~12 MB of traffic per 496-candidate decision on a GPU, which bounds it
@@ -33,8 +33,8 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
-from ijoy_jax.footcost.index import TerrainIndex, rows_max, window_cells
-from ijoy_jax.footcost.xla import SLACK, metric_term, plane_metrics, solve3
+from ijoy_jax.footcost.index import TerrainIndex, index_terrain, rows_max, window_cells
+from ijoy_jax.footcost.xla import SLACK, metric_term, plane_metrics, solve3, validate
 from ijoy_jax.robots import Robot, nearest_actions
 from ijoy_jax.terrain import Terrain
 
@@ -405,24 +405,26 @@ def _box_top(hmax_ref, box, shape, lanes: int):
 
 def foot_cost_fused(
     terrain: Terrain,
-    index: TerrainIndex,
     robot: Robot,
     stance,
     stance_side,
     steps,
+    *,
     swing_from=None,
     action_index=None,
-    *,
+    index: TerrainIndex | None = None,
     block: int = 32,
     num_warps: int | None = 1,
     interpret: bool | None = None,
     broad_phase: bool = True,
 ) -> jax.Array:
-    """(N,) FootCost totals of candidate steps, the same numbers as ``foot_cost_terms_indexed(...).total``.
+    """(N,) FootCost totals of candidate steps, the same numbers as ``foot_cost_terms(...).total``.
 
     One terrain, one stance (vmap for batches: the terrain tables are shared,
-    not copied, when only the queries are batched). Arguments as in
-    :func:`ijoy_jax.footcost.foot_cost_terms_indexed`.
+    not copied, when only the queries are batched). Arguments and checks as in
+    :func:`ijoy_jax.footcost.foot_cost_terms` (``index``: the prebuilt
+    :class:`TerrainIndex`, built inside when None); no jit of its own: call it
+    inside yours.
 
     Args:
       block: candidates per kernel program (static, a power of two).
@@ -445,8 +447,11 @@ def foot_cost_fused(
       kernel has no derivative rule): take gradients through the XLA path or
       :mod:`ijoy_jax.tune`'s relaxation.
     """
+    validate(terrain, robot, stance, stance_side, steps, swing_from, index)
     if block < 1 or block & (block - 1):
         raise ValueError(f"block must be a power of two, got {block}")
+    if index is None:
+        index = index_terrain(terrain, robot)
     if interpret is None:
         interpret = jax.default_backend() != "gpu"
     steps = jnp.asarray(steps, jnp.float32).reshape(-1, 3)

@@ -280,20 +280,10 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     )
 
 
-def foot_cost_terms_indexed(
-    terrain: Terrain,
-    index: TerrainIndex,
-    robot: Robot,
-    stance: jax.Array,
-    stance_side,
-    steps: jax.Array,
-    swing_from: jax.Array | None = None,
-    action_index: jax.Array | None = None,
-) -> FootCostTerms:
-    """:func:`foot_cost_terms` with a prebuilt :class:`TerrainIndex` (jit-friendly core).
-
-    Use it when one terrain is queried many times (the selector and rollout do).
-    """
+def _foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, action_index, index) -> FootCostTerms:
+    """The body of :func:`foot_cost_terms` (always run through :data:`_foot_cost_terms_jit`)."""
+    if index is None:
+        index = index_terrain(terrain, robot)
     steps = jnp.asarray(steps, jnp.float32).reshape(-1, 3)
     stance = jnp.asarray(stance, jnp.float32)
     if action_index is None:
@@ -312,11 +302,20 @@ def foot_cost_terms_indexed(
     return jax.vmap(one)(steps, action_index)
 
 
-def validate(terrain, robot, stance, stance_side, steps, swing_from):
+_foot_cost_terms_jit = jax.jit(_foot_cost_terms)
+
+
+def validate(terrain, robot, stance, stance_side, steps, swing_from=None, index=None):
+    """Check the arguments of :func:`foot_cost_terms` (raises ValueError / TypeError).
+
+    Values of tracers are not checked (their shapes are), so it costs nothing inside a trace.
+    """
     if not isinstance(terrain, Terrain):
         raise TypeError(f"terrain must be an ijoy_jax.Terrain, got {type(terrain).__name__}")
     if not isinstance(robot, Robot):
         raise TypeError(f"robot must be an ijoy_jax.robots.Robot, got {type(robot).__name__}")
+    if index is not None and not isinstance(index, TerrainIndex):
+        raise TypeError(f"index must be an ijoy_jax.footcost.TerrainIndex, got {type(index).__name__}")
     if terrain.free.ndim != 2:
         raise ValueError(
             f"foot_cost takes one terrain (free of shape (nx, ny)), got {terrain.free.shape}; vmap over batches"
@@ -337,22 +336,23 @@ def validate(terrain, robot, stance, stance_side, steps, swing_from):
             raise ValueError(f"stance_side must be +1 (left stance foot) or -1 (right), got {stance_side!r}")
 
 
-@jax.jit
-def _foot_cost_terms_jit(terrain, robot, stance, stance_side, steps, swing_from, action_index):
-    index = index_terrain(terrain, robot)
-    return foot_cost_terms_indexed(terrain, index, robot, stance, stance_side, steps, swing_from, action_index)
-
-
 def foot_cost_terms(
     terrain: Terrain,
     robot: Robot,
     stance,
     stance_side,
     steps,
+    *,
     swing_from=None,
     action_index=None,
+    index: TerrainIndex | None = None,
 ) -> FootCostTerms:
     """FootCost of candidate swing-foot poses, with every named term and raw metric.
+
+    The public entry point and the function to call inside your own jit, vmap
+    or grad: the checks below skip traced values, and the work runs through
+    one module-level jit (an eager loop compiles once; inside your jit it is
+    inlined into your program).
 
     Args:
       terrain: one :class:`~ijoy_jax.Terrain` (vmap for batches).
@@ -367,21 +367,34 @@ def foot_cost_terms(
       action_index: (N,) int indices into the action set: whose cost,
         clearance and height limit apply to each step. None: the nearest
         action of S to each step in the stance frame (:func:`nearest_actions`).
+      index: the terrain's prebuilt :class:`TerrainIndex`
+        (:func:`~ijoy_jax.footcost.index_terrain` of this terrain and robot),
+        for many queries on one terrain; None: built inside.
 
     Returns:
       :class:`FootCostTerms` of (N,) arrays.
 
     Raises:
       ValueError / TypeError on wrong shapes, non-finite poses or a stance_side
-      that is not +-1 (checked when called outside jit; under jit a
-      non-finite step gets +inf in the ``unsupported`` term).
+      that is not +-1 (values are checked when concrete; a traced non-finite
+      step gets +inf in the ``unsupported`` term).
     """
-    validate(terrain, robot, stance, stance_side, steps, swing_from)
-    side = side_sign(stance_side)
-    return _foot_cost_terms_jit(terrain, robot, stance, side, steps, swing_from, action_index)
+    validate(terrain, robot, stance, stance_side, steps, swing_from, index)
+    return _foot_cost_terms_jit(terrain, robot, stance, side_sign(stance_side), steps, swing_from, action_index,
+                                index)
 
 
-def foot_cost(terrain, robot, stance, stance_side, steps, swing_from=None, action_index=None) -> jax.Array:
+def foot_cost(
+    terrain: Terrain,
+    robot: Robot,
+    stance,
+    stance_side,
+    steps,
+    *,
+    swing_from=None,
+    action_index=None,
+    index: TerrainIndex | None = None,
+) -> jax.Array:
     """(N,) FootCost of candidate swing-foot poses: +inf where invalid, else >= 0.
 
     Same arguments as :func:`foot_cost_terms`, which also returns the named
@@ -397,4 +410,5 @@ def foot_cost(terrain, robot, stance, stance_side, steps, swing_from=None, actio
       >>> ij.foot_cost(terrain, robot, stance, -1, steps)
       Array([ 0., inf], dtype=float32)
     """
-    return foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, action_index).total
+    return foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from=swing_from,
+                           action_index=action_index, index=index).total

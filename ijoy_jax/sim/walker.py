@@ -318,8 +318,8 @@ def _rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, first_sw
              method: str, swing_path: bool, quantize: bool, frames_per_step: int) -> control.Trajectory:
     """The loop of :func:`rollout`, jitted, its inputs checked by the caller."""
     walker = mjx_walker(sim, terrain, frames_per_step=frames_per_step)
-    return control.rollout_core(terrain, robot, start, commands, num_steps, method, first_swing, walker,
-                                swing_path, quantize, targets)
+    return control.rollout(terrain, robot, start, commands, num_steps, method=method, first_swing=first_swing,
+                           walker=walker, swing_path=swing_path, quantize=quantize, targets=targets)
 
 
 @functools.partial(jax.jit, static_argnames=("sim",) + _OPTIONS)

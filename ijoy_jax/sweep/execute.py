@@ -16,7 +16,7 @@ one call of a jitted ``vmap`` over scenarios of: generate the terrain (its
 family's parameters are traced per scenario), ``robot.replace`` with the
 scenario's traced leaves (w, rotation weight, margin, step time, footprint,
 metric weights), the start stance from the terrain's start zone, and
-:func:`ijoy_jax.control.rollout_core` with the scenario's command, returning
+:func:`ijoy_jax.control.rollout` with the scenario's command, returning
 :meth:`ijoy_jax.Trajectory.summary` plus the family's extra metrics
 (:meth:`ijoy_jax.terrain.family.Family.metrics`; bars: whether the robot got past them).
 
@@ -98,7 +98,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ijoy_jax import robots
-from ijoy_jax.control import rollout_core
+from ijoy_jax.control import rollout
 from ijoy_jax.select import make_targets
 from ijoy_jax.sweep import distributed
 from ijoy_jax.sweep.config import (
@@ -148,8 +148,8 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_val
     robot = robots.set_leaves(base, {k: robot_vals[k] for k in robots.SCALAR_LEAVES})
     centre = generators.start_point(params, shape=static.shape, resolution=static.resolution)
     start = robots.start_stance(base, centre[0], centre[1])  # side by side at the step-in-place width, facing +x
-    traj = rollout_core(terrain, robot, start, command, static.num_steps, static.method, targets=targets,
-                        kernel=static.kernel)
+    traj = rollout(terrain, robot, start, command, static.num_steps, method=static.method, targets=targets,
+                   kernel=static.kernel)
     summary = traj.summary()
     # The family's extra metrics (bars: whether the robot got past them), from the terrain it generated.
     summary.update(fam.metrics(tkey, params, traj.feet, robot.foot_length, robot.foot_width, shape=static.shape,

@@ -45,7 +45,7 @@ or +inf, so the exact choice does not depend on ``w`` (zero action costs)
 nor the metric terms: the default tunables are then ``rotation_weight`` and
 ``margin`` (2.5D adds ``w`` and the metric weights and limits).
 
-Evaluation (:func:`evaluate`): the EXACT selector (:func:`ijoy_jax.select.select_step_indexed`,
+Evaluation (:func:`evaluate`): the EXACT selector (:func:`ijoy_jax.select.select_step`,
 scored against p_next) on held-out decisions, the command error of its
 choice and Monte-Carlo counts of noisy placements near/on obstacles.
 
@@ -73,10 +73,10 @@ import numpy as np
 import optax
 
 from ijoy_jax import geometry, robots
-from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain
+from ijoy_jax.footcost import foot_cost_terms, index_terrain
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
-from ijoy_jax.select import make_targets, select_step_indexed
+from ijoy_jax.select import make_targets, prepare, select_step
 from ijoy_jax.terrain import Terrain, generators
 from ijoy_jax.terrain.family import ParamError
 from ijoy_jax.tune import loop, relax
@@ -342,8 +342,8 @@ def probe_robot(robot: Robot, distance: float) -> Robot:
 def _near(terrain, index, probe, stance, side, poses):
     """(M,) bool: the footprint grown by the probe's margin at each pose (M, 3) touches an obstacle / leaves the map."""
     m = poses.shape[0]
-    return foot_cost_terms_indexed(terrain, index, probe, stance, side, poses, None,
-                                   jnp.zeros((m,), jnp.int32)).obstacle > 0
+    return foot_cost_terms(terrain, probe, stance, side, poses, action_index=jnp.zeros((m,), jnp.int32),
+                           index=index).obstacle > 0
 
 
 def _noisy(poses, noise, cfg: ForwardConfig):
@@ -569,7 +569,8 @@ def _evaluate(robot, probe_near, probe_on, decisions, cfg):
     targets = make_targets(robot)
 
     def one(t, stance, side, command, noise):
-        c = select_step_indexed(t, index_terrain(t, robot), robot, targets, stance, side, command, quantize=False)
+        p = prepare(t, robot, targets=targets)
+        c = select_step(t, robot, stance, side, command, quantize=False, targets=p.targets, index=p.index)
         et, er = _errors(robot, side, command, geometry.relative(stance, c.pose)[None])
         poses = _noisy(c.pose, noise, cfg)  # (K, 3)
         near = _near(t, index_terrain(t, probe_near), probe_near, stance, side, poses)

@@ -36,9 +36,8 @@ import numpy as np
 import optax
 
 from ijoy_jax import geometry
-from ijoy_jax.footcost import index_terrain
 from ijoy_jax.robots import Robot, dist, get_leaf, set_leaf, side_actions, side_p0, side_sign
-from ijoy_jax.select import make_targets, select_step_indexed
+from ijoy_jax.select import make_targets, prepare, select_step
 from ijoy_jax.terrain import Terrain
 from ijoy_jax.tune import loop, relax
 
@@ -94,7 +93,8 @@ def _exact_actions(terrains, robot, stances, sides, commands, quantize):
     targets = make_targets(robot)
 
     def one(t, s, side, c):
-        return select_step_indexed(t, index_terrain(t, robot), robot, targets, s, side, c, quantize=quantize).index
+        p = prepare(t, robot, targets=targets)
+        return select_step(t, robot, s, side, c, quantize=quantize, targets=p.targets, index=p.index).index
 
     return jax.vmap(one)(terrains, stances, sides, commands)
 

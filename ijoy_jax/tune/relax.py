@@ -45,7 +45,7 @@ import jax
 import jax.numpy as jnp
 
 from ijoy_jax import geometry
-from ijoy_jax.footcost import foot_cost_terms_indexed, index_terrain, window_cells
+from ijoy_jax.footcost import foot_cost_terms, window_cells
 from ijoy_jax.robots import Robot, dist, side_actions, side_p0, side_sign
 from ijoy_jax.select import Targets, make_targets
 from ijoy_jax.terrain import Terrain
@@ -498,16 +498,14 @@ def relaxed_select(
     log_probs = jax.nn.log_softmax(-cost / tau)
     probs = jnp.exp(log_probs)
     if exact:
-        index = index_terrain(terrain, robot)
-        fc = foot_cost_terms_indexed(
+        fc = foot_cost_terms(
             terrain,
-            index,
             jax.lax.stop_gradient(robot),
             jax.lax.stop_gradient(stance),
             side,
             jax.lax.stop_gradient(steps),
-            None if swing_from is None else jax.lax.stop_gradient(swing_from),
-            idx,
+            swing_from=None if swing_from is None else jax.lax.stop_gradient(swing_from),
+            action_index=idx,
         ).total
         valid = jnp.isfinite(fc)
         invalid_mass = jnp.sum(jnp.where(valid, 0.0, jax.lax.stop_gradient(probs)))

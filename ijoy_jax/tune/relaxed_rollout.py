@@ -1,6 +1,6 @@
 """A relaxed rollout of the joystick control loop, differentiable end to end over tens of steps.
 
-Each step of :func:`ijoy_jax.control.rollout_core` (Algorithm 1 with the
+Each step of :func:`ijoy_jax.control.rollout` (Algorithm 1 with the
 perfect walker) becomes smooth: the relaxed selector
 (:func:`ijoy_jax.tune.relax.relaxed_select`, swing-path check included) gives
 a Boltzmann distribution over the action set, the foot is put down at a pose
