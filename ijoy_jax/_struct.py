@@ -1,4 +1,5 @@
-"""A small frozen-dataclass pytree helper (static fields are metadata, the rest are leaves).
+"""A small frozen-dataclass pytree helper (static fields are metadata, the rest are leaves), and the two
+boundary helpers every public function shares (:func:`is_traced`, :func:`as_array`).
 
 Like ``mjx._src.dataclasses`` and ``flax.struct``: a field declared with
 ``static_field()`` is part of the tree's structure (hashable, never traced:
@@ -12,6 +13,7 @@ import dataclasses
 from typing import Any, TypeVar
 
 import jax
+import jax.numpy as jnp
 
 T = TypeVar("T")
 
@@ -49,3 +51,20 @@ def is_traced(*trees: Any) -> bool:
     compiles once.
     """
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
+
+
+def as_array(name: str, value):
+    """``value`` as a float32 array if it is a list or tuple (of numbers or of traced scalars), else as given.
+
+    The public functions call it on their pose and command arguments first, so a Python list works inside
+    a caller's jit as it does outside (NumPy cannot take the shape of a list of tracers).
+
+    Raises:
+      ValueError: a ragged or non-numeric list, naming ``name``.
+    """
+    if not isinstance(value, (list, tuple)):
+        return value
+    try:
+        return jnp.asarray(value, jnp.float32)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name} must be an array of numbers, got {value!r}") from e

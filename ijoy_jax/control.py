@@ -23,7 +23,7 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry, select
-from ijoy_jax._struct import is_traced
+from ijoy_jax._struct import as_array, is_traced
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import Targets
 from ijoy_jax.terrain import Terrain
@@ -302,6 +302,7 @@ def rollout(
       >>> round(float(traj.summary()["distance_along"]), 2)   # 0.1 + 5 * 0.2 m
       1.1
     """
+    start, commands = as_array("start", start), as_array("commands", commands)
     select.validate(terrain, robot, np.zeros(3), 1, np.zeros(3), method=method, targets=targets, kernel=kernel)
     if np.shape(start) != (2, 3):
         raise ValueError(f"start must have shape (2, 3) (left foot, right foot), got {np.shape(start)}")

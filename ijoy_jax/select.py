@@ -36,7 +36,7 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import pytree_dataclass, static_field
+from ijoy_jax._struct import as_array, pytree_dataclass, static_field
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain
 from ijoy_jax.footcost import validate as validate_foot_cost
 from ijoy_jax.robots import Robot, dist, mirror, side_actions, side_p0, side_sign
@@ -160,8 +160,8 @@ class Prepared(NamedTuple):
       robot's static windows (height tables padded by ``index.pad`` cells,
       obstacle prefix counts, kernel window sums; float32 / int32 arrays
       sized by the terrain grid).
-    targets: the robot's :class:`Targets`: F and L_i, ``order`` (|F|, N)
-      int32 and ``dist`` (|F|, N) float32.
+    targets: the robot's :class:`Targets`: F and L_i, ``order`` (``|F|``, N)
+      int32 and ``dist`` (``|F|``, N) float32.
     """
 
     index: TerrainIndex
@@ -180,7 +180,7 @@ def prepare(terrain: Terrain, robot: Robot, *, targets: Targets | None = None) -
       robot: the robot model (its windows size the index; its actions and
         rotation weight give L_i).
       targets: a prebuilt :func:`make_targets` of this robot, reused as is;
-        None: built here (a sort of |F| x N entries).
+        None: built here (a sort of ``|F|`` x N entries).
 
     Returns:
       :class:`Prepared`.
@@ -360,9 +360,8 @@ def select_step(
       chunk: actions per chunk of the ordered search (static).
       kernel: how FootCost is computed (static): "xla" (default) or "pallas",
         one fused kernel per decision (:mod:`ijoy_jax.footcost.pallas`): the
-        same costs to float32 rounding, 30x faster on a GPU (H100:
-        5.5 M decisions/s exhaustive); on a CPU it is interpreted (slow, for
-        checks).
+        same costs to float32 rounding, about 30x faster on a GPU
+        (BENCHMARKS.md); on a CPU it is interpreted (slow, for checks).
 
     Returns:
       :class:`StepChoice`.
@@ -381,6 +380,8 @@ def select_step(
       >>> bool(c.valid), round(float(c.pose[0]), 2)   # as far forward as the wall allows
       (True, 0.9)
     """
+    stance, command, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("command", command),
+                                                               ("swing_from", swing_from)))
     validate(terrain, robot, stance, stance_side, command, method=method, swing_from=swing_from, targets=targets,
              index=index, kernel=kernel)
     targets = make_targets(robot) if targets is None else targets  # outside the jit: one program with or without

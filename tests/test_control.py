@@ -163,6 +163,19 @@ def test_the_same_checks_run_inside_a_users_jit_and_vmap():
         jax.jit(lambda s: ij.rollout(t, ROBOT, s, jnp.zeros(3), 3, kernel="cuda"))(START)
 
 
+def test_python_lists_of_traced_values_work_inside_a_users_jit():
+    """A command or stance written as a list of traced scalars (as a user's jitted code builds them) is taken
+    like the array it stands for, by rollout and select_step alike; a ragged list is refused by name."""
+    t = ij.terrain.flat(SHAPE, RES)
+    want = ij.rollout(t, ROBOT, START, [0.25, 0.0, 0.0], 3).footsteps
+    got = jax.jit(lambda v: ij.rollout(t, ROBOT, START, [v, 0.0, 0.0], 3).footsteps)(jnp.float32(0.25))
+    np.testing.assert_array_equal(got, want)
+    pick = lambda x: ij.select_step(t, ROBOT, [x, 0.6, 0.0], -1, [0.25, 0.0, 0.0]).index  # noqa: E731
+    assert int(jax.jit(pick)(jnp.float32(0.5))) == int(pick(0.5))
+    with pytest.raises(ValueError, match="commands must be an array of numbers"):
+        ij.rollout(t, ROBOT, START, [0.25, [0.0], 0.0], 3)
+
+
 def test_marking_time_with_staggered_feet_counts_as_stationary():
     """A 12 cm block in the right lane: the feet end up alternating between two footholds."""
     free = np.ones((200, 100), bool)

@@ -33,6 +33,7 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
+from ijoy_jax._struct import as_array
 from ijoy_jax.footcost.index import TerrainIndex, index_terrain, rows_max, window_cells
 from ijoy_jax.footcost.xla import SLACK, metric_term, plane_metrics, solve3, validate
 from ijoy_jax.robots import Robot, nearest_actions
@@ -429,9 +430,8 @@ def foot_cost_fused(
     Args:
       block: candidates per kernel program (static, a power of two).
       num_warps: warps per program on the GPU (None: Triton's default). The
-        defaults put one candidate on each lane of one warp: on an H100,
-        32 x 1 ran 3.85 M decisions/s and 64 x 2 3.22 M in one run of an
-        earlier version of this kernel (BENCHMARKS.md): a larger block runs
+        defaults put one candidate on each lane of one warp, the fastest
+        block shape measured (docs/benchmarks_history.md): a larger block runs
         its loops to a longer longest footprint.
       interpret: run the kernel through the Pallas interpreter (None: on every
         backend but GPU; slow, for tests and CPU use). Compiled, the kernel
@@ -447,6 +447,8 @@ def foot_cost_fused(
       kernel has no derivative rule): take gradients through the XLA path or
       :mod:`ijoy_jax.tune`'s relaxation.
     """
+    stance, steps, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("steps", steps),
+                                                             ("swing_from", swing_from)))
     validate(terrain, robot, stance, stance_side, steps, swing_from, index)
     if block < 1 or block & (block - 1):
         raise ValueError(f"block must be a power of two, got {block}")

@@ -27,6 +27,7 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
+from ijoy_jax._struct import as_array
 from ijoy_jax.footcost.index import (
     TerrainIndex,
     column_has_obstacle,
@@ -379,6 +380,8 @@ def foot_cost_terms(
       that is not +-1 (values are checked when concrete; a traced non-finite
       step gets +inf in the ``unsupported`` term).
     """
+    stance, steps, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("steps", steps),
+                                                             ("swing_from", swing_from)))
     validate(terrain, robot, stance, stance_side, steps, swing_from, index)
     return _foot_cost_terms_jit(terrain, robot, stance, side_sign(stance_side), steps, swing_from, action_index,
                                 index)
