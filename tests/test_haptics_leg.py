@@ -146,7 +146,7 @@ def test_fig8_force_points_down_when_knee_is_near_its_end(decay_length):
 def test_generator_pairs_one_and_four_are_longest():
     """The paper: "Pairs 1 and 4 are the longest as they originate from the main hip and knee movement"."""
     ws = L.leg_workspace(L.alduro_leg(-1.0), jnp.array(L.PAPER_Q))
-    e_minus, e_plus = W.generators(ws.jacobian, ws.travel_minus, ws.travel_plus)
+    e_minus, e_plus = W.zonotope_generators(ws.jacobian, ws.travel_minus, ws.travel_plus)
     pair_length = np.linalg.norm(np.asarray(e_plus - e_minus), axis=1)
     assert set(np.argsort(pair_length)[-2:]) == {0, 3}
 

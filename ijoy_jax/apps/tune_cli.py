@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import sys
 import time
 
 _SET_HELP = ("override one config field, VALUE parsed as JSON if it can be (0.05, [40, 40], true, \"x\"), "
@@ -233,9 +232,3 @@ def bench(quick: bool = False) -> list:
         print(json.dumps(row), flush=True)
         rows.append(row)
     return rows
-
-
-if __name__ == "__main__":  # pragma: no cover
-    from ijoy_jax.apps import cli
-
-    sys.exit(cli.main(["tune", *sys.argv[1:]]))

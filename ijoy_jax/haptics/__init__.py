@@ -54,7 +54,6 @@ from ijoy_jax.haptics.platform import translation_halfspaces as translation_half
 from ijoy_jax.haptics.platform import yaw_limits as yaw_limits
 from ijoy_jax.haptics.workspace import Planes as Planes
 from ijoy_jax.haptics.workspace import Workspace as Workspace
-from ijoy_jax.haptics.workspace import generators as generators
 from ijoy_jax.haptics.workspace import limiting_planes as limiting_planes
 from ijoy_jax.haptics.workspace import linearise as linearise
 from ijoy_jax.haptics.workspace import plane_forces as plane_forces
@@ -62,6 +61,7 @@ from ijoy_jax.haptics.workspace import repulsive_force as repulsive_force
 from ijoy_jax.haptics.workspace import repulsive_force_decay as repulsive_force_decay
 from ijoy_jax.haptics.workspace import support as support
 from ijoy_jax.haptics.workspace import workspace_halfspaces as workspace_halfspaces
+from ijoy_jax.haptics.workspace import zonotope_generators as zonotope_generators
 
 __all__ = [
     "ConstantEffect",
@@ -88,7 +88,7 @@ __all__ = [
     "filter_signal",
     "filter_step",
     "fold",
-    "generators",
+    "zonotope_generators",
     "init_state",
     "joystick_forces",
     "leg_forward_kinematics",

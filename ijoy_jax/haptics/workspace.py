@@ -229,7 +229,7 @@ def support(normals, jacobian, travel_minus, travel_plus):
     return _unrolled(jnp.add, jnp.where(a > 0, travel_plus * a, travel_minus * a))
 
 
-def generators(jacobian, travel_minus, travel_plus) -> tuple[jax.Array, jax.Array]:
+def zonotope_generators(jacobian, travel_minus, travel_plus) -> tuple[jax.Array, jax.Array]:
     """The generator pairs of eq. 5: ``(e_minus, e_plus)``, each (k, 3), metres."""
     cols = jnp.asarray(jacobian).T
     return jnp.asarray(travel_minus)[:, None] * cols, jnp.asarray(travel_plus)[:, None] * cols

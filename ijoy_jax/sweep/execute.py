@@ -119,8 +119,7 @@ DEFAULT_CHUNK = 32
 MEMORY_FRACTION = 0.5
 """Share of an accelerator's memory a default-sized chunk may fill (the rest: XLA workspace, fragmentation)."""
 MAX_AUTO_CHUNK = 4096
-"""Largest chunk :func:`auto_chunk_size` picks (progress and resume granularity)."""
-"""Scenarios per chunk by default: large enough to amortise dispatch, small enough to resume often."""
+"""Largest chunk :func:`auto_chunk_size` picks: large enough to amortise dispatch, small enough to resume often."""
 
 _PART = "part-{:05d}.parquet"
 _PROC = "process-{:05d}.json"
