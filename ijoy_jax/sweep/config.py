@@ -403,11 +403,15 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
 
     cfg = SweepConfig(**kw)
     # Cross-field checks (the family's ordered ranges) on every cell's resolved values, still before any compute.
+    # The start zone must leave room for the terrain on the sweep's map (family.Family.validate).
     for row in cells(cfg).to_dict("records"):  # records keep each column's type (counts stay ints)
         try:
-            fam.validate({name: _terrain_of(cfg, row, name) for name in fields})
+            fam.validate({name: _terrain_of(cfg, row, name) for name in fields}, shape=cfg.shape,
+                         resolution=cfg.resolution)
         except ParamError as e:
-            chk.fail(f"terrain.params.{e.field}", e.reason)
+            swept = next((f"{s}.terrain.{e.field}" for s in ("grid", "random")
+                          if f"terrain.{e.field}" in kw[s]), None)
+            chk.fail(swept or f"terrain.params.{e.field}", e.reason)
     return cfg
 
 
