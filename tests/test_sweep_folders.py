@@ -7,11 +7,14 @@ chunk function for the module.
 
 from __future__ import annotations
 
+import json
+import os
 from pathlib import Path
 
 import pytest
 
 from ijoy_jax import sweep
+from ijoy_jax.sweep import results as sweep_results
 from ijoy_jax.terrain import generators as gen
 from ijoy_jax.terrain.family import ParamError
 
@@ -40,6 +43,9 @@ vx = [0.1, 0.3]
 [grid]
 "robot.w" = [0.5, 2.0]
 """
+CHUNK = 2  # 6 scenarios -> 3 chunks
+# A second run of two real processes gets this long to refuse (it compiles nothing before it does), s.
+REFUSE_S = 60
 
 
 def write(tmp_path: Path, text: str, name: str = "s.toml") -> Path:
@@ -79,3 +85,64 @@ def test_sweep_refuses_a_start_zone_over_the_whole_map(tmp_path, text, key):
     msg = str(e.value)
     assert msg.startswith(f"{path}: {key}: "), msg
     assert "covers the whole" in msg
+
+
+# --------------------------------------------------------------------------- 1. parts record their plan
+
+
+@pytest.fixture(scope="module")
+def tiny_file(tmp_path_factory) -> Path:
+    return write(tmp_path_factory.mktemp("cfg"), TINY, "tiny.toml")
+
+
+@pytest.fixture(scope="module")
+def other_file(tmp_path_factory) -> Path:
+    """Another sweep with the same plan shape (3 chunks of 2): only the robot.w values differ."""
+    return write(tmp_path_factory.mktemp("cfg"), TINY.replace("[0.5, 2.0]", "[1.0, 4.0]"), "tiny.toml")
+
+
+def test_parts_record_their_plan(tiny_file, tmp_path):
+    out = tmp_path / "a"
+    sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False)
+    man = json.loads((out / "manifest.json").read_text())
+    plans = {sweep_results.part_plan(p)["hash"] for p in (out / "parts").glob("part-*.parquet")}
+    assert plans == {man["plan_hash"]}
+    assert len(man["plan_hash"]) >= 12
+
+
+def test_another_sweep_into_a_folder_without_manifest_is_refused(tiny_file, other_file, tmp_path):
+    out = tmp_path / "mixed"
+    sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False)
+    (out / "manifest.json").unlink()
+    parts_before = sorted((out / "parts").glob("*"))
+    with pytest.raises(ValueError) as e:
+        sweep.run(other_file, out, chunk_size=CHUNK, progress=False)
+    msg = str(e.value)
+    assert str(out) in msg and "another plan" in msg
+    assert msg.count("plan ") >= 2  # both plans are named
+    assert sorted((out / "parts").glob("*")) == parts_before  # nothing written
+    assert not (out / "manifest.json").exists()
+
+
+def test_load_refuses_parts_of_another_plan(tiny_file, other_file, tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    sweep.run(tiny_file, a, chunk_size=CHUNK, progress=False, max_scenarios=4)
+    sweep.run(other_file, b, chunk_size=CHUNK, progress=False)
+    # Sweep A's first chunk slipped into sweep B's folder (same chunk ids, same columns).
+    os.replace(a / "parts" / "part-00000.parquet", b / "parts" / "part-00000.parquet")
+    for partial in (False, True):
+        with pytest.raises(ValueError) as e:
+            sweep.load(b, partial=partial)
+        msg = str(e.value)
+        assert str(b) in msg and "part-00000.parquet" in msg and "another plan" in msg, msg
+    with pytest.raises(ValueError, match="another plan"):
+        sweep.load_aggregates(b)
+
+
+def test_resume_skips_only_parts_of_the_same_plan(tiny_file, tmp_path):
+    out = tmp_path / "r"
+    sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False, max_scenarios=4)
+    want = sweep.load(out, partial=True)
+    stats = sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False, max_scenarios=4)
+    assert stats.skipped == 2 and stats.computed == 0
+    assert sweep.load(out).equals(want)

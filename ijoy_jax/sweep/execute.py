@@ -4,7 +4,8 @@ Layout of an output folder::
 
     DIR/sweep.toml              the sweep file's text, as run
     DIR/manifest.json           sweep text, plan, package versions, device, git commit, timings
-    DIR/parts/part-00000.parquet  one file per completed chunk (written atomically)
+    DIR/parts/part-00000.parquet  one file per completed chunk (written atomically), its plan record
+                                (sweep name, chunk plan and the plan's hash) in the parquet metadata
     DIR/processes/process-00001.json  sessions of process 1 of several (process 0's are in the manifest)
     DIR/aggregates.parquet      per-cell means and 95% confidence intervals (when complete)
 
@@ -76,6 +77,10 @@ size is the same (e.g. the default 32 on 1, 2, 4 or 8 devices). Each finished
 chunk is written to a temporary file and renamed (atomic on POSIX), so after a
 kill a part file is either complete or absent; a rerun on the same folder skips the
 chunks whose part exists and computes the rest. Nothing is lost or duplicated.
+Every part records the hash of its plan (:func:`ijoy_jax.sweep.results.plan_hash`:
+the sweep text and the chunk plan; also in the manifest as ``plan_hash``): a run
+refuses a folder holding parts of another plan (even with ``manifest.json``
+deleted) before writing anything, and :func:`ijoy_jax.sweep.load` refuses to mix them.
 """
 
 from __future__ import annotations
@@ -109,6 +114,7 @@ from ijoy_jax.sweep.config import (
     load_config,
     scenarios,
 )
+from ijoy_jax.sweep.results import PLAN_KEY, IncompleteSweepError, check_plans, describe_plan, plan_hash
 from ijoy_jax.terrain import generators
 
 __all__ = ["DEFAULT_CHUNK", "MAX_AUTO_CHUNK", "MEMORY_FRACTION", "RunStats", "auto_chunk_size", "default_chunk_size",
@@ -253,6 +259,16 @@ def _write_json(path: Path, obj) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(obj, indent=2, default=str))
     os.replace(tmp, path)
+
+
+def _write_part(df, path: Path, plan_record: dict) -> None:
+    """Write one chunk's results as parquet, its plan record in the file's metadata (:data:`PLAN_KEY`)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    meta = {**(table.schema.metadata or {}), PLAN_KEY: json.dumps(plan_record).encode()}
+    pq.write_table(table.replace_schema_metadata(meta), path)
 
 
 def _plan(cfg: SweepConfig, table, chunk_size: int) -> list[tuple[int, float, np.ndarray]]:
@@ -498,15 +514,26 @@ def run(
             raise ValueError(f"{out} holds results of a different sweep or chunk plan "
                              f"({prev.get('plan')} vs {plan_key}; chunk_size is rounded up to a multiple "
                              f"of the {ndev} device(s)); choose another --out or delete it")
+    # Every part records its plan: parts of another plan (a deleted manifest) are never skipped as done.
+    phash = plan_hash(cfg.text, plan_key)
+    plan_record = {"hash": phash, "name": cfg.name, **plan_key}
+    if parts.exists():
+        try:  # unrecorded (older) parts are vouched for by a matching manifest only
+            check_plans(out, sorted(parts.glob("part-*.parquet")), plan_record,
+                        allow_unrecorded=(old or mine) is not None)
+        except IncompleteSweepError as e:
+            raise ValueError(f"{e} (this run's plan is {describe_plan(plan_record)})") from None
     layout = {"num_processes": nproc, "rule": "chunk % num_processes == process_id",
               "process_files": "processes/process-NNNNN.json (sessions of processes 1..N-1)"}
     if pid == 0:  # the manifest and sweep.toml are written by process 0 only
         manifest = old or {"sweep_file": cfg.source, "sweep_text": cfg.text, "name": cfg.name, "plan": plan_key,
                            "versions": _versions(), "git_commit": _git_commit(), "sessions": []}
+        manifest.setdefault("plan_hash", phash)  # a manifest from before plans were hashed: same text and plan
         manifest["layout"] = layout
         record = manifest_path
     else:  # each other process writes only its own file
         manifest = mine or {"sweep_text": cfg.text, "plan": plan_key, "process_id": pid, "sessions": []}
+        manifest.setdefault("plan_hash", phash)
         record = proc_path
     mine_plan = [p for p in plan if p[0] % nproc == pid]
     parts.mkdir(parents=True, exist_ok=True)
@@ -558,7 +585,7 @@ def run(
         result.insert(1, "chunk", chunk_id)
         path = parts / _PART.format(chunk_id)
         tmp = path.with_name(path.name + ".tmp")
-        result.to_parquet(tmp, index=False)
+        _write_part(result, tmp, plan_record)
         os.replace(tmp, path)
         dt = time.perf_counter() - t0
         if density not in stats.first_chunk_s:
