@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -44,6 +47,8 @@ vx = [0.1, 0.3]
 "robot.w" = [0.5, 2.0]
 """
 CHUNK = 2  # 6 scenarios -> 3 chunks
+# A second run of two real processes gets this long to refuse (it compiles nothing before it does), s.
+REFUSE_S = 120
 # A second run of two real processes gets this long to refuse (it compiles nothing before it does), s.
 REFUSE_S = 60
 
@@ -146,3 +151,94 @@ def test_resume_skips_only_parts_of_the_same_plan(tiny_file, tmp_path):
     stats = sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False, max_scenarios=4)
     assert stats.skipped == 2 and stats.computed == 0
     assert sweep.load(out).equals(want)
+
+
+# --------------------------------------------------------------------------- 2. one run per folder
+
+
+_HOLDING_CHILD = """
+import os, sys, time
+_replace = os.replace
+def slow_replace(src, dst):
+    _replace(src, dst)
+    if str(dst).endswith(".parquet"):
+        time.sleep(600)   # hold the folder (and its lock) after the first part; the test kills it
+os.replace = slow_replace
+from ijoy_jax.apps import cli
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+def test_a_second_process_on_the_same_out_is_refused(tiny_file, tmp_path):
+    """Two real processes on one --out: the second refuses at once with one line naming the holder."""
+    out = tmp_path / "shared"
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    first = subprocess.Popen([sys.executable, "-c", _HOLDING_CHILD, "sweep", "run", str(tiny_file), "--out",
+                              str(out), "--chunk", str(CHUNK)], env=env, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 180
+        while not list((out / "parts").glob("part-*.parquet")) if (out / "parts").exists() else True:
+            assert first.poll() is None, "the first run ended before writing a chunk"
+            assert time.monotonic() < deadline, "no chunk written in 180 s"
+            time.sleep(0.05)
+        sessions = len(json.loads((out / "manifest.json").read_text())["sessions"])
+        second = subprocess.run([sys.executable, "-m", "ijoy_jax.apps.cli", "sweep", "run", str(tiny_file),
+                                 "--out", str(out), "--chunk", str(CHUNK)], env=env, capture_output=True,
+                                text=True, timeout=REFUSE_S)
+        assert first.poll() is None  # still holding the folder
+    finally:
+        first.kill()
+        first.wait()
+    assert second.returncode == 2, second.stderr
+    err = second.stderr.strip()
+    assert len(err.splitlines()) == 1, err
+    assert f"{out} is in use by another run" in err and f"pid {first.pid}" in err, err
+    # The refused run wrote nothing: no session, no part of its own.
+    assert len(json.loads((out / "manifest.json").read_text())["sessions"]) == sessions
+    assert not list((out / "parts").glob("*.tmp")) or all(str(first.pid) in p.name
+                                                         for p in (out / "parts").glob("*.tmp"))
+    # Once the holder is dead its lock is stale: a rerun takes it over and finishes the sweep.
+    stats = sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False)
+    assert stats.skipped == 1 and stats.computed == 4
+    assert len(sweep.load(out)) == 6
+    assert not list((out / "parts").glob("*.tmp"))
+
+
+def test_a_held_lock_refuses_and_a_dead_holders_lock_is_taken_over(tiny_file, tmp_path):
+    import fcntl
+
+    out = tmp_path / "o"
+    out.mkdir()
+    lock = out / ".lock"
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    lock.write_text(json.dumps({"pid": int(dead.stdout), "host": os.uname().nodename}))  # a dead holder
+    with open(lock, "r+") as held:  # another open file: flock conflicts even within this process
+        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(ValueError, match=f"{out} is in use by another run"):
+            sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False, max_scenarios=2)
+        assert not (out / "manifest.json").exists()
+    # Released (its holder gone): the stale file is taken over.
+    sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False, max_scenarios=2)
+    assert json.loads(lock.read_text())["pid"] == os.getpid()
+    assert len(sweep.load(out)) == 2
+
+
+def test_members_of_a_multi_process_run_share_the_folder(tiny_file, tmp_path):
+    """Process 1 of 2 runs beside a live process 0 (simulated by its locks), but not beside a single run
+    nor a second process 1."""
+    import fcntl
+
+    out = tmp_path / "m"
+    out.mkdir()
+    with open(out / ".lock", "a+") as shared, open(out / ".lock-process-00000", "a+") as p0:
+        fcntl.flock(shared, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        fcntl.flock(p0, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(ValueError, match="in use by another run"):
+            sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False)
+        with open(out / ".lock-process-00001", "a+") as p1:
+            fcntl.flock(p1, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            with pytest.raises(ValueError, match="in use by another process with this --process-id"):
+                sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False, process_id=1, num_processes=2)
+        stats = sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False, process_id=1, num_processes=2)
+        assert stats.computed == 2 and stats.skipped == 0
