@@ -14,9 +14,11 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ijoy_jax import sweep
+from ijoy_jax.sweep import config as sweep_config
 from ijoy_jax.sweep import results as sweep_results
 from ijoy_jax.terrain import generators as gen
 from ijoy_jax.terrain.family import ParamError
@@ -242,3 +244,64 @@ def test_members_of_a_multi_process_run_share_the_folder(tiny_file, tmp_path):
                 sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False, process_id=1, num_processes=2)
         stats = sweep.run(tiny_file, out, chunk_size=CHUNK, progress=False, process_id=1, num_processes=2)
         assert stats.computed == 2 and stats.skipped == 0
+
+
+# --------------------------------------------------------------------------- 3. sizes before allocation
+
+
+@pytest.mark.parametrize("text, key", [
+    ("[sweep]\nscenarios_per_cell = 2000000000\n", "sweep.scenarios_per_cell"),
+    ('[sweep]\nscenarios_per_cell = 10\n[grid]\n"robot.w" = [1, 2]\n"robot.margin" = [0, 0.01]\n'
+     '"robot.step_time" = [0.5, 0.6]\n"robot.rotation_weight" = [1, 2]\n', None),  # small: fine
+    ("[sweep]\nseed = 1\n[grid]\n" + "".join(
+        f'"robot.{k}" = [{", ".join(str(0.001 * (i + 1)) for i in range(100))}]\n'
+        for k in ("w", "margin", "rotation_weight", "step_time", "metrics.slope_weight")), "grid"),
+], ids=["2e9-per-cell", "small", "1e10-cells"])
+def test_sizes_are_checked_at_validation_before_any_allocation(tmp_path, text, key, monkeypatch):
+    # A grid of 1e10 cells or 2e9 scenarios per cell would allocate tens of GiB (or loop) in cells()/scenarios().
+    monkeypatch.setattr(sweep_config, "cells", lambda cfg: pytest.fail("cells() ran before the size check"))
+    path = write(tmp_path, text)
+    if key is None:
+        monkeypatch.undo()
+        assert sweep.load_config(path).num_scenarios == 160
+        return
+    t0 = time.perf_counter()
+    with pytest.raises(sweep.SweepConfigError) as e:
+        sweep.load_config(path)
+    assert time.perf_counter() - t0 < 5
+    msg = str(e.value)
+    assert msg.startswith(f"{path}: {key}: "), msg
+    assert "exceed the limit" in msg and "GiB of host memory" in msg and "split the sweep" in msg
+
+
+def test_tables_beyond_host_memory_are_refused(tmp_path, monkeypatch):
+    monkeypatch.setattr(sweep_config, "_host_memory", lambda: 64 * 2**20)  # a 64 MiB host
+    cfg_text = "[sweep]\nscenarios_per_cell = 200000\n"
+    with pytest.raises(sweep.SweepConfigError, match=r"sweep.scenarios_per_cell: 2e\+05 scenarios \(1 cells x "
+                                                     r"200000 per cell\) need ~.* GiB of host memory"):
+        sweep.parse_config(cfg_text)
+    monkeypatch.setattr(sweep_config, "_host_memory", lambda: 64 * 2**30)
+    cfg = sweep.parse_config(cfg_text)
+    assert sweep_config.table_bytes(cfg) < 0.5 * 64 * 2**30
+
+
+def test_a_big_plan_reports_its_progress_and_builds_only_what_is_asked(monkeypatch, capsys):
+    cfg = sweep.parse_config("[sweep]\nscenarios_per_cell = 40\n[command]\nvx = [0.1, 0.3]\n"
+                             '[grid]\n"robot.w" = [1, 2]\n')
+    full = sweep.scenarios(cfg)
+    monkeypatch.setattr(sweep_config, "_PROGRESS_EVERY", 10)
+    head = sweep.scenarios(cfg, 13, progress=True)
+    err = capsys.readouterr().err
+    assert "[ijoy sweep] drawing commands: 10/13 replicates" in err
+    assert head.equals(full.iloc[:13])
+    again = sweep.scenarios(cfg, progress=True)
+    assert again.equals(full) and capsys.readouterr().err.count("drawing commands") == 4
+    # Fixed commands need no generator per replicate, and are the draws' values exactly.
+    fixed = sweep.parse_config("[sweep]\nscenarios_per_cell = 5\n[command]\nvx = 0.2\nwz = -0.0\n")
+    got = sweep.scenarios(fixed, progress=True)
+    assert "drawing commands" not in capsys.readouterr().err
+    for r in range(5):
+        rng = np.random.default_rng([fixed.seed, 2, r])
+        want = [rng.uniform(*fixed.command[k]) for k in sweep.COMMAND_KEYS]
+        row = got.loc[r, [f"command.{k}" for k in sweep.COMMAND_KEYS]].to_numpy()
+        assert np.array_equal(row, want) and np.array_equal(np.signbit(row), np.signbit(want))

@@ -570,7 +570,7 @@ def run(
     pid, nproc = _process_layout(process_id, num_processes)
     devs = _local_devices(devices)
     out = Path(out) if out is not None else Path("results") / cfg.name
-    table = scenarios(cfg, max_scenarios)
+    table = scenarios(cfg, max_scenarios, progress=progress)
     # Host-side robots per density (cheap, no compile): footprint problems surface before any output.
     bases = {d: _base_robot(cfg, table, d) for d in dict.fromkeys(table["robot.density"].tolist())}
     lock = _FolderLock(out, pid, nproc)  # one run per folder (members of a multi-process run share it)
