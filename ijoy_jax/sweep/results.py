@@ -28,8 +28,9 @@ import numpy as np
 
 from ijoy_jax.terrain import generators
 
-__all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "UNITS", "IncompleteSweepError", "action_counts", "aggregate",
-           "b_max", "load", "load_aggregates", "plot", "plot_crossing", "t_quantile"]
+__all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "PLAN_KEY", "UNITS", "IncompleteSweepError", "action_counts",
+           "aggregate", "b_max", "check_plans", "describe_plan", "load", "load_aggregates", "part_plan", "plan_hash",
+           "plot", "plot_crossing", "t_quantile"]
 
 METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
            "invalid_footholds", "distance_along", "distance_across", "mean_deviation", "mean_foot_cost")
