@@ -4,12 +4,15 @@ Public names::
 
   load_config / parse_config / SweepConfig / SweepConfigError   the TOML schema, validated before compute
   cells / scenarios                                              the expansion into cells and scenarios
+  MAX_SCENARIOS / HOST_MEMORY_FRACTION / table_bytes             sizes checked before any allocation
   run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks sharded over local
                                                                  devices, parquet parts, resume
   default_chunk_size / auto_chunk_size / scenario_bytes          chunks sized to device memory
   distributed                                                    several processes/hosts (jax.distributed)
   load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table (union of processes), 95% CIs, plot
-  IncompleteSweepError / action_counts / PAPER_ACTIONS           missing chunks; density as action counts
+  IncompleteSweepError / action_counts / PAPER_ACTIONS           missing chunks, parts of another plan;
+                                                                 density as action counts
+  plan_hash / part_plan                                          the plan every part records (its hash)
   EXTRA_METRICS / plot_crossing / b_max                          family metrics (bars: crossing rate vs the
                                                                  paper's bound; see terrain.family.Family.metrics)
 
@@ -25,6 +28,8 @@ Command line: ``ijoy sweep run FILE`` and ``ijoy sweep summarize DIR``.
 from ijoy_jax.sweep import distributed
 from ijoy_jax.sweep.config import (
     COMMAND_KEYS,
+    HOST_MEMORY_FRACTION,
+    MAX_SCENARIOS,
     ROBOT_DEFAULTS,
     SweepConfig,
     SweepConfigError,
@@ -32,6 +37,7 @@ from ijoy_jax.sweep.config import (
     load_config,
     parse_config,
     scenarios,
+    table_bytes,
 )
 from ijoy_jax.sweep.execute import (
     DEFAULT_CHUNK,
@@ -55,6 +61,8 @@ from ijoy_jax.sweep.results import (
     b_max,
     load,
     load_aggregates,
+    part_plan,
+    plan_hash,
     plot,
     plot_crossing,
     t_quantile,
@@ -64,8 +72,10 @@ __all__ = [
     "COMMAND_KEYS",
     "DEFAULT_CHUNK",
     "EXTRA_METRICS",
+    "HOST_MEMORY_FRACTION",
     "MAX_AUTO_CHUNK",
     "MEMORY_FRACTION",
+    "MAX_SCENARIOS",
     "METRICS",
     "PAPER_ACTIONS",
     "ROBOT_DEFAULTS",
@@ -85,11 +95,14 @@ __all__ = [
     "load_aggregates",
     "load_config",
     "parse_config",
+    "part_plan",
+    "plan_hash",
     "plot",
     "plot_crossing",
     "run",
     "scenario_bytes",
     "scenarios",
     "t_quantile",
+    "table_bytes",
     "trace_count",
 ]

@@ -52,6 +52,14 @@ terrain (seed ``r``) with the same command draw: paired comparisons across cells
 
 Everything is checked by :func:`load_config` before any compute; a problem
 raises :class:`SweepConfigError` naming the file, the key and the reason.
+
+Sizes. A sweep is held on the host as one table row per scenario (:func:`scenarios`,
+then the results), so its size is checked when it is parsed, before anything is
+allocated: at most :data:`MAX_SCENARIOS` scenarios, and the tables' estimated host
+memory (:func:`table_bytes`) at most :data:`HOST_MEMORY_FRACTION` of this host's
+physical memory. Drawing the commands costs tens of microseconds per replicate, so
+:func:`scenarios` reports its progress (``progress=True``, as :func:`ijoy_jax.sweep.run`
+does) for a sweep of millions of replicates, and builds only the rows it is asked for.
 """
 
 from __future__ import annotations
@@ -59,6 +67,9 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import os
+import sys
+import time
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
@@ -74,6 +85,8 @@ from ijoy_jax.terrain.family import Family, ParamError
 
 __all__ = [
     "COMMAND_KEYS",
+    "HOST_MEMORY_FRACTION",
+    "MAX_SCENARIOS",
     "ROBOT_DEFAULTS",
     "SweepConfig",
     "SweepConfigError",
@@ -81,6 +94,7 @@ __all__ = [
     "load_config",
     "parse_config",
     "scenarios",
+    "table_bytes",
 ]
 
 def _robot_defaults() -> dict[str, float]:
@@ -99,6 +113,13 @@ _MAX_MARGIN = 0.5
 
 COMMAND_KEYS = ("vx", "vy", "wz")
 """Joystick command components: forward (m/s), left (m/s), turn (rad/s), in the stance foot's frame."""
+
+MAX_SCENARIOS = 10**8
+"""Most scenarios one sweep may declare (cells x scenarios_per_cell): their host tables alone take tens of GB."""
+HOST_MEMORY_FRACTION = 0.5
+"""Share of the host's physical memory a sweep's tables (:func:`table_bytes`) may need."""
+_TABLE_COPIES = 3  # the scenario table, its index by scenario while running, the loaded results at the end
+_PROGRESS_EVERY = 1 << 17  # replicates between progress lines while drawing commands (~5 s)
 
 _SECTIONS = ("sweep", "robot", "terrain", "command", "grid", "random")
 _SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps", "method", "kernel",
@@ -402,13 +423,57 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         chk.fail("sweep.random_samples", "is set but [random] is empty")
 
     cfg = SweepConfig(**kw)
+    _check_size(chk, cfg)  # before cells() or scenarios() allocate anything
     # Cross-field checks (the family's ordered ranges) on every cell's resolved values, still before any compute.
+    # The start zone must leave room for the terrain on the sweep's map (family.Family.validate).
     for row in cells(cfg).to_dict("records"):  # records keep each column's type (counts stay ints)
         try:
-            fam.validate({name: _terrain_of(cfg, row, name) for name in fields})
+            fam.validate({name: _terrain_of(cfg, row, name) for name in fields}, shape=cfg.shape,
+                         resolution=cfg.resolution)
         except ParamError as e:
-            chk.fail(f"terrain.params.{e.field}", e.reason)
+            swept = next((f"{s}.terrain.{e.field}" for s in ("grid", "random")
+                          if f"terrain.{e.field}" in kw[s]), None)
+            chk.fail(swept or f"terrain.params.{e.field}", e.reason)
     return cfg
+
+
+def _host_memory() -> int | None:
+    """This host's physical memory in bytes (None where the OS does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def table_bytes(cfg: SweepConfig, num_scenarios: int | None = None) -> int:
+    """Estimated host bytes of a sweep's tables: ``num_scenarios`` (default all) rows of 8-byte columns (ids,
+    every robot, terrain and command value, the metrics), times the copies a run holds at once.
+
+    Example:
+      >>> cfg = parse_config("[sweep]\\nscenarios_per_cell = 1000\\n")
+      >>> 100_000 < table_bytes(cfg) < 10_000_000
+      True
+    """
+    from ijoy_jax.sweep.results import METRICS
+
+    fam = generators.FAMILIES[cfg.family]
+    columns = 4 + len(ROBOT_DEFAULTS) + len(fam.rules) + len(COMMAND_KEYS) + len(METRICS) + len(fam.metric_names)
+    n = cfg.num_scenarios if num_scenarios is None else num_scenarios
+    return n * columns * 8 * _TABLE_COPIES
+
+
+def _check_size(chk: _Checker, cfg: SweepConfig) -> None:
+    """Refuse a sweep whose scenarios exceed :data:`MAX_SCENARIOS` or whose tables would not fit in memory."""
+    n, cells_, per = cfg.num_scenarios, cfg.num_cells, cfg.scenarios_per_cell
+    key = "grid" if cells_ > MAX_SCENARIOS else "sweep.scenarios_per_cell"
+    what = f"{n:.3g} scenarios ({cells_} cells x {per} per cell)"
+    if n > MAX_SCENARIOS:
+        chk.fail(key, f"{what} exceed the limit of {MAX_SCENARIOS:.0e} (sweep.config.MAX_SCENARIOS; their tables "
+                      f"would need ~{table_bytes(cfg) / 2**30:.3g} GiB of host memory): split the sweep")
+    mem = _host_memory()
+    if mem is not None and table_bytes(cfg) > HOST_MEMORY_FRACTION * mem:
+        chk.fail(key, f"{what} need ~{table_bytes(cfg) / 2**30:.3g} GiB of host memory for their tables, more "
+                      f"than {HOST_MEMORY_FRACTION:g} of this host's {mem / 2**30:.3g} GiB: split the sweep")
 
 
 def load_config(path) -> SweepConfig:
@@ -462,7 +527,7 @@ def cells(cfg: SweepConfig):
     return df
 
 
-def scenarios(cfg: SweepConfig, max_scenarios: int | None = None):
+def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: bool = False):
     """Every scenario of the sweep with all its parameters resolved (host only, no JAX).
 
     Scenario ``cell * scenarios_per_cell + replicate``; its terrain key is
@@ -476,7 +541,9 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None):
 
     Args:
       cfg: the sweep.
-      max_scenarios: keep only the first this many scenarios (None: all).
+      max_scenarios: build only the first this many scenarios (None: all).
+      progress: print a progress line on stderr every ~10^5 replicates while drawing commands
+        (a sweep of millions of replicates takes minutes there).
 
     Returns:
       pandas.DataFrame, one row per scenario, ordered by ``scenario``.
@@ -485,12 +552,24 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None):
 
     c = cells(cfg)
     n_rep = cfg.scenarios_per_cell
-    cmd = np.zeros((n_rep, 3))
-    for r in range(n_rep):
-        rng = np.random.default_rng([cfg.seed, 2, r])
-        cmd[r] = [rng.uniform(*cfg.command[k]) for k in COMMAND_KEYS]
-    cell_idx = np.repeat(c["cell"].to_numpy(), n_rep)
-    rep = np.tile(np.arange(n_rep), len(c))
+    total = len(c) * n_rep if max_scenarios is None else min(len(c) * n_rep, int(max_scenarios))
+    reps = min(n_rep, total)  # only the replicates of the rows asked for
+    cmd = np.zeros((reps, 3))
+    if all(lo == hi for lo, hi in cfg.command.values()):
+        # Fixed commands: what every replicate's draw gives (lo + (hi - lo) * u), without a generator each.
+        cmd[:] = [lo + (hi - lo) * 0.0 for lo, hi in (cfg.command[k] for k in COMMAND_KEYS)]
+    else:
+        t0 = time.perf_counter()
+        for r in range(reps):
+            rng = np.random.default_rng([cfg.seed, 2, r])
+            cmd[r] = [rng.uniform(*cfg.command[k]) for k in COMMAND_KEYS]
+            if progress and (r + 1) % _PROGRESS_EVERY == 0:
+                rate = (r + 1) / (time.perf_counter() - t0)
+                print(f"[ijoy sweep] drawing commands: {r + 1}/{reps} replicates  {rate:.0f}/s  "
+                      f"ETA {(reps - r - 1) / rate:.0f} s", file=sys.stderr, flush=True)
+    cell_idx = np.arange(total, dtype=np.int64) // n_rep
+    rep = np.arange(total, dtype=np.int64) % n_rep
+    cell_idx = c["cell"].to_numpy()[cell_idx]
     cols: dict[str, Any] = {"scenario": np.arange(len(cell_idx), dtype=np.int64), "cell": cell_idx,
                             "replicate": rep.astype(np.int64)}
     for name, default in ROBOT_DEFAULTS.items():
@@ -511,7 +590,4 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None):
         cols[key] = v.astype(np.int64 if is_int else np.float64)
     for j, k in enumerate(COMMAND_KEYS):
         cols[f"command.{k}"] = cmd[rep, j]
-    df = pd.DataFrame(cols)
-    if max_scenarios is not None:
-        df = df.iloc[: int(max_scenarios)].copy()
-    return df
+    return pd.DataFrame(cols)

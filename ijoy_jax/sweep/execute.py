@@ -4,9 +4,11 @@ Layout of an output folder::
 
     DIR/sweep.toml              the sweep file's text, as run
     DIR/manifest.json           sweep text, plan, package versions, device, git commit, timings
-    DIR/parts/part-00000.parquet  one file per completed chunk (written atomically)
+    DIR/parts/part-00000.parquet  one file per completed chunk (written atomically), its plan record
+                                (sweep name, chunk plan and the plan's hash) in the parquet metadata
     DIR/processes/process-00001.json  sessions of process 1 of several (process 0's are in the manifest)
     DIR/aggregates.parquet      per-cell means and 95% confidence intervals (when complete)
+    DIR/.lock                   held (flock) while a run writes here: a second run refuses (see _FolderLock)
 
 Execution. Scenarios are grouped by action-set density (the only parameter
 that changes an array shape) and each group is cut into chunks of
@@ -76,6 +78,10 @@ size is the same (e.g. the default 32 on 1, 2, 4 or 8 devices). Each finished
 chunk is written to a temporary file and renamed (atomic on POSIX), so after a
 kill a part file is either complete or absent; a rerun on the same folder skips the
 chunks whose part exists and computes the rest. Nothing is lost or duplicated.
+Every part records the hash of its plan (:func:`ijoy_jax.sweep.results.plan_hash`:
+the sweep text and the chunk plan; also in the manifest as ``plan_hash``): a run
+refuses a folder holding parts of another plan (even with ``manifest.json``
+deleted) before writing anything, and :func:`ijoy_jax.sweep.load` refuses to mix them.
 """
 
 from __future__ import annotations
@@ -109,6 +115,7 @@ from ijoy_jax.sweep.config import (
     load_config,
     scenarios,
 )
+from ijoy_jax.sweep.results import PLAN_KEY, IncompleteSweepError, check_plans, describe_plan, plan_hash
 from ijoy_jax.terrain import generators
 
 __all__ = ["DEFAULT_CHUNK", "MAX_AUTO_CHUNK", "MEMORY_FRACTION", "RunStats", "auto_chunk_size", "default_chunk_size",
@@ -249,10 +256,102 @@ def _git_commit() -> str | None:
     return r.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
 
 
+_WHO = f"{platform.node()}-{os.getpid()}"  # names this process's temporary files (host and pid)
+_LOCK = ".lock"
+_LOCK_PROC = ".lock-process-{:05d}"
+
+
+class _FolderLock:
+    """An advisory lock (``fcntl.flock``) on a sweep's output folder, taken before its manifest is read.
+
+    One process of one (process 0 of 1) holds ``DIR/.lock`` exclusively; the processes of a
+    multi-process layout (``num_processes > 1``: members of one ``jax.distributed`` run, which
+    split the chunks between them) share it and each holds ``DIR/.lock-process-I`` exclusively.
+    So a second run on the folder, or a second process I, is refused (ValueError naming the
+    holder's pid and host, written into the lock file). The kernel drops a flock when its process
+    dies, so a lock file left by a dead process is stale and simply taken over. (On NFS, Linux maps
+    flock onto the server's byte-range locks.)
+    """
+
+    def __init__(self, out: Path, pid: int, nproc: int):
+        import fcntl
+
+        out.mkdir(parents=True, exist_ok=True)
+        self.fds: list[int] = []
+        me = {"pid": os.getpid(), "host": platform.node(), "process_id": pid, "num_processes": nproc,
+              "since": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+        wanted = ([(out / _LOCK, fcntl.LOCK_EX)] if nproc == 1 else
+                  [(out / _LOCK, fcntl.LOCK_SH), (out / _LOCK_PROC.format(pid), fcntl.LOCK_EX)])
+        try:
+            for path, mode in wanted:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+                self.fds.append(fd)
+                try:
+                    fcntl.flock(fd, mode | fcntl.LOCK_NB)
+                except BlockingIOError:
+                    raise ValueError(self._refusal(out, path, nproc)) from None
+                if mode == fcntl.LOCK_EX:  # the holder, for the next one's error message
+                    os.ftruncate(fd, 0)
+                    os.pwrite(fd, json.dumps(me).encode(), 0)
+        except BaseException:
+            self.release()
+            raise
+        if nproc == 1:  # alone in the folder: temporary files left by killed runs are garbage
+            for tmp in (out / "parts").glob("*.tmp"):
+                tmp.unlink(missing_ok=True)
+
+    @staticmethod
+    def _refusal(out: Path, path: Path, nproc: int) -> str:
+        holders = []
+        for f in [out / _LOCK, *sorted(out.glob(".lock-process-*"))]:
+            try:
+                h = json.loads(f.read_text())
+                if not _alive(h):
+                    continue  # a stale record (its lock is not held)
+                holders.append(f"pid {h['pid']} on {h['host']}"
+                               + (f" (process {h['process_id']} of {h['num_processes']})"
+                                  if h.get("num_processes", 1) > 1 else ""))
+            except (OSError, ValueError, KeyError, TypeError):
+                continue
+        who = "; ".join(dict.fromkeys(holders)) or "another process"
+        what = "another run" if path.name == _LOCK else "another process with this --process-id"
+        return (f"{out} is in use by {what} ({who} holds {path.name}); wait for it to finish or choose another "
+                f"--out" + ("" if nproc > 1 else "; processes of one multi-process run share a folder "
+                            "(--num-processes/--process-id)"))
+
+    def release(self) -> None:
+        for fd in self.fds:
+            os.close(fd)  # closing drops the flock
+        self.fds = []
+
+
+def _alive(holder: dict) -> bool:
+    """Whether a lock file's holder may still run (a pid on another host cannot be checked: True)."""
+    if holder.get("host") != platform.node():
+        return True
+    try:
+        os.kill(int(holder["pid"]), 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def _write_json(path: Path, obj) -> None:
-    tmp = path.with_name(path.name + ".tmp")
+    tmp = path.with_name(f"{path.name}.{_WHO}.tmp")
     tmp.write_text(json.dumps(obj, indent=2, default=str))
     os.replace(tmp, path)
+
+
+def _write_part(df, path: Path, plan_record: dict) -> None:
+    """Write one chunk's results as parquet, its plan record in the file's metadata (:data:`PLAN_KEY`)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    meta = {**(table.schema.metadata or {}), PLAN_KEY: json.dumps(plan_record).encode()}
+    pq.write_table(table.replace_schema_metadata(meta), path)
 
 
 def _plan(cfg: SweepConfig, table, chunk_size: int) -> list[tuple[int, float, np.ndarray]]:
@@ -451,7 +550,8 @@ def run(
 
     Raises:
       SweepConfigError: a bad sweep file (before any compute).
-      ValueError: ``out`` holds results of a different sweep or chunk plan, or a
+      ValueError: ``out`` holds results of a different sweep or chunk plan, or is in
+        use by another run (its lock; members of one multi-process run share it), or a
         bad ``chunk_size``, ``max_scenarios``, ``devices`` or process layout.
 
     Example:
@@ -469,11 +569,23 @@ def run(
         raise ValueError(f"max_scenarios must be a positive int, got {max_scenarios!r}")
     pid, nproc = _process_layout(process_id, num_processes)
     devs = _local_devices(devices)
-    ndev = len(devs)
     out = Path(out) if out is not None else Path("results") / cfg.name
-    table = scenarios(cfg, max_scenarios)
+    table = scenarios(cfg, max_scenarios, progress=progress)
     # Host-side robots per density (cheap, no compile): footprint problems surface before any output.
     bases = {d: _base_robot(cfg, table, d) for d in dict.fromkeys(table["robot.density"].tolist())}
+    lock = _FolderLock(out, pid, nproc)  # one run per folder (members of a multi-process run share it)
+    try:
+        return _run_locked(cfg, out, table, bases, devs, pid, nproc, chunk_size=chunk_size,
+                           max_scenarios=max_scenarios, progress=progress, barrier_timeout_s=barrier_timeout_s,
+                           t_start=t_start)
+    finally:
+        lock.release()
+
+
+def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, devs: list, pid: int, nproc: int, *,
+                chunk_size, max_scenarios, progress: bool, barrier_timeout_s: float, t_start: float) -> RunStats:
+    """:func:`run` once it holds the folder's lock."""
+    ndev = len(devs)
     parts = out / "parts"
     manifest_path = out / "manifest.json"
     proc_path = out / "processes" / _PROC.format(pid)
@@ -498,15 +610,26 @@ def run(
             raise ValueError(f"{out} holds results of a different sweep or chunk plan "
                              f"({prev.get('plan')} vs {plan_key}; chunk_size is rounded up to a multiple "
                              f"of the {ndev} device(s)); choose another --out or delete it")
+    # Every part records its plan: parts of another plan (a deleted manifest) are never skipped as done.
+    phash = plan_hash(cfg.text, plan_key)
+    plan_record = {"hash": phash, "name": cfg.name, **plan_key}
+    if parts.exists():
+        try:  # unrecorded (older) parts are vouched for by a matching manifest only
+            check_plans(out, sorted(parts.glob("part-*.parquet")), plan_record,
+                        allow_unrecorded=(old or mine) is not None)
+        except IncompleteSweepError as e:
+            raise ValueError(f"{e} (this run's plan is {describe_plan(plan_record)})") from None
     layout = {"num_processes": nproc, "rule": "chunk % num_processes == process_id",
               "process_files": "processes/process-NNNNN.json (sessions of processes 1..N-1)"}
     if pid == 0:  # the manifest and sweep.toml are written by process 0 only
         manifest = old or {"sweep_file": cfg.source, "sweep_text": cfg.text, "name": cfg.name, "plan": plan_key,
                            "versions": _versions(), "git_commit": _git_commit(), "sessions": []}
+        manifest.setdefault("plan_hash", phash)  # a manifest from before plans were hashed: same text and plan
         manifest["layout"] = layout
         record = manifest_path
     else:  # each other process writes only its own file
         manifest = mine or {"sweep_text": cfg.text, "plan": plan_key, "process_id": pid, "sessions": []}
+        manifest.setdefault("plan_hash", phash)
         record = proc_path
     mine_plan = [p for p in plan if p[0] % nproc == pid]
     parts.mkdir(parents=True, exist_ok=True)
@@ -557,8 +680,8 @@ def run(
             result[k] = np.asarray(v)[:n]
         result.insert(1, "chunk", chunk_id)
         path = parts / _PART.format(chunk_id)
-        tmp = path.with_name(path.name + ".tmp")
-        result.to_parquet(tmp, index=False)
+        tmp = path.with_name(f"{path.name}.{_WHO}.tmp")  # per process: members never share a temp file
+        _write_part(result, tmp, plan_record)
         os.replace(tmp, path)
         dt = time.perf_counter() - t0
         if density not in stats.first_chunk_s:

@@ -19,6 +19,7 @@ intervals suggest.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from pathlib import Path
@@ -27,8 +28,9 @@ import numpy as np
 
 from ijoy_jax.terrain import generators
 
-__all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "UNITS", "IncompleteSweepError", "action_counts", "aggregate",
-           "b_max", "load", "load_aggregates", "plot", "plot_crossing", "t_quantile"]
+__all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "PLAN_KEY", "UNITS", "IncompleteSweepError", "action_counts",
+           "aggregate", "b_max", "check_plans", "describe_plan", "load", "load_aggregates", "part_plan", "plan_hash",
+           "plot", "plot_crossing", "t_quantile"]
 
 METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
            "invalid_footholds", "distance_along", "distance_across", "mean_deviation", "mean_foot_cost")
@@ -81,7 +83,60 @@ def t_quantile(df: int) -> float:
 
 
 class IncompleteSweepError(ValueError):
-    """A sweep folder lacks chunks (a process has not finished) or holds duplicated scenarios."""
+    """A sweep folder lacks chunks (a process has not finished), holds duplicated scenarios, or mixes in parts
+    of another plan."""
+
+
+PLAN_KEY = b"ijoy_jax.plan"
+"""Key of the plan record in every part's parquet metadata: JSON ``{"hash", "name", "chunk_size",
+"max_scenarios", "scenarios", "chunks"}`` (the hash of the sweep text and the chunk plan, :func:`plan_hash`)."""
+
+
+def plan_hash(sweep_text: str, plan: dict) -> str:
+    """The hash (16 hex digits) of a sweep's plan: its file's text and its chunk plan (chunk size,
+    ``max_scenarios``, scenario and chunk counts); everything that decides which results a chunk holds.
+
+    Example:
+      >>> plan_hash("[sweep]\\n", {"chunk_size": 2}) == plan_hash("[sweep]\\n", {"chunk_size": 3})
+      False
+    """
+    blob = json.dumps({"sweep_text": sweep_text, "plan": plan}, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def part_plan(path) -> dict | None:
+    """The plan record a part file was written with (:data:`PLAN_KEY`), or None for a part written before
+    parts recorded their plan. Reads only the file's footer."""
+    import pyarrow.parquet as pq
+
+    meta = pq.read_schema(path).metadata or {}
+    return json.loads(meta[PLAN_KEY]) if PLAN_KEY in meta else None
+
+
+def describe_plan(record: dict | None) -> str:
+    """``plan <hash> (sweep 'name', 12 scenarios in 6 chunks of 2)``, for error messages."""
+    if record is None:
+        return "an unrecorded plan (a part written before parts recorded their plan)"
+    return (f"plan {record.get('hash')} (sweep {record.get('name')!r}, {record.get('scenarios')} scenarios in "
+            f"{record.get('chunks')} chunks of {record.get('chunk_size')})")
+
+
+def check_plans(path: Path, files, expected: dict | None, *, allow_unrecorded: bool) -> None:
+    """Raise :class:`IncompleteSweepError` (naming the folder, the part and both plans) unless every part
+    in ``files`` was written by the plan ``expected`` (a record as in :data:`PLAN_KEY`; None: the first
+    recorded part's plan). Unrecorded (older) parts pass when ``allow_unrecorded``."""
+    for f in files:
+        rec = part_plan(f)
+        if rec is None and allow_unrecorded:
+            continue
+        if expected is None:
+            expected = rec
+            continue
+        if rec is None or rec.get("hash") != expected.get("hash"):
+            raise IncompleteSweepError(
+                f"{path}: {Path(f).relative_to(path)} belongs to another plan: {describe_plan(rec)}, not "
+                f"{describe_plan(expected)}; results of different sweeps would be mixed: run into another "
+                f"folder, or delete the parts of the other plan")
 
 
 def _process_sessions(path: Path) -> list[dict]:
@@ -141,9 +196,10 @@ def load(path, *, partial: bool = False):
 
     Raises:
       FileNotFoundError: no parts at all.
-      IncompleteSweepError: (unless ``partial``) chunks of the manifest's plan are missing (the
-        message names them and, for a multi-process run, the processes they belong to), or
-        scenarios are duplicated, or parts of another plan are mixed in.
+      IncompleteSweepError: parts of another plan are mixed in (every part records its plan's
+        hash; also with ``partial``); or (unless ``partial``) chunks of the manifest's plan are
+        missing (the message names them and, for a multi-process run, the processes they belong
+        to), or scenarios are duplicated.
 
     Example:
       >>> from ijoy_jax import sweep
@@ -156,6 +212,11 @@ def load(path, *, partial: bool = False):
     files = sorted((path / "parts").glob("part-*.parquet"))
     if not files:
         raise FileNotFoundError(f"no result parts under {path / 'parts'}")
+    man_path = path / "manifest.json"
+    man = json.loads(man_path.read_text()) if man_path.exists() else {}
+    expected = ({"hash": man["plan_hash"], "name": man.get("name"), **man.get("plan", {})}
+                if "plan_hash" in man else None)
+    check_plans(path, files, expected, allow_unrecorded=True)  # even with partial: never mix two sweeps
     df = pd.concat([pd.read_parquet(p) for p in files], ignore_index=True)
     if not partial:
         _check_complete(path, files, df)

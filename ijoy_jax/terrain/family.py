@@ -49,6 +49,7 @@ __all__ = [
     "make_grid",
     "param",
     "rules",
+    "start_zone_reach",
     "uniform",
 ]
 
@@ -95,6 +96,22 @@ NONNEG = Rule(lo=0.0)
 """A finite number >= 0 (sizes, spacings, half-ranges of jitter)."""
 COUNT = Rule(lo=0, integer=True, count=True)
 """The family's count: an integer >= 0, at most ``max_count``."""
+
+
+def start_zone_reach(start_x: float, start_y: float, shape, resolution: float) -> float:
+    """Distance (m) from the start point to the farthest cell centre of the map: a ``start_radius`` at or
+    above it keeps the whole map clear (see :class:`StartZone`).
+
+    Example:
+      >>> round(start_zone_reach(0.5, 0.5, (10, 10), 0.1), 4)   # centre of a 1 m map, corner centres
+      0.6364
+    """
+    nx, ny = shape
+    res = float(resolution)
+    sx, sy = start_x * nx * res, start_y * ny * res  # from the origin
+    fx = max(abs(sx - 0.5 * res), abs((nx - 0.5) * res - sx))
+    fy = max(abs(sy - 0.5 * res), abs((ny - 0.5) * res - sy))
+    return math.hypot(fx, fy)
 
 
 def param(default, rule: Rule = ANY) -> Any:
@@ -205,11 +222,16 @@ class Family:
             fail(f"{v} exceeds {max_count_key} = {max_count} (raise {max_count_key})")
         return v
 
-    def validate(self, params, *, max_count: int | None = None, max_count_key: str = "max_count") -> None:
+    def validate(self, params, *, max_count: int | None = None, max_count_key: str = "max_count",
+                 shape: tuple[int, int] | None = None, resolution: float | None = None) -> None:
         """Check every field of concrete parameters (a params instance or ``{field: value}``), and their order.
 
         Each value goes through :meth:`check`; then every field with
         ``Rule.at_most`` must not exceed that field (an impossible range).
+        Given the map's ``shape`` (cells) and ``resolution`` (m), the start
+        zone must leave room for the family's terrain: a ``start_radius``
+        that reaches every cell centre (the whole map kept clear, e.g. an
+        obstacle-free map) is refused (:func:`start_zone_reach`).
 
         Raises:
           ParamError: naming the first offending field and the reason.
@@ -229,6 +251,16 @@ class Family:
                 if lo > hi:
                     raise ParamError(self.params.__name__, name,
                                      f"impossible range: {name} ({lo}) > {rule.at_most} ({hi})")
+        if shape is not None and resolution is not None and {"start_x", "start_y", "start_radius"} <= checked.keys():
+            r = checked["start_radius"]
+            reach = start_zone_reach(checked["start_x"], checked["start_y"], shape, resolution)
+            if r > 0 and r >= reach:
+                nx, ny = shape
+                raise ParamError(self.params.__name__, "start_radius",
+                                 f"the start zone ({r:g} m around the start point) covers the whole "
+                                 f"{nx * resolution:g} x {ny * resolution:g} m map, leaving no room for the "
+                                 f"family's terrain (it would be cleared everywhere); use a radius below "
+                                 f"{reach:.3g} m")
 
     def slots(self, params) -> int | None:
         """Static slots just big enough for concrete ``params``: ``max(count, 1)``; None without slots."""
