@@ -330,6 +330,17 @@ def filter_signal(coeffs: FilterCoeffs, signal, state: FilterState | None = None
       ((5, 2), True)
     """
     signal = jnp.asarray(signal, jnp.result_type(float))
+    channels = signal.shape[1:]
+    coeff_shape = jnp.broadcast_shapes(*(jnp.shape(c) for c in coeffs[:4]))
+    try:
+        fits = signal.ndim >= 1 and np.broadcast_shapes(coeff_shape, channels) == channels
+    except ValueError:
+        fits = False
+    if not fits:
+        raise ValueError(
+            f"signal must have shape (T, *S) with the filter's parameters broadcastable to S; got signal "
+            f"{signal.shape} and parameters of shape {coeff_shape}"
+        )
     if state is None:
         state = init_state(_first_finite(signal))
 
@@ -344,7 +355,10 @@ def filter_signal(coeffs: FilterCoeffs, signal, state: FilterState | None = None
 def _check_concrete_positive(name, value, allow_zero=False):
     if isinstance(value, jax.core.Tracer):
         return
-    v = np.asarray(value, dtype=float)
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number or an array of numbers, got {value!r}") from None
     bad = ~np.isfinite(v) | ((v < 0) if allow_zero else (v <= 0))
     if np.any(bad):
         rel = ">= 0" if allow_zero else "> 0"
@@ -374,6 +388,11 @@ def spring_damper_filter(signal, dt, natural_frequency, damping_ratio):
       >>> y.shape
       (1000, 2)
     """
+    dtype = signal.dtype if hasattr(signal, "dtype") else np.asarray(signal).dtype
+    if not (jnp.issubdtype(dtype, jnp.number) or jnp.issubdtype(dtype, jnp.bool_)) or jnp.issubdtype(
+        dtype, jnp.complexfloating
+    ):
+        raise TypeError(f"signal must hold real numbers, got dtype {dtype}")
     if jnp.ndim(signal) < 1:
         raise ValueError("signal must have a time axis: shape (T, ...)")
     _check_concrete_positive("dt", dt)

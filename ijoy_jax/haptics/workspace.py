@@ -358,7 +358,9 @@ def limiting_planes(jacobian, travel_minus, travel_plus) -> Planes:
     # plane's normal, and the frame is used only when no pair plane exists.
     valid = jnp.concatenate(ok_rows, axis=0)
     normals = jnp.where(valid[:, None], jnp.concatenate(rows, axis=0), 0.0)
-    offsets = jnp.where(valid, support(normals, jac, tm, tp), 0.0)
+    h = support(normals, jac, tm, tp)
+    # A workspace too large for the dtype (support overflowed): its planes are as far as representable.
+    offsets = jnp.where(valid, jnp.where(jnp.isfinite(h), h, jnp.finfo(dtype).max), 0.0)
     return Planes(normals=normals, offsets=offsets, valid=valid)
 
 
@@ -444,7 +446,12 @@ def c1_max(dtype=None) -> float:
 
 
 def _concrete_values(value):
-    return None if isinstance(value, jax.core.Tracer) else np.asarray(value, dtype=float)
+    if isinstance(value, jax.core.Tracer):
+        return None
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return np.array(np.nan)  # not a number: reported as out of range, with the value
 
 
 def check_repulsion(c1, *, decay_length=None, decay_rate=None, c2=None) -> None:
@@ -454,6 +461,9 @@ def check_repulsion(c1, *, decay_length=None, decay_rate=None, c2=None) -> None:
     ``0 < c2 <= 1``, all finite. Traced values are skipped (they are handled by the
     zero-force rule of :func:`plane_forces`).
     """
+    for name, value in (("c1", c1), ("decay_length", decay_length), ("decay_rate", decay_rate), ("c2", c2)):
+        if value is not None and jnp.ndim(value) != 0:
+            raise ValueError(f"{name} must be a scalar, got shape {jnp.shape(value)}")
     v = _concrete_values(c1)
     if v is not None and not np.all(np.isfinite(v) & (v >= 0) & (v <= c1_max())):
         raise ValueError(f"c1 must be finite and in [0, {c1_max():.3g}] N, got {c1!r}")
@@ -499,7 +509,8 @@ def _plane_forces(planes: Planes, c1, decay_rate) -> PlaneForces:
     c1 = jnp.where(ok, c1, 0.0)  # safe stand-ins: neither value nor gradient sees the bad constants
     rate = jnp.where(ok, rate, 0.0)
     d = jnp.where(planes.valid, planes.offsets, 0.0)
-    mag = jnp.where(planes.valid & ok, c1 * jnp.exp(-rate * d), 0.0)
+    # No decay (rate 0, i.e. C2 = 1) reaches even a plane at an overflowed (inf) distance: never 0 * inf.
+    mag = jnp.where(planes.valid & ok, c1 * jnp.exp(-jnp.where(rate > 0, rate * d, 0.0)), 0.0)
     force = -jnp.sum(mag[:, None] * planes.normals, axis=0)
     return PlaneForces(force=force, terms=mag, bad_constants=~ok)
 
