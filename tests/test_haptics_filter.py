@@ -241,3 +241,127 @@ def test_invalid_parameters_raise(kwargs):
     args = dict(signal=np.zeros(5), dt=DT, natural_frequency=10.0, damping_ratio=0.7) | kwargs
     with pytest.raises(ValueError):
         F.spring_damper_filter(**args)
+
+
+# --- issue 22: the discretisation stays finite for every stable (w0, zeta, dt) in float32 -------------------------
+
+# float32 coefficients against the float64 matrix exponential of the float32-rounded parameters, in the scaled
+# form [[a11, w0 a12], [a21 / w0, a22]] (all dimensionless, |.| <= ~1): each coefficient is a few products of
+# exponentials of arguments rounded to float32, so its error is a few eps times max(x e^-x) (measured: at most
+# 3.3e-7 over 1500 random points of the grid below); 1e-5 leaves 30x headroom and is still ~100 float32 eps.
+TOL_F32_COEFFS = 1e-5
+# The new form against the pre-issue-22 float32 closed form where that one was finite: the old form loses up to
+# ~5.4e-6 (measured over the same grid) to the cancellation cosh r - sigma sinh(r)/r when overdamped; 2e-5.
+TOL_OLD_COEFFS = 2e-5
+
+
+def _discretise_before_22(w0, zeta, dt):
+    """The closed form used before issue 22 (float32): e^-sigma [cosh r I + sinh(r)/r (M + sigma I)]."""
+    w0, zeta, dt = (jnp.float32(v) for v in (w0, zeta, dt))
+    wh = w0 * dt
+    sigma = zeta * wh
+    z = (zeta * zeta - 1.0) * wh * wh
+    small = jnp.abs(z) < 1e-3
+    zs = jnp.where(small, 0.0, z)
+    r = jnp.sqrt(jnp.where(small, 1.0, jnp.abs(zs)))
+    c_big = jnp.where(zs > 0, jnp.cosh(r), jnp.cos(r))
+    s_big = jnp.where(zs > 0, jnp.sinh(r), jnp.sin(r)) / r
+    zz = jnp.where(small, z, 0.0)
+    c = jnp.where(small, 1.0 + zz * (1.0 / 2.0 + zz * (1.0 / 24.0 + zz / 720.0)), c_big)
+    s = jnp.where(small, 1.0 + zz * (1.0 / 6.0 + zz * (1.0 / 120.0 + zz / 5040.0)), s_big)
+    e = jnp.exp(-sigma)
+    return np.array([e * (c - s * sigma), e * s * dt, -e * s * w0 * wh, e * (c + s * sigma)], np.float64)
+
+
+def _scaled(coeffs, w0):
+    a11, a12, a21, a22 = (float(v) for v in coeffs)
+    return np.array([a11, w0 * a12, a21 / w0, a22])
+
+
+def _expm_scaled(w0, zeta, dt):
+    from scipy.linalg import expm
+
+    w0, zeta, dt = (float(np.float32(v)) for v in (w0, zeta, dt))
+    a, *_ = _ss(w0, zeta)
+    e = expm(a * dt)
+    return np.array([e[0, 0], w0 * e[0, 1], e[1, 0] / w0, e[1, 1]])
+
+
+@pytest.mark.parametrize(
+    "w0,zeta,dt",
+    [(10.0, 3.0, 10.0), (2e4, 1.5, 5e-3), (1e4, 50.0, 10.0), (3.0, 1.0 + 1e-6, 10.0), (1e-3, 50.0, 1e-6)],
+)
+def test_overdamped_discretisation_finite_in_float32(w0, zeta, dt):
+    """cosh(r) overflowed float32 for r = w0 dt sqrt(zeta^2 - 1) > ~89 and the whole signal came out NaN."""
+    co = F.discretise(F.SpringDamper.create(w0, zeta), dt)
+    got = _scaled(co[:4], float(np.float32(w0)))
+    assert np.all(np.isfinite(got))
+    np.testing.assert_allclose(got, _expm_scaled(w0, zeta, dt), rtol=0, atol=TOL_F32_COEFFS)
+    y = np.asarray(F.spring_damper_filter(np.linspace(0.0, 1.0, 50, dtype=np.float32), dt, w0, zeta))
+    assert np.all(np.isfinite(y))
+
+
+_LOG_GRID = dict(allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=300, derandomize=True, deadline=None)
+@given(
+    st.floats(-3.0, 4.0, **_LOG_GRID),
+    st.floats(np.log10(0.05), np.log10(50.0), **_LOG_GRID),
+    st.floats(-6.0, 1.0, **_LOG_GRID),
+)
+def test_discretisation_float32_over_wide_grid(log_w0, log_zeta, log_dt):
+    """w0 over 1e-3..1e4 rad/s, zeta 0.05..50, dt 1e-6..10 s: float32 coefficients are finite, match the float64
+    matrix exponential, keep the filter stable, and match the old closed form wherever that one was finite."""
+    w0, zeta, dt = 10.0**log_w0, 10.0**log_zeta, 10.0**log_dt
+    co = F.discretise(F.SpringDamper.create(w0, zeta), dt)
+    w0_32 = float(np.float32(w0))
+    got = _scaled(co[:4], w0_32)
+    assert np.all(np.isfinite(got)) and not bool(co.invalid)
+    np.testing.assert_allclose(got, _expm_scaled(w0, zeta, dt), rtol=0, atol=TOL_F32_COEFFS)
+    assert np.max(np.abs(np.linalg.eigvals(got.reshape(2, 2)))) <= 1.0 + TOL_F32_COEFFS
+    old = _discretise_before_22(w0, zeta, dt)
+    # Where the old form was finite *and* e^-sigma still a normal float32 (beyond, it flushed to 0 times a finite
+    # cosh: finite but wrong, e.g. 0 instead of a11 = -9e-4 at w0 = 5.6, zeta = 3.9, dt = 4.1).
+    sigma = float(np.float32(zeta) * np.float32(w0) * np.float32(dt))
+    if np.all(np.isfinite(old)) and sigma < 87.0:
+        np.testing.assert_allclose(got, _scaled(old, w0_32), rtol=0, atol=TOL_OLD_COEFFS)
+
+
+def test_negative_dt_inside_jit_passes_the_input_through_and_flags():
+    """dt < 0 inside jit gave ~1e6 for a 0.4 input; now the coefficients are flagged and the input passes through."""
+    u = jnp.full(200, 0.4, jnp.float32).at[:20].set(0.0)
+    y = jax.jit(F.spring_damper_filter)(u, -1e-3, 20.0, 0.7)
+    np.testing.assert_array_equal(np.asarray(y), np.asarray(u))
+    co = jax.jit(F.discretise)(F.SpringDamper.create(20.0, 0.7), jnp.array([-1e-3, 0.0, jnp.nan, 1e-3]))
+    np.testing.assert_array_equal(np.asarray(co.invalid), [True, True, True, False])
+    assert np.all(np.asarray(co[:4])[:, :3] == 0.0)
+
+
+@pytest.mark.parametrize(
+    "w0,zeta", [(jnp.nan, 0.7), (jnp.inf, 0.7), (-5.0, 0.7), (0.0, 0.7), (20.0, -0.5), (20.0, jnp.nan)]
+)
+def test_bad_parameters_inside_jit_are_flagged(w0, zeta):
+    co = jax.jit(F.discretise)(F.SpringDamper.create(w0, zeta), 1e-3)
+    assert bool(co.invalid)
+    u = jnp.linspace(0.0, 1.0, 30)
+    y = jax.jit(F.spring_damper_filter)(u, 1e-3, w0, zeta)
+    np.testing.assert_array_equal(np.asarray(y), np.asarray(u))
+
+
+@pytest.mark.parametrize("dt", [-1e-3, 0.0, float("inf"), float("nan")])
+def test_discretise_refuses_concrete_bad_dt(dt):
+    with pytest.raises(ValueError, match="dt"):
+        F.discretise(F.SpringDamper.create(20.0, 0.7), dt)
+    with pytest.raises(ValueError, match="dt"):
+        F.spring_damper_filter(np.zeros(5), dt, 20.0, 0.7)
+
+
+@pytest.mark.parametrize("shape", [(0,), (0, 2)])
+def test_empty_signal_gives_an_empty_output(shape):
+    """An empty signal failed inside JAX with "argmax of an empty sequence"."""
+    y = F.spring_damper_filter(np.zeros(shape, np.float32), DT, 20.0, 0.7)
+    assert y.shape == shape
+    y, final, held = F.filter_signal(F.discretise(F.SpringDamper.create(20.0, 0.7), DT), jnp.zeros(shape))
+    assert y.shape == shape and held.shape == shape and final.position.shape == shape[1:]
+    np.testing.assert_array_equal(np.asarray(final.position), 0.0)

@@ -183,3 +183,14 @@ def test_no_recompile_over_geometry_and_pose():
         q = jnp.asarray(rng.uniform(0.1, 0.9, 4) * np.asarray(leg.stroke), jnp.float32)
         f(leg.replace(thigh=leg.thigh * rng.uniform(0.9, 1.1)), q, rng.uniform(0.5, 2.0), rng.uniform(0.01, 0.2))
     assert f._cache_size() == before
+
+
+@pytest.mark.parametrize("c1,decay_length", [(float("nan"), 0.05), (-1.0, 0.05), (1.0, -0.05), (1.0, float("nan"))])
+def test_bad_repulsion_constants(c1, decay_length):
+    """Refused where concrete; inside jit a zero force (never NaN, never attraction): issue 22."""
+    leg = L.alduro_leg(-1.0)
+    q = jnp.array(L.PAPER_Q)
+    with pytest.raises(ValueError, match="c1" if c1 != 1.0 else "decay_length"):
+        L.leg_repulsive_force(leg, q, c1, decay_length)
+    f = jax.jit(L.leg_repulsive_force)(leg, q, c1, decay_length)
+    np.testing.assert_array_equal(np.asarray(f), 0.0)

@@ -151,3 +151,16 @@ def test_stroke_validation_and_vmap_over_poses():
     assert np.asarray(pws.out_of_range[1, 2]).tolist() == [False, True, False, False]
     lims = jax.vmap(P.yaw_limits)(pws)
     assert np.all(~np.isnan(np.asarray(lims.positive)))
+
+
+@pytest.mark.parametrize("c1,decay_length", [(float("nan"), 0.05), (-1.0, 0.05), (1.0, 0.0), (1.0, float("inf"))])
+def test_bad_repulsion_constants(c1, decay_length):
+    """Refused where concrete; inside jit a zero force, flagged (issue 22: c1 < 0 attracted, NaN gave NaN)."""
+    pw = P.platform_workspace(P.alduro_platform(), P.nominal_q())
+    with pytest.raises(ValueError, match="c1" if c1 != 1.0 else "decay_length"):
+        P.platform_force(pw, c1, decay_length)
+    out = jax.jit(P.platform_force)(pw, c1, decay_length)
+    np.testing.assert_array_equal(np.asarray(out.force), 0.0)
+    np.testing.assert_array_equal(np.asarray(out.per_leg), 0.0)
+    assert bool(out.bad_constants)
+    assert not bool(jax.jit(P.platform_force)(pw, 1.0, 0.05).bad_constants)

@@ -460,3 +460,51 @@ def test_workspace_halfspaces_generic_shape():
     a, b = W.workspace_halfspaces(jac, tm, tp)
     assert a.shape == (12, 3) and b.shape == (12,)
     assert W.num_planes(4) == 26 and len(W.plane_labels(4)) == 26
+
+
+# --- issue 22: the repulsion constants (c1 was not checked: NaN gave a NaN force, c1 < 0 an attractive one) ---------
+
+CUBE = (jnp.eye(3), jnp.array([-0.1, -1.0, -1.0]), jnp.ones(3))  # near plane at x = -0.1 pushes towards +x
+
+
+@pytest.mark.parametrize("c1", [float("nan"), -1.0, float("inf"), -float("inf"), 1e30])
+def test_concrete_bad_c1_is_refused(c1):
+    with pytest.raises(ValueError, match="c1"):
+        W.repulsive_force(*CUBE, c1, 1e-3)
+    with pytest.raises(ValueError, match="c1"):
+        W.repulsive_force_decay(*CUBE, c1, 0.05)
+    with pytest.raises(ValueError, match="c1"):
+        W.plane_forces(W.limiting_planes(*CUBE), c1, 20.0)
+
+
+@pytest.mark.parametrize("decay_length", [0.0, -0.05, float("nan"), float("inf")])
+def test_concrete_bad_decay_length_is_refused(decay_length):
+    with pytest.raises(ValueError, match="decay_length"):
+        W.repulsive_force_decay(*CUBE, 1.0, decay_length)
+
+
+@pytest.mark.parametrize("c1", [float("nan"), -1.0, float("inf"), 1e30])
+def test_bad_c1_inside_jit_gives_zero_force_flagged(c1):
+    """The documented rule: non-finite, negative or overflow-prone c1 gives zero force, never NaN or attraction."""
+    f = jax.jit(W.repulsive_force)(*CUBE, c1, 1e-3)
+    np.testing.assert_array_equal(np.asarray(f), 0.0)
+    f = jax.jit(W.repulsive_force_decay)(*CUBE, c1, 0.05)
+    np.testing.assert_array_equal(np.asarray(f), 0.0)
+    out = jax.jit(W.plane_forces)(W.limiting_planes(*CUBE), c1, 20.0)
+    np.testing.assert_array_equal(np.asarray(out.force), 0.0)
+    np.testing.assert_array_equal(np.asarray(out.terms), 0.0)
+    assert bool(out.bad_constants)
+
+
+@pytest.mark.parametrize("c2", [float("nan"), 2.0, 0.0, -0.5])
+def test_bad_c2_inside_jit_gives_zero_force(c2):
+    """c2 > 1 made the force grow with distance; c2 <= 0 or NaN gave NaN."""
+    f = jax.jit(W.repulsive_force)(*CUBE, 1.0, c2)
+    np.testing.assert_array_equal(np.asarray(f), 0.0)
+
+
+def test_good_constants_are_not_flagged():
+    out = jax.jit(W.plane_forces)(W.limiting_planes(*CUBE), 1.0, 20.0)
+    assert not bool(out.bad_constants) and float(out.force[0]) > 0.1
+    out = jax.jit(W.plane_forces)(W.limiting_planes(*CUBE), 0.0, 0.0)  # c1 = 0 and no decay: valid, zero
+    assert not bool(out.bad_constants)

@@ -235,6 +235,11 @@ class JoystickForces(NamedTuple):
       total: their sum, saturated at ``max_force``.
       saturated: () bool, True if the sum exceeded ``max_force``.
       kinematic_effect: ConstantEffect playing ``kinematic`` (limited to ``max_force``).
+      nonfinite_input: () bool, True if a deflection or kinematic-force entry was
+        not finite (that entry counted as 0: the stick at its centre, no force).
+      bad_max_force: () bool, True if ``max_force`` was NaN or negative: then ``total``
+        and ``kinematic_effect`` are zero (a negative limit would flip the force's
+        direction; ``+inf`` is allowed and means no limit).
     """
 
     centring: jax.Array
@@ -243,6 +248,8 @@ class JoystickForces(NamedTuple):
     total: jax.Array
     saturated: jax.Array
     kinematic_effect: ConstantEffect
+    nonfinite_input: jax.Array
+    bad_max_force: jax.Array
 
 
 @jax.jit
@@ -257,6 +264,8 @@ def joystick_forces(config: JoystickForceConfig, position, kinematic_force3) -> 
 
     Returns:
       JoystickForces (terms, saturated total, and the constant effect to play).
+      Always finite: non-finite inputs count as 0 (``nonfinite_input``), and a
+      ``max_force`` that is NaN or negative sends no force (``bad_max_force``).
 
     Example:
       >>> cfg = default_config()
@@ -265,7 +274,18 @@ def joystick_forces(config: JoystickForceConfig, position, kinematic_force3) -> 
       [-1.12, -0.92]
     """
     f3 = jnp.asarray(kinematic_force3)
+    position = jnp.asarray(position)
+    nonfinite = ~jnp.all(jnp.isfinite(f3)) | ~jnp.all(jnp.isfinite(position))
     f3 = jnp.where(jnp.isfinite(f3), f3, 0.0)
+    # A force beyond finfo.max ** (1/4) (1.4e9 N in float32) keeps its direction but is scaled down to that
+    # size, so the reduction and the norms below cannot overflow; any device saturates far below it.
+    cap = float(jnp.finfo(f3.dtype).max) ** 0.25 if jnp.issubdtype(f3.dtype, jnp.floating) else jnp.inf
+    big = jnp.max(jnp.abs(f3))
+    f3 = f3 * jnp.where(big > cap, cap / jnp.where(big > cap, big, 1.0), 1.0)
+    position = jnp.where(jnp.isfinite(position), position, config.centring.center)
+    max_force = jnp.asarray(config.max_force)
+    bad_max = ~(max_force >= 0)  # NaN or negative
+    max_force = jnp.where(bad_max, 0.0, max_force)
     if config.reduction == "project":
         kin = project(f3, config.axes)
     else:
@@ -273,14 +293,16 @@ def joystick_forces(config: JoystickForceConfig, position, kinematic_force3) -> 
     centring = spring_force(config.centring, position)
     ahead = spring_force(config.straight_ahead, position)
     raw = centring + ahead + kin
-    total = saturate(raw, config.max_force)
+    total = saturate(raw, max_force)
     return JoystickForces(
         centring=centring,
         straight_ahead=ahead,
         kinematic=kin,
         total=total,
-        saturated=_safe_norm(raw) > config.max_force,
-        kinematic_effect=constant(saturate(kin, config.max_force)),
+        saturated=_safe_norm(raw) > max_force,
+        kinematic_effect=constant(saturate(kin, max_force)),
+        nonfinite_input=nonfinite,
+        bad_max_force=bad_max,
     )
 
 

@@ -30,7 +30,17 @@ which is the exact ZOH discretisation written in error coordinates: a
 constant input is reproduced bit for bit in float32 (unit DC gain exactly; a
 direct-form biquad loses ~1e-3 of DC gain at low cut-offs in float32).
 ``Ad`` has a closed form for 2x2 matrices, evaluated elementwise, so
-parameters broadcast against the signal's channels and can be vmapped.
+parameters broadcast against the signal's channels and can be vmapped. The
+form never overflows for a stable filter (see :func:`discretise`): overdamped,
+it is written with the two real modes' decays ``exp(-mu dt) <= 1`` instead of
+``e^-sigma cosh(r)`` (whose ``cosh`` overflows float32 once ``r > ~89``).
+
+Invalid parameters (``w0 <= 0``, ``zeta < 0``, ``dt <= 0`` or anything non-finite)
+are refused with a ValueError where concrete (:func:`discretise`,
+:func:`spring_damper_filter`); inside jit they are flagged in
+``FilterCoeffs.invalid`` and their coefficients are zero, so the filter passes
+its (last finite) input straight through: a defined, finite output, never an
+explosion.
 
 Output convention: after the filter consumes sample ``k`` its position is the
 exact continuous-time response at ``t = (k + 1) dt`` to the input held at
@@ -124,13 +134,17 @@ class FilterCoeffs(NamedTuple):
     """Exact ZOH transition matrix ``Ad = expm(A dt)`` of the state ``(x_c, w)``, elementwise.
 
     Each field has the broadcast shape of (natural_frequency, damping_ratio, dt),
-    dtype float; ``a12`` in seconds, ``a21`` in 1/s, the others dimensionless.
+    dtype float (``invalid`` bool); ``a12`` in seconds, ``a21`` in 1/s, the others
+    dimensionless.
     """
 
     a11: jax.Array
     a12: jax.Array
     a21: jax.Array
     a22: jax.Array
+    #: bool, True where (w0, zeta, dt) is not a finite, stable filter (w0 > 0, zeta >= 0, dt > 0) or its
+    #: coefficients would not be finite; there all four coefficients are 0: the input passes straight through.
+    invalid: jax.Array = False
 
 
 class FilterState(NamedTuple):
@@ -161,35 +175,88 @@ def _cosh_sinhc(z):
     return jnp.where(small, c_ser, c_big), jnp.where(small, s_ser, s_big)
 
 
-@jax.jit
+def _overdamped(w0, zeta, dt):
+    """``expm(A dt)`` for ``zeta > 1`` from the two real modes, without overflow.
+
+    The modes decay at ``mu1 = w0 / (zeta + s)`` (slow; ``zeta - s`` without the
+    cancellation) and ``mu2 = w0 (zeta + s)``, ``s = sqrt(zeta^2 - 1)``. With
+    ``E1 = exp(-mu1 dt) <= 1``, ``x = (mu2 - mu1) dt = 2 s w0 dt >= 0`` and
+    ``g = (1 - e^-x) / x = -expm1(-x) / x`` in ``(0, 1]``::
+
+        a12 = E1 dt g,   a21 = -w0^2 a12,   a11 = E1 (e^-x - mu1 dt g),   a22 = E1 (1 + mu1 dt g)
+
+    (``(E1 - E2) / (mu2 - mu1) = E1 dt g``: the difference of near-equal
+    exponentials is an expm1). Every factor is bounded, so nothing overflows
+    however large ``w0 dt`` is; only used where ``x`` is away from 0.
+    """
+    s = jnp.sqrt(zeta - 1.0) * jnp.sqrt(zeta + 1.0)  # no overflow of zeta^2
+    wh = w0 * dt
+    mu1h = wh / (zeta + s)
+    x = 2.0 * s * wh
+    e1 = jnp.exp(-mu1h)
+    g = -jnp.expm1(-x) / x
+    a12 = e1 * dt * g
+    return FilterCoeffs(a11=e1 * (jnp.exp(-x) - mu1h * g), a12=a12, a21=-w0 * (e1 * wh * g), a22=e1 * (1.0 + mu1h * g))
+
+
 def discretise(params: SpringDamper, dt) -> FilterCoeffs:
     """Exact zero-order-hold transition matrix for one sample period.
 
     With ``A = [[-2 zeta w0, 1], [-w0^2, 0]]`` and ``M = A dt``,
     ``expm(M) = e^a [cosh(r) I + sinh(r)/r (M - a I)]``, ``a = -zeta w0 dt``,
-    ``r^2 = (zeta^2 - 1) (w0 dt)^2`` (cos/sin when underdamped). Elementwise,
-    so parameters of any broadcastable shape give coefficients of that shape.
+    ``r^2 = (zeta^2 - 1) (w0 dt)^2`` (cos/sin when underdamped, a power series
+    near critical damping). Overdamped, the same matrix is evaluated from the
+    two real modes' decays (see :func:`_overdamped`), which never overflows:
+    the coefficients are finite for every stable ``(w0, zeta, dt)`` in float32.
+    Elementwise, so parameters of any broadcastable shape give coefficients of
+    that shape.
 
     Args:
-      params: SpringDamper (w0 in rad/s, zeta).
+      params: SpringDamper (w0 in rad/s, > 0; zeta >= 0).
       dt: sample period in seconds (> 0), scalar or broadcastable.
 
     Returns:
-      FilterCoeffs.
+      FilterCoeffs. Inside jit, invalid parameters (w0 <= 0, zeta < 0, dt <= 0,
+      non-finite) give ``invalid = True`` and zero coefficients (the filter then
+      passes its input through).
+
+    Raises:
+      ValueError: concrete (not traced) parameters or dt that are invalid.
 
     Example:
       >>> c = discretise(SpringDamper.create(10.0, 0.7), 1e-3)
       >>> round(float(c.a12), 6)  # ~dt for w0 dt << 1
       0.000993
     """
+    _check_concrete_positive("dt", dt)
+    _check_concrete_positive("natural_frequency", params.natural_frequency)
+    _check_concrete_positive("damping_ratio", params.damping_ratio, allow_zero=True)
+    return _discretise(params, dt)
+
+
+@jax.jit
+def _discretise(params: SpringDamper, dt) -> FilterCoeffs:
     w0 = jnp.asarray(params.natural_frequency)
     zeta = jnp.asarray(params.damping_ratio)
     dt = jnp.asarray(dt, jnp.result_type(w0.dtype, float))
+    w0, zeta, dt = jnp.broadcast_arrays(w0.astype(dt.dtype), zeta.astype(dt.dtype), dt)
+    ok = jnp.isfinite(w0) & jnp.isfinite(zeta) & jnp.isfinite(dt) & (w0 > 0) & (zeta >= 0) & (dt > 0)
+    # Safe stand-ins where not ok or not in a branch, so neither value nor gradient sees NaN/inf.
+    w0 = jnp.where(ok, w0, 1.0)
+    zeta = jnp.where(ok, zeta, 0.5)
+    dt = jnp.where(ok, dt, 1.0)
     wh = w0 * dt
     sigma = zeta * wh
-    c, s = _cosh_sinhc((zeta * zeta - 1.0) * wh * wh)
+    z = (zeta - 1.0) * (zeta + 1.0) * wh * wh
+    over = z >= _SERIES_BOUND
+    c, s = _cosh_sinhc(jnp.where(over, -1.0, z))  # underdamped and near-critical: bounded cos/sin or series
     e = jnp.exp(-sigma)
-    return FilterCoeffs(a11=e * (c - s * sigma), a12=e * s * dt, a21=-e * s * w0 * wh, a22=e * (c + s * sigma))
+    near = FilterCoeffs(a11=e * (c - s * sigma), a12=e * s * dt, a21=-e * s * w0 * wh, a22=e * (c + s * sigma))
+    far = _overdamped(w0, jnp.where(over, zeta, 2.0), dt)
+    coeffs = [jnp.where(over, f, n) for f, n in zip(far[:4], near[:4], strict=True)]
+    ok = ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in coeffs]), axis=0)
+    a11, a12, a21, a22 = (jnp.where(ok, v, 0.0) for v in coeffs)
+    return FilterCoeffs(a11=a11, a12=a12, a21=a21, a22=a22, invalid=~ok)
 
 
 def init_state(sample) -> FilterState:
@@ -235,6 +302,8 @@ def filter_step(coeffs: FilterCoeffs, state: FilterState, sample) -> tuple[Filte
 
 
 def _first_finite(signal):
+    if signal.shape[0] == 0:  # an empty signal: nothing to start from (static shape)
+        return jnp.zeros(signal.shape[1:], signal.dtype)
     finite = jnp.isfinite(signal)
     idx = jnp.argmax(finite, axis=0)
     first = jnp.take_along_axis(signal, idx[None], axis=0)[0]
@@ -261,6 +330,17 @@ def filter_signal(coeffs: FilterCoeffs, signal, state: FilterState | None = None
       ((5, 2), True)
     """
     signal = jnp.asarray(signal, jnp.result_type(float))
+    channels = signal.shape[1:]
+    coeff_shape = jnp.broadcast_shapes(*(jnp.shape(c) for c in coeffs[:4]))
+    try:
+        fits = signal.ndim >= 1 and np.broadcast_shapes(coeff_shape, channels) == channels
+    except ValueError:
+        fits = False
+    if not fits:
+        raise ValueError(
+            f"signal must have shape (T, *S) with the filter's parameters broadcastable to S; got signal "
+            f"{signal.shape} and parameters of shape {coeff_shape}"
+        )
     if state is None:
         state = init_state(_first_finite(signal))
 
@@ -275,7 +355,10 @@ def filter_signal(coeffs: FilterCoeffs, signal, state: FilterState | None = None
 def _check_concrete_positive(name, value, allow_zero=False):
     if isinstance(value, jax.core.Tracer):
         return
-    v = np.asarray(value, dtype=float)
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number or an array of numbers, got {value!r}") from None
     bad = ~np.isfinite(v) | ((v < 0) if allow_zero else (v <= 0))
     if np.any(bad):
         rel = ">= 0" if allow_zero else "> 0"
@@ -305,6 +388,11 @@ def spring_damper_filter(signal, dt, natural_frequency, damping_ratio):
       >>> y.shape
       (1000, 2)
     """
+    dtype = signal.dtype if hasattr(signal, "dtype") else np.asarray(signal).dtype
+    if not (jnp.issubdtype(dtype, jnp.number) or jnp.issubdtype(dtype, jnp.bool_)) or jnp.issubdtype(
+        dtype, jnp.complexfloating
+    ):
+        raise TypeError(f"signal must hold real numbers, got dtype {dtype}")
     if jnp.ndim(signal) < 1:
         raise ValueError("signal must have a time axis: shape (T, ...)")
     _check_concrete_positive("dt", dt)
@@ -318,4 +406,4 @@ def _filter(signal, dt, natural_frequency, damping_ratio):
     params = SpringDamper(
         jnp.asarray(natural_frequency, jnp.result_type(float)), jnp.asarray(damping_ratio, jnp.result_type(float))
     )
-    return filter_signal(discretise(params, dt), signal)[0]
+    return filter_signal(_discretise(params, dt), signal)[0]

@@ -47,7 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax._struct import pytree_dataclass
-from ijoy_jax.haptics.workspace import Workspace, check_stroke, linearise, plane_forces
+from ijoy_jax.haptics.workspace import Workspace, check_repulsion, check_stroke, decay_rate_of, linearise, plane_forces
 
 #: The paper's example (section 3.3): cylinder positions (m) and foot position (m), a right leg.
 PAPER_Q = (0.15875, 0.10656, 0.08319, 0.04366)
@@ -180,7 +180,10 @@ def leg_repulsive_force(leg: LegGeometry, q, c1, decay_length) -> jax.Array:
     """The foot's repulsive force (3,) (N) at cylinder positions q (4,) (m): the 1 kHz haptic path.
 
     Forward kinematics, ``J`` by autodiff, limiting planes and ``sum -n C1 exp(-d / lambda)``
-    in one jittable function (no validation: q outside the stroke is clamped).
+    in one jittable function (q outside the stroke is clamped). Concrete invalid
+    constants raise a ValueError; traced ones (c1 non-finite, negative or above
+    :func:`~ijoy_jax.haptics.workspace.c1_max`, decay_length not finite and > 0)
+    give a zero force (see :func:`~ijoy_jax.haptics.workspace.plane_forces`).
 
     Args:
       leg: LegGeometry.
@@ -193,8 +196,9 @@ def leg_repulsive_force(leg: LegGeometry, q, c1, decay_length) -> jax.Array:
       >>> bool(f[2] < 0)  # Fig. 8: the force points down
       True
     """
+    check_repulsion(c1, decay_length=decay_length)
     ws = linearise(lambda x: forward_kinematics(leg, x), q, leg.q_min, leg.q_max)
-    return plane_forces(ws.planes, c1, 1.0 / decay_length).force
+    return plane_forces(ws.planes, c1, decay_rate_of(decay_length, ws.planes.offsets.dtype)).force
 
 
 def alduro_leg(lateral_sign: float = 1.0, dtype=None) -> LegGeometry:

@@ -32,7 +32,7 @@ import numpy as np
 
 from ijoy_jax._struct import pytree_dataclass
 from ijoy_jax.haptics.leg import PAPER_Q, LegGeometry, alduro_leg, forward_kinematics
-from ijoy_jax.haptics.workspace import Planes, check_stroke, linearise, plane_forces
+from ijoy_jax.haptics.workspace import Planes, check_repulsion, check_stroke, decay_rate_of, linearise, plane_forces
 
 LEG_NAMES = ("front-left", "front-right", "rear-left", "rear-right")
 
@@ -124,23 +124,35 @@ class PlatformForce(NamedTuple):
     Fields:
       force: (3,) the sum over legs.
       per_leg: (L, 3) each leg's contribution.
+      bad_constants: () bool, True when C1 or the decay length was invalid: then all forces are zero.
     """
 
     force: jax.Array
     per_leg: jax.Array
+    bad_constants: jax.Array
 
 
-@jax.jit
 def platform_force(pw: PlatformWorkspace, c1, decay_length) -> PlatformForce:
     """Sum of ``-n C1 exp(-d / lambda)`` over every leg's flipped plane (the platform's repulsion).
 
     Args:
       pw: from :func:`platform_workspace`.
-      c1: C1 (N).
+      c1: C1 (N), in ``[0, c1_max()]`` (:func:`~ijoy_jax.haptics.workspace.c1_max`).
       decay_length: lambda (m) > 0.
+
+    Returns:
+      PlatformForce. Concrete invalid constants raise a ValueError; traced ones
+      give zero forces with ``bad_constants`` set (never NaN, never an attraction).
     """
-    per_leg = jax.vmap(lambda p: plane_forces(p, c1, 1.0 / decay_length).force)(pw.planes)
-    return PlatformForce(force=jnp.sum(per_leg, axis=0), per_leg=per_leg)
+    check_repulsion(c1, decay_length=decay_length)
+    return _platform_force(pw, c1, decay_length)
+
+
+@jax.jit
+def _platform_force(pw, c1, decay_length):
+    rate = decay_rate_of(decay_length, pw.planes.offsets.dtype)
+    out = jax.vmap(lambda p: plane_forces(p, c1, rate))(pw.planes)
+    return PlatformForce(force=jnp.sum(out.force, axis=0), per_leg=out.force, bad_constants=out.bad_constants[0])
 
 
 def translation_halfspaces(pw: PlatformWorkspace) -> tuple[np.ndarray, np.ndarray]:

@@ -44,7 +44,11 @@ normal ``n`` at distance ``d >= 0``::
     f = sum_planes -n C1 C2^d      or, unit-consistent,      f = sum_planes -n C1 exp(-d / lambda)
 
 (``C2^d`` depends on the unit of d; ``lambda = -1 / ln C2`` is the decay length
-in metres). Fixed shapes throughout (``R = k(k-1) + 2k + 6`` candidate rows with
+in metres). The constants must be finite with ``0 <= C1 <= C1_MAX`` (so no sum
+of terms overflows), ``0 < C2 <= 1`` and ``lambda > 0``: concrete values outside
+raise a ValueError naming them (:func:`check_repulsion`); traced ones give a
+zero force, flagged in ``PlaneForces.bad_constants`` (never NaN, never an
+attraction or a force that grows with distance). Fixed shapes throughout (``R = k(k-1) + 2k + 6`` candidate rows with
 a ``valid`` mask), so everything jits, vmaps and differentiates;
 :func:`workspace_halfspaces` returns the compact rows for inspection.
 """
@@ -354,7 +358,9 @@ def limiting_planes(jacobian, travel_minus, travel_plus) -> Planes:
     # plane's normal, and the frame is used only when no pair plane exists.
     valid = jnp.concatenate(ok_rows, axis=0)
     normals = jnp.where(valid[:, None], jnp.concatenate(rows, axis=0), 0.0)
-    offsets = jnp.where(valid, support(normals, jac, tm, tp), 0.0)
+    h = support(normals, jac, tm, tp)
+    # A workspace too large for the dtype (support overflowed): its planes are as far as representable.
+    offsets = jnp.where(valid, jnp.where(jnp.isfinite(h), h, jnp.finfo(dtype).max), 0.0)
     return Planes(normals=normals, offsets=offsets, valid=valid)
 
 
@@ -425,28 +431,88 @@ class PlaneForces(NamedTuple):
     Fields:
       force: (3,) sum of the terms, newtons (units of C1).
       terms: (R,) magnitudes ``C1 exp(-d / lambda)`` of each plane's term (0 where not valid).
+      bad_constants: () bool, True when C1 or the decay rate was invalid (non-finite,
+        negative, or C1 above :func:`c1_max`): then force and terms are zero.
     """
 
     force: jax.Array
     terms: jax.Array
+    bad_constants: jax.Array
 
 
-@jax.jit
+def c1_max(dtype=None) -> float:
+    """Largest accepted C1 (N): ``sqrt(finfo(dtype).max)`` (1.8e19 N in float32), so no sum of terms overflows."""
+    return float(np.sqrt(jnp.finfo(jnp.result_type(float) if dtype is None else dtype).max))
+
+
+def _concrete_values(value):
+    if isinstance(value, jax.core.Tracer):
+        return None
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return np.array(np.nan)  # not a number: reported as out of range, with the value
+
+
+def check_repulsion(c1, *, decay_length=None, decay_rate=None, c2=None) -> None:
+    """Raise ValueError naming the constant if a concrete C1, decay length/rate or C2 is invalid.
+
+    Valid: ``0 <= c1 <= c1_max()`` (N), ``decay_length > 0`` (m), ``decay_rate >= 0`` (1/m),
+    ``0 < c2 <= 1``, all finite. Traced values are skipped (they are handled by the
+    zero-force rule of :func:`plane_forces`).
+    """
+    for name, value in (("c1", c1), ("decay_length", decay_length), ("decay_rate", decay_rate), ("c2", c2)):
+        if value is not None and jnp.ndim(value) != 0:
+            raise ValueError(f"{name} must be a scalar, got shape {jnp.shape(value)}")
+    v = _concrete_values(c1)
+    if v is not None and not np.all(np.isfinite(v) & (v >= 0) & (v <= c1_max())):
+        raise ValueError(f"c1 must be finite and in [0, {c1_max():.3g}] N, got {c1!r}")
+    for name, value, ok in (
+        ("decay_length", decay_length, lambda x: x > 0),
+        ("decay_rate", decay_rate, lambda x: x >= 0),
+        ("c2", c2, lambda x: (x > 0) & (x <= 1)),
+    ):
+        v = None if value is None else _concrete_values(value)
+        if v is not None and not np.all(np.isfinite(v) & ok(v)):
+            rule = {"decay_length": "finite and > 0 (m)", "decay_rate": "finite and >= 0 (1/m)", "c2": "in (0, 1]"}
+            raise ValueError(f"{name} must be {rule[name]}, got {value!r}")
+
+
 def plane_forces(planes: Planes, c1, decay_rate) -> PlaneForces:
     """Per-plane repulsion ``-n C1 exp(-decay_rate d)`` and its sum (eqs. 12-13).
 
     Args:
       planes: from :func:`limiting_planes`.
-      c1: force scale C1 (N), the magnitude of a plane's push at distance 0.
-      decay_rate: 1 / lambda in 1/m (= -ln C2 when d is in metres), >= 0.
+      c1: force scale C1 (N), the magnitude of a plane's push at distance 0,
+        ``0 <= c1 <= c1_max()``.
+      decay_rate: 1 / lambda in 1/m (= -ln C2 when d is in metres), finite and >= 0.
 
     Returns:
-      PlaneForces; always finite.
+      PlaneForces; always finite. Invalid constants raise where concrete; traced
+      ones give a zero force with ``bad_constants`` set (never NaN or an attraction).
+
+    Example:
+      >>> out = plane_forces(limiting_planes(jnp.eye(3), -jnp.ones(3), jnp.ones(3)), 1.0, 20.0)
+      >>> bool(jnp.allclose(out.force, 0.0)), bool(out.bad_constants)  # centred in a cube
+      (True, False)
     """
+    check_repulsion(c1, decay_rate=decay_rate)
+    return _plane_forces(planes, c1, decay_rate)
+
+
+@jax.jit
+def _plane_forces(planes: Planes, c1, decay_rate) -> PlaneForces:
+    dtype = planes.offsets.dtype
+    c1 = jnp.asarray(c1, dtype)
+    rate = jnp.asarray(decay_rate, dtype)
+    ok = jnp.isfinite(c1) & (c1 >= 0) & (c1 <= c1_max(dtype)) & jnp.isfinite(rate) & (rate >= 0)
+    c1 = jnp.where(ok, c1, 0.0)  # safe stand-ins: neither value nor gradient sees the bad constants
+    rate = jnp.where(ok, rate, 0.0)
     d = jnp.where(planes.valid, planes.offsets, 0.0)
-    mag = jnp.where(planes.valid, c1 * jnp.exp(-decay_rate * d), 0.0)
+    # No decay (rate 0, i.e. C2 = 1) reaches even a plane at an overflowed (inf) distance: never 0 * inf.
+    mag = jnp.where(planes.valid & ok, c1 * jnp.exp(-jnp.where(rate > 0, rate * d, 0.0)), 0.0)
     force = -jnp.sum(mag[:, None] * planes.normals, axis=0)
-    return PlaneForces(force=force, terms=mag)
+    return PlaneForces(force=force, terms=mag, bad_constants=~ok)
 
 
 def repulsive_force(jacobian, travel_minus, travel_plus, c1, c2) -> jax.Array:
@@ -463,7 +529,7 @@ def repulsive_force(jacobian, travel_minus, travel_plus, c1, c2) -> jax.Array:
       jacobian: (3, k) J = dPhi/dq.
       travel_minus: (k,) q_min - q <= 0.
       travel_plus: (k,) q_max - q >= 0.
-      c1: C1 (N), force of a plane at distance 0.
+      c1: C1 (N), force of a plane at distance 0, in ``[0, c1_max()]``.
       c2: C2 in (0, 1], the factor per metre of distance.
 
     Returns:
@@ -475,15 +541,17 @@ def repulsive_force(jacobian, travel_minus, travel_plus, c1, c2) -> jax.Array:
       True
     """
     _validate(jacobian, travel_minus, travel_plus)
-    if _is_concrete(c2) and not np.all((np.asarray(c2) > 0) & (np.asarray(c2) <= 1)):
-        raise ValueError(f"c2 must lie in (0, 1], got {c2!r}")
+    check_repulsion(c1, c2=c2)
     return _force_c2(jacobian, travel_minus, travel_plus, c1, c2)
 
 
 @jax.jit
 def _force_c2(jacobian, travel_minus, travel_plus, c1, c2):
     planes = limiting_planes(jacobian, travel_minus, travel_plus)
-    return plane_forces(planes, c1, -jnp.log(jnp.asarray(c2, planes.offsets.dtype))).force
+    c2 = jnp.asarray(c2, planes.offsets.dtype)
+    # c2 outside (0, 1] (NaN, <= 0: NaN rate; > 1: a force growing with distance) gives a NaN rate: zero force.
+    rate = jnp.where((c2 > 0) & (c2 <= 1), -jnp.log(jnp.where(c2 > 0, c2, 1.0)), jnp.nan)
+    return _plane_forces(planes, c1, rate).force
 
 
 def repulsive_force_decay(jacobian, travel_minus, travel_plus, c1, decay_length) -> jax.Array:
@@ -493,7 +561,7 @@ def repulsive_force_decay(jacobian, travel_minus, travel_plus, c1, decay_length)
 
     Args:
       jacobian, travel_minus, travel_plus: as in :func:`repulsive_force`.
-      c1: C1 (N).
+      c1: C1 (N), in ``[0, c1_max()]``.
       decay_length: lambda (m) > 0: the force of a plane falls by 1/e per lambda.
 
     Returns:
@@ -505,13 +573,21 @@ def repulsive_force_decay(jacobian, travel_minus, travel_plus, c1, decay_length)
       True
     """
     _validate(jacobian, travel_minus, travel_plus)
+    check_repulsion(c1, decay_length=decay_length)
     return _force_decay(jacobian, travel_minus, travel_plus, c1, decay_length)
 
 
 @jax.jit
 def _force_decay(jacobian, travel_minus, travel_plus, c1, decay_length):
     planes = limiting_planes(jacobian, travel_minus, travel_plus)
-    return plane_forces(planes, c1, 1.0 / jnp.asarray(decay_length, planes.offsets.dtype)).force
+    return _plane_forces(planes, c1, decay_rate_of(decay_length, planes.offsets.dtype)).force
+
+
+def decay_rate_of(decay_length, dtype=None) -> jax.Array:
+    """``1 / decay_length`` (1/m), NaN where ``decay_length`` is not finite and > 0 (:func:`plane_forces` flags it)."""
+    lam = jnp.asarray(decay_length, jnp.result_type(float) if dtype is None else dtype)
+    ok = jnp.isfinite(lam) & (lam > 0)
+    return jnp.where(ok, 1.0 / jnp.where(ok, lam, 1.0), jnp.nan)
 
 
 def linearise(forward_kinematics: Callable[[jax.Array], jax.Array], q, q_min, q_max) -> Workspace:
