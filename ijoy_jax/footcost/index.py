@@ -53,7 +53,8 @@ def window_cells(radius: float, resolution: float) -> int:
 def index_terrain(terrain: Terrain, robot: Robot) -> TerrainIndex:
     """Build the :class:`TerrainIndex` of a terrain (once per terrain, reused across steps)."""
     occ = (~terrain.free).astype(jnp.int32)
-    before = jnp.concatenate([jnp.zeros(occ.shape[:-1] + (1,), jnp.int32), jnp.cumsum(occ, axis=-1)], -1)
+    counts = jnp.cumsum(occ, axis=-1, dtype=jnp.int32)  # int32 also under x64
+    before = jnp.concatenate([jnp.zeros(occ.shape[:-1] + (1,), jnp.int32), counts], -1)
     h = terrain.height
     ny = h.shape[-1]
     levels = [h]
@@ -132,8 +133,9 @@ def rows_max(height_max, ix, j0, j1):
     taken from the exponent of the span as a float (exact below 2**24; Triton lowers no count of leading zeros)
     and capped at the table's top level."""
     span = jnp.maximum(j1 - j0 + 1, 1)
-    lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), 23)
-    lvl = jnp.minimum(lvl - 127, height_max.shape[0] - 1)
+    # int32 throughout (explicit, so that it also holds under jax_enable_x64, where a bare 23 is int64).
+    lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), jnp.int32(23))
+    lvl = jnp.minimum(lvl - 127, height_max.shape[0] - 1).astype(jnp.int32)
     return jnp.maximum(height_max[lvl, ix, j0], height_max[lvl, ix, j1 - (1 << lvl) + 1])
 
 

@@ -152,8 +152,9 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
     """Least-squares plane under the footprint at ``pose`` (world) and the metrics around it."""
     res = terrain.resolution
     k = index.pad
-    cx = pose[0] - terrain.origin[0]
-    cy = pose[1] - terrain.origin[1]
+    origin = jnp.asarray(terrain.origin, jnp.float32)  # float32 also under x64 (an origin may be float64)
+    cx = pose[0] - origin[0]
+    cy = pose[1] - origin[1]
     hl, hw = 0.5 * robot.foot_length, 0.5 * robot.foot_width
     grown = geometry.rect_column_spans(cx, cy, pose[2], hl + robot.margin, hw + robot.margin, res, k)
     foot = geometry.rect_column_spans(cx, cy, pose[2], hl, hw, res, k, ix0=grown.ix[0])
@@ -166,7 +167,7 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
     m_foot = geometry.spans_mask(foot, iy0, k)  # (K, K) bool; stays bool: XLA:CPU converts it to float slowly
     m_band = geometry.spans_mask(grown, iy0, k) & ~m_foot
     u = (grown.ix + 0.5) * res - cx  # (K,) column centres relative to the foot centre
-    v = (iy0 + jnp.arange(k) + 0.5) * res - cy  # (K,) row centres
+    v = (iy0 + jnp.arange(k, dtype=jnp.int32) + 0.5) * res - cy  # (K,) row centres
     # Heights relative to the cell under the foot centre, for float32 conditioning.
     ic = jnp.clip(jnp.floor(cx / res).astype(jnp.int32) - grown.ix[0], 0, k - 1)
     jc = jnp.clip(jnp.floor(cy / res).astype(jnp.int32) - iy0, 0, k - 1)
@@ -219,8 +220,9 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     k = index.pad
     finite = jnp.all(jnp.isfinite(step))
     step = jnp.where(finite, step, 0.0)
-    cx = step[0] - terrain.origin[0]
-    cy = step[1] - terrain.origin[1]
+    origin = jnp.asarray(terrain.origin, jnp.float32)  # float32 also under x64 (an origin may be float64)
+    cx = step[0] - origin[0]
+    cy = step[1] - origin[1]
     hl = 0.5 * robot.foot_length + robot.margin
     hw = 0.5 * robot.foot_width + robot.margin
     grown = geometry.rect_column_spans(cx, cy, step[2], hl, hw, res, k)
@@ -247,8 +249,8 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     path_bad = jnp.bool_(False)
     if terrain.has_height and swing_from is not None:
         kp = window_cells(0.5 * robot.max_swing, res)
-        sx = swing_from[0] - terrain.origin[0]
-        sy = swing_from[1] - terrain.origin[1]
+        sx = swing_from[0] - origin[0]
+        sy = swing_from[1] - origin[1]
         corridor, length = swing_corridor(sx, sy, cx, cy, 0.5 * robot.foot_width, res, kp)
         top, off_map = column_max_height(index, corridor, terrain.shape)
         path_height = top - jnp.maximum(start_plane.height, raw[5])
