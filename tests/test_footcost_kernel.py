@@ -118,6 +118,18 @@ def test_off_map_oversized_and_non_finite_steps_are_inf():
     assert np.isinf(xla).all() and np.isinf(fused).all()
 
 
+def test_steps_far_off_the_map_are_inf_at_every_magnitude():
+    """As in the XLA path (test_footcost.test_off_map_is_an_obstacle_at_every_magnitude): float32 keeps no
+    footprint width at 1e7 m, yet such a step is off the map."""
+    robot = ij.robots.hrp2(margin=0.02)
+    terrain = ij.terrain.from_arrays(np.zeros(SHAPE, np.float32), np.ones(SHAPE, bool), RES)
+    stance = jnp.array([[0.5, 0.5, 0.0]], jnp.float32)
+    far = [[0.5, 0.7, 0.0]] + [[s * v, 0.5, 0.0] for v in (1e7, 1e30) for s in (1, -1)] + [[0.5, 3e9, 0.3]]
+    xla, fused = _both(terrain, robot, stance, None, jnp.asarray(far, jnp.float32))  # no swing: its length flags
+    _assert_same(xla, fused)
+    assert np.isfinite(fused[0, 0]) and np.all(np.isinf(fused[0, 1:]))
+
+
 @settings(max_examples=15)  # each example is ~500 interpreted candidates on 2.5D; the CI has 2 cores
 @given(seed=st.integers(0, 2**16), margin=st.sampled_from([0.0, 0.01, 0.03, 0.06]))
 def test_property_fused_equals_xla_on_random_maps(seed, margin):

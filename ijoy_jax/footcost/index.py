@@ -116,6 +116,15 @@ def swing_corridor(sx, sy, cx, cy, half_width, res, num_columns: int) -> tuple[g
     return spans, length
 
 
+def centre_off_map(cx, cy, shape, res) -> jax.Array:
+    """Bool (shape of cx): a foot centre (map coordinates, m) not strictly inside the map, so its footprint
+    leaves the map. Both paths flag it as an obstacle besides the exact cell spans, which at a coordinate
+    float32 cannot resolve (a footprint at 1e7 m collapses to a line touching no cell; cells past 2**31
+    overflow int32) would miss it. NaN compares false: off the map too."""
+    nx, ny = shape
+    return ~((cx > 0.0) & (cx < nx * res) & (cy > 0.0) & (cy < ny * res))
+
+
 def column_has_obstacle(index: TerrainIndex, spans: geometry.ColumnSpans, shape) -> jax.Array:
     """(K,) bool: touched columns holding an obstacle cell or leaving the map."""
     nx, ny = shape

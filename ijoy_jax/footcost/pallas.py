@@ -34,7 +34,7 @@ from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
 from ijoy_jax._struct import as_array
-from ijoy_jax.footcost.index import TerrainIndex, index_terrain, rows_max, window_cells
+from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max, window_cells
 from ijoy_jax.footcost.xla import SLACK, metric_term, plane_metrics, solve3, validate
 from ijoy_jax.robots import Robot, nearest_actions
 from ijoy_jax.terrain import Terrain
@@ -200,7 +200,8 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
         count = obs_ref[ixc, jnp.clip(j1 + 1, 0, ny)] - obs_ref[ixc, jnp.clip(j0, 0, ny)]
         return touched & (off_map(ix, j0, j1) | (count > 0))
 
-    total = cand_ref[_COST, :]
+    # A centre off the map is an obstacle (footcost.index.centre_off_map), whatever the spans below find.
+    total = cand_ref[_COST, :] + jnp.where(centre_off_map(cx, cy, shape, res), jnp.inf, 0.0)
     if not has_height:  # 2D: obstacles only, one pass over the grown footprint's columns
         blocked = _column_loop(num_cols, ix0, (grown,), lambda ix, spans, acc: acc | hits_obstacle(ix, *spans[0]),
                                finite & False)

@@ -30,6 +30,7 @@ from ijoy_jax import geometry
 from ijoy_jax._struct import as_array
 from ijoy_jax.footcost.index import (
     TerrainIndex,
+    centre_off_map,
     column_has_obstacle,
     column_max_height,
     index_terrain,
@@ -229,7 +230,7 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     # The static sizes are float64 and the pose's float32: a footprint exactly at max_radius (max_margin ==
     # margin) would round above it, so compare with a micrometre of slack (the column spans flag real overflow).
     too_big = (jnp.hypot(hl, hw) > robot.max_radius + SLACK) | grown.overflow
-    blocked = jnp.any(column_has_obstacle(index, grown, terrain.shape))
+    blocked = jnp.any(column_has_obstacle(index, grown, terrain.shape)) | centre_off_map(cx, cy, terrain.shape, res)
     metrics = robot.metrics
     zero = jnp.float32(0.0)
     neg_inf = jnp.float32(-jnp.inf)
