@@ -342,7 +342,10 @@ def select_step(
     """Choose the next swing-foot placement for a joystick command.
 
     Args:
-      terrain: one Terrain (vmap for batches).
+      terrain: one Terrain (vmap for batches), within
+        :data:`~ijoy_jax.footcost.MAX_COORDINATE` m of the world origin, where
+        float32 holds millimetres (a UTM-scale origin is refused: shift your
+        world frame; traced inside a jit, every step is flagged invalid).
       robot: the robot model; ``robot.w`` and ``robot.rotation_weight`` weigh dist.
       stance: (3,) world pose of the stance foot (m, rad).
       stance_side: +1 if the stance foot is the left one (the right foot

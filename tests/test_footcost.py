@@ -99,6 +99,30 @@ def test_a_stance_far_off_the_map_has_no_valid_step_and_the_rollout_stops(x):
     assert not np.any(np.asarray(traj.taken)) and bool(np.all(traj.stopped))
 
 
+def test_a_world_frame_float32_cannot_resolve_is_refused_or_flagged():
+    """A map at UTM scale (origin 5e5, 5.2e6 m): float32 rounds y there to 0.5 m, so FootCost would score the
+    wrong cells. Refused at the boundary with the fix named; inside a jit (traced origin) flagged unsupported."""
+    robot = ij.robots.hrp2(margin=0.02)
+    for has_height in (False, True):
+        utm = ij.terrain.flat((40, 40), RES, origin=(5e5, 5.2e6), has_height=has_height)
+        stance = np.array([5e5 + 0.4, 5.2e6 + 0.4, 0.0])
+        with pytest.raises(ValueError, match="shift your world frame"):
+            ij.foot_cost_terms(utm, robot, stance, -1, stance[None], action_index=0)
+    near = ij.terrain.flat((40, 40), RES, origin=(0.0, 0.0), has_height=True)
+
+    @jax.jit
+    def at(origin, stance):
+        t = near.replace(origin=origin)
+        return ij.foot_cost_terms(t, robot, stance, -1, stance[None] + jnp.array([0.0, 0.19, 0.0]), action_index=0)
+
+    ok = at(jnp.array([0.0, 0.0]), jnp.array([0.4, 0.3, 0.0]))
+    assert float(ok.total[0]) == 0.0
+    bad = at(jnp.array([5e5, 5.2e6]), jnp.array([5e5 + 0.4, 5.2e6 + 0.3, 0.0]))
+    assert np.isinf(bad.unsupported[0]) and np.isinf(bad.total[0])
+    with pytest.raises(ValueError, match="shift your world frame"):  # the far corner counts too
+        ij.foot_cost_terms(ij.terrain.flat((10, 10), 1000.0), robot, [0.4, 0.4, 0.0], -1, [[0.4, 0.6, 0.0]])
+
+
 def _rot90(terrain):
     nx, ny = terrain.shape
     ox, oy = np.asarray(terrain.origin)

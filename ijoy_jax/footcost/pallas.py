@@ -35,7 +35,7 @@ from jax.experimental.pallas import triton as pl_triton
 
 from ijoy_jax._struct import as_array
 from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max, window_cells
-from ijoy_jax.footcost.xla import SLACK, metric_term, plane_metrics, solve3, validate
+from ijoy_jax.footcost.xla import SLACK, far_frame, metric_term, plane_metrics, solve3, validate
 from ijoy_jax.robots import Robot, nearest_actions
 from ijoy_jax.terrain import Terrain
 
@@ -484,7 +484,7 @@ def foot_cost_fused(
     m = robot.metrics
     par = [terrain.origin[0], terrain.origin[1], ghl, ghw, 0.5 * robot.foot_length, 0.5 * robot.foot_width,
            stance_h, start_h, swx, swy, robot.max_swing + SLACK, robot.foot_width,
-           jnp.where(jnp.hypot(ghl, ghw) > robot.max_radius + SLACK, 1.0, 0.0),
+           jnp.where((jnp.hypot(ghl, ghw) > robot.max_radius + SLACK) | far_frame(terrain), 1.0, 0.0),
            m.slope_weight, m.slope_limit, m.roughness_weight, m.roughness_limit, m.bump_weight, m.bump_limit,
            m.step_weight, m.band_weight, m.band_limit]
     par = jnp.stack([f32(q) for q in par] + [zero] * (_NUM_PAR - len(par)))

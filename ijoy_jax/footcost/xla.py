@@ -41,6 +41,42 @@ from ijoy_jax.robots import Robot, nearest_actions, side_sign
 from ijoy_jax.terrain import Terrain
 
 SLACK = 1e-6  # m: float32 rounding allowed above the robot's float64 static window sizes
+# m: the largest world coordinate a map may reach (its origin and far corner). FootCost runs in float32
+# (also under x64: poses are cast), whose spacing at 2**13 m is 2**-10 m (0.98 mm), so within it every
+# coordinate rounds by under half a millimetre; beyond, a footprint lands on the wrong cells (at a UTM
+# northing of 5.2e6 m, y rounds to 0.5 m). Such frames are refused, not shifted internally: the results are
+# world poses in float32 too, and would round the same way on the way out. Subtract your map's origin (in
+# float64, on your side) from every pose and add it back to the returned ones.
+MAX_COORDINATE = 8192.0
+
+
+def frame_extent(terrain: Terrain):
+    """The largest |world coordinate| of the map (origin or far corner, m): NumPy for a concrete origin, a
+    jax scalar for a traced one (NaN if the origin is not finite)."""
+    nx, ny = terrain.shape
+    o = terrain.origin
+    xp = jnp if isinstance(o, jax.core.Tracer) else np
+    o = xp.asarray(o, xp.float64 if xp is np else o.dtype)
+    far = o + xp.asarray([nx * terrain.resolution, ny * terrain.resolution], o.dtype)
+    return xp.max(xp.abs(xp.concatenate([o, far])))
+
+
+def check_frame(terrain: Terrain) -> None:
+    """Raise ValueError if a concrete terrain lies where float32 loses millimetres (:data:`MAX_COORDINATE`).
+
+    A traced origin is not checked here: inside a jit such a map flags every step ``unsupported``."""
+    if isinstance(terrain.origin, jax.core.Tracer):
+        return
+    extent = float(frame_extent(terrain))
+    if not np.isfinite(extent):
+        raise ValueError(f"terrain origin must be finite, got {np.asarray(terrain.origin).tolist()}")
+    if extent > MAX_COORDINATE:
+        lost = float(np.spacing(np.float32(extent))) / 2
+        raise ValueError(
+            f"shift your world frame: the map reaches {extent:.6g} m from the origin, where float32 rounds "
+            f"coordinates by up to {lost:.3g} m (millimetres hold within {MAX_COORDINATE:g} m); subtract the "
+            f"map's origin {np.asarray(terrain.origin).tolist()} from every pose (float64, on your side), "
+            "build the terrain at origin (0, 0) and add the origin back to the returned poses")
 
 
 class FootCostTerms(NamedTuple):
@@ -56,8 +92,9 @@ class FootCostTerms(NamedTuple):
         the metric's limit (0 on 2D terrains).
       swing_path: 0, or +inf if the swing corridor is too high (or leaves the
         map) for the action's clearance.
-      unsupported: 0, or +inf if the pose is not finite or the footprint,
-        margin or swing is larger than the robot's static windows cover.
+      unsupported: 0, or +inf if the pose is not finite, the footprint,
+        margin or swing is larger than the robot's static windows cover, or
+        (a traced origin) the map lies beyond :data:`MAX_COORDINATE`.
 
     Raw metrics (for plots and tests)::
 
@@ -149,6 +186,12 @@ def _sum_max_max(a, b, c):
                       lambda x, y: (x[0] + y[0], jnp.maximum(x[1], y[1]), jnp.maximum(x[2], y[2])), (0, 1))
 
 
+def far_frame(terrain: Terrain) -> jax.Array:
+    """() bool: the map reaches beyond :data:`MAX_COORDINATE` or its origin is not finite (flagged
+    ``unsupported`` inside a jit, where :func:`check_frame` cannot see the origin's value)."""
+    return ~(jnp.asarray(frame_extent(terrain)) <= MAX_COORDINATE)
+
+
 def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> Plane:
     """Least-squares plane under the footprint at ``pose`` (world) and the metrics around it."""
     res = terrain.resolution
@@ -229,7 +272,7 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     grown = geometry.rect_column_spans(cx, cy, step[2], hl, hw, res, k)
     # The static sizes are float64 and the pose's float32: a footprint exactly at max_radius (max_margin ==
     # margin) would round above it, so compare with a micrometre of slack (the column spans flag real overflow).
-    too_big = (jnp.hypot(hl, hw) > robot.max_radius + SLACK) | grown.overflow
+    too_big = (jnp.hypot(hl, hw) > robot.max_radius + SLACK) | grown.overflow | far_frame(terrain)
     blocked = jnp.any(column_has_obstacle(index, grown, terrain.shape)) | centre_off_map(cx, cy, terrain.shape, res)
     metrics = robot.metrics
     zero = jnp.float32(0.0)
@@ -331,6 +374,7 @@ def validate(terrain, robot, stance, stance_side, steps, swing_from=None, index=
             raise ValueError(f"{name} must have shape {shape}, got {np.shape(value)}")
         if not isinstance(value, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(value))):
             raise ValueError(f"{name} must be finite, got {np.asarray(value).tolist()}")
+    check_frame(terrain)
     s = np.shape(steps)
     if len(s) != 2 or s[1] != 3:
         raise ValueError(f"steps must have shape (N, 3) of (x, y, theta) world poses, got {s}")
@@ -381,7 +425,10 @@ def foot_cost_terms(
     Raises:
       ValueError / TypeError on wrong shapes, non-finite poses or a stance_side
       that is not +-1 (values are checked when concrete; a traced non-finite
-      step gets +inf in the ``unsupported`` term).
+      step gets +inf in the ``unsupported`` term), and on a map that reaches
+      beyond :data:`MAX_COORDINATE` (e.g. a UTM origin), where float32 cannot
+      resolve millimetres: shift your world frame (a traced origin there flags
+      every step ``unsupported``).
     """
     stance, steps, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("steps", steps),
                                                              ("swing_from", swing_from)))
