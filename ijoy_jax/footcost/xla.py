@@ -48,6 +48,14 @@ SLACK = 1e-6  # m: float32 rounding allowed above the robot's float64 static win
 # world poses in float32 too, and would round the same way on the way out. Subtract your map's origin (in
 # float64, on your side) from every pose and add it back to the returned ones.
 MAX_COORDINATE = 8192.0
+# rad or m (the metric's unit): how far a metric may exceed its limit and still pass (:func:`exceeds`). The
+# XLA path and the fused kernel sum the plane fit in different orders, so one metric differs between them by
+# float32 rounding, measured up to ~1e-6 (a slope within 1e-6 of 20 deg was decided differently in 1 of 2048
+# decisions). A metric exactly at its limit (a 20 deg ramp, a step as high as the limit: what a constructed
+# map gives) is then accepted by both, as is anything within LIMIT_TOL - 1e-6 of it; the paths can still
+# differ only for a metric within rounding of limit + LIMIT_TOL. 1e-5 is ten times that rounding and
+# physically nothing (10 micrometres, 10 microradians: 1e-3 of the smallest default limit, 1 cm roughness).
+LIMIT_TOL = 1e-5
 
 
 def frame_extent(terrain: Terrain):
@@ -250,8 +258,16 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
     )
 
 
+def exceeds(metric, limit):
+    """The one rule for limits, on both paths: a metric rejects a step when it exceeds its limit by more than
+    :data:`LIMIT_TOL` (slope, roughness, bump, step height, band, and the swing corridor's height against the
+    action's clearance)."""
+    return metric > limit + LIMIT_TOL
+
+
 def metric_term(weight, metric, limit):
-    return jnp.where(metric > limit, jnp.inf, weight * metric)
+    """``weight * metric``, or +inf when the metric :func:`exceeds` its limit."""
+    return jnp.where(exceeds(metric, limit), jnp.inf, weight * metric)
 
 
 def _inf_if(flag):
@@ -298,7 +314,7 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
         corridor, length = swing_corridor(sx, sy, cx, cy, 0.5 * robot.foot_width, res, kp)
         top, off_map = column_max_height(index, corridor, terrain.shape)
         path_height = top - jnp.maximum(start_plane.height, raw[5])
-        path_bad = off_map | (path_height > robot.clearance[action_index])
+        path_bad = off_map | exceeds(path_height, robot.clearance[action_index])
         too_big = too_big | corridor.overflow | (length + robot.foot_width > robot.max_swing + SLACK)
     action = robot.action_cost[action_index]
     obstacle = _inf_if(blocked)
