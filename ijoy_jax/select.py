@@ -296,8 +296,9 @@ def _ordered(terms_of, order, dists, w, n, chunk):
     chunk = min(chunk, n)
     num_chunks = -(-n // chunk)
     pad = num_chunks * chunk - n
+    # Carry dtypes are explicit (int32 positions, float32 costs), so the loop also types under jax_enable_x64.
     order = jnp.concatenate([order, jnp.full((pad,), order[-1], jnp.int32)])
-    d_sorted = jnp.concatenate([dists[order[:n]], jnp.full((pad,), jnp.inf)])
+    d_sorted = jnp.concatenate([dists[order[:n]], jnp.full((pad,), jnp.inf, dists.dtype)]).astype(jnp.float32)
 
     def cond(state):
         k, best_cost, _, _ = state
@@ -308,10 +309,10 @@ def _ordered(terms_of, order, dists, w, n, chunk):
 
     def body(state):
         k, best_cost, best_fc, best_pos = state
-        pos = k * chunk + jnp.arange(chunk)
+        pos = k * chunk + jnp.arange(chunk, dtype=jnp.int32)
         idx = lax.dynamic_slice(order, (k * chunk,), (chunk,))
         fc = terms_of(idx)
-        c = fc + w * lax.dynamic_slice(d_sorted, (k * chunk,), (chunk,))
+        c = (fc + w * lax.dynamic_slice(d_sorted, (k * chunk,), (chunk,))).astype(jnp.float32)
         c = jnp.where(pos < n, c, jnp.inf)
         j = jnp.argmin(c)  # first in L_i order among equal costs
         better = c[j] < best_cost
@@ -341,7 +342,10 @@ def select_step(
     """Choose the next swing-foot placement for a joystick command.
 
     Args:
-      terrain: one Terrain (vmap for batches).
+      terrain: one Terrain (vmap for batches), within
+        :data:`~ijoy_jax.footcost.MAX_COORDINATE` m of the world origin, where
+        float32 holds millimetres (a UTM-scale origin is refused: shift your
+        world frame; traced inside a jit, every step is flagged invalid).
       robot: the robot model; ``robot.w`` and ``robot.rotation_weight`` weigh dist.
       stance: (3,) world pose of the stance foot (m, rad).
       stance_side: +1 if the stance foot is the left one (the right foot

@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from ijoy_jax.footcost.xla import LIMIT_TOL
+
 
 def _touched(x, y, th, hl, hw, res, origin, shape):
     """Cells (ix, iy arrays) whose interior a rotated rectangle overlaps, and whether it leaves the map."""
@@ -94,7 +96,7 @@ class NumpyFootCost:
                              (bump, m["bump_weight"], m["bump_limit"]),
                              (abs(hgt - stance_h), m["step_weight"], self.max_dh[a]),
                              (band, m["band_weight"], m["band_limit"])):
-            if val > lim:
+            if val > lim + LIMIT_TOL:  # the library's one rule for limits (footcost.xla.exceeds)
                 return math.inf
             total += wt * val
         if swing_from is not None:
@@ -104,7 +106,7 @@ class NumpyFootCost:
                                    self.W / 2, self.res, self.origin, self.free.shape)
             if off:
                 return math.inf
-            if cx.size and self.height[cx, cy].max() - max(start_h, hgt) > self.clearance[a]:
+            if cx.size and self.height[cx, cy].max() - max(start_h, hgt) > self.clearance[a] + LIMIT_TOL:
                 return math.inf
         return total
 

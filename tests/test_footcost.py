@@ -68,6 +68,61 @@ def test_off_map_counts_as_obstacle():
     np.testing.assert_array_equal(np.isinf(c), [False, True, True, True, False])
 
 
+HUGE = [1e4, 1e7, 3.3e9, 1e30, 3.4e38]  # 3.3e9: past int32 cells at 2 cm; 3.4e38: float32's largest
+
+
+@pytest.mark.parametrize("has_height", [False, True])
+def test_off_map_is_an_obstacle_at_every_magnitude(has_height):
+    """A footprint beyond the map is an obstacle however far it is: float32 keeps no footprint width at 1e7 m
+    (the rectangle collapses to a line touching no cell) and cells past 2**31 overflow int32."""
+    t = ij.terrain.flat((40, 40), RES, has_height=has_height)
+    stance = jnp.array([0.4, 0.4, 0.0])
+    far = [[s * v, 0.4, 0.0] for v in HUGE for s in (1, -1)] + [[0.4, s * v, 0.3] for v in HUGE for s in (1, -1)]
+    terms = ij.foot_cost_terms(t, ROBOT, stance, -1, np.array(far), swing_from=stance if has_height else None,
+                               action_index=0)
+    assert np.all(np.isinf(np.asarray(terms.obstacle)) | np.isinf(np.asarray(terms.unsupported)))
+    assert np.all(np.isinf(np.asarray(terms.obstacle)))
+    assert not np.any(np.isnan(np.asarray(terms.total)))
+    # Inside a jit a non-finite pose is flagged unsupported (at the boundary it is refused).
+    bad = jnp.array([[jnp.inf, 0.4, 0.0], [-jnp.inf, 0.4, 0.0], [0.4, jnp.inf, 0.0], [jnp.nan, 0.4, 0.0]])
+    terms = jax.jit(lambda s: ij.foot_cost_terms(t, ROBOT, stance, -1, s, action_index=0))(bad)
+    assert np.all(np.isinf(np.asarray(terms.unsupported))) and np.all(np.isinf(np.asarray(terms.total)))
+
+
+@pytest.mark.parametrize("x", [1e7, -1e7, 1e30])
+def test_a_stance_far_off_the_map_has_no_valid_step_and_the_rollout_stops(x):
+    t = ij.terrain.flat((40, 40), RES)
+    c = ij.select_step(t, ROBOT, [x, 0.4, 0.0], -1, [0.2, 0.0, 0.0])
+    assert not bool(c.valid) and int(c.index) == -1
+    start = np.array([[x, 0.495, 0.0], [x, 0.305, 0.0]])
+    traj = ij.rollout(t, ROBOT, start, [0.25, 0.0, 0.0], 3)
+    assert not np.any(np.asarray(traj.taken)) and bool(np.all(traj.stopped))
+
+
+def test_a_world_frame_float32_cannot_resolve_is_refused_or_flagged():
+    """A map at UTM scale (origin 5e5, 5.2e6 m): float32 rounds y there to 0.5 m, so FootCost would score the
+    wrong cells. Refused at the boundary with the fix named; inside a jit (traced origin) flagged unsupported."""
+    robot = ij.robots.hrp2(margin=0.02)
+    for has_height in (False, True):
+        utm = ij.terrain.flat((40, 40), RES, origin=(5e5, 5.2e6), has_height=has_height)
+        stance = np.array([5e5 + 0.4, 5.2e6 + 0.4, 0.0])
+        with pytest.raises(ValueError, match="shift your world frame"):
+            ij.foot_cost_terms(utm, robot, stance, -1, stance[None], action_index=0)
+    near = ij.terrain.flat((40, 40), RES, origin=(0.0, 0.0), has_height=True)
+
+    @jax.jit
+    def at(origin, stance):
+        t = near.replace(origin=origin)
+        return ij.foot_cost_terms(t, robot, stance, -1, stance[None] + jnp.array([0.0, 0.19, 0.0]), action_index=0)
+
+    ok = at(jnp.array([0.0, 0.0]), jnp.array([0.4, 0.3, 0.0]))
+    assert float(ok.total[0]) == 0.0
+    bad = at(jnp.array([5e5, 5.2e6]), jnp.array([5e5 + 0.4, 5.2e6 + 0.3, 0.0]))
+    assert np.isinf(bad.unsupported[0]) and np.isinf(bad.total[0])
+    with pytest.raises(ValueError, match="shift your world frame"):  # the far corner counts too
+        ij.foot_cost_terms(ij.terrain.flat((10, 10), 1000.0), robot, [0.4, 0.4, 0.0], -1, [[0.4, 0.6, 0.0]])
+
+
 def _rot90(terrain):
     nx, ny = terrain.shape
     ox, oy = np.asarray(terrain.origin)

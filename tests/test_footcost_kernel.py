@@ -118,6 +118,52 @@ def test_off_map_oversized_and_non_finite_steps_are_inf():
     assert np.isinf(xla).all() and np.isinf(fused).all()
 
 
+def test_steps_far_off_the_map_are_inf_at_every_magnitude():
+    """As in the XLA path (test_footcost.test_off_map_is_an_obstacle_at_every_magnitude): float32 keeps no
+    footprint width at 1e7 m, yet such a step is off the map."""
+    robot = ij.robots.hrp2(margin=0.02)
+    terrain = ij.terrain.from_arrays(np.zeros(SHAPE, np.float32), np.ones(SHAPE, bool), RES)
+    stance = jnp.array([[0.5, 0.5, 0.0]], jnp.float32)
+    far = [[0.5, 0.7, 0.0]] + [[s * v, 0.5, 0.0] for v in (1e7, 1e30) for s in (1, -1)] + [[0.5, 3e9, 0.3]]
+    xla, fused = _both(terrain, robot, stance, None, jnp.asarray(far, jnp.float32))  # no swing: its length flags
+    _assert_same(xla, fused)
+    assert np.isfinite(fused[0, 0]) and np.all(np.isinf(fused[0, 1:]))
+
+
+def test_one_rule_for_limits_a_metric_at_its_limit_is_decided_alike_on_both_paths():
+    """Limits are set to the XLA path's own metrics, shifted by less than float32 rounding, by half the
+    tolerance and by three times it: at the limit (to rounding) and within LIMIT_TOL above it, both paths accept;
+    beyond it, both reject. Per-action step limits put every candidate at its limit at once."""
+    tol = footcost.xla.LIMIT_TOL
+    terrain = _terrain("25d", seed=5)
+    loose = ij.robots.hrp2(margin=0.02)
+    loose = loose.replace(metrics=loose.metrics.replace(
+        slope_limit=jnp.float32(1.5), roughness_limit=jnp.float32(1.0), bump_limit=jnp.float32(1.0),
+        band_limit=jnp.float32(1.0)), max_step_height=jnp.full(loose.num_actions, 1.0, jnp.float32))
+    stance = jnp.array([[0.45, 0.5, 0.3]], jnp.float32)
+    idx = np.arange(0, loose.num_actions, 31)[:16]
+    steps = ij.action_steps(loose, stance[0], -1)[idx]
+    terms = footcost.foot_cost_terms(terrain, loose, stance[0], -1, steps, action_index=np.arange(len(idx)))
+    open_ = np.isfinite(np.asarray(terms.total))
+    assert open_.sum() >= 8
+    dh = np.abs(np.asarray(terms.step_height_m))
+    slope = np.asarray(terms.slope_angle)
+    i = int(np.flatnonzero(open_ & (slope > 0.05))[0])
+
+    def totals(robot):
+        return _both(terrain, robot, stance, None, steps)  # steps given: action_index cycles over them
+
+    for d, accept in ((0.0, True), (1e-7, True), (-1e-7, True), (0.5 * tol, True), (3 * tol, False)):
+        limits = np.full(loose.num_actions, 1.0, np.float32)
+        limits[np.arange(len(idx)) % loose.num_actions] = dh - d  # the harness's action_index is arange(N)
+        xla, fused = totals(loose.replace(max_step_height=jnp.asarray(limits)))
+        np.testing.assert_array_equal(np.isfinite(xla[0]), np.isfinite(fused[0]))
+        np.testing.assert_array_equal(np.isfinite(xla[0])[open_], np.full(open_.sum(), accept))
+        steep = loose.replace(metrics=loose.metrics.replace(slope_limit=jnp.float32(slope[i] - d)))
+        xla, fused = totals(steep)
+        assert np.isfinite(xla[0, i]) == np.isfinite(fused[0, i]) == accept, (d, xla[0, i], fused[0, i])
+
+
 @settings(max_examples=15)  # each example is ~500 interpreted candidates on 2.5D; the CI has 2 cores
 @given(seed=st.integers(0, 2**16), margin=st.sampled_from([0.0, 0.01, 0.03, 0.06]))
 def test_property_fused_equals_xla_on_random_maps(seed, margin):

@@ -129,6 +129,24 @@ def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost():
         assert float(ch.foot_cost) == pytest.approx(fc[int(ch.index)], rel=1e-5, abs=1e-6)
 
 
+def test_a_shifted_world_frame_gives_the_same_steps_shifted_and_a_utm_frame_is_refused():
+    h = np.asarray(_random_terrains(21, 1, True).height[0])
+    stance, side, command, swing_from = (np.asarray(a[0], np.float64) for a in _random_queries(22, 1))
+    shift = np.array([1000.0, -2000.0, 0.0])  # float32 keeps 0.1 mm here
+    base = ij.terrain.from_arrays(h, None, RES)
+    moved = ij.terrain.from_arrays(h, None, RES, origin=shift[:2])
+    a = ij.select_step(base, ROBOT, stance, side, command, swing_from=swing_from, targets=TARGETS)
+    b = ij.select_step(moved, ROBOT, stance + shift, side, command, swing_from=swing_from + shift, targets=TARGETS)
+    assert bool(a.valid) and int(a.index) == int(b.index)
+    np.testing.assert_allclose(np.asarray(b.pose, np.float64) - shift, np.asarray(a.pose), atol=2e-4)
+    utm = ij.terrain.from_arrays(h, None, RES, origin=(5e5, 5.2e6))
+    far = stance + [5e5, 5.2e6, 0.0]
+    with pytest.raises(ValueError, match="shift your world frame"):
+        ij.select_step(utm, ROBOT, far, side, command, targets=TARGETS)
+    with pytest.raises(ValueError, match="shift your world frame"):
+        ij.rollout(utm, ROBOT, np.stack([far, far + [0.0, 0.19, 0.0]]), [0.2, 0.0, 0.0], 2)
+
+
 def test_no_valid_step_is_explicit_and_finite():
     t = ij.terrain.from_arrays(None, np.zeros(SHAPE, bool), RES)  # all obstacle
     for method in select.METHODS:

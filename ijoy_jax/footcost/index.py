@@ -53,7 +53,8 @@ def window_cells(radius: float, resolution: float) -> int:
 def index_terrain(terrain: Terrain, robot: Robot) -> TerrainIndex:
     """Build the :class:`TerrainIndex` of a terrain (once per terrain, reused across steps)."""
     occ = (~terrain.free).astype(jnp.int32)
-    before = jnp.concatenate([jnp.zeros(occ.shape[:-1] + (1,), jnp.int32), jnp.cumsum(occ, axis=-1)], -1)
+    counts = jnp.cumsum(occ, axis=-1, dtype=jnp.int32)  # int32 also under x64
+    before = jnp.concatenate([jnp.zeros(occ.shape[:-1] + (1,), jnp.int32), counts], -1)
     h = terrain.height
     ny = h.shape[-1]
     levels = [h]
@@ -115,6 +116,15 @@ def swing_corridor(sx, sy, cx, cy, half_width, res, num_columns: int) -> tuple[g
     return spans, length
 
 
+def centre_off_map(cx, cy, shape, res) -> jax.Array:
+    """Bool (shape of cx): a foot centre (map coordinates, m) not strictly inside the map, so its footprint
+    leaves the map. Both paths flag it as an obstacle besides the exact cell spans, which at a coordinate
+    float32 cannot resolve (a footprint at 1e7 m collapses to a line touching no cell; cells past 2**31
+    overflow int32) would miss it. NaN compares false: off the map too."""
+    nx, ny = shape
+    return ~((cx > 0.0) & (cx < nx * res) & (cy > 0.0) & (cy < ny * res))
+
+
 def column_has_obstacle(index: TerrainIndex, spans: geometry.ColumnSpans, shape) -> jax.Array:
     """(K,) bool: touched columns holding an obstacle cell or leaving the map."""
     nx, ny = shape
@@ -132,8 +142,9 @@ def rows_max(height_max, ix, j0, j1):
     taken from the exponent of the span as a float (exact below 2**24; Triton lowers no count of leading zeros)
     and capped at the table's top level."""
     span = jnp.maximum(j1 - j0 + 1, 1)
-    lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), 23)
-    lvl = jnp.minimum(lvl - 127, height_max.shape[0] - 1)
+    # int32 throughout (explicit, so that it also holds under jax_enable_x64, where a bare 23 is int64).
+    lvl = lax.shift_right_logical(lax.bitcast_convert_type(span.astype(jnp.float32), jnp.int32), jnp.int32(23))
+    lvl = jnp.minimum(lvl - 127, height_max.shape[0] - 1).astype(jnp.int32)
     return jnp.maximum(height_max[lvl, ix, j0], height_max[lvl, ix, j1 - (1 << lvl) + 1])
 
 

@@ -19,8 +19,11 @@ is within every step's clearance (on most terrain), the exact walk is skipped.
 Same definitions as the XLA path, term by term (exact cell coverage, the
 least-squares plane and its metrics, step height, safety band, swing corridor,
 unsupported flags); sums run in a different order, so totals agree to float32
-rounding and a metric within rounding of its limit may decide validity
-differently (the tests measure both).
+rounding. Validity follows one rule for every limit on both paths
+(:func:`~ijoy_jax.footcost.xla.exceeds`: beyond the limit by more than
+``LIMIT_TOL``), so a metric at its limit to rounding is valid on both; only one
+within rounding of limit + ``LIMIT_TOL`` may be decided differently (the tests
+measure both).
 """
 
 from __future__ import annotations
@@ -34,8 +37,8 @@ from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
 from ijoy_jax._struct import as_array
-from ijoy_jax.footcost.index import TerrainIndex, index_terrain, rows_max, window_cells
-from ijoy_jax.footcost.xla import SLACK, metric_term, plane_metrics, solve3, validate
+from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max, window_cells
+from ijoy_jax.footcost.xla import SLACK, exceeds, far_frame, metric_term, plane_metrics, solve3, validate
 from ijoy_jax.robots import Robot, nearest_actions
 from ijoy_jax.terrain import Terrain
 
@@ -200,7 +203,8 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
         count = obs_ref[ixc, jnp.clip(j1 + 1, 0, ny)] - obs_ref[ixc, jnp.clip(j0, 0, ny)]
         return touched & (off_map(ix, j0, j1) | (count > 0))
 
-    total = cand_ref[_COST, :]
+    # A centre off the map is an obstacle (footcost.index.centre_off_map), whatever the spans below find.
+    total = cand_ref[_COST, :] + jnp.where(centre_off_map(cx, cy, shape, res), jnp.inf, 0.0)
     if not has_height:  # 2D: obstacles only, one pass over the grown footprint's columns
         blocked = _column_loop(num_cols, ix0, (grown,), lambda ix, spans, acc: acc | hits_obstacle(ix, *spans[0]),
                                finite & False)
@@ -349,7 +353,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
                 open_lane = jnp.isfinite(total) & ~too_big & finite
                 box = _corridor_box(open_lane, cx, cy, p[_SWX], p[_SWY], p[_FHW], res)
                 box_top = _box_top(hmax_ref, box, shape, cx.shape[0])
-                clear = box_top - floor_h <= cand_ref[_CLEARANCE, :]
+                clear = ~exceeds(box_top - floor_h, cand_ref[_CLEARANCE, :])
                 path_cols = jnp.where(_any(open_lane & ~clear), path_cols, 0)
 
             def path_column(ix, spans, acc):
@@ -361,7 +365,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
 
             path_top, path_off = _column_loop(path_cols, pix0, (path,), path_column, (zero_f - jnp.inf, finite & False))
             path_height = path_top - floor_h
-            path_bad = path_off | (path_height > cand_ref[_CLEARANCE, :])
+            path_bad = path_off | exceeds(path_height, cand_ref[_CLEARANCE, :])
             total = total + jnp.where(path_bad, jnp.inf, 0.0)
 
     out_ref[...] = total + jnp.where(too_big | ~finite, jnp.inf, 0.0)
@@ -483,7 +487,7 @@ def foot_cost_fused(
     m = robot.metrics
     par = [terrain.origin[0], terrain.origin[1], ghl, ghw, 0.5 * robot.foot_length, 0.5 * robot.foot_width,
            stance_h, start_h, swx, swy, robot.max_swing + SLACK, robot.foot_width,
-           jnp.where(jnp.hypot(ghl, ghw) > robot.max_radius + SLACK, 1.0, 0.0),
+           jnp.where((jnp.hypot(ghl, ghw) > robot.max_radius + SLACK) | far_frame(terrain), 1.0, 0.0),
            m.slope_weight, m.slope_limit, m.roughness_weight, m.roughness_limit, m.bump_weight, m.bump_limit,
            m.step_weight, m.band_weight, m.band_limit]
     par = jnp.stack([f32(q) for q in par] + [zero] * (_NUM_PAR - len(par)))

@@ -30,6 +30,7 @@ from ijoy_jax import geometry
 from ijoy_jax._struct import as_array
 from ijoy_jax.footcost.index import (
     TerrainIndex,
+    centre_off_map,
     column_has_obstacle,
     column_max_height,
     index_terrain,
@@ -40,6 +41,50 @@ from ijoy_jax.robots import Robot, nearest_actions, side_sign
 from ijoy_jax.terrain import Terrain
 
 SLACK = 1e-6  # m: float32 rounding allowed above the robot's float64 static window sizes
+# m: the largest world coordinate a map may reach (its origin and far corner). FootCost runs in float32
+# (also under x64: poses are cast), whose spacing at 2**13 m is 2**-10 m (0.98 mm), so within it every
+# coordinate rounds by under half a millimetre; beyond, a footprint lands on the wrong cells (at a UTM
+# northing of 5.2e6 m, y rounds to 0.5 m). Such frames are refused, not shifted internally: the results are
+# world poses in float32 too, and would round the same way on the way out. Subtract your map's origin (in
+# float64, on your side) from every pose and add it back to the returned ones.
+MAX_COORDINATE = 8192.0
+# rad or m (the metric's unit): how far a metric may exceed its limit and still pass (:func:`exceeds`). The
+# XLA path and the fused kernel sum the plane fit in different orders, so one metric differs between them by
+# float32 rounding, measured up to ~1e-6 (a slope within 1e-6 of 20 deg was decided differently in 1 of 2048
+# decisions). A metric exactly at its limit (a 20 deg ramp, a step as high as the limit: what a constructed
+# map gives) is then accepted by both, as is anything within LIMIT_TOL - 1e-6 of it; the paths can still
+# differ only for a metric within rounding of limit + LIMIT_TOL. 1e-5 is ten times that rounding and
+# physically nothing (10 micrometres, 10 microradians: 1e-3 of the smallest default limit, 1 cm roughness).
+LIMIT_TOL = 1e-5
+
+
+def frame_extent(terrain: Terrain):
+    """The largest |world coordinate| of the map (origin or far corner, m): NumPy for a concrete origin, a
+    jax scalar for a traced one (NaN if the origin is not finite)."""
+    nx, ny = terrain.shape
+    o = terrain.origin
+    xp = jnp if isinstance(o, jax.core.Tracer) else np
+    o = xp.asarray(o, xp.float64 if xp is np else o.dtype)
+    far = o + xp.asarray([nx * terrain.resolution, ny * terrain.resolution], o.dtype)
+    return xp.max(xp.abs(xp.concatenate([o, far])))
+
+
+def check_frame(terrain: Terrain) -> None:
+    """Raise ValueError if a concrete terrain lies where float32 loses millimetres (:data:`MAX_COORDINATE`).
+
+    A traced origin is not checked here: inside a jit such a map flags every step ``unsupported``."""
+    if isinstance(terrain.origin, jax.core.Tracer):
+        return
+    extent = float(frame_extent(terrain))
+    if not np.isfinite(extent):
+        raise ValueError(f"terrain origin must be finite, got {np.asarray(terrain.origin).tolist()}")
+    if extent > MAX_COORDINATE:
+        lost = float(np.spacing(np.float32(extent))) / 2
+        raise ValueError(
+            f"shift your world frame: the map reaches {extent:.6g} m from the origin, where float32 rounds "
+            f"coordinates by up to {lost:.3g} m (millimetres hold within {MAX_COORDINATE:g} m); subtract the "
+            f"map's origin {np.asarray(terrain.origin).tolist()} from every pose (float64, on your side), "
+            "build the terrain at origin (0, 0) and add the origin back to the returned poses")
 
 
 class FootCostTerms(NamedTuple):
@@ -55,8 +100,9 @@ class FootCostTerms(NamedTuple):
         the metric's limit (0 on 2D terrains).
       swing_path: 0, or +inf if the swing corridor is too high (or leaves the
         map) for the action's clearance.
-      unsupported: 0, or +inf if the pose is not finite or the footprint,
-        margin or swing is larger than the robot's static windows cover.
+      unsupported: 0, or +inf if the pose is not finite, the footprint,
+        margin or swing is larger than the robot's static windows cover, or
+        (a traced origin) the map lies beyond :data:`MAX_COORDINATE`.
 
     Raw metrics (for plots and tests)::
 
@@ -148,12 +194,19 @@ def _sum_max_max(a, b, c):
                       lambda x, y: (x[0] + y[0], jnp.maximum(x[1], y[1]), jnp.maximum(x[2], y[2])), (0, 1))
 
 
+def far_frame(terrain: Terrain) -> jax.Array:
+    """() bool: the map reaches beyond :data:`MAX_COORDINATE` or its origin is not finite (flagged
+    ``unsupported`` inside a jit, where :func:`check_frame` cannot see the origin's value)."""
+    return ~(jnp.asarray(frame_extent(terrain)) <= MAX_COORDINATE)
+
+
 def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> Plane:
     """Least-squares plane under the footprint at ``pose`` (world) and the metrics around it."""
     res = terrain.resolution
     k = index.pad
-    cx = pose[0] - terrain.origin[0]
-    cy = pose[1] - terrain.origin[1]
+    origin = jnp.asarray(terrain.origin, jnp.float32)  # float32 also under x64 (an origin may be float64)
+    cx = pose[0] - origin[0]
+    cy = pose[1] - origin[1]
     hl, hw = 0.5 * robot.foot_length, 0.5 * robot.foot_width
     grown = geometry.rect_column_spans(cx, cy, pose[2], hl + robot.margin, hw + robot.margin, res, k)
     foot = geometry.rect_column_spans(cx, cy, pose[2], hl, hw, res, k, ix0=grown.ix[0])
@@ -166,7 +219,7 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
     m_foot = geometry.spans_mask(foot, iy0, k)  # (K, K) bool; stays bool: XLA:CPU converts it to float slowly
     m_band = geometry.spans_mask(grown, iy0, k) & ~m_foot
     u = (grown.ix + 0.5) * res - cx  # (K,) column centres relative to the foot centre
-    v = (iy0 + jnp.arange(k) + 0.5) * res - cy  # (K,) row centres
+    v = (iy0 + jnp.arange(k, dtype=jnp.int32) + 0.5) * res - cy  # (K,) row centres
     # Heights relative to the cell under the foot centre, for float32 conditioning.
     ic = jnp.clip(jnp.floor(cx / res).astype(jnp.int32) - grown.ix[0], 0, k - 1)
     jc = jnp.clip(jnp.floor(cy / res).astype(jnp.int32) - iy0, 0, k - 1)
@@ -205,8 +258,16 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
     )
 
 
+def exceeds(metric, limit):
+    """The one rule for limits, on both paths: a metric rejects a step when it exceeds its limit by more than
+    :data:`LIMIT_TOL` (slope, roughness, bump, step height, band, and the swing corridor's height against the
+    action's clearance)."""
+    return metric > limit + LIMIT_TOL
+
+
 def metric_term(weight, metric, limit):
-    return jnp.where(metric > limit, jnp.inf, weight * metric)
+    """``weight * metric``, or +inf when the metric :func:`exceeds` its limit."""
+    return jnp.where(exceeds(metric, limit), jnp.inf, weight * metric)
 
 
 def _inf_if(flag):
@@ -219,15 +280,16 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     k = index.pad
     finite = jnp.all(jnp.isfinite(step))
     step = jnp.where(finite, step, 0.0)
-    cx = step[0] - terrain.origin[0]
-    cy = step[1] - terrain.origin[1]
+    origin = jnp.asarray(terrain.origin, jnp.float32)  # float32 also under x64 (an origin may be float64)
+    cx = step[0] - origin[0]
+    cy = step[1] - origin[1]
     hl = 0.5 * robot.foot_length + robot.margin
     hw = 0.5 * robot.foot_width + robot.margin
     grown = geometry.rect_column_spans(cx, cy, step[2], hl, hw, res, k)
     # The static sizes are float64 and the pose's float32: a footprint exactly at max_radius (max_margin ==
     # margin) would round above it, so compare with a micrometre of slack (the column spans flag real overflow).
-    too_big = (jnp.hypot(hl, hw) > robot.max_radius + SLACK) | grown.overflow
-    blocked = jnp.any(column_has_obstacle(index, grown, terrain.shape))
+    too_big = (jnp.hypot(hl, hw) > robot.max_radius + SLACK) | grown.overflow | far_frame(terrain)
+    blocked = jnp.any(column_has_obstacle(index, grown, terrain.shape)) | centre_off_map(cx, cy, terrain.shape, res)
     metrics = robot.metrics
     zero = jnp.float32(0.0)
     neg_inf = jnp.float32(-jnp.inf)
@@ -247,12 +309,12 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     path_bad = jnp.bool_(False)
     if terrain.has_height and swing_from is not None:
         kp = window_cells(0.5 * robot.max_swing, res)
-        sx = swing_from[0] - terrain.origin[0]
-        sy = swing_from[1] - terrain.origin[1]
+        sx = swing_from[0] - origin[0]
+        sy = swing_from[1] - origin[1]
         corridor, length = swing_corridor(sx, sy, cx, cy, 0.5 * robot.foot_width, res, kp)
         top, off_map = column_max_height(index, corridor, terrain.shape)
         path_height = top - jnp.maximum(start_plane.height, raw[5])
-        path_bad = off_map | (path_height > robot.clearance[action_index])
+        path_bad = off_map | exceeds(path_height, robot.clearance[action_index])
         too_big = too_big | corridor.overflow | (length + robot.foot_width > robot.max_swing + SLACK)
     action = robot.action_cost[action_index]
     obstacle = _inf_if(blocked)
@@ -328,6 +390,7 @@ def validate(terrain, robot, stance, stance_side, steps, swing_from=None, index=
             raise ValueError(f"{name} must have shape {shape}, got {np.shape(value)}")
         if not isinstance(value, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(value))):
             raise ValueError(f"{name} must be finite, got {np.asarray(value).tolist()}")
+    check_frame(terrain)
     s = np.shape(steps)
     if len(s) != 2 or s[1] != 3:
         raise ValueError(f"steps must have shape (N, 3) of (x, y, theta) world poses, got {s}")
@@ -378,7 +441,10 @@ def foot_cost_terms(
     Raises:
       ValueError / TypeError on wrong shapes, non-finite poses or a stance_side
       that is not +-1 (values are checked when concrete; a traced non-finite
-      step gets +inf in the ``unsupported`` term).
+      step gets +inf in the ``unsupported`` term), and on a map that reaches
+      beyond :data:`MAX_COORDINATE` (e.g. a UTM origin), where float32 cannot
+      resolve millimetres: shift your world frame (a traced origin there flags
+      every step ``unsupported``).
     """
     stance, steps, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("steps", steps),
                                                              ("swing_from", swing_from)))
