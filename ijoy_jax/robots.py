@@ -186,6 +186,7 @@ def _overlap(xp, a, foot_length, foot_width, tol):
             separated |= (pa.max(1) <= pb.min(1) + tol) | (pb.max(1) <= pa.min(1) + tol)
     return ~separated
 
+
 WINDOW_SLACK = 1e-6
 """m: float32 rounding allowed above the float64 static window ``max_radius`` (as FootCost allows)."""
 
