@@ -190,7 +190,8 @@ def test_marking_time_with_staggered_feet_counts_as_stationary():
     assert fs[fs[:, 1] < 1.0, 0].max() < 1.0  # the right foot never gets past the block
 
 
-COUNTS = ("steps_taken", "steps_in_place", "steps_stationary", "footholds_on_obstacles", "invalid_footholds")
+COUNTS = ("steps_taken", "steps_in_place", "steps_stationary", "footholds_on_obstacles", "invalid_footholds",
+          "commands_not_finite", "unsupported_decisions")
 
 
 def test_summary_counts_are_int32_under_jit_and_vmap():
