@@ -14,6 +14,7 @@ from typing import Any, TypeVar
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 T = TypeVar("T")
 
@@ -68,3 +69,15 @@ def as_array(name: str, value):
         return jnp.asarray(value, jnp.float32)
     except (TypeError, ValueError) as e:
         raise ValueError(f"{name} must be an array of numbers, got {value!r}") from e
+
+
+def check_numeric(name: str, value) -> None:
+    """Raise a TypeError naming ``name`` if a concrete ``value`` is not numbers (strings, objects); skip tracers.
+
+    Without it an array of strings reaches ``jnp.asarray`` inside a jit and fails in JAX's own wording.
+    """
+    if value is None or is_traced(value):
+        return
+    kind = (value.dtype if hasattr(value, "dtype") else np.asarray(value).dtype).kind
+    if kind not in "biuf":
+        raise TypeError(f"{name} must be numbers, got {value!r}")

@@ -23,8 +23,8 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry, select
-from ijoy_jax._struct import as_array, is_traced
-from ijoy_jax.robots import LEFT, Robot
+from ijoy_jax._struct import as_array, check_numeric, is_traced
+from ijoy_jax.robots import LEFT, Robot, footprints_overlap
 from ijoy_jax.select import Targets
 from ijoy_jax.terrain import Terrain
 
@@ -116,6 +116,9 @@ class Trajectory(NamedTuple):
       deviation: |achieved - p_next| of the swing foot in the stance frame (m).
       rotation_deviation: |wrap(achieved - p_next)| rotation (rad).
       evaluated: actions whose FootCost was computed.
+      unsupported: the robot's or terrain's values were outside what FootCost
+        supports (:attr:`ijoy_jax.select.StepChoice.unsupported`): the reason
+        no step was valid, so the robot stopped.
 
     feet: (2, 3) final foot poses (row 0 left).
     log: the walker's per-step log (leaves with a leading T axis), or None.
@@ -139,6 +142,7 @@ class Trajectory(NamedTuple):
     deviation: jax.Array
     rotation_deviation: jax.Array
     evaluated: jax.Array
+    unsupported: jax.Array
     feet: jax.Array
     commanded: jax.Array | None = None
     log: Any = None
@@ -153,6 +157,10 @@ class Trajectory(NamedTuple):
         and ``mean_foot_cost``, the mean FootCost over every foothold taken: +inf as soon as one
         of them was invalid (infinite cost means impossible; it is never averaged away), 0 if no
         step was taken.
+        Flagged inputs (int32 counts of decisions): ``commands_not_finite``, commands with NaN/inf,
+        treated as zero (step in place), and ``unsupported_decisions``, decisions whose robot or
+        terrain values were unsupported (:attr:`Trajectory.unsupported`), so a silent NaN in a command
+        stream or a robot changed out of range shows up.
         """
         taken = self.taken
         count = lambda b: jnp.sum(b, axis=-1, dtype=jnp.int32)  # noqa: E731
@@ -168,6 +176,8 @@ class Trajectory(NamedTuple):
             "distance_across": jnp.sum(self.across, axis=-1),
             "mean_deviation": jnp.sum(self.deviation * taken, axis=-1) / jnp.maximum(n_taken, 1),
             "mean_foot_cost": jnp.sum(jnp.where(taken, self.foot_cost, 0.0), axis=-1) / jnp.maximum(n_taken, 1),
+            "commands_not_finite": count(~self.command_ok),
+            "unsupported_decisions": count(self.unsupported),
         }
 
 def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, method, walker, swing_path, quantize,
@@ -228,6 +238,7 @@ def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, m
             deviation=jnp.where(go, jnp.hypot(err[0], err[1]), 0.0),
             rotation_deviation=jnp.where(go, jnp.abs(geometry.wrap_angle(err[2])), 0.0),
             evaluated=choice.evaluated,
+            unsupported=choice.unsupported,
         )
         if walker.log is not None:
             record["log"] = walker.log(new_state)
@@ -242,6 +253,28 @@ def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, m
     return Trajectory(feet=walker.feet(state), **rec)
 
 _rollout_jit = jax.jit(_rollout, static_argnames=("num_steps", "method", "walker", "swing_path", "quantize", "kernel"))
+
+def _check_start(robot: Robot, start) -> None:
+    """Refuse concrete start feet whose footprints overlap or that stand crossed (left foot on the right)."""
+    size = (robot.foot_length, robot.foot_width)
+    if is_traced(start, size):
+        return
+    feet = np.asarray(start, np.float64)
+    length, width = (float(v) for v in size)
+
+    def seen_from(a, b):  # pose of foot b in foot a's frame
+        d = feet[b, :2] - feet[a, :2]
+        c, s = np.cos(feet[a, 2]), np.sin(feet[a, 2])
+        return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], feet[b, 2] - feet[a, 2]])
+
+    left_seen = seen_from(1, 0)
+    if footprints_overlap(left_seen, length, width)[0]:
+        raise ValueError(f"start: the feet's footprints ({length} x {width} m) overlap, left {feet[0].tolist()}, "
+                         f"right {feet[1].tolist()}; start with them apart (robots.start_stance)")
+    if left_seen[1] < 0 or seen_from(0, 1)[1] > 0:
+        raise ValueError(f"start: the feet are crossed, the left foot (row 0, {feet[0].tolist()}) is to the right of "
+                         f"the right foot (row 1, {feet[1].tolist()}) in their own frames; row 0 is the left foot")
+
 
 def rollout(
     terrain: Terrain,
@@ -304,16 +337,22 @@ def rollout(
     """
     start, commands = as_array("start", start), as_array("commands", commands)
     select.validate(terrain, robot, np.zeros(3), 1, np.zeros(3), method=method, targets=targets, kernel=kernel)
+    check_numeric("start", start)
+    check_numeric("commands", commands)
     if np.shape(start) != (2, 3):
         raise ValueError(f"start must have shape (2, 3) (left foot, right foot), got {np.shape(start)}")
-    if not isinstance(start, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(start))):
+    with np.errstate(over="ignore"):  # finite as the float32 it is computed in (1e39 is not)
+        bad_start = not isinstance(start, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(start, np.float32)))
+    if bad_start:
         raise ValueError("start must be finite")
-    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
+    _check_start(robot, start)
+    if isinstance(num_steps, bool) or not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
         raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
     cs = np.shape(commands)
     if cs not in ((3,), (num_steps, 3)):
         raise ValueError(f"commands must have shape (3,) or ({num_steps}, 3), got {cs}")
     if not isinstance(first_swing, jax.core.Tracer) and (np.shape(first_swing) != ()
+                                                         or np.asarray(first_swing).dtype.kind not in "iuf"
                                                          or float(first_swing) not in (LEFT, -LEFT)):
         raise ValueError(f"first_swing must be +1 (left) or -1 (right), got {first_swing!r}")
     args = (terrain, robot, start, commands, first_swing, targets)

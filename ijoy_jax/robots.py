@@ -161,24 +161,134 @@ def footprints_overlap(actions, foot_length: float, foot_width: float) -> np.nda
     Separating-axis test of two rectangles (interiors; touching is no overlap),
     in NumPy float64. The stance foot is at the origin with angle 0.
     """
-    a = np.asarray(actions, np.float64).reshape(-1, 3)
+    return _overlap(np, np.asarray(actions, np.float64).reshape(-1, 3), foot_length, foot_width, 0.0)
+
+
+def _overlap(xp, a, foot_length, foot_width, tol):
+    """:func:`footprints_overlap` in NumPy or jnp: overlap deeper than ``tol`` metres."""
 
     def corners(x, y, t):
-        c, s = np.cos(t)[:, None], np.sin(t)[:, None]
+        c, s = xp.cos(t)[:, None], xp.sin(t)[:, None]
         lx = np.array([1, -1, -1, 1]) * foot_length / 2
         ly = np.array([1, 1, -1, -1]) * foot_width / 2
-        return np.stack([x[:, None] + c * lx - s * ly, y[:, None] + s * lx + c * ly], -1)
+        return xp.stack([x[:, None] + c * lx - s * ly, y[:, None] + s * lx + c * ly], -1)
 
     swing = corners(a[:, 0], a[:, 1], a[:, 2])  # (N, 4, 2)
-    stance = np.broadcast_to(corners(np.zeros(1), np.zeros(1), np.zeros(1)), swing.shape)
-    separated = np.zeros(len(a), bool)
+    zero = xp.zeros_like(a[:1, 0])
+    stance = xp.broadcast_to(corners(zero, zero, zero), swing.shape)
+    separated = xp.zeros(a.shape[0], bool)
     for poly in (stance, swing):
         for i in range(4):
             e = poly[:, (i + 1) % 4] - poly[:, i]
-            n = np.stack([-e[:, 1], e[:, 0]], -1)[:, None, :]
-            pa, pb = np.sum(stance * n, -1), np.sum(swing * n, -1)
-            separated |= (pa.max(1) <= pb.min(1)) | (pb.max(1) <= pa.min(1))
+            n = xp.stack([-e[:, 1], e[:, 0]], -1)[:, None, :]
+            n = n / xp.maximum(xp.sqrt(xp.sum(n * n, -1, keepdims=True)), 1e-12)  # unit axes: tol in metres
+            pa, pb = xp.sum(stance * n, -1), xp.sum(swing * n, -1)
+            separated |= (pa.max(1) <= pb.min(1) + tol) | (pb.max(1) <= pa.min(1) + tol)
     return ~separated
+
+
+WINDOW_SLACK = 1e-6
+"""m: float32 rounding allowed above the float64 static window ``max_radius`` (as FootCost allows)."""
+
+OVERLAP_TOL = 1e-5
+"""m: overlap of the feet a traced check ignores (float32 rounding of corners of footprints that touch)."""
+
+_PER_ACTION = ("action_cost", "clearance", "max_step_height")
+
+
+def _positive(xp, x):
+    return xp.all(xp.isfinite(x) & (x > 0))
+
+
+def _nonneg(xp, x):
+    return xp.all(xp.isfinite(x) & (x >= 0))
+
+
+def _finite(xp, x):
+    return xp.all(xp.isfinite(x))
+
+
+def _in_window(xp, robot, length, width, margin):
+    return 0.5 * xp.hypot(length + 2 * margin, width + 2 * margin) <= robot.max_radius + WINDOW_SLACK
+
+
+# (leaf names, what they must be, rule(xp, *values) -> bool). One list for both uses: check_robot raises on
+# the first rule a concrete robot breaks; robot_supported ANDs them all in jnp inside a trace.
+_ROBOT_RULES = (
+    *((n, "finite and > 0", _positive) for n in ("foot_length", "foot_width", "step_time")),
+    *((n, "finite and >= 0", _nonneg) for n in ("margin", "w", "rotation_weight", *_PER_ACTION)),
+    *((f"metrics.{n}", "finite and >= 0", _nonneg) for n in TerrainMetrics.__dataclass_fields__),
+    *((n, "finite", _finite) for n in ("actions", "p0")),
+)
+
+
+def _leaf_shape(robot: Robot, name: str) -> tuple:
+    n = robot.num_actions
+    return {"actions": (n, 3), "p0": (3,), **{k: (n,) for k in _PER_ACTION}}.get(name, ())
+
+
+def check_robot(robot) -> None:
+    """Check a :class:`Robot`'s values where they are concrete (tracers are skipped); raise on the first bad one.
+
+    What a constructor (:func:`make_robot`) checks, for a robot changed since by ``replace`` or
+    :func:`set_leaves`: leaf shapes and numeric dtypes; sizes and times finite and > 0; margin,
+    weights, costs, clearances and limits finite and >= 0; actions and p0 finite; the grown
+    footprint within the static window ``max_radius`` (a larger margin or footprint needs a robot
+    built for it, ``make_robot(..., max_margin=...)``); no action making the footprints overlap.
+    The public boundaries (:func:`ijoy_jax.foot_cost_terms`, :func:`ijoy_jax.select_step`,
+    :func:`ijoy_jax.rollout`) call it; inside a trace the same rules are flagged instead
+    (:func:`robot_supported`).
+
+    Raises:
+      TypeError: not a Robot, or a non-numeric leaf. ValueError: a bad shape or value, naming the leaf.
+    """
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot must be an ijoy_jax.robots.Robot, got {type(robot).__name__}")
+    if not isinstance(robot.metrics, TerrainMetrics):
+        raise TypeError(f"robot.metrics must be a TerrainMetrics, got {type(robot.metrics).__name__}")
+    values = {}
+    for name, *_ in _ROBOT_RULES:
+        leaf = get_leaf(robot, name)
+        if np.shape(leaf) != _leaf_shape(robot, name):
+            raise ValueError(f"robot.{name} must have shape {_leaf_shape(robot, name)}, got {np.shape(leaf)}")
+        if not _is_concrete(leaf):
+            continue
+        arr = np.asarray(leaf)
+        if arr.dtype.kind not in "biuf":
+            raise TypeError(f"robot.{name} must be a number, got dtype {arr.dtype}")
+        values[name] = arr.astype(np.float64)
+    for name, must, rule in _ROBOT_RULES:
+        if name in values and not rule(np, values[name]):
+            shown = values[name].tolist() if values[name].size <= 3 else "an array"
+            raise ValueError(f"robot.{name} must be {must}, got {shown}")
+    size = [values.get(n) for n in ("foot_length", "foot_width", "margin")]
+    if all(v is not None for v in size) and not _in_window(np, robot, *size):
+        raise ValueError(
+            f"robot's footprint {float(size[0])} x {float(size[1])} m grown by margin {float(size[2])} m does not "
+            f"fit its static window (half-diagonal max_radius = {robot.max_radius:.4f} m): build the robot with "
+            f"that margin or size (make_robot(..., max_margin=...), hrp2(margin=...)) instead of replace")
+    if all(v is not None for v in size[:2]) and "actions" in values:
+        bad = footprints_overlap(values["actions"], float(size[0]), float(size[1]))
+        if bad.any():
+            raise ValueError(f"robot.actions: {int(bad.sum())} action(s) make the swing and stance footprints "
+                             f"overlap with foot_length {float(size[0])} m, foot_width {float(size[1])} m, e.g. "
+                             f"action {values['actions'][np.argmax(bad)].tolist()}")
+
+
+def robot_supported(robot: Robot) -> jax.Array:
+    """() bool: the robot's values are ones FootCost and the selectors support (traceable).
+
+    The rules of :func:`check_robot` that a traced value can break (a margin, weight or cost below 0, a
+    size <= 0, NaN/inf, a grown footprint beyond ``max_radius``), as one flag: where it is False
+    FootCost's ``unsupported`` term is +inf and :func:`ijoy_jax.select_step` reports no valid step, with
+    ``unsupported`` set (never a negative cost or a silent stop). An action making the footprints overlap
+    (deeper than :data:`OVERLAP_TOL`), e.g. after a longer ``foot_length``, is flagged too.
+    """
+    ok = [rule(jnp, get_leaf(robot, name)) for name, _, rule in _ROBOT_RULES]
+    ok.append(_in_window(jnp, robot, robot.foot_length, robot.foot_width, robot.margin))
+    # float32 corners: overlaps shallower than OVERLAP_TOL (rounding of touching feet) are not flagged
+    ok.append(~jnp.any(_overlap(jnp, robot.actions, robot.foot_length, robot.foot_width, OVERLAP_TOL)))
+    return jnp.all(jnp.stack(ok))
 
 
 def make_robot(
@@ -263,7 +373,7 @@ def make_robot(
     reach = float(np.max(np.hypot(acts[:, 0], acts[:, 1])))
     max_swing = 2.0 * reach + float(foot_width)
     f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
-    return Robot(
+    robot = Robot(
         foot_length=f32(foot_length),
         foot_width=f32(foot_width),
         margin=f32(margin),
@@ -280,6 +390,8 @@ def make_robot(
         max_swing=max_swing,
         target_grid=target_lattice(acts),
     )
+    check_robot(robot)  # as float32 leaves: 1e39 overflows, and what passes here passes every boundary
+    return robot
 
 
 def target_lattice(actions, refine: int = 2) -> tuple[tuple, tuple, tuple]:

@@ -36,11 +36,11 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import as_array, pytree_dataclass, static_field
+from ijoy_jax._struct import as_array, check_numeric, pytree_dataclass, static_field
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain
 from ijoy_jax.footcost import validate as validate_foot_cost
-from ijoy_jax.robots import Robot, dist, mirror, side_actions, side_p0, side_sign
-from ijoy_jax.terrain import Terrain
+from ijoy_jax.robots import Robot, dist, mirror, robot_supported, side_actions, side_p0, side_sign
+from ijoy_jax.terrain import Terrain, terrain_supported
 
 METHODS = ("exhaustive", "ordered", "naive")
 KERNELS = ("xla", "pallas")
@@ -129,6 +129,12 @@ class StepChoice(NamedTuple):
       target: (3,) world pose the choice was scored against (f_i, or p_next).
       command_ok: () bool, False if the command had NaN/inf (treated as zero).
       evaluated: () int32 number of actions whose FootCost was computed.
+      unsupported: () bool, True when the robot's or terrain's values (set by
+        ``replace`` or vmap inside a trace) are outside what FootCost supports:
+        a margin or footprint beyond the static windows, a negative margin,
+        weight or cost, NaN/inf, a non-finite origin
+        (:func:`~ijoy_jax.robots.robot_supported`). Then no step is valid
+        (``valid`` False, ``cost`` +inf): the reason a robot stops.
     """
 
     pose: jax.Array
@@ -139,6 +145,7 @@ class StepChoice(NamedTuple):
     target: jax.Array
     command_ok: jax.Array
     evaluated: jax.Array
+    unsupported: jax.Array
 
 
 def ideal_step(robot: Robot, stance_side, command) -> tuple[jax.Array, jax.Array]:
@@ -217,6 +224,7 @@ def validate(terrain, robot, stance, stance_side, command, *, method="exhaustive
     inside a trace; :func:`ijoy_jax.rollout` runs it on its own arguments.
     """
     validate_foot_cost(terrain, robot, stance, stance_side, np.zeros((1, 3)), swing_from, index)
+    check_numeric("command", command)
     if np.shape(command) != (3,):
         raise ValueError(f"command must have shape (3,) (xdot, ydot, thetadot), got {np.shape(command)}")
     if method not in METHODS:
@@ -268,6 +276,8 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     else:
         best, cost, fc, evaluated = _ordered(terms_of, targets.order[fi], dists, robot.w, n, chunk)
         valid = jnp.isfinite(cost)
+    supported = robot_supported(robot) & terrain_supported(terrain)
+    valid = valid & supported  # e.g. w < 0: the search's early exit is wrong and its cost negative
     in_place = geometry.compose(stance, side_p0(robot, swing))
     # The naive joystick steps to its action whatever the terrain; the others
     # report no step (index -1, the step-in-place pose) when none is valid.
@@ -281,6 +291,7 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
         target=geometry.compose(stance, target_rel),
         command_ok=ok,
         evaluated=evaluated,
+        unsupported=~supported,
     )
 
 

@@ -190,7 +190,8 @@ def test_marking_time_with_staggered_feet_counts_as_stationary():
     assert fs[fs[:, 1] < 1.0, 0].max() < 1.0  # the right foot never gets past the block
 
 
-COUNTS = ("steps_taken", "steps_in_place", "steps_stationary", "footholds_on_obstacles", "invalid_footholds")
+COUNTS = ("steps_taken", "steps_in_place", "steps_stationary", "footholds_on_obstacles", "invalid_footholds",
+          "commands_not_finite", "unsupported_decisions")
 
 
 def test_summary_counts_are_int32_under_jit_and_vmap():
@@ -223,3 +224,40 @@ def test_naive_summary_does_not_average_invalid_footholds_away():
     taken, cost = np.asarray(smart.taken), np.asarray(smart.foot_cost, np.float64)
     assert int(s["invalid_footholds"]) == 0 and taken.sum() > 0
     assert float(s["mean_foot_cost"]) == pytest.approx(cost[taken].mean(), abs=1e-6)
+
+
+@pytest.mark.parametrize("start, match", [
+    (np.array([[0.3, 0.65, 0.0], [0.3, 0.55, 0.0]]), "overlap"),  # 10 cm apart: 13 cm wide feet overlap
+    (np.array([[0.5, 0.6, 0.0], [0.3, 0.6, 0.2]]), "overlap"),  # one behind the other, touching
+    (START[::-1], "crossed"),  # rows swapped: the left foot stands on the right
+    (np.array([[0.3, 0.505, 0.0], [0.6, 0.695, 0.0]]), "crossed"),
+])
+def test_start_feet_overlapping_or_crossed_are_refused(start, match):
+    t = ij.terrain.flat(SHAPE, RES)
+    with pytest.raises(ValueError, match=match):
+        ij.rollout(t, ROBOT, start, [0.1, 0.0, 0.0], 3)
+    ij.rollout(t, ROBOT, START, [0.1, 0.0, 0.0], 3)  # apart and uncrossed: accepted
+    jax.jit(lambda s: ij.rollout(t, ROBOT, s, [0.1, 0.0, 0.0], 3))(start)  # traced: not checked, no error
+
+
+def test_bools_and_strings_for_numbers_get_clear_errors():
+    t = ij.terrain.flat(SHAPE, RES)
+    with pytest.raises(ValueError, match="num_steps must be a positive int"):
+        ij.rollout(t, ROBOT, START, [0.1, 0, 0], True)  # was: one step
+    with pytest.raises(ValueError, match=r"first_swing must be \+1 \(left\) or -1 \(right\)"):
+        ij.rollout(t, ROBOT, START, [0.1, 0, 0], 3, first_swing="left")
+
+
+def test_summary_counts_non_finite_commands_and_unsupported_decisions():
+    """A NaN in the command stream is stepped in place; the summary says how often, so it is not silent. A robot
+    made unsupported inside a trace stops the walk, and the summary says why."""
+    t = ij.terrain.flat(SHAPE, RES)
+    commands = np.tile([0.2, 0.0, 0.0], (STEPS, 1))
+    commands[[2, 5]] = np.nan
+    s = ij.rollout(t, ROBOT, START, commands, STEPS).summary()
+    assert int(s["commands_not_finite"]) == 2 and int(s["unsupported_decisions"]) == 0
+    assert int(s["steps_taken"]) == STEPS
+    run = jax.jit(lambda m: ij.rollout(t, ROBOT.replace(margin=m), START, commands[0], STEPS).summary())
+    s = run(jnp.float32(-0.05))
+    assert int(s["unsupported_decisions"]) >= 1 and bool(s["stopped"]) and int(s["steps_taken"]) == 0
+    assert int(s["commands_not_finite"]) == 0 and int(run(jnp.float32(0.02))["unsupported_decisions"]) == 0

@@ -265,3 +265,46 @@ def test_nearest_actions_is_the_brute_force_argmin(stance, stance_side, seed):
     best = d.min(1)
     # float32 ties: the chosen action is within the tolerance of the brute-force minimum.
     np.testing.assert_array_less(d[np.arange(len(rel)), got] - best, POSE_TOL * (1 + rw) * 4)
+
+
+# What replace (or set_leaves) can set that a constructor refuses: checked where concrete, flagged when traced.
+REPLACED = [
+    (dict(margin=-0.1), "margin"),
+    (dict(margin=0.15), "static window"),  # above hrp2()'s max_margin of 0.10: the windows do not cover it
+    (dict(w=-1.0), "w"),
+    (dict(foot_length=0.40), "overlap"),  # fits a window built for it, but the stance footprint overlaps
+    (dict(foot_width=float("nan")), "foot_width"),
+    (dict(step_time=0.0), "step_time"),
+]
+
+
+@pytest.mark.parametrize("changes, match", REPLACED)
+def test_check_robot_refuses_what_replace_set(changes, match):
+    robot = robots.hrp2()
+    robots.check_robot(robot)  # the constructor's robot passes
+    bad = robot.replace(**{k: jnp.float32(v) for k, v in changes.items()})
+    if "foot_length" in changes:  # a window large enough, so that only the overlap is wrong
+        bad = dataclasses.replace(bad, max_radius=1.0)
+    with pytest.raises(ValueError, match=match):
+        robots.check_robot(bad)
+
+
+def test_check_robot_refuses_wrong_shapes_and_dtypes_and_skips_tracers():
+    robot = robots.hrp2(density=0.1)
+    with pytest.raises(ValueError, match=r"robot.w must have shape \(\)"):
+        robots.check_robot(robot.replace(w=jnp.ones(2)))
+    with pytest.raises(ValueError, match="robot.action_cost"):
+        robots.check_robot(robot.replace(action_cost=-jnp.ones(robot.num_actions)))
+    with pytest.raises(TypeError, match="robot.margin"):
+        robots.check_robot(robot.replace(margin=np.array("x")))
+    with pytest.raises(TypeError, match="Robot"):
+        robots.check_robot("hrp2")
+    jax.jit(lambda m: robots.check_robot(robot.replace(margin=m)) or m)(-1.0)  # traced: not checked, no error
+
+
+@pytest.mark.parametrize("changes, match", REPLACED)
+def test_robot_supported_flags_the_same_values_inside_jit(changes, match):
+    robot = robots.hrp2()
+    flag = jax.jit(lambda r: robots.robot_supported(r))
+    assert bool(flag(robot))
+    assert not bool(flag(robot.replace(**{k: jnp.float32(v) for k, v in changes.items()})))

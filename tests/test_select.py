@@ -266,3 +266,62 @@ def test_bad_input_at_the_boundary():
         ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.1, 0.0])
     with pytest.raises(ValueError, match="stance_side"):
         ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], 2, [0.1, 0.0, 0.0])
+
+
+def _wall_terrain():
+    free = np.ones(SHAPE, bool)
+    free[30:, :] = False  # a wall from x = 0.6 m
+    return ij.terrain.from_arrays(None, free, RES)
+
+
+@pytest.mark.parametrize("changes, match", [
+    (dict(margin=-0.1), "margin"),  # would accept a foothold overlapping the wall
+    (dict(margin=0.15), "static window"),  # would stop the robot silently, where hrp2(margin=0.15) steps
+    (dict(w=-1.0), "w"),  # would give negative costs, on which the ordered search's early exit is wrong
+    (dict(foot_length=0.40), "static window|overlap"),
+])
+def test_robot_values_set_by_replace_are_checked_at_the_boundary(changes, match):
+    t = _wall_terrain()
+    bad = ROBOT.replace(**{k: jnp.float32(v) for k, v in changes.items()})
+    with pytest.raises(ValueError, match=match):
+        ij.select_step(t, bad, [0.3, 0.5, 0.0], -1, [0.2, 0.0, 0.0], targets=TARGETS)
+    with pytest.raises(ValueError, match=match):
+        ij.foot_cost_terms(t, bad, [0.3, 0.5, 0.0], -1, [[0.3, 0.69, 0.0]])
+    with pytest.raises(ValueError, match=match):
+        ij.rollout(t, bad, [[0.3, 0.595, 0.0], [0.3, 0.405, 0.0]], [0.2, 0.0, 0.0], 2, targets=TARGETS)
+
+
+@pytest.mark.parametrize("method", ["exhaustive", "ordered"])
+@pytest.mark.parametrize("changes", [dict(margin=-0.1), dict(margin=0.15), dict(w=-1.0), dict(foot_length=0.40)])
+def test_unsupported_robot_values_inside_jit_are_flagged_not_silent(method, changes):
+    """Traced (a user's jit or vmap): no check can raise, so the choice is invalid WITH a reason, and its cost is
+    +inf, never negative."""
+    t = _wall_terrain()
+    f = jax.jit(lambda r: ij.select_step(t, r, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], method=method,
+                                         targets=TARGETS))
+    ok = f(ROBOT)
+    assert bool(ok.valid) and not bool(ok.unsupported)
+    c = f(ROBOT.replace(**{k: jnp.float32(v) for k, v in changes.items()}))
+    assert not bool(c.valid) and bool(c.unsupported) and float(c.cost) == np.inf and int(c.index) == -1
+    terms = jax.jit(lambda r: ij.foot_cost_terms(t, r, [0.5, 0.5, 0.0], -1, [[0.5, 0.69, 0.0]], action_index=[0]))(
+        ROBOT.replace(**{k: jnp.float32(v) for k, v in changes.items()}))
+    assert np.isinf(terms.unsupported).all() and np.isinf(terms.total).all()
+
+
+def test_non_finite_origin_set_by_replace():
+    t = ij.terrain.flat(SHAPE, RES)
+    nan_origin = t.replace(origin=jnp.array([jnp.nan, 0.0]))
+    with pytest.raises(ValueError, match="origin"):
+        ij.select_step(nan_origin, ROBOT, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], targets=TARGETS)
+    f = jax.jit(lambda o: ij.select_step(t.replace(origin=o), ROBOT, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0],
+                                         targets=TARGETS))
+    assert bool(f(jnp.zeros(2)).valid)
+    c = f(jnp.array([jnp.nan, 0.0]))
+    assert not bool(c.valid) and bool(c.unsupported) and np.all(np.isfinite(c.pose))
+
+
+@pytest.mark.parametrize("side", ["left", True, None])
+def test_stance_side_that_is_not_a_number_gets_a_clear_error(side):
+    t = ij.terrain.flat(SHAPE, RES)
+    with pytest.raises(ValueError, match=r"stance_side must be \+1 .* or -1"):
+        ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], side, [0.1, 0.0, 0.0], targets=TARGETS)

@@ -95,3 +95,31 @@ def test_rasterize_vmaps_over_scenes():
     boxes = jnp.stack([jnp.array([[0.5, 0.5, 0.0, 0.2, 0.2, h]]) for h in (0.1, 0.2, 0.3)])
     ts = jax.vmap(lambda b: ij.terrain.scene.rasterize(base, b))(boxes)
     np.testing.assert_allclose(np.asarray(ts.height.max(axis=(1, 2))), [0.1, 0.2, 0.3], rtol=1e-6)
+
+
+def test_check_terrain_refuses_what_replace_set():
+    t = ij.terrain.flat((20, 20), 0.02, has_height=True)
+    ij.terrain.check_terrain(t)
+    for bad, err, match in [
+        (t.replace(origin=jnp.array([jnp.nan, 0.0])), ValueError, "origin"),
+        (t.replace(origin=jnp.zeros(3)), ValueError, "origin"),
+        (t.replace(height=t.height.at[3, 3].set(jnp.inf)), ValueError, "height"),
+        (t.replace(free=t.free.astype(jnp.float32)), TypeError, "free"),
+        (t.replace(resolution=0.0), ValueError, "resolution"),
+        (t.replace(resolution=float("nan")), ValueError, "resolution"),
+    ]:
+        with pytest.raises(err, match=match):
+            ij.terrain.check_terrain(bad)
+    flag = jax.jit(ij.terrain.terrain_supported)
+    assert bool(flag(t)) and not bool(flag(t.replace(origin=jnp.array([0.0, jnp.inf]))))
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(height=None, free=np.full((4, 4), "yes")), "free"),
+    (dict(height=np.full((4, 4), "1.0")), "height"),
+    (dict(height=np.zeros((4, 4)), origin=("a", "b")), "origin"),
+    (dict(height=np.zeros((4, 4)), resolution="0.02"), "resolution"),
+])
+def test_from_arrays_refuses_strings_with_a_clear_error(kwargs, match):
+    with pytest.raises(TypeError, match=match):
+        ij.terrain.from_arrays(**kwargs)

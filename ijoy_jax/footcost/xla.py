@@ -27,7 +27,7 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import as_array
+from ijoy_jax._struct import as_array, check_numeric
 from ijoy_jax.footcost.index import (
     TerrainIndex,
     centre_off_map,
@@ -37,8 +37,8 @@ from ijoy_jax.footcost.index import (
     swing_corridor,
     window_cells,
 )
-from ijoy_jax.robots import Robot, nearest_actions, side_sign
-from ijoy_jax.terrain import Terrain
+from ijoy_jax.robots import Robot, check_robot, nearest_actions, robot_supported, side_sign
+from ijoy_jax.terrain import Terrain, check_terrain, terrain_supported
 
 SLACK = 1e-6  # m: float32 rounding allowed above the robot's float64 static window sizes
 # m: the largest world coordinate a map may reach (its origin and far corner). FootCost runs in float32
@@ -102,7 +102,10 @@ class FootCostTerms(NamedTuple):
         map) for the action's clearance.
       unsupported: 0, or +inf if the pose is not finite, the footprint,
         margin or swing is larger than the robot's static windows cover, or
-        (a traced origin) the map lies beyond :data:`MAX_COORDINATE`.
+        (a traced origin) the map lies beyond :data:`MAX_COORDINATE`, or
+        the robot's or terrain's values are ones FootCost does not support
+        (a negative margin, weight or cost, NaN, a non-finite origin:
+        :func:`~ijoy_jax.robots.robot_supported`, set by ``replace`` or vmap).
 
     Raw metrics (for plots and tests)::
 
@@ -319,7 +322,7 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     action = robot.action_cost[action_index]
     obstacle = _inf_if(blocked)
     swing = _inf_if(path_bad)
-    unsupported = _inf_if(too_big | ~finite)
+    unsupported = _inf_if(too_big | ~finite | ~(robot_supported(robot) & terrain_supported(terrain)))
     total = action + obstacle + slope + rough + bump + stepc + band + swing + unsupported
     return FootCostTerms(
         total=total,
@@ -368,6 +371,12 @@ def _foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, act
 _foot_cost_terms_jit = jax.jit(_foot_cost_terms)
 
 
+def _finite32(value) -> bool:
+    """Whether a concrete value is finite once cast to the float32 it is computed in (1e39 is not)."""
+    with np.errstate(over="ignore"):
+        return bool(np.all(np.isfinite(np.asarray(value, np.float32))))
+
+
 def validate(terrain, robot, stance, stance_side, steps, swing_from=None, index=None):
     """Check the arguments of :func:`foot_cost_terms` (raises ValueError / TypeError).
 
@@ -383,20 +392,24 @@ def validate(terrain, robot, stance, stance_side, steps, swing_from=None, index=
         raise ValueError(
             f"foot_cost takes one terrain (free of shape (nx, ny)), got {terrain.free.shape}; vmap over batches"
         )
+    check_terrain(terrain)
+    check_robot(robot)
     for name, value, shape in (("stance", stance, (3,)), ("swing_from", swing_from, (3,))):
         if value is None:
             continue
+        check_numeric(name, value)
         if np.shape(value) != shape:
             raise ValueError(f"{name} must have shape {shape}, got {np.shape(value)}")
-        if not isinstance(value, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(value))):
+        if not isinstance(value, jax.core.Tracer) and not _finite32(value):
             raise ValueError(f"{name} must be finite, got {np.asarray(value).tolist()}")
     check_frame(terrain)
+    check_numeric("steps", steps)
     s = np.shape(steps)
     if len(s) != 2 or s[1] != 3:
         raise ValueError(f"steps must have shape (N, 3) of (x, y, theta) world poses, got {s}")
     if not isinstance(stance_side, jax.core.Tracer):
         side = np.asarray(stance_side)
-        if side.shape != () or float(side) not in (-1.0, 1.0):
+        if side.shape != () or side.dtype.kind not in "iuf" or float(side) not in (-1.0, 1.0):
             raise ValueError(f"stance_side must be +1 (left stance foot) or -1 (right), got {stance_side!r}")
 
 

@@ -33,7 +33,8 @@ __all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "PLAN_KEY", "UNITS", "In
            "plot", "plot_crossing", "t_quantile"]
 
 METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
-           "invalid_footholds", "distance_along", "distance_across", "mean_deviation", "mean_foot_cost")
+           "invalid_footholds", "distance_along", "distance_across", "mean_deviation", "mean_foot_cost",
+           "commands_not_finite", "unsupported_decisions")
 """Rollout metrics (:meth:`ijoy_jax.Trajectory.summary`) in every results table."""
 
 EXTRA_METRICS = generators.METRIC_NAMES
@@ -45,7 +46,8 @@ UNITS = {
     "steps_taken": "steps", "steps_in_place": "steps", "steps_stationary": "steps", "stopped": "fraction",
     "footholds_on_obstacles": "footholds", "invalid_footholds": "footholds", "distance_along": "m",
     "distance_across": "m",
-    "mean_deviation": "m", "mean_foot_cost": "cost units", "robot.w": "cost units per m",
+    "mean_deviation": "m", "mean_foot_cost": "cost units", "commands_not_finite": "decisions",
+    "unsupported_decisions": "decisions", "robot.w": "cost units per m",
     "robot.rotation_weight": "cost units per rad",
     "robot.margin": "m", "robot.step_time": "s", "robot.foot_length": "m", "robot.foot_width": "m",
     "robot.density": "x HRP-2's 496 actions", "command.vx": "m/s", "command.vy": "m/s", "command.wz": "rad/s",

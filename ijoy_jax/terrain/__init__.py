@@ -12,9 +12,12 @@ from ijoy_jax.terrain import generators as generators
 from ijoy_jax.terrain import grid as grid
 from ijoy_jax.terrain import scene as scene
 from ijoy_jax.terrain.grid import Terrain as Terrain
+from ijoy_jax.terrain.grid import check_terrain as check_terrain
 from ijoy_jax.terrain.grid import flat as flat
 from ijoy_jax.terrain.grid import from_arrays as from_arrays
 from ijoy_jax.terrain.grid import from_image as from_image
 from ijoy_jax.terrain.grid import grid_spec as grid_spec
+from ijoy_jax.terrain.grid import terrain_supported as terrain_supported
 
-__all__ = ["Terrain", "flat", "from_arrays", "from_image", "generators", "grid", "grid_spec", "scene"]
+__all__ = ["Terrain", "check_terrain", "flat", "from_arrays", "from_image", "generators", "grid", "grid_spec", "scene",
+           "terrain_supported"]

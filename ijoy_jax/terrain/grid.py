@@ -75,16 +75,69 @@ def _is_concrete(x: Any) -> bool:
     return not isinstance(x, jax.core.Tracer)
 
 
+def _dtype(value: Any) -> np.dtype:
+    return value.dtype if hasattr(value, "dtype") else np.asarray(value).dtype
+
+
+def _check_numeric(name: str, value: Any, kinds: str = "biuf") -> None:
+    if _dtype(value).kind not in kinds:
+        raise TypeError(f"{name} must be an array of {'bools' if kinds == 'b' else 'numbers'}, got dtype "
+                        f"{_dtype(value)}")
+
+
 def _check_finite(name: str, value: Any) -> None:
     if _is_concrete(value) and not np.all(np.isfinite(np.asarray(value))):
         raise ValueError(f"{name} must be finite (no NaN or inf)")
 
 
+def check_terrain(terrain) -> None:
+    """Check a :class:`Terrain`'s values where they are concrete (tracers are skipped); raise on the first bad one.
+
+    What :func:`from_arrays` checks, for a terrain changed since by ``replace``: a 2D ``free`` of bools and a
+    numeric ``height`` of its shape, finite heights, a finite (2,) origin and a positive finite resolution.
+    The public boundaries (:func:`ijoy_jax.foot_cost_terms`, :func:`ijoy_jax.select_step`,
+    :func:`ijoy_jax.rollout`) call it; inside a trace a non-finite origin is flagged instead
+    (:func:`terrain_supported`).
+
+    Raises:
+      TypeError: not a Terrain, or a leaf of the wrong dtype. ValueError: a bad shape or value, naming it.
+    """
+    if not isinstance(terrain, Terrain):
+        raise TypeError(f"terrain must be an ijoy_jax.Terrain, got {type(terrain).__name__}")
+    res = terrain.resolution
+    if isinstance(res, bool) or not isinstance(res, (int, float, np.integer, np.floating)) or not np.isfinite(res) \
+            or res <= 0:
+        raise ValueError(f"terrain.resolution must be a positive finite number of metres, got {res!r}")
+    for name, kinds, what in (("free", "b", "bool"), ("height", "biuf", "numeric"), ("origin", "biuf", "numeric")):
+        dtype = _dtype(getattr(terrain, name))
+        if dtype.kind not in kinds:
+            raise TypeError(f"terrain.{name} must be {what}, got dtype {dtype}")
+    if np.ndim(terrain.free) != 2 or np.shape(terrain.height) != np.shape(terrain.free):
+        raise ValueError(f"terrain.free must be 2D and terrain.height of its shape, got {np.shape(terrain.free)} "
+                         f"and {np.shape(terrain.height)}")
+    if np.shape(terrain.origin) != (2,):
+        raise ValueError(f"terrain.origin must have shape (2,), got {np.shape(terrain.origin)}")
+    _check_finite("terrain.origin", terrain.origin)
+    if _is_concrete(terrain.height):
+        with jax.ensure_compile_time_eval():  # on the device, also inside a trace: one bool comes back
+            finite = bool(jnp.all(jnp.isfinite(terrain.height)))
+        if not finite:
+            raise ValueError("terrain.height must be finite (no NaN or inf)")
+
+
+def terrain_supported(terrain: Terrain) -> jax.Array:
+    """() bool: the terrain's origin is finite (traceable); where False every step is ``unsupported``."""
+    return jnp.all(jnp.isfinite(terrain.origin))
+
+
 def grid_spec(resolution, origin) -> tuple[float, jax.Array]:
     """Validate a grid's resolution (> 0, finite, metres) and origin ((2,), finite); return them typed."""
+    if isinstance(resolution, bool) or np.ndim(resolution) != 0 or _dtype(resolution).kind not in "iuf":
+        raise TypeError(f"resolution must be a number of metres, got {resolution!r}")
     res = float(resolution)
     if not np.isfinite(res) or res <= 0.0:
         raise ValueError(f"resolution must be a positive finite number of metres, got {resolution!r}")
+    _check_numeric("origin", origin)
     origin = jnp.asarray(origin, jnp.float32)
     if origin.shape != (2,):
         raise ValueError(f"origin must have shape (2,), got {origin.shape}")
@@ -122,11 +175,13 @@ def from_arrays(height, free=None, resolution: float = 0.02, origin=(0.0, 0.0)) 
     res, origin = grid_spec(resolution, origin)
     has_height = height is not None
     if has_height:
+        _check_numeric("height", height)
         height = jnp.asarray(height, jnp.float32)
         if height.ndim != 2:
             raise ValueError(f"height must be 2D (nx, ny), got shape {height.shape}")
         _check_finite("height", height)
     if free is not None:
+        _check_numeric("free", free)
         free_arr = jnp.asarray(free)
         if free_arr.ndim != 2:
             raise ValueError(f"free must be 2D (nx, ny), got shape {free_arr.shape}")
