@@ -59,7 +59,7 @@ LIMIT_TOL = 1e-5
 
 
 def frame_extent(terrain: Terrain):
-    """The largest |world coordinate| of the map (origin or far corner, m): NumPy for a concrete origin, a
+    """The largest absolute world coordinate of the map (origin or far corner, m): NumPy for a concrete origin, a
     jax scalar for a traced one (NaN if the origin is not finite)."""
     nx, ny = terrain.shape
     o = terrain.origin
@@ -452,12 +452,13 @@ def foot_cost_terms(
       :class:`FootCostTerms` of (N,) arrays.
 
     Raises:
-      ValueError / TypeError on wrong shapes, non-finite poses or a stance_side
-      that is not +-1 (values are checked when concrete; a traced non-finite
-      step gets +inf in the ``unsupported`` term), and on a map that reaches
-      beyond :data:`MAX_COORDINATE` (e.g. a UTM origin), where float32 cannot
-      resolve millimetres: shift your world frame (a traced origin there flags
-      every step ``unsupported``).
+      ValueError: wrong shapes, non-finite poses or a stance_side that is not
+        +-1 (values are checked when concrete; a traced non-finite step gets
+        +inf in the ``unsupported`` term), or a map that reaches beyond
+        :data:`MAX_COORDINATE` (e.g. a UTM origin), where float32 cannot
+        resolve millimetres: shift your world frame (a traced origin there
+        flags every step ``unsupported``).
+      TypeError: an argument of the wrong type.
     """
     stance, steps, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("steps", steps),
                                                              ("swing_from", swing_from)))

@@ -229,7 +229,8 @@ def default_config(reduction: str = "project") -> JoystickForceConfig:
 class JoystickForces(NamedTuple):
     """The joystick's force terms and what to send to the device.
 
-    Fields (forces (2,) in N along the joystick axes):
+    Fields (forces (2,) in N along the joystick axes)::
+
       centring, straight_ahead: the device-originating terms.
       kinematic: the reduced kinematics-originating term.
       total: their sum, saturated at ``max_force``.

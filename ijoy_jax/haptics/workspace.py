@@ -428,7 +428,8 @@ def workspace_halfspaces(jacobian, travel_minus, travel_plus) -> tuple[jax.Array
 class PlaneForces(NamedTuple):
     """Repulsive force and its terms.
 
-    Fields:
+    Fields::
+
       force: (3,) sum of the terms, newtons (units of C1).
       terms: (R,) magnitudes ``C1 exp(-d / lambda)`` of each plane's term (0 where not valid).
       bad_constants: () bool, True when C1 or the decay rate was invalid (non-finite,
