@@ -36,9 +36,8 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
-from ijoy_jax._struct import as_array
 from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max, window_cells
-from ijoy_jax.footcost.xla import SLACK, exceeds, far_frame, metric_term, plane_metrics, solve3, validate
+from ijoy_jax.footcost.xla import SLACK, checked_query, exceeds, far_frame, metric_term, plane_metrics, solve3
 from ijoy_jax.robots import Robot, nearest_actions
 from ijoy_jax.terrain import Terrain
 
@@ -451,9 +450,7 @@ def foot_cost_fused(
       kernel has no derivative rule): take gradients through the XLA path or
       :mod:`ijoy_jax.tune`'s relaxation.
     """
-    stance, steps, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("steps", steps),
-                                                             ("swing_from", swing_from)))
-    validate(terrain, robot, stance, stance_side, steps, swing_from, index)
+    stance, steps, swing_from = checked_query(terrain, robot, stance, stance_side, steps, swing_from, index)
     if block < 1 or block & (block - 1):
         raise ValueError(f"block must be a power of two, got {block}")
     if index is None:

@@ -413,6 +413,15 @@ def validate(terrain, robot, stance, stance_side, steps, swing_from=None, index=
             raise ValueError(f"stance_side must be +1 (left stance foot) or -1 (right), got {stance_side!r}")
 
 
+def checked_query(terrain, robot, stance, stance_side, steps, swing_from=None, index=None):
+    """The boundary of both FootCost paths: lists (of numbers or traced scalars) as float32 arrays
+    (:func:`~ijoy_jax._struct.as_array`), then :func:`validate`; returns ``(stance, steps, swing_from)``."""
+    stance, steps, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("steps", steps),
+                                                             ("swing_from", swing_from)))
+    validate(terrain, robot, stance, stance_side, steps, swing_from, index)
+    return stance, steps, swing_from
+
+
 def foot_cost_terms(
     terrain: Terrain,
     robot: Robot,
@@ -460,9 +469,7 @@ def foot_cost_terms(
         flags every step ``unsupported``).
       TypeError: an argument of the wrong type.
     """
-    stance, steps, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("steps", steps),
-                                                             ("swing_from", swing_from)))
-    validate(terrain, robot, stance, stance_side, steps, swing_from, index)
+    stance, steps, swing_from = checked_query(terrain, robot, stance, stance_side, steps, swing_from, index)
     return _foot_cost_terms_jit(terrain, robot, stance, side_sign(stance_side), steps, swing_from, action_index,
                                 index)
 
