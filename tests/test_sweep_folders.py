@@ -20,6 +20,7 @@ import pytest
 from ijoy_jax import sweep
 from ijoy_jax.sweep import config as sweep_config
 from ijoy_jax.sweep import results as sweep_results
+from ijoy_jax.sweep import seeding
 from ijoy_jax.terrain import generators as gen
 from ijoy_jax.terrain.family import ParamError
 
@@ -290,12 +291,13 @@ def test_a_big_plan_reports_its_progress_and_builds_only_what_is_asked(monkeypat
                              '[grid]\n"robot.w" = [1, 2]\n')
     full = sweep.scenarios(cfg)
     monkeypatch.setattr(sweep_config, "_PROGRESS_EVERY", 10)
+    monkeypatch.setattr(seeding, "_BLOCK", 8)  # progress is reported per vectorised block of replicates
     head = sweep.scenarios(cfg, 13, progress=True)
     err = capsys.readouterr().err
-    assert "[ijoy sweep] drawing commands: 10/13 replicates" in err
+    assert "[ijoy sweep] drawing commands: 13/13 replicates" in err  # blocks end at 8 and 13: 10 crossed at 13
     assert head.equals(full.iloc[:13])
     again = sweep.scenarios(cfg, progress=True)
-    assert again.equals(full) and capsys.readouterr().err.count("drawing commands") == 4
+    assert again.equals(full) and capsys.readouterr().err.count("drawing commands") == 4  # at 16, 24, 32, 40
     # Fixed commands need no generator per replicate, and are the draws' values exactly.
     fixed = sweep.parse_config("[sweep]\nscenarios_per_cell = 5\n[command]\nvx = 0.2\nwz = -0.0\n")
     got = sweep.scenarios(fixed, progress=True)

@@ -57,15 +57,16 @@ Sizes. A sweep is held on the host as one table row per scenario (:func:`scenari
 then the results), so its size is checked when it is parsed, before anything is
 allocated: at most :data:`MAX_SCENARIOS` scenarios, and the tables' estimated host
 memory (:func:`table_bytes`) at most :data:`HOST_MEMORY_FRACTION` of this host's
-physical memory. Drawing the commands costs tens of microseconds per replicate, so
-:func:`scenarios` reports its progress (``progress=True``, as :func:`ijoy_jax.sweep.run`
-does) for a sweep of millions of replicates, and builds only the rows it is asked for.
+physical memory. Replicate r's command comes from its own generator, drawn for all
+replicates at once (:mod:`ijoy_jax.sweep.seeding`: ~3 s for 2e7 replicates, where one
+NumPy generator per replicate took ~7 minutes); :func:`scenarios` reports its progress
+(``progress=True``, as :func:`ijoy_jax.sweep.run` does) and builds only the rows it is
+asked for.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 import os
 import sys
@@ -80,6 +81,7 @@ import numpy as np
 
 from ijoy_jax import robots
 from ijoy_jax.select import KERNELS, METHODS
+from ijoy_jax.sweep import seeding
 from ijoy_jax.terrain import generators
 from ijoy_jax.terrain.family import Family, ParamError
 
@@ -119,7 +121,7 @@ MAX_SCENARIOS = 10**8
 HOST_MEMORY_FRACTION = 0.5
 """Share of the host's physical memory a sweep's tables (:func:`table_bytes`) may need."""
 _TABLE_COPIES = 3  # the scenario table, its index by scenario while running, the loaded results at the end
-_PROGRESS_EVERY = 1 << 17  # replicates between progress lines while drawing commands (~5 s)
+_PROGRESS_EVERY = 1 << 22  # replicates between progress lines while drawing commands (~1 s)
 
 _SECTIONS = ("sweep", "robot", "terrain", "command", "grid", "random")
 _SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps", "method", "kernel",
@@ -426,7 +428,11 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     _check_size(chk, cfg)  # before cells() or scenarios() allocate anything
     # Cross-field checks (the family's ordered ranges) on every cell's resolved values, still before any compute.
     # The start zone must leave room for the terrain on the sweep's map (family.Family.validate).
-    for row in cells(cfg).to_dict("records"):  # records keep each column's type (counts stay ints)
+    # Only the terrain values matter: each distinct combination is checked once, in cell order (the first
+    # failing cell's combination fails first), not every cell (2e5 cells took 35 s).
+    swept_terrain = [k for k in (*kw["grid"], *kw["random"]) if k.startswith("terrain.")]
+    combos = cells(cfg)[swept_terrain].drop_duplicates() if swept_terrain else None
+    for row in ([{}] if combos is None else combos.to_dict("records")):  # records keep each column's type
         try:
             fam.validate({name: _terrain_of(cfg, row, name) for name in fields}, shape=cfg.shape,
                          resolution=cfg.resolution)
@@ -515,16 +521,50 @@ def cells(cfg: SweepConfig):
     import pandas as pd
 
     keys = list(cfg.grid)
-    combos = list(itertools.product(*(cfg.grid[k] for k in keys))) if keys else [()]
-    rows = [dict(zip(keys, c, strict=True)) for c in combos]
+    n_grid = math.prod(len(cfg.grid[k]) for k in keys)
+    samples = cfg.random_samples if cfg.random else 1
+    n = n_grid * samples
+    cols: dict[str, np.ndarray] = {}
+    combo = np.arange(n, dtype=np.int64) // samples  # each cell's grid combination, every draw crossed with it
+    stride = n_grid
+    for k in keys:  # the first key slowest, as itertools.product
+        values = np.asarray(cfg.grid[k])  # int64 for counts, float64 for the rest (as pandas reads the lists)
+        stride //= len(values)
+        cols[k] = values[(combo // stride) % len(values)]
     if cfg.random:
+        # One generator, the keys of a sample in turn, sample after sample: C order of Generator.uniform's
+        # broadcast, which draws each element as the scalar calls do (lo + (hi - lo) * u).
         rng = np.random.default_rng([cfg.seed, 1])
-        draws = [{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in cfg.random.items()}
-                 for _ in range(cfg.random_samples)]
-        rows = [{**r, **d} for r in rows for d in draws]
-    df = pd.DataFrame(rows, index=range(len(rows)))
-    df.insert(0, "cell", np.arange(len(rows), dtype=np.int64))
+        bounds = np.array(list(cfg.random.values()), np.float64).reshape(-1, 2)
+        draws = rng.uniform(bounds[:, 0], bounds[:, 1], size=(cfg.random_samples, len(bounds)))
+        sample = np.arange(n, dtype=np.int64) % samples
+        for j, k in enumerate(cfg.random):
+            cols[k] = draws[sample, j]
+    df = pd.DataFrame(cols, index=pd.RangeIndex(n))
+    df.insert(0, "cell", np.arange(n, dtype=np.int64))
     return df
+
+
+def _draw_commands(cfg: SweepConfig, reps: int, progress: bool) -> np.ndarray:
+    """(reps, 3): replicate r's command, ``np.random.default_rng([seed, 2, r]).uniform(lo, hi)`` per component
+    (vectorised, bit-identical: :func:`ijoy_jax.sweep.seeding.uniform_draws`); a progress line on stderr each
+    time another :data:`_PROGRESS_EVERY` replicates are done."""
+    t0 = time.perf_counter()
+    shown = 0
+
+    def report(done: int) -> None:
+        nonlocal shown
+        if done < shown:  # NumPy's own generators draw them again (seeding.uniform_draws' fallback)
+            shown = 0
+        if not progress or done // _PROGRESS_EVERY == shown // _PROGRESS_EVERY:
+            return
+        shown = done
+        rate = done / max(time.perf_counter() - t0, 1e-9)
+        print(f"[ijoy sweep] drawing commands: {done}/{reps} replicates  {rate:.0f}/s  "
+              f"ETA {(reps - done) / rate:.0f} s", file=sys.stderr, flush=True)
+
+    return seeding.uniform_draws([cfg.seed, 2], [cfg.command[k] for k in COMMAND_KEYS], reps, on_block=report,
+                                 on_replicate=lambda i: report(i + 1))
 
 
 def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: bool = False):
@@ -542,8 +582,8 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     Args:
       cfg: the sweep.
       max_scenarios: build only the first this many scenarios (None: all).
-      progress: print a progress line on stderr every ~10^5 replicates while drawing commands
-        (a sweep of millions of replicates takes minutes there).
+      progress: print a progress line on stderr every ~4e6 replicates while drawing commands
+        (~1 s each).
 
     Returns:
       pandas.DataFrame, one row per scenario, ordered by ``scenario``.
@@ -554,40 +594,55 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     n_rep = cfg.scenarios_per_cell
     total = len(c) * n_rep if max_scenarios is None else min(len(c) * n_rep, int(max_scenarios))
     reps = min(n_rep, total)  # only the replicates of the rows asked for
-    cmd = np.zeros((reps, 3))
     if all(lo == hi for lo, hi in cfg.command.values()):
-        # Fixed commands: what every replicate's draw gives (lo + (hi - lo) * u), without a generator each.
+        # Fixed commands: what every replicate's draw gives (lo + (hi - lo) * u), without drawing.
+        cmd = np.zeros((reps, 3))
         cmd[:] = [lo + (hi - lo) * 0.0 for lo, hi in (cfg.command[k] for k in COMMAND_KEYS)]
     else:
-        t0 = time.perf_counter()
-        for r in range(reps):
-            rng = np.random.default_rng([cfg.seed, 2, r])
-            cmd[r] = [rng.uniform(*cfg.command[k]) for k in COMMAND_KEYS]
-            if progress and (r + 1) % _PROGRESS_EVERY == 0:
-                rate = (r + 1) / (time.perf_counter() - t0)
-                print(f"[ijoy sweep] drawing commands: {r + 1}/{reps} replicates  {rate:.0f}/s  "
-                      f"ETA {(reps - r - 1) / rate:.0f} s", file=sys.stderr, flush=True)
-    cell_idx = np.arange(total, dtype=np.int64) // n_rep
-    rep = np.arange(total, dtype=np.int64) % n_rep
-    cell_idx = c["cell"].to_numpy()[cell_idx]
-    cols: dict[str, Any] = {"scenario": np.arange(len(cell_idx), dtype=np.int64), "cell": cell_idx,
-                            "replicate": rep.astype(np.int64)}
-    for name, default in ROBOT_DEFAULTS.items():
-        key = f"robot.{name}"
-        if key in c:
-            cols[key] = c[key].to_numpy(np.float64)[cell_idx]
-        else:
-            cols[key] = np.full(len(cell_idx), float(cfg.robot.get(name, default)))
-    defaults = cfg.params_class()
+        cmd = _draw_commands(cfg, reps, progress)
+    # Columns (in this order): ids, robot values, terrain values, commands. Each is written once into its
+    # final place, by broadcasting a value per cell or per replicate: the float64 ones into one 2D block that
+    # becomes the DataFrame's without a copy, the int64 ones inserted beside it (at 2e7 rows, np.full and
+    # fancy indexing per column, then pandas stacking the columns into a block, took ~22 s of 28).
     rules = generators.FAMILIES[cfg.family].rules
-    for f in dataclasses.fields(cfg.params_class):
-        key = f"terrain.{f.name}"
-        is_int = rules[f.name].integer
+    fields = [f.name for f in dataclasses.fields(cfg.params_class)]
+    names = ["scenario", "cell", "replicate", *(f"robot.{n}" for n in ROBOT_DEFAULTS),
+             *(f"terrain.{n}" for n in fields), *(f"command.{k}" for k in COMMAND_KEYS)]
+    ints = {"scenario", "cell", "replicate", *(f"terrain.{n}" for n in fields if rules[n].integer)}
+    floats = [n for n in names if n not in ints]
+    block = np.empty((len(floats), total))
+    cols: dict[str, np.ndarray] = {n: block[i] for i, n in enumerate(floats)}
+    cols.update({n: np.empty(total, np.int64) for n in names if n in ints})
+    full, rem = divmod(total, n_rep)  # scenario s is replicate s % n_rep of cell s // n_rep
+
+    def per_cell(out, values):
+        """out[s] = values[s // n_rep]: a broadcast write per cell row (no index arrays)."""
+        out[:full * n_rep].reshape(full, n_rep)[:] = values[:full, None]
+        if rem:
+            out[full * n_rep:] = values[full]
+
+    def per_replicate(out, values):
+        """out[s] = values[s % n_rep] (``values`` has min(n_rep, total) rows)."""
+        if full:
+            out[:full * n_rep].reshape(full, n_rep)[:] = values[None, :]
+        out[full * n_rep:] = values[:rem]
+
+    cols["scenario"][:] = np.arange(total, dtype=np.int64)
+    per_cell(cols["cell"], c["cell"].to_numpy())  # cells() numbers its rows 0, 1, ...
+    per_replicate(cols["replicate"], np.arange(reps, dtype=np.int64))
+    defaults = cfg.params_class()
+    fixed = {**{f"robot.{n}": cfg.robot.get(n, d) for n, d in ROBOT_DEFAULTS.items()},
+             **{f"terrain.{n}": cfg.terrain_params.get(n, getattr(defaults, n)) for n in fields}}
+    for key, value in fixed.items():
+        out = cols[key]
         if key in c:
-            v = c[key].to_numpy()[cell_idx]
+            per_cell(out, c[key].to_numpy().astype(out.dtype))
         else:
-            v = np.full(len(cell_idx), cfg.terrain_params.get(f.name, getattr(defaults, f.name)))
-        cols[key] = v.astype(np.int64 if is_int else np.float64)
+            out[:] = np.asarray(value).astype(out.dtype)
     for j, k in enumerate(COMMAND_KEYS):
-        cols[f"command.{k}"] = cmd[rep, j]
-    return pd.DataFrame(cols)
+        per_replicate(cols[f"command.{k}"], cmd[:, j])
+    df = pd.DataFrame(block.T, columns=floats, copy=False)
+    for i, n in enumerate(names):
+        if n in ints:
+            df.insert(i, n, pd.Series(cols[n], index=df.index, copy=False))  # a bare array would be copied
+    return df
