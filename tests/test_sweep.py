@@ -1,9 +1,9 @@
 """Tests of ijoy_jax.sweep: validation, expansion, results against direct rollouts, no recompiles,
 resume after SIGKILL, loading, and the ``ijoy sweep`` command line.
 
-Sizes are tiny (2D 60 x 50 map at 4 cm, 19 actions, 6 steps) and every in-process sweep shares one
-static configuration, so the chunk function compiles once for the module (plus once for a second
-density, on purpose).
+Sizes are tiny (tests/_sweep_util.py: 2D 60 x 50 map at 4 cm, 19 actions, 6 steps) and every in-process
+sweep shares one static configuration, so the chunk function compiles once for the module (plus once for a
+second density, on purpose).
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.stats
+from _sweep_util import tiny_sweep, write  # tests/ is on sys.path (pytest rootdir import)
 
 import ijoy_jax as ij
 from ijoy_jax import select, sweep
@@ -36,42 +37,8 @@ FLOAT_TOL = 1e-5
 # t quantiles: the table has 6 decimals; the Cornish-Fisher expansion beyond df = 30 is within 1e-7.
 T_TOL = 1e-6
 
-BASE = """
-[sweep]
-name = "tiny"
-seed = 3
-scenarios_per_cell = 3
-num_steps = 6
-method = "exhaustive"
-
-[robot]
-density = 0.25
-
-[terrain]
-family = "obstacles"
-shape = [60, 50]
-resolution = 0.04
-max_count = 8
-
-[terrain.params]
-count = 6
-
-[command]
-vx = [0.1, 0.3]
-vy = [-0.05, 0.05]
-wz = 0.0
-
-[grid]
-"robot.w" = [0.5, 2.0]
-"robot.margin" = [0.0, 0.05]
-"""
+BASE = tiny_sweep(margins=True)
 CHUNK = 2  # 12 scenarios -> 6 chunks
-
-
-def write(tmp_path: Path, text: str, name: str = "s.toml") -> Path:
-    p = tmp_path / name
-    p.write_text(text)
-    return p
 
 
 @pytest.fixture(scope="module")

@@ -1,8 +1,8 @@
 """Sweep folders and sweep sizes: parts record their plan, one run per folder (a lock), sizes checked before
 any allocation, and a start zone that leaves room for the terrain (issue #22).
 
-Sizes are those of tests/test_sweep.py (2D 60 x 50 map at 4 cm, 19 actions, 6 steps): one compile of the
-chunk function for the module.
+The sweep is tests/_sweep_util.py's tiny one (2D 60 x 50 map at 4 cm, 19 actions, 6 steps), as in
+tests/test_sweep.py, with a grid of robot.w alone: one compile of the chunk function for the module.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _sweep_util import tiny_sweep, write  # tests/ is on sys.path (pytest rootdir import)
 
 from ijoy_jax import sweep
 from ijoy_jax.sweep import config as sweep_config
@@ -24,42 +25,10 @@ from ijoy_jax.sweep import seeding
 from ijoy_jax.terrain import generators as gen
 from ijoy_jax.terrain.family import ParamError
 
-TINY = """
-[sweep]
-name = "tiny"
-seed = 3
-scenarios_per_cell = 3
-num_steps = 6
-
-[robot]
-density = 0.25
-
-[terrain]
-family = "obstacles"
-shape = [60, 50]
-resolution = 0.04
-max_count = 8
-
-[terrain.params]
-count = 6
-
-[command]
-vx = [0.1, 0.3]
-
-[grid]
-"robot.w" = [0.5, 2.0]
-"""
+TINY = tiny_sweep(margins=False)
 CHUNK = 2  # 6 scenarios -> 3 chunks
 # A second run of two real processes gets this long to refuse (it compiles nothing before it does), s.
-REFUSE_S = 120
-# A second run of two real processes gets this long to refuse (it compiles nothing before it does), s.
 REFUSE_S = 60
-
-
-def write(tmp_path: Path, text: str, name: str = "s.toml") -> Path:
-    p = tmp_path / name
-    p.write_text(text)
-    return p
 
 
 # --------------------------------------------------------------------------- 4. the start zone
