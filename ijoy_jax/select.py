@@ -37,10 +37,10 @@ from jax import lax
 
 from ijoy_jax import geometry
 from ijoy_jax._struct import as_array, check_numeric, pytree_dataclass, static_field
-from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain
+from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
 from ijoy_jax.footcost import validate as validate_foot_cost
-from ijoy_jax.robots import Robot, dist, mirror, robot_supported, side_actions, side_p0, side_sign
-from ijoy_jax.terrain import Terrain, terrain_supported
+from ijoy_jax.robots import Robot, dist, mirror, side_actions, side_p0, side_sign
+from ijoy_jax.terrain import Terrain
 
 METHODS = ("exhaustive", "ordered", "naive")
 KERNELS = ("xla", "pallas")
@@ -132,8 +132,9 @@ class StepChoice(NamedTuple):
       unsupported: () bool, True when the robot's or terrain's values (set by
         ``replace`` or vmap inside a trace) are outside what FootCost supports:
         a margin or footprint beyond the static windows, a negative margin,
-        weight or cost, NaN/inf, a non-finite origin
-        (:func:`~ijoy_jax.robots.robot_supported`). Then no step is valid
+        weight or cost, NaN/inf, a non-finite origin or height, a map beyond
+        ``MAX_COORDINATE`` (:func:`~ijoy_jax.footcost.xla.query_supported`).
+        Then no step is valid
         (``valid`` False, ``cost`` +inf): the reason a robot stops.
     """
 
@@ -276,7 +277,7 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     else:
         best, cost, fc, evaluated = _ordered(terms_of, targets.order[fi], dists, robot.w, n, chunk)
         valid = jnp.isfinite(cost)
-    supported = robot_supported(robot) & terrain_supported(terrain)
+    supported = query_supported(terrain, robot)  # FootCost's own rule: every candidate was flagged by it
     valid = valid & supported  # e.g. w < 0: the search's early exit is wrong and its cost negative
     in_place = geometry.compose(stance, side_p0(robot, swing))
     # The naive joystick steps to its action whatever the terrain; the others

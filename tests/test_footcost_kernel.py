@@ -354,3 +354,180 @@ def test_corridor_broad_phase_keeps_every_swing_path_rejection():
         assert (only_path.sum() >= 20) == wall, only_path.sum()  # steps that only the swing path rejects
         for f in fused.values():
             _assert_same(np.asarray(terms.total), np.asarray(f(terrain, index)))
+
+
+# --------------------------------------------------------------------------- issue #22: one flag, both paths
+
+SMALL = ij.robots.hrp2(margin=0.02, density=0.1)  # 10 actions: small interpreted programs
+FLAT = ij.terrain.from_arrays(np.zeros(SHAPE, np.float32), np.ones(SHAPE, bool), RES)
+STANCE = jnp.array([0.45, 0.4, 0.0], jnp.float32)  # a right foot; the left one swings to y ~ 0.59
+SWING = jnp.array([0.45, 0.59, 0.0], jnp.float32)
+HOSTILE = [np.nan, np.inf, -np.inf, 1e30, -1e30, 1e-30, -1.0, 0.0, -0.0, 1e39, 0.5, 3.0]
+"""Values a careless or hostile user sets by ``replace`` or vmap inside a jit (1e39 is inf in float32)."""
+COST_TERMS = ("action", "obstacle", "slope", "roughness", "bump", "step", "band", "swing_path", "unsupported")
+
+
+@jax.jit
+def _both_traced(terrain, robot):
+    """(XLA terms, fused totals) of SMALL's action steps with terrain and robot traced (one compile each)."""
+    steps = ij.action_steps(robot, STANCE, -1)
+    idx = jnp.arange(robot.num_actions)
+    kw = dict(swing_from=SWING, action_index=idx)
+    return (footcost.foot_cost_terms(terrain, robot, STANCE, -1, steps, **kw),
+            foot_cost_fused(terrain, robot, STANCE, -1, steps, **kw))
+
+
+def _refused(terrain, robot) -> bool:
+    """Whether the boundary checks refuse these (concrete) values."""
+    try:
+        ij.robots.check_robot(robot)
+        ij.terrain.check_terrain(terrain)
+        footcost.xla.check_frame(terrain)
+    except ValueError:
+        return True
+    return False
+
+
+def _assert_flagged_alike(terrain, robot):
+    """Both paths on traced values: no NaN anywhere, the same steps +inf, and every step +inf with the
+    ``unsupported`` term set exactly where query_supported (the one rule) is False, which is exactly where the
+    concrete boundary checks refuse the same values."""
+    terms, fused = _both_traced(terrain, robot)
+    xla, fused = np.asarray(terms.total), np.asarray(fused)
+    for name in COST_TERMS:
+        assert not np.isnan(np.asarray(getattr(terms, name))).any(), name
+    assert not np.isnan(xla).any() and not np.isnan(fused).any()
+    supported = bool(footcost.query_supported(terrain, robot))
+    assert supported == (not _refused(terrain, robot))
+    unsupported = np.isinf(np.asarray(terms.unsupported))
+    if not supported:
+        assert unsupported.all() and np.isinf(xla).all() and np.isinf(fused).all()
+    else:
+        assert not unsupported.any() and (xla >= 0).all() and np.isfinite(xla).any()
+        _assert_same(xla, fused)
+    return supported
+
+
+ROBOT_FIELDS = ["margin", "foot_length", "foot_width", "w", "rotation_weight", "metrics.slope_weight",
+                "metrics.slope_limit", "metrics.band_limit", "action_cost", "clearance", "max_step_height"]
+
+
+@settings(max_examples=30, deadline=None)
+@given(field=st.sampled_from([*ROBOT_FIELDS, "origin", "height"]), v=st.sampled_from(HOSTILE),
+       cell=st.tuples(st.integers(0, SHAPE[0] - 1), st.integers(0, SHAPE[1] - 1)))
+def test_both_paths_flag_hostile_traced_robot_and_terrain_values_alike(field, v, cell):
+    """The fused kernel called inside a jit applies the XLA path's rule (footcost.query_supported: the robot's,
+    the terrain's and the frame's) for the same hostile traced values, with the same outcome per step."""
+    robot, terrain = SMALL, FLAT
+    if field in ("action_cost", "clearance", "max_step_height"):
+        robot = robot.replace(**{field: jnp.full(robot.num_actions, v, jnp.float32)})
+    elif field == "origin":
+        terrain = terrain.replace(origin=jnp.array([v, 0.0], jnp.float32))
+    elif field == "height":
+        terrain = terrain.replace(height=terrain.height.at[cell].set(v))
+    else:
+        robot = ij.robots.set_leaf(robot, field, jnp.float32(v))
+    _assert_flagged_alike(terrain, robot)
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf])
+@pytest.mark.parametrize("where", ["under the stance foot", "under a step", "in a swing corridor", "far away"])
+def test_non_finite_heights_inside_jit_flag_every_step_on_both_paths(value, where):
+    """A NaN/inf height that reaches a trace (replace, vmap) is refused where concrete; inside the jit every step
+    is +inf with the ``unsupported`` term, on both paths, with every cost term and raw metric free of NaN, and
+    select_step reports ``unsupported`` (never a NaN cost, never a valid step); the finite map is not."""
+    cell = {"under the stance foot": (22, 20), "under a step": (22, 30), "in a swing corridor": (22, 25),
+            "far away": (2, 45)}[where]
+    terrain = FLAT.replace(height=FLAT.height.at[cell].set(value))
+    assert not _assert_flagged_alike(terrain, SMALL)
+    terms, _ = _both_traced(terrain, SMALL)
+    for name in ("slope_angle", "roughness_m", "bump_m", "step_height_m", "band_m", "foot_height_m"):
+        assert np.isfinite(np.asarray(getattr(terms, name))).all(), name
+    choice = _select_traced(terrain, SMALL)
+    assert bool(choice.unsupported) and not bool(choice.valid) and np.isinf(float(choice.cost))
+    assert np.isfinite(np.asarray(choice.pose)).all()
+    assert _assert_flagged_alike(FLAT, SMALL)
+    assert not bool(_select_traced(FLAT, SMALL).unsupported) and bool(_select_traced(FLAT, SMALL).valid)
+
+
+@jax.jit
+def _select_traced(terrain, robot):
+    return select.select_step(terrain, robot, STANCE, -1, jnp.array([0.1, 0.0, 0.0]), swing_from=SWING,
+                              targets=ij.make_targets(SMALL), method="exhaustive")
+
+
+def test_a_plane_fit_beyond_float32_is_flagged_not_a_flat_valid_step():
+    """Heights too large for the plane fit's float32 sums (finite, so the boundary accepts them) gave a NaN fit
+    that both paths replaced by a flat plane: the step was valid with zero metrics. Now the steps whose fit
+    overflows are flagged ``unsupported`` on the XLA path and +inf on the kernel; the others stay valid."""
+    terrain = FLAT.replace(height=FLAT.height.at[22, 36].set(3e38))  # under the three steps to (0.45, 0.73)
+    terms, fused = _both_traced(terrain, SMALL)
+    xla, fused, unsupported = (np.asarray(a) for a in (terms.total, fused, terms.unsupported))
+    np.testing.assert_array_equal(np.isinf(unsupported), np.isin(np.arange(SMALL.num_actions), [5, 6, 7]))
+    assert not np.isnan(xla).any() and not np.isnan(fused).any()
+    np.testing.assert_array_equal(np.isinf(fused), np.isinf(xla))
+    assert np.isfinite(xla).sum() == SMALL.num_actions - 3  # the other steps stay valid
+
+
+# --------------------------------------------------------------------------- the band where the paths may differ
+
+BAND_METRICS = {"slope": "slope_angle", "roughness": "roughness_m", "bump": "bump_m", "step": "step_height_m",
+                "band": "band_m"}
+
+
+def _probe(robot, metric):
+    """The robot with every cost 0 but ``metric``'s weight 1 and every limit out of reach: a total is the metric."""
+    zero, one, far = jnp.float32(0.0), jnp.float32(1.0), jnp.float32(10.0)
+    weights = {f"{k}_weight": one if k == metric else zero for k in BAND_METRICS}
+    limits = {f"{k}_limit": far for k in BAND_METRICS if k != "step"}
+    return robot.replace(metrics=robot.metrics.replace(**weights, **limits), action_cost=zero * robot.action_cost,
+                         max_step_height=jnp.full_like(robot.max_step_height, far))
+
+
+@jax.jit
+def _metric_both(terrain, robot, stance):
+    """(XLA terms, kernel totals) of every action at ``stance``, no swing corridor."""
+    steps = ij.action_steps(robot, stance, -1)
+    idx = jnp.arange(robot.num_actions)
+    return (footcost.foot_cost_terms(terrain, robot, stance, -1, steps, action_index=idx),
+            foot_cost_fused(terrain, robot, stance, -1, steps, action_index=idx))
+
+
+# Measured largest |kernel - XLA| of each metric (CPU, interpreted kernel; 1000 maps like these of 496 steps, and
+# 300 of 45 deg ramps): slope 7.7e-6 rad (5.0e-6 on 20 deg ramps), roughness 4.9e-7 m, bump 8.7e-7 m, band
+# 1.2e-6 m, step height 1.2e-7 m at altitude 0 plus one float32 ulp of the altitude (3.8e-6 m at 50 m, 6.1e-5 m
+# at 1000 m): the numbers in footcost.xla.LIMIT_TOL's comment. Each must stay below LIMIT_TOL, so that a metric
+# at its limit is accepted by both paths; the altitudes here stay below 64 m, where one ulp is 3.8e-6 m.
+BAND_ALTITUDES = (0.0, 50.0, -60.0)
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 2**16), altitude=st.sampled_from(BAND_ALTITUDES),
+       slope_deg=st.sampled_from([20.0, 0.0, 5.0]) | st.floats(0.0, 45.0),
+       noise=st.sampled_from([0.0, 0.005]), step=st.sampled_from([0.0, 0.02, 0.1]))
+def test_the_paths_metrics_differ_by_less_than_limit_tol_on_hostile_near_limit_maps(seed, altitude, slope_deg,
+                                                                                    noise, step):
+    """Ramps at and around the 20 deg limit (and up to 45 deg), roughness near its 1 cm limit, steps near the 10 cm
+    limit, at altitude: each metric as both paths compute it (a kernel total with one weight 1 is that metric),
+    for every step of a stance. Where they differ, a decision may differ only for a metric within that
+    difference of limit + LIMIT_TOL; the largest difference (the band) stays below LIMIT_TOL."""
+    rng = np.random.default_rng(seed)
+    x = np.arange(SHAPE[0])[:, None] * RES
+    y = np.arange(SHAPE[1])[None, :] * RES
+    phi = rng.uniform(-np.pi, np.pi)
+    h = np.tan(np.radians(slope_deg)) * (x * np.cos(phi) + y * np.sin(phi)) + noise * rng.standard_normal(SHAPE)
+    h[rng.integers(10, 38):, :] += step
+    terrain = ij.terrain.from_arrays((h + altitude).astype(np.float32), None, RES)
+    stance = jnp.asarray([*rng.uniform(0.35, 0.6, 2), rng.uniform(-np.pi, np.pi)], jnp.float32)
+    robot = ij.robots.hrp2(margin=0.02)
+    tol = footcost.xla.LIMIT_TOL
+    for metric, field in BAND_METRICS.items():
+        terms, fused = _metric_both(terrain, _probe(robot, metric), stance)
+        xla, fused = np.asarray(getattr(terms, field)), np.asarray(fused)
+        if metric == "step":
+            xla = np.abs(xla)
+        both = np.isfinite(fused)
+        np.testing.assert_array_equal(both, np.isfinite(np.asarray(terms.total)))  # off the map on both, or neither
+        assert both.sum() >= 100
+        band = float(np.max(np.abs(fused[both] - xla[both])))
+        assert band < tol, (metric, band)

@@ -96,10 +96,17 @@ def test_terrain_replace_is_checked_at_the_boundary_and_flagged_inside_jit(field
         refused = True
     else:
         refused = False
-    if field == "origin":  # the one terrain value a trace can carry: flagged, never a valid step
-        c = _select_jit(TERRAIN_2D.replace(origin=bad.origin), ROBOT, jnp.asarray(STANCE), jnp.zeros(3))
+        if field == "origin":  # finite, yet maybe beyond where float32 holds millimetres: FootCost's frame check
+            try:
+                ij.footcost.xla.check_frame(bad)
+            except ValueError as e:
+                assert "world frame" in str(e), e
+                refused = True
+    if field in ("origin", "height"):  # the terrain values a trace can carry: flagged, never a valid step
+        traced = (TERRAIN_2D if field == "origin" else TERRAIN_25D).replace(**{field: getattr(bad, field)})
+        c = _select_jit(traced, ROBOT, jnp.asarray(STANCE), jnp.zeros(3))
         assert bool(c.unsupported) == refused and np.all(np.isfinite(np.asarray(c.pose)))
-        assert not (bool(c.valid) and refused)
+        assert not (bool(c.valid) and refused) and not np.isnan(float(c.cost))
 
 
 # ----- robot constructors and replace -----

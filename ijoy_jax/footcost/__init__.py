@@ -18,6 +18,7 @@ from ijoy_jax.footcost.xla import MAX_COORDINATE as MAX_COORDINATE
 from ijoy_jax.footcost.xla import FootCostTerms as FootCostTerms
 from ijoy_jax.footcost.xla import foot_cost as foot_cost
 from ijoy_jax.footcost.xla import foot_cost_terms as foot_cost_terms
+from ijoy_jax.footcost.xla import query_supported as query_supported
 from ijoy_jax.footcost.xla import validate as validate
 
 __all__ = [
@@ -31,6 +32,7 @@ __all__ = [
     "index",
     "index_terrain",
     "pallas",
+    "query_supported",
     "swing_corridor",
     "validate",
     "window_cells",

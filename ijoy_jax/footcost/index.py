@@ -55,7 +55,9 @@ def index_terrain(terrain: Terrain, robot: Robot) -> TerrainIndex:
     occ = (~terrain.free).astype(jnp.int32)
     counts = jnp.cumsum(occ, axis=-1, dtype=jnp.int32)  # int32 also under x64
     before = jnp.concatenate([jnp.zeros(occ.shape[:-1] + (1,), jnp.int32), counts], -1)
-    h = terrain.height
+    # A non-finite height (only possible traced: check_terrain refuses it) flags every step unsupported
+    # (terrain_supported); as 0 in the tables it leaves every term finite instead of NaN.
+    h = jnp.where(jnp.isfinite(terrain.height), terrain.height, jnp.zeros((), terrain.height.dtype))
     ny = h.shape[-1]
     levels = [h]
     span = 1

@@ -22,8 +22,12 @@ unsupported flags); sums run in a different order, so totals agree to float32
 rounding. Validity follows one rule for every limit on both paths
 (:func:`~ijoy_jax.footcost.xla.exceeds`: beyond the limit by more than
 ``LIMIT_TOL``), so a metric at its limit to rounding is valid on both; only one
-within rounding of limit + ``LIMIT_TOL`` may be decided differently (the tests
-measure both).
+within the measured band of limit + ``LIMIT_TOL`` (~8e-6 rad for slopes, ~1e-6 m
+for the height metrics, plus an ulp of the altitude for step heights:
+:mod:`ijoy_jax.footcost.xla`) may be decided differently. The robot's and
+terrain's values are flagged by the same rule as the XLA path's
+(:func:`~ijoy_jax.footcost.xla.query_supported`): a step of an unsupported
+query is +inf, also where the kernel is called directly inside a jit.
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
 from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max, window_cells
-from ijoy_jax.footcost.xla import SLACK, checked_query, exceeds, far_frame, metric_term, plane_metrics, solve3
+from ijoy_jax.footcost.xla import SLACK, checked_query, exceeds, metric_term, plane_metrics, query_supported, solve3
 from ijoy_jax.robots import Robot, nearest_actions
 from ijoy_jax.terrain import Terrain
 
@@ -322,6 +326,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
                                                     (zero_f, zero_f, zero_f, finite & False))
         total = total + jnp.where(blocked, jnp.inf, 0.0)
         ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(cc)
+        too_big = too_big | ~ok  # a fit beyond float32's range (plane_metrics' ``fitted``)
         height = jnp.where(ok, a + h_ref, h_ref)
         slope = jnp.where(ok, jnp.arctan(jnp.sqrt(b * b + cc * cc)), 0.0)
         rough = jnp.where(ok, abs_sum / n, 0.0)
@@ -367,7 +372,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
             path_bad = path_off | exceeds(path_height, cand_ref[_CLEARANCE, :])
             total = total + jnp.where(path_bad, jnp.inf, 0.0)
 
-    out_ref[...] = total + jnp.where(too_big | ~finite, jnp.inf, 0.0)
+    out_ref[...] = jnp.where(too_big | ~finite, jnp.inf, total)  # +inf also where an unsupported value made NaN
 
 
 def _any(flags):
@@ -471,20 +476,23 @@ def foot_cost_fused(
     zero = f32(0.0)
     stance_h = start_h = zero
     swx = swy = zero
+    unsupported = ~query_supported(terrain, robot)  # the XLA path's rule, for the whole query
     _, blocks, window, _ = index.height_sums.shape
     window = (window - 1) // 2  # rows per window step (>= k, the longest span)
     if has_height:
-        stance_h = plane_metrics(terrain, index, robot, stance).height
+        stance_plane = plane_metrics(terrain, index, robot, stance)
+        stance_h, unsupported = stance_plane.height, unsupported | ~stance_plane.fitted
         if has_swing:
             swing_from = jnp.asarray(swing_from, jnp.float32)
-            start_h = plane_metrics(terrain, index, robot, swing_from).height
+            start_plane = plane_metrics(terrain, index, robot, swing_from)
+            start_h, unsupported = start_plane.height, unsupported | ~start_plane.fitted
             swx, swy = swing_from[0] - terrain.origin[0], swing_from[1] - terrain.origin[1]
     ghl = 0.5 * robot.foot_length + robot.margin
     ghw = 0.5 * robot.foot_width + robot.margin
     m = robot.metrics
     par = [terrain.origin[0], terrain.origin[1], ghl, ghw, 0.5 * robot.foot_length, 0.5 * robot.foot_width,
            stance_h, start_h, swx, swy, robot.max_swing + SLACK, robot.foot_width,
-           jnp.where((jnp.hypot(ghl, ghw) > robot.max_radius + SLACK) | far_frame(terrain), 1.0, 0.0),
+           jnp.where(unsupported, 1.0, 0.0),
            m.slope_weight, m.slope_limit, m.roughness_weight, m.roughness_limit, m.bump_weight, m.bump_limit,
            m.step_weight, m.band_weight, m.band_limit]
     par = jnp.stack([f32(q) for q in par] + [zero] * (_NUM_PAR - len(par)))

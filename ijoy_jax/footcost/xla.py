@@ -15,6 +15,16 @@ above the higher of the two footholds invalidates the step.
 
 FootCost is never negative and invalid is +inf, never a large finite number:
 the paper's early-exit rule for the ordered search relies on both.
+
+Limits follow one rule on both paths (this one and the fused kernel of
+:mod:`ijoy_jax.footcost.pallas`): a metric rejects a step when it exceeds its
+limit by more than :data:`LIMIT_TOL` (:func:`exceeds`). The two paths sum in
+different orders, so their metrics differ by float32 rounding, measured up to
+~8e-6 rad for slopes and ~1e-6 m for the height metrics (plus one float32 ulp
+of the terrain's altitude for step heights and the swing corridor; see
+LIMIT_TOL's comment in the source): a decision whose metric lies within that
+band of limit + LIMIT_TOL may differ between the paths; any other decision is
+the same on both.
 """
 
 from __future__ import annotations
@@ -49,12 +59,18 @@ SLACK = 1e-6  # m: float32 rounding allowed above the robot's float64 static win
 # float64, on your side) from every pose and add it back to the returned ones.
 MAX_COORDINATE = 8192.0
 # rad or m (the metric's unit): how far a metric may exceed its limit and still pass (:func:`exceeds`). The
-# XLA path and the fused kernel sum the plane fit in different orders, so one metric differs between them by
-# float32 rounding, measured up to ~1e-6 (a slope within 1e-6 of 20 deg was decided differently in 1 of 2048
-# decisions). A metric exactly at its limit (a 20 deg ramp, a step as high as the limit: what a constructed
-# map gives) is then accepted by both, as is anything within LIMIT_TOL - 1e-6 of it; the paths can still
-# differ only for a metric within rounding of limit + LIMIT_TOL. 1e-5 is ten times that rounding and
-# physically nothing (10 micrometres, 10 microradians: 1e-3 of the smallest default limit, 1 cm roughness).
+# XLA path and the fused kernel sum the plane fit in different orders (the kernel from prefix sums over windows
+# of 2B rows, whose rounding grows with the relief within a window), so one metric differs between them by
+# float32 rounding: the *band*. Measured (tests/test_footcost_kernel.py, ...differ_by_less_than_limit_tol...;
+# 1000 hostile maps of 496 steps, CPU, interpreted kernel): slope 7.7e-6 rad on ramps up to 45 deg (5.0e-6 on
+# 20 deg ramps), roughness 4.9e-7 m, bump 8.7e-7 m, safety band 1.2e-6 m; step height (and the swing corridor's
+# height, both from absolute plane heights) 1.2e-7 m plus one float32 ulp of the terrain's altitude (3.8e-6 m
+# at 50 m, 6.1e-5 m at 1000 m). A decision can differ between the paths only for a metric within the band of
+# limit + LIMIT_TOL: near a limit, trust neither path to within the band. A metric exactly at its limit (a
+# 20 deg ramp, a step as high as the limit: what a constructed map gives) is accepted by both wherever the band
+# is below LIMIT_TOL: every metric on maps below 128 m of altitude (beyond, the step height's ulp exceeds it:
+# subtract the altitude, as for MAX_COORDINATE). 1e-5 is above every band measured there and physically
+# nothing (10 micrometres, 10 microradians: 1e-3 of the smallest default limit, 1 cm roughness).
 LIMIT_TOL = 1e-5
 
 
@@ -101,11 +117,14 @@ class FootCostTerms(NamedTuple):
       swing_path: 0, or +inf if the swing corridor is too high (or leaves the
         map) for the action's clearance.
       unsupported: 0, or +inf if the pose is not finite, the footprint,
-        margin or swing is larger than the robot's static windows cover, or
-        (a traced origin) the map lies beyond :data:`MAX_COORDINATE`, or
-        the robot's or terrain's values are ones FootCost does not support
-        (a negative margin, weight or cost, NaN, a non-finite origin:
-        :func:`~ijoy_jax.robots.robot_supported`, set by ``replace`` or vmap).
+        margin or swing is larger than the robot's static windows cover, a
+        plane fit overflows float32 (heights beyond ~1e35 m), or the robot's
+        or terrain's values are ones FootCost does not support
+        (:func:`query_supported`: a negative margin, weight or cost, NaN, a
+        non-finite origin or height, a map beyond :data:`MAX_COORDINATE`,
+        set by ``replace`` or vmap inside a jit). The total is then +inf,
+        and a term such a value makes NaN (a NaN weight) reads +inf: no
+        cost term is ever NaN.
 
     Raw metrics (for plots and tests)::
 
@@ -142,6 +161,7 @@ class Plane(NamedTuple):
     roughness: jax.Array  # mean |residual| under the foot (m)
     bump: jax.Array  # largest residual under the foot (m)
     band: jax.Array  # largest |residual| in the safety band (m)
+    fitted: jax.Array  # () bool: the fit is finite (False: heights beyond float32's range; metrics then 0)
 
 
 def solve3(a00, a01, a02, a11, a12, a22, r0, r1, r2):
@@ -203,6 +223,20 @@ def far_frame(terrain: Terrain) -> jax.Array:
     return ~(jnp.asarray(frame_extent(terrain)) <= MAX_COORDINATE)
 
 
+def query_supported(terrain: Terrain, robot: Robot) -> jax.Array:
+    """() bool: FootCost supports this robot on this terrain (traceable; the one rule of both paths).
+
+    False when the robot's values break a rule of :func:`~ijoy_jax.robots.robot_supported` (NaN, a negative
+    margin, weight or cost, a footprint beyond its static window, ...), the terrain's break
+    :func:`~ijoy_jax.terrain.terrain_supported` (a non-finite origin or height), or the map reaches beyond
+    :data:`MAX_COORDINATE` (:func:`far_frame`): the values the boundary checks refuse where they are
+    concrete. Where False, every candidate of :func:`foot_cost_terms` is +inf with its ``unsupported`` term
+    set, and so is every total of :func:`~ijoy_jax.footcost.pallas.foot_cost_fused`;
+    :func:`ijoy_jax.select_step` reports ``unsupported``.
+    """
+    return robot_supported(robot) & terrain_supported(terrain) & ~far_frame(terrain)
+
+
 def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> Plane:
     """Least-squares plane under the footprint at ``pose`` (world) and the metrics around it."""
     res = terrain.resolution
@@ -258,6 +292,7 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
         roughness=jnp.where(ok, roughness, z),
         bump=jnp.where(ok, bump, z),
         band=jnp.where(ok, band, z),
+        fitted=ok,
     )
 
 
@@ -289,9 +324,9 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     hl = 0.5 * robot.foot_length + robot.margin
     hw = 0.5 * robot.foot_width + robot.margin
     grown = geometry.rect_column_spans(cx, cy, step[2], hl, hw, res, k)
-    # The static sizes are float64 and the pose's float32: a footprint exactly at max_radius (max_margin ==
-    # margin) would round above it, so compare with a micrometre of slack (the column spans flag real overflow).
-    too_big = (jnp.hypot(hl, hw) > robot.max_radius + SLACK) | grown.overflow | far_frame(terrain)
+    # The robot's and terrain's values (query_supported: a footprint beyond max_radius among them) and this
+    # candidate's own: its grown footprint, swing corridor or plane fit beyond what the windows or float32 hold.
+    too_big = grown.overflow | ~query_supported(terrain, robot)
     blocked = jnp.any(column_has_obstacle(index, grown, terrain.shape)) | centre_off_map(cx, cy, terrain.shape, res)
     metrics = robot.metrics
     zero = jnp.float32(0.0)
@@ -305,6 +340,7 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
         stepc = metric_term(metrics.step_weight, jnp.abs(dh), robot.max_step_height[action_index])
         band = metric_term(metrics.band_weight, plane.band, metrics.band_limit)
         raw = (plane.slope, plane.roughness, plane.bump, dh, plane.band, plane.height)
+        too_big = too_big | ~plane.fitted | ~stance_plane.fitted
     else:
         slope = rough = bump = stepc = band = zero
         raw = (zero, zero, zero, zero, zero, zero)
@@ -318,12 +354,18 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
         top, off_map = column_max_height(index, corridor, terrain.shape)
         path_height = top - jnp.maximum(start_plane.height, raw[5])
         path_bad = off_map | exceeds(path_height, robot.clearance[action_index])
-        too_big = too_big | corridor.overflow | (length + robot.foot_width > robot.max_swing + SLACK)
+        too_big = (too_big | corridor.overflow | (length + robot.foot_width > robot.max_swing + SLACK)
+                   | ~start_plane.fitted)
     action = robot.action_cost[action_index]
     obstacle = _inf_if(blocked)
     swing = _inf_if(path_bad)
-    unsupported = _inf_if(too_big | ~finite | ~(robot_supported(robot) & terrain_supported(terrain)))
-    total = action + obstacle + slope + rough + bump + stepc + band + swing + unsupported
+    flagged = too_big | ~finite
+    unsupported = _inf_if(flagged)
+    # +inf where flagged, whatever the other terms hold; a term that an unsupported value (a NaN weight, cost
+    # or limit) makes NaN cannot be evaluated, and reads +inf too: no cost term is ever NaN.
+    action, slope, rough, bump, stepc, band = (jnp.where(jnp.isnan(t), jnp.inf, t)
+                                               for t in (action, slope, rough, bump, stepc, band))
+    total = jnp.where(flagged, jnp.inf, action + obstacle + slope + rough + bump + stepc + band + swing)
     return FootCostTerms(
         total=total,
         action=action,

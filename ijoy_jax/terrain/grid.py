@@ -96,7 +96,7 @@ def check_terrain(terrain) -> None:
     What :func:`from_arrays` checks, for a terrain changed since by ``replace``: a 2D ``free`` of bools and a
     numeric ``height`` of its shape, finite heights, a finite (2,) origin and a positive finite resolution.
     The public boundaries (:func:`ijoy_jax.foot_cost_terms`, :func:`ijoy_jax.select_step`,
-    :func:`ijoy_jax.rollout`) call it; inside a trace a non-finite origin is flagged instead
+    :func:`ijoy_jax.rollout`) call it; inside a trace a non-finite origin or height is flagged instead
     (:func:`terrain_supported`).
 
     Raises:
@@ -126,8 +126,11 @@ def check_terrain(terrain) -> None:
 
 
 def terrain_supported(terrain: Terrain) -> jax.Array:
-    """() bool: the terrain's origin is finite (traceable); where False every step is ``unsupported``."""
-    return jnp.all(jnp.isfinite(terrain.origin))
+    """() bool: the terrain's origin and heights are finite (traceable): what :func:`check_terrain` refuses
+    where they are concrete. Where False (a NaN height set by ``replace`` or vmap inside a jit) every step is
+    ``unsupported``: the whole map, as the boundary refuses the whole map, so that both FootCost paths agree
+    (a NaN reaches different candidates through their different sums)."""
+    return jnp.all(jnp.isfinite(terrain.origin)) & jnp.all(jnp.isfinite(terrain.height))
 
 
 def grid_spec(resolution, origin) -> tuple[float, jax.Array]:
