@@ -187,6 +187,12 @@ def _overlap(xp, a, foot_length, foot_width, tol):
     return ~separated
 
 
+MAX_SIZE = 2.0
+"""m: the largest ``foot_length``, ``foot_width``, ``margin`` and ``max_margin`` a robot may have. The static windows
+are sized from them (``max_radius``) and FootCost's work per candidate grows with their square, so a larger value
+is refused (:func:`make_robot`, :func:`check_robot`; flagged inside a jit, :func:`robot_supported`): it is a unit
+mistake (millimetres for metres), not a foot."""
+
 WINDOW_SLACK = 1e-6
 """m: float32 rounding allowed above the float64 static window ``max_radius`` (as FootCost allows)."""
 
@@ -208,6 +214,14 @@ def _finite(xp, x):
     return xp.all(xp.isfinite(x))
 
 
+def _size(xp, x):
+    return xp.all(xp.isfinite(x) & (x > 0) & (x <= MAX_SIZE))
+
+
+def _margin(xp, x):
+    return xp.all(xp.isfinite(x) & (x >= 0) & (x <= MAX_SIZE))
+
+
 def _in_window(xp, robot, length, width, margin):
     return 0.5 * xp.hypot(length + 2 * margin, width + 2 * margin) <= robot.max_radius + WINDOW_SLACK
 
@@ -215,8 +229,10 @@ def _in_window(xp, robot, length, width, margin):
 # (leaf names, what they must be, rule(xp, *values) -> bool). One list for both uses: check_robot raises on
 # the first rule a concrete robot breaks; robot_supported ANDs them all in jnp inside a trace.
 _ROBOT_RULES = (
-    *((n, "finite and > 0", _positive) for n in ("foot_length", "foot_width", "step_time")),
-    *((n, "finite and >= 0", _nonneg) for n in ("margin", "w", "rotation_weight", *_PER_ACTION)),
+    *((n, f"finite, > 0 and <= MAX_SIZE = {MAX_SIZE:g} m", _size) for n in ("foot_length", "foot_width")),
+    ("margin", f"finite, >= 0 and <= MAX_SIZE = {MAX_SIZE:g} m", _margin),
+    ("step_time", "finite and > 0", _positive),
+    *((n, "finite and >= 0", _nonneg) for n in ("w", "rotation_weight", *_PER_ACTION)),
     *((f"metrics.{n}", "finite and >= 0", _nonneg) for n in TerrainMetrics.__dataclass_fields__),
     *((n, "finite", _finite) for n in ("actions", "p0")),
 )
@@ -231,8 +247,9 @@ def check_robot(robot) -> None:
     """Check a :class:`Robot`'s values where they are concrete (tracers are skipped); raise on the first bad one.
 
     What a constructor (:func:`make_robot`) checks, for a robot changed since by ``replace`` or
-    :func:`set_leaves`: leaf shapes and numeric dtypes; sizes and times finite and > 0; margin,
-    weights, costs, clearances and limits finite and >= 0; actions and p0 finite; the grown
+    :func:`set_leaves`: leaf shapes and numeric dtypes; sizes and times finite and > 0 (foot sizes and
+    the margin at most :data:`MAX_SIZE`); margin, weights, costs, clearances and limits finite and >= 0;
+    actions and p0 finite; the grown
     footprint within the static window ``max_radius`` (a larger margin or footprint needs a robot
     built for it, ``make_robot(..., max_margin=...)``); no action making the footprints overlap.
     The public boundaries (:func:`ijoy_jax.foot_cost_terms`, :func:`ijoy_jax.select_step`,
@@ -263,10 +280,11 @@ def check_robot(robot) -> None:
             raise ValueError(f"robot.{name} must be {must}, got {shown}")
     size = [values.get(n) for n in ("foot_length", "foot_width", "margin")]
     if all(v is not None for v in size) and not _in_window(np, robot, *size):
+        field = "robot.margin" if _in_window(np, robot, size[0], size[1], 0.0) else "robot.foot_length/foot_width"
         raise ValueError(
-            f"robot's footprint {float(size[0])} x {float(size[1])} m grown by margin {float(size[2])} m does not "
-            f"fit its static window (half-diagonal max_radius = {robot.max_radius:.4f} m): build the robot with "
-            f"that margin or size (make_robot(..., max_margin=...), hrp2(margin=...)) instead of replace")
+            f"{field}: robot's footprint {float(size[0])} x {float(size[1])} m grown by margin {float(size[2])} m "
+            f"does not fit its static window (half-diagonal max_radius = {robot.max_radius:.4f} m): build the "
+            f"robot with that margin or size (make_robot(..., max_margin=...), hrp2(margin=...)) instead of replace")
     if all(v is not None for v in size[:2]) and "actions" in values:
         bad = footprints_overlap(values["actions"], float(size[0]), float(size[1]))
         if bad.any():
@@ -312,21 +330,22 @@ def make_robot(
     Args:
       actions: (N, 3) LEFT swing-foot actions (dx, dy, dtheta) relative to a
         right stance foot; N >= 1; no action may make the footprints overlap.
-      foot_length, foot_width: footprint size (m), > 0.
-      margin: safety margin (m), >= 0.
+      foot_length, foot_width: footprint size (m), > 0 and <= :data:`MAX_SIZE`.
+      margin: safety margin (m), >= 0 and <= :data:`MAX_SIZE`.
       step_time: seconds per step, > 0.
       p0: (3,) step-in-place action; default: the action with dx = dtheta = 0
         and the smallest dy, or the action nearest (0, 0.19, 0) if none.
       action_cost, clearance, max_step_height: scalars or (N,) arrays (>= 0).
       metrics: TerrainMetrics; default :func:`default_metrics`.
       w: weight of dist (>= 0). rotation_weight: see :class:`Robot` (>= 0).
-      max_margin: largest margin the static windows must cover (m); default
-        ``max(margin, 0.10)``, the paper's whole 2-10 cm range, so a margin
-        sweep never recompiles.
+      max_margin: largest margin the static windows must cover (m, at most
+        :data:`MAX_SIZE`); default ``max(margin, 0.10)``, the paper's whole
+        2-10 cm range, so a margin sweep never recompiles.
 
     Raises:
       ValueError: empty or malformed action set, overlapping footprints,
-        non-positive sizes or times, negative costs, NaN/inf anywhere.
+        non-positive sizes or times, sizes or margins above :data:`MAX_SIZE`,
+        negative costs, NaN/inf anywhere (naming the argument).
     """
     acts = np.asarray(actions, np.float64)
     if acts.ndim != 2 or acts.shape[1] != 3:
@@ -341,6 +360,13 @@ def make_robot(
     _check_scalar("step_time", step_time, positive=True)
     _check_scalar("w", w, nonneg=True)
     _check_scalar("rotation_weight", rotation_weight, nonneg=True)
+    if max_margin is not None:
+        _check_scalar("max_margin", max_margin, nonneg=True)
+    for name, v in (("foot_length", foot_length), ("foot_width", foot_width), ("margin", margin),
+                    ("max_margin", max_margin)):
+        if v is not None and float(v) > MAX_SIZE:
+            raise ValueError(f"{name} must be <= {MAX_SIZE:g} m (robots.MAX_SIZE: the static windows grow with it), "
+                             f"got {float(v)}")
     bad = footprints_overlap(acts, float(foot_length), float(foot_width))
     if bad.any():
         raise ValueError(

@@ -139,6 +139,34 @@ def test_make_robot_wrong_shapes_and_values(kwargs, name):
         robots.make_robot(**{**base, **kwargs})
 
 
+@pytest.mark.parametrize("name", ["foot_length", "foot_width", "margin", "max_margin"])
+@pytest.mark.parametrize("value", [robots.MAX_SIZE + 0.01, 50.0, 1e30])
+def test_make_robot_refuses_absurd_sizes_naming_the_field(name, value):
+    """An absurd footprint or margin (a unit mistake: 240 for 0.24) would size the static windows, and every
+    terrain index's padding, from it: refused above MAX_SIZE, naming the argument."""
+    base = dict(actions=[[0.0, 3.0, 0.0]], foot_length=0.242, foot_width=0.13, margin=0.02, step_time=0.8)
+    with pytest.raises(ValueError, match=rf"^{name} must be <= 2 m \(robots.MAX_SIZE"):
+        robots.make_robot(**{**base, name: value})
+    robots.make_robot(**{**base, name: robots.MAX_SIZE})  # the maximum itself is accepted
+
+
+@pytest.mark.parametrize("name, value, field", [
+    ("foot_length", 2.5, "robot.foot_length"),  # beyond MAX_SIZE
+    ("margin", 3.0, "robot.margin"),
+    ("foot_width", 0.6, "robot.foot_length/foot_width"),  # within MAX_SIZE, beyond the robot's static window
+    ("margin", 0.3, "robot.margin"),  # the footprint fits, the margin does not
+])
+def test_replace_beyond_the_static_windows_names_the_field_and_is_flagged_inside_jit(name, value, field):
+    bad = robots.set_leaf(ROBOT, name, jnp.float32(value))
+    with pytest.raises(ValueError, match=field):
+        robots.check_robot(bad)
+    with pytest.raises(ValueError, match=field):
+        ij.select_step(TERRAIN_25D, bad, STANCE, -1, [0.1, 0.0, 0.0], targets=TARGETS)
+    assert not bool(robots.robot_supported(bad))
+    c = _select_jit(TERRAIN_25D, bad, jnp.asarray(STANCE), jnp.array([0.1, 0.0, 0.0]))
+    assert bool(c.unsupported) and not bool(c.valid) and np.all(np.isfinite(np.asarray(c.pose)))
+
+
 def _one(robot, terrain, stance, command):
     return ij.select_step(terrain, robot, stance, -1, command, swing_from=stance + jnp.array([0.0, 0.19, 0.0]),
                           targets=TARGETS, method="ordered")
