@@ -5,6 +5,8 @@ Public names::
   load_config / parse_config / SweepConfig / SweepConfigError   the TOML schema, validated before compute
   cells / scenarios                                              the expansion into cells and scenarios
   MAX_SCENARIOS / HOST_MEMORY_FRACTION / table_bytes             sizes checked before any allocation
+  MAX_NUM_STEPS / MAX_DENSITY / MIN_RESOLUTION / MAX_MAP_CELLS /  bounds of the sizes that set memory and
+  MAX_OBJECT_SLOTS                                               static shapes
   run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks sharded over local
                                                                  devices, parquet parts, resume
   default_chunk_size / auto_chunk_size / scenario_bytes          chunks sized to device memory
@@ -29,7 +31,12 @@ from ijoy_jax.sweep import distributed
 from ijoy_jax.sweep.config import (
     COMMAND_KEYS,
     HOST_MEMORY_FRACTION,
+    MAX_DENSITY,
+    MAX_MAP_CELLS,
+    MAX_NUM_STEPS,
+    MAX_OBJECT_SLOTS,
     MAX_SCENARIOS,
+    MIN_RESOLUTION,
     ROBOT_DEFAULTS,
     SweepConfig,
     SweepConfigError,
@@ -74,8 +81,13 @@ __all__ = [
     "EXTRA_METRICS",
     "HOST_MEMORY_FRACTION",
     "MAX_AUTO_CHUNK",
+    "MAX_DENSITY",
+    "MAX_MAP_CELLS",
+    "MAX_NUM_STEPS",
+    "MAX_OBJECT_SLOTS",
     "MEMORY_FRACTION",
     "MAX_SCENARIOS",
+    "MIN_RESOLUTION",
     "METRICS",
     "PAPER_ACTIONS",
     "ROBOT_DEFAULTS",

@@ -52,6 +52,13 @@ terrain (seed ``r``) with the same command draw: paired comparisons across cells
 
 Everything is checked by :func:`load_config` before any compute; a problem
 raises :class:`SweepConfigError` naming the file, the key and the reason.
+Numbers must be finite and within float32's range (the robot, the terrain's
+parameters and the commands are float32 on the device), integers within TOML's
+64 bits; the sizes that set memory or static shapes have documented bounds:
+:data:`MAX_NUM_STEPS`, :data:`MAX_DENSITY`, :data:`MIN_RESOLUTION`,
+:data:`MAX_MAP_CELLS`, :data:`MAX_OBJECT_SLOTS`, a map within
+:data:`~ijoy_jax.footcost.MAX_COORDINATE`, foot sizes within
+:data:`~ijoy_jax.robots.MAX_SIZE`.
 
 Sizes. A sweep is held on the host as one table row per scenario (:func:`scenarios`,
 then the results), so its size is checked when it is parsed, before anything is
@@ -80,6 +87,7 @@ from typing import Any
 import numpy as np
 
 from ijoy_jax import robots
+from ijoy_jax.footcost import MAX_COORDINATE
 from ijoy_jax.select import KERNELS, METHODS
 from ijoy_jax.sweep import seeding
 from ijoy_jax.terrain import generators
@@ -88,7 +96,12 @@ from ijoy_jax.terrain.family import Family, ParamError
 __all__ = [
     "COMMAND_KEYS",
     "HOST_MEMORY_FRACTION",
+    "MAX_DENSITY",
+    "MAX_MAP_CELLS",
+    "MAX_NUM_STEPS",
+    "MAX_OBJECT_SLOTS",
     "MAX_SCENARIOS",
+    "MIN_RESOLUTION",
     "ROBOT_DEFAULTS",
     "SweepConfig",
     "SweepConfigError",
@@ -112,6 +125,23 @@ ROBOT_DEFAULTS: Mapping[str, float] = MappingProxyType(_robot_defaults())
 _POSITIVE = {n for n, spec in robots.SCALAR_LEAVES.items() if spec.positive} | {"density"}
 # Largest margin the sweep accepts (m): the static footprint window grows with it.
 _MAX_MARGIN = 0.5
+# Largest magnitude of any number (a float32 robot leaf or command; beyond it float32 holds inf).
+_MAX_FLOAT = float(np.finfo(np.float32).max)
+# TOML's integers are 64-bit (tomllib reads longer ones): a seed or count beyond is refused, not overflowed later.
+_MAX_INT = 2**63 - 1
+MAX_NUM_STEPS = 100_000
+"""Most decisions per rollout (``sweep.num_steps``): the trajectory holds every step (a 22-hour walk at 0.8 s)."""
+MAX_DENSITY = 2.0
+"""Largest action-set density (``robot.density``, 3307 actions): the targets table F x N grows as its sixth power
+(~1 GB at 2, ~8 GB at 3)."""
+MIN_RESOLUTION = 0.005
+"""Finest map resolution (m): FootCost's windows hold the footprint in cells, ~(footprint / resolution)**2 per
+candidate (~110 x 110 for HRP-2 at 5 mm)."""
+MAX_MAP_CELLS = 2**22
+"""Most cells of a sweep's map (nx * ny, e.g. 2048 x 2048): its FootCost tables take ~60 bytes per cell, per
+scenario of a chunk."""
+MAX_OBJECT_SLOTS = 1024
+"""Most object slots (``terrain.max_count``) of an object family's map: each is rasterised over every cell."""
 
 COMMAND_KEYS = ("vx", "vy", "wz")
 """Joystick command components: forward (m/s), left (m/s), turn (rad/s), in the stance foot's frame."""
@@ -233,15 +263,27 @@ class _Checker:
     def number(self, key: str, value) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(key, f"must be a number, got {type(value).__name__} {value!r}")
+        self.int64(key, value)
         if not math.isfinite(value):
             self.fail(key, f"must be finite, got {value!r}")
+        if abs(value) > _MAX_FLOAT:
+            self.fail(key, f"must be at most {_MAX_FLOAT:.4g} in magnitude (float32's largest; the robot and the "
+                           f"commands are float32), got {value!r}")
         return float(value)
 
-    def integer(self, key: str, value, lo: int | None = None) -> int:
+    def int64(self, key: str, value) -> None:
+        """An integer must fit TOML's 64 bits (tomllib reads longer ones, which overflow later)."""
+        if isinstance(value, int) and abs(value) > _MAX_INT:
+            self.fail(key, f"must fit in 64 bits (|x| <= 2**63 - 1, as TOML integers do), got {value}")
+
+    def integer(self, key: str, value, lo: int | None = None, hi: int | None = None) -> int:
         if isinstance(value, bool) or not isinstance(value, int):
             self.fail(key, f"must be an integer, got {type(value).__name__} {value!r}")
+        self.int64(key, value)
         if lo is not None and value < lo:
             self.fail(key, f"must be >= {lo}, got {value}")
+        if hi is not None and value > hi:
+            self.fail(key, f"must be <= {hi}, got {value}")
         return int(value)
 
     def string(self, key: str, value, choices=None) -> str:
@@ -264,7 +306,7 @@ def _flatten(table: dict, prefix: str = "") -> dict:
     """{"robot": {"w": [..]}} -> {"robot.w": [..]} (dotted TOML keys and nested tables are the same)."""
     out = {}
     for k, v in table.items():
-        if isinstance(v, dict):
+        if isinstance(v, dict) and v:  # an empty table stays a value, refused where a number or list belongs
             out.update(_flatten(v, f"{prefix}{k}."))
         else:
             out[f"{prefix}{k}"] = v
@@ -280,15 +322,24 @@ def _robot_value(chk: _Checker, key: str, name: str, value) -> float:
         chk.fail(key, f"must be >= 0, got {v}")
     if name == "margin" and v > _MAX_MARGIN:
         chk.fail(key, f"must be <= {_MAX_MARGIN} m, got {v}")
+    if name in ("foot_length", "foot_width") and v > robots.MAX_SIZE:
+        chk.fail(key, f"must be <= {robots.MAX_SIZE} m (ijoy_jax.robots.MAX_SIZE), got {v}")
+    if name == "density" and v > MAX_DENSITY:
+        chk.fail(key, f"must be <= {MAX_DENSITY} (sweep.config.MAX_DENSITY: the targets table grows as its sixth "
+                      f"power), got {v}")
     return v
 
 
 def _terrain_value(chk: _Checker, key: str, fam: Family, name: str, value, max_count: int | None):
     """Check one terrain parameter value by its family's rule (:meth:`ijoy_jax.terrain.family.Family.check`)."""
+    chk.int64(key, value)  # a longer integer would overflow in the float conversion
     try:
-        return fam.check(name, value, max_count=max_count, max_count_key="[terrain] max_count")
+        v = fam.check(name, value, max_count=max_count, max_count_key="[terrain] max_count")
     except ParamError as e:
         chk.fail(key, e.reason)
+    if math.isfinite(v) and abs(v) > _MAX_FLOAT:  # the generator's parameters are float32 (inf where allowed)
+        chk.fail(key, f"must be at most {_MAX_FLOAT:.4g} in magnitude (float32's largest), got {value!r}")
+    return v
 
 
 def parse_config(text: str, source: str = "<string>") -> SweepConfig:
@@ -327,10 +378,11 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     if "name" in kw and not kw["name"].replace("-", "_").replace(".", "_").isidentifier():
         chk.fail("sweep.name", f"must be letters, digits, '_', '-' or '.', got {kw['name']!r}")
     if "seed" in sweep:
-        kw["seed"] = chk.integer("sweep.seed", sweep["seed"], lo=0)
-    for k in ("scenarios_per_cell", "num_steps"):
-        if k in sweep:
-            kw[k] = chk.integer(f"sweep.{k}", sweep[k], lo=1)
+        kw["seed"] = chk.integer("sweep.seed", sweep["seed"], lo=0)  # < 2**63: jax.random.key's range
+    if "scenarios_per_cell" in sweep:
+        kw["scenarios_per_cell"] = chk.integer("sweep.scenarios_per_cell", sweep["scenarios_per_cell"], lo=1)
+    if "num_steps" in sweep:
+        kw["num_steps"] = chk.integer("sweep.num_steps", sweep["num_steps"], lo=1, hi=MAX_NUM_STEPS)
     if "random_samples" in sweep:
         kw["random_samples"] = chk.integer("sweep.random_samples", sweep["random_samples"], lo=0)
     if "method" in sweep:
@@ -347,11 +399,21 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         if not isinstance(s, list) or len(s) != 2:
             chk.fail("terrain.shape", f"must be [nx, ny], got {s!r}")
         kw["shape"] = (chk.integer("terrain.shape[0]", s[0], lo=8), chk.integer("terrain.shape[1]", s[1], lo=8))
+        if math.prod(kw["shape"]) > MAX_MAP_CELLS:
+            chk.fail("terrain.shape", f"{kw['shape'][0]} x {kw['shape'][1]} cells exceed the limit of "
+                                      f"{MAX_MAP_CELLS} (sweep.config.MAX_MAP_CELLS)")
     if "resolution" in terrain:
         r = chk.number("terrain.resolution", terrain["resolution"])
         if r <= 0:
             chk.fail("terrain.resolution", f"must be > 0 m, got {r}")
+        if r < MIN_RESOLUTION:
+            chk.fail("terrain.resolution", f"must be >= {MIN_RESOLUTION} m (sweep.config.MIN_RESOLUTION), got {r}")
         kw["resolution"] = r
+    extent = max(kw.get("shape", SweepConfig.shape)) * kw.get("resolution", SweepConfig.resolution)
+    if extent > MAX_COORDINATE:
+        chk.fail("terrain.resolution" if "resolution" in terrain else "terrain.shape",
+                 f"the map reaches {extent:.6g} m, beyond the {MAX_COORDINATE:g} m where float32 holds millimetres "
+                 "(ijoy_jax.footcost.MAX_COORDINATE)")
     if "has_height" in terrain:
         if not isinstance(terrain["has_height"], bool):
             chk.fail("terrain.has_height", f"must be true or false, got {terrain['has_height']!r}")
@@ -360,7 +422,7 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     if "max_count" in terrain:
         if fam.max_count is None:
             chk.fail("terrain.max_count", f"family {family!r} has no object slots")
-        kw["max_count"] = chk.integer("terrain.max_count", terrain["max_count"], lo=0)
+        kw["max_count"] = chk.integer("terrain.max_count", terrain["max_count"], lo=0, hi=MAX_OBJECT_SLOTS)
     max_count = kw.get("max_count", fam.max_count)
     fields = tuple(f.name for f in dataclasses.fields(fam.params))
     tparams = chk.table("terrain.params", terrain.get("params", {}))
@@ -437,10 +499,23 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
             fam.validate({name: _terrain_of(cfg, row, name) for name in fields}, shape=cfg.shape,
                          resolution=cfg.resolution)
         except ParamError as e:
-            swept = next((f"{s}.terrain.{e.field}" for s in ("grid", "random")
-                          if f"terrain.{e.field}" in kw[s]), None)
-            chk.fail(swept or f"terrain.params.{e.field}", e.reason)
+            chk.fail(_blame(fam, e.field, kw), e.reason)
     return cfg
+
+
+def _blame(fam: Family, field: str, kw: dict) -> str:
+    """The key of the file to name for a cross-field error of ``field``: the field itself or the other end of
+    its range (``Rule.at_most``), where the file sets it (grid, random, then params); else its params key."""
+    rules = fam.rules
+    ends = [field, *([rules[field].at_most] if rules[field].at_most else []),
+            *(n for n, r in rules.items() if r.at_most == field)]
+    for f in ends:
+        for s in ("grid", "random"):
+            if f"terrain.{f}" in kw[s]:
+                return f"{s}.terrain.{f}"
+        if f in kw["terrain_params"]:
+            return f"terrain.params.{f}"
+    return f"terrain.params.{field}"
 
 
 def _host_memory() -> int | None:
