@@ -63,3 +63,20 @@ def test_turning_in_place_keeps_the_zmp_near_the_com(setup, zmp_fn):
     zmp, fz = zmp_fn(m, jnp.asarray(traj, jnp.float32), dt=0.01)
     assert bool(jnp.all(jnp.isfinite(zmp)))
     np.testing.assert_allclose(zmp, np.tile(com[:2], (4, 1)), atol=0.01)
+
+
+def test_zmp_on_a_raised_support_plane(setup, zmp_fn):
+    """The ZMP on the plane z = g: the free robot accelerating horizontally (a ramp of the pelvis position) has
+    its ZMP moved by -(h - g) a / g_grav from the CoM; raising the plane by g moves it by g f_x / f_z."""
+    m, qpos, com, mass = setup
+    acc = 1.0  # m/s^2 along x
+    dt = 0.01
+    t = np.arange(7) * dt
+    traj = np.tile(np.asarray(qpos, np.float32), (7, 1))
+    traj[:, 0] += 0.5 * acc * t**2
+    flat, fz = zmp_fn(m, jnp.asarray(traj), dt=dt)
+    raised, _ = dynamics.motion_zmp(m, jnp.asarray(traj), dt, jnp.full(5, 0.3))
+    np.testing.assert_allclose(np.asarray(raised - flat)[:, 0], 0.3 * mass * acc / np.asarray(fz), atol=ZMP_TOL)
+    np.testing.assert_allclose(np.asarray(raised - flat)[:, 1], 0.0, atol=ZMP_TOL)
+    np.testing.assert_allclose(np.asarray(flat)[:, 0] - (com[0] + traj[1:-1, 0] - qpos[0]),
+                               -com[2] * acc / G, atol=ZMP_TOL)

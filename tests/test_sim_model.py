@@ -116,7 +116,7 @@ def test_standing_qpos_puts_soles_on_the_commanded_poses():
 
 def test_hfield_data_matches_build_model_and_mujoco_rescales_user_data():
     rng = np.random.default_rng(1)
-    height = rng.uniform(-0.3, 0.7, SHAPE).astype(np.float32)  # beyond [z_lo, z_hi]: clipped
+    height = rng.uniform(-1.3, 1.4, SHAPE).astype(np.float32)  # beyond [z_lo, z_hi]: clipped
     free = rng.uniform(size=SHAPE) > 0.2
     for t in (ij.terrain.from_arrays(height, free, RES, ORIGIN), ij.terrain.from_arrays(None, free, RES, ORIGIN)):
         m = model.build_model(P, t)

@@ -220,3 +220,57 @@ def test_jit_vmap_batch_and_no_recompile():
         pos, yaw = bf(starts, ends, jnp.asarray(rng.uniform(0, 1, 5), jnp.float32))
         assert pos.shape == (5, 3) and yaw.shape == (5,)
     assert len(traces) == 1
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# A tilted sole resting on the ground
+
+
+def _plane_terrain(b, c, h0=0.1, shape=(60, 50), origin=(-0.6, -0.5)):
+    """The plane z = h0 + b x + c y sampled at the cell centres of a map."""
+    x = origin[0] + (np.arange(shape[0]) + 0.5) * RES
+    y = origin[1] + (np.arange(shape[1]) + 0.5) * RES
+    h = h0 + b * x[:, None] + c * y[None, :]
+    return ij.terrain.from_arrays(h.astype(np.float32), resolution=RES, origin=origin).replace(has_height=True)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.floats(-0.2, 0.2), st.floats(-0.2, 0.2), st.floats(-np.pi, np.pi), st.floats(-0.1, 0.1), st.floats(-0.1, 0.1))
+def test_sole_parallel_to_a_plane_rests_at_the_planes_height(b, c, yaw, x, y):
+    """Closed form: a sole turned to the plane's own tilt rests with its centre on the plane (every cell of the
+    footprint then lies exactly on the sole's plane), and sole_plane_gradient gives back (b, c)."""
+    t = _plane_terrain(b, c)
+    gf, gl = b * np.cos(yaw) + c * np.sin(yaw), -b * np.sin(yaw) + c * np.cos(yaw)
+    pitch, roll = -np.arctan(gf), np.arctan2(gl, np.sqrt(1 + gf * gf))
+    np.testing.assert_allclose(sw.sole_plane_gradient(jnp.float32(roll), jnp.float32(pitch), jnp.float32(yaw)),
+                               [b, c], atol=1e-5)
+    z = sw.resting_height(t, jnp.array([x, y, 0.0, roll, pitch, yaw], jnp.float32), FOOT_L, FOOT_W)
+    np.testing.assert_allclose(z, 0.1 + b * x + c * y, atol=1e-5)  # float32 heights ~0.1 m
+
+
+def test_resting_height_matches_brute_force_on_rough_ground():
+    """Brute force: the largest height above the sole's plane over every cell the rectangle overlaps."""
+    rng = np.random.default_rng(3)
+    with enable_x64():
+        for _ in range(20):
+            t = random_terrain(rng)
+            org = np.asarray(t.origin, np.float64)
+            foothold = np.concatenate([org + rng.uniform(0.3, 0.5, 2), [0.0], rng.uniform(-0.25, 0.25, 2),
+                                       rng.uniform(-np.pi, np.pi, 1)])
+            g = np.asarray(sw.sole_plane_gradient(*(jnp.float64(v) for v in foothold[3:6])))
+            hp = np.asarray(t.height, np.float64)
+            mask = rect_touches_cells(foothold[0], foothold[1], foothold[5], FOOT_L / 2, FOOT_W / 2, RES, hp.shape, org)
+            ix, iy = np.nonzero(mask)
+            cx, cy = org[0] + (ix + 0.5) * RES, org[1] + (iy + 0.5) * RES
+            want = np.max(hp[ix, iy] - g[0] * (cx - foothold[0]) - g[1] * (cy - foothold[1]))
+            got = float(sw.resting_height(t, jnp.asarray(foothold), FOOT_L, FOOT_W))
+            np.testing.assert_allclose(got, want, atol=1e-6)  # float32 heights and cell offsets
+
+
+def test_level_sole_rests_on_the_highest_cell():
+    t = random_terrain(np.random.default_rng(4))
+    pose = jnp.asarray(np.asarray(t.origin) + 0.4)
+    foothold = jnp.array([pose[0], pose[1], 0.0, 0.0, 0.0, 0.3])
+    assert float(sw.resting_height(t, foothold, FOOT_L, FOOT_W)) == float(
+        sw.footprint_height(t, jnp.array([pose[0], pose[1], 0.3]), FOOT_L, FOOT_W))
+    assert np.isnan(float(sw.resting_height(t, foothold.at[3].set(jnp.nan), FOOT_L, FOOT_W)))

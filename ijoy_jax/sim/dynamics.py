@@ -50,24 +50,31 @@ def _free_velocity(q0, q1, dt):
     return jnp.concatenate([lin, ang, (q1[7:] - q0[7:]) / dt])
 
 
-def motion_zmp(m: mjx.Model, qpos: jax.Array, dt: float) -> tuple[jax.Array, jax.Array]:
-    """Multibody ZMP of a trajectory of a free-floating robot on flat ground at z = 0.
+def motion_zmp(m: mjx.Model, qpos: jax.Array, dt: float, ground=None) -> tuple[jax.Array, jax.Array]:
+    """Multibody ZMP of a trajectory of a free-floating robot, on the horizontal plane of the support.
 
     Args:
       m: an MJX model whose first joint is the free joint, with constraints off
         (:func:`no_contact_model`).
       qpos: (T, nq) positions at period ``dt`` (T >= 3).
       dt: period (s).
+      ground: (T - 2,) height (m) of the plane the ZMP is taken on at samples
+        1 .. T - 2 (the support's; default 0). With the ground-reaction force
+        f and moment tau about the origin, ``zmp = ((z f_x - tau_y) / f_z,
+        (z f_y + tau_x) / f_z)``: on a stair 30 cm up, the plane z = 0 would
+        misplace the ZMP by ``0.3 f_x / f_z``, centimetres while the body
+        accelerates.
 
     Returns:
       ``(zmp (T - 2, 2), fz (T - 2,))``: the ZMP (m, world x, y) and the vertical
       ground force (N) at samples 1 .. T - 2, from central differences.
     """
+    ground = jnp.zeros(qpos.shape[0] - 2, qpos.dtype) if ground is None else jnp.asarray(ground, qpos.dtype)
     v = jax.vmap(lambda a, b: _free_velocity(a, b, dt))(qpos[:-1], qpos[1:])  # (T - 1, nv), at half samples
     qvel = 0.5 * (v[1:] + v[:-1])
     qacc = (v[1:] - v[:-1]) / dt
 
-    def one(q, qv, qa):
+    def one(q, qv, qa, z):
         d = mjx.make_data(m).replace(qpos=q, qvel=qv, qacc=qa)
         d = mjx.inverse(m, d)
         f = d.qfrc_inverse[0:3]
@@ -75,6 +82,6 @@ def motion_zmp(m: mjx.Model, qpos: jax.Array, dt: float) -> tuple[jax.Array, jax
         tau = d.xmat[1].reshape(3, 3) @ d.qfrc_inverse[3:6] + jnp.cross(q[0:3], f)
         fz = f[2]
         safe = jnp.where(jnp.abs(fz) > 1e-6, fz, 1.0)
-        return jnp.stack([-tau[1] / safe, tau[0] / safe]), fz
+        return jnp.stack([(z * f[0] - tau[1]) / safe, (z * f[1] + tau[0]) / safe]), fz
 
-    return jax.vmap(one)(qpos[1:-1], qvel, qacc)
+    return jax.vmap(one)(qpos[1:-1], qvel, qacc, ground)

@@ -55,6 +55,7 @@ __all__ = [
     "physical_heights",
     "put_terrain",
     "put_terrains",
+    "sole_points",
     "standing_qpos",
 ]
 
@@ -151,8 +152,8 @@ class BipedParams:
     iterations: int = 4
     ls_iterations: int = 8
     obstacle_height: float = 0.1
-    z_lo: float = -0.2
-    z_hi: float = 0.6
+    z_lo: float = -1.0
+    z_hi: float = 1.0
     base_depth: float = 0.1
 
     def __post_init__(self):
@@ -232,8 +233,9 @@ def biped_params(robot=None, **overrides) -> BipedParams:
 # The robot
 
 
-def _sole_points(p: BipedParams) -> np.ndarray:
-    """(K, 3) sphere centres in the foot frame (origin at the ankle), K = n_along * n_across."""
+def sole_points(p: BipedParams) -> np.ndarray:
+    """(K, 3) the sole spheres' centres in the foot frame (origin at the ankle; m), K = n_along * n_across: the
+    points at which the simulated foot touches the ground (their x, y are the sole's contact points)."""
     r = p.sole_radius
     nx, ny = p.sole_grid
     xs = np.linspace(p.foot_length / 2 - r, -(p.foot_length / 2 - r), nx) if nx > 1 else np.zeros(1)
@@ -287,12 +289,17 @@ def _add_robot(spec: mujoco.MjSpec, p: BipedParams) -> None:
                       size=[p.foot_length / 2, p.foot_width / 2, _FOOT_THICKNESS / 2],
                       pos=[0, 0, -p.ankle_height + _FOOT_THICKNESS / 2], mass=p.foot_mass, rgba=[0.3, 0.3, 0.35, 1],
                       **visual)
-        for k, c in enumerate(_sole_points(p)):
+        for k, c in enumerate(sole_points(p)):
             foot.add_geom(name=f"{side}_sole{k}", type=sphere, size=[p.sole_radius, 0, 0], pos=list(c),
                           contype=1, conaffinity=0, condim=3, friction=[p.friction, 0.005, 0.0001], mass=0.0,
                           rgba=[0.9, 0.3, 0.3, 1])
         foot.add_site(name=f"{side}_sole", pos=[0, 0, -p.ankle_height])
+        foot.add_site(name=f"{side}_ankle", pos=[0, 0, 0])  # the ankle's force/torque sensor (HRP-2's 6-axis F/T)
 
+    for side in SIDES:
+        for kind in ("force", "torque"):
+            spec.add_sensor(name=f"{side}_ankle_{kind}", type=getattr(mujoco.mjtSensor, f"mjSENS_{kind.upper()}"),
+                            objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"{side}_ankle")
     for side in SIDES:
         lo, hi = p.joint_range(side)
         for k, name in enumerate(JOINTS):
@@ -474,6 +481,8 @@ class ModelIndex(NamedTuple):
       hfield_geom: () the terrain geom id.
       imu_site: () site at the pelvis origin.
       torso_site: () site in the torso.
+      ankle_sensor: (2, 2) ``sensordata`` addresses of each ankle's force and torque (3 values each, in the
+        foot frame at the ankle point: what the shank exerts on the foot).
     """
 
     qpos_adr: np.ndarray
@@ -487,6 +496,7 @@ class ModelIndex(NamedTuple):
     hfield_geom: np.ndarray
     imu_site: np.ndarray
     torso_site: np.ndarray
+    ankle_sensor: np.ndarray
 
 
 def model_index(mj_model: mujoco.MjModel) -> ModelIndex:
@@ -519,6 +529,8 @@ def model_index(mj_model: mujoco.MjModel) -> ModelIndex:
         hfield_geom=np.asarray(oid(geom, "terrain")),
         imu_site=np.asarray(oid(site, "imu")),
         torso_site=np.asarray(oid(site, "torso")),
+        ankle_sensor=np.array([[mj_model.sensor_adr[oid(mujoco.mjtObj.mjOBJ_SENSOR, f"{s}_ankle_{k}")]
+                                for k in ("force", "torque")] for s in SIDES]),
     )
 
 
@@ -536,13 +548,15 @@ def _robot_model(params: BipedParams) -> mujoco.MjModel:
     return build_spec(params, (2, 2), 1.0).compile()
 
 
-def stand_pose(params: BipedParams, feet, ground, pelvis_z, shift=None) -> tuple[jax.Array, jax.Array]:
+def stand_pose(params: BipedParams, feet, ground, pelvis_z, shift=None, *, tilt=None) -> tuple[jax.Array, jax.Array]:
     """qpos (19,) of the robot standing with its soles at ``feet`` (2, 3) on ``ground`` (2,), and whether both
     legs reach (pure JAX: jit/vmap-able; float64 under ``jax.enable_x64``).
 
     The pelvis is level, yawed to the feet's mean yaw, ``pelvis_z`` high, above
     the feet's midpoint (moved by ``shift`` (2,) m when given); the legs come
-    from :func:`ijoy_jax.sim.kinematics.leg_ik`.
+    from :func:`ijoy_jax.sim.kinematics.leg_ik`. ``tilt`` (2, 2), roll and
+    pitch of each sole (rad, :func:`ijoy_jax.sim.kinematics.rpy_to_rot`),
+    stands the soles on sloped ground (default level).
     """
     feet = jnp.asarray(feet)
     dtype = feet.dtype
@@ -551,8 +565,9 @@ def stand_pose(params: BipedParams, feet, ground, pelvis_z, shift=None) -> tuple
     xy = jnp.mean(feet[:, :2], axis=0) + (0.0 if shift is None else jnp.asarray(shift, dtype))
     pelvis = jnp.concatenate([xy, jnp.asarray(pelvis_z, dtype)[None]])
     prot = kinematics.rot_z(yaw)
+    tilt = jnp.zeros((2, 2), dtype) if tilt is None else jnp.asarray(tilt, dtype)
     legs = [kinematics.leg_ik(params, side, pelvis, prot, jnp.stack([feet[row, 0], feet[row, 1], ground[row]]),
-                              kinematics.rot_z(feet[row, 2]))
+                              kinematics.rpy_to_rot(jnp.stack([tilt[row, 0], tilt[row, 1], feet[row, 2]])))
             for row, side in enumerate(SIDES)]
     zero = jnp.zeros_like(yaw)
     quat = jnp.stack([jnp.cos(yaw / 2), zero, zero, jnp.sin(yaw / 2)])

@@ -34,6 +34,7 @@ import jax.numpy as jnp
 
 from ijoy_jax import geometry
 from ijoy_jax.footcost import window_cells
+from ijoy_jax.sim import kinematics
 from ijoy_jax.terrain import Terrain
 
 
@@ -57,7 +58,9 @@ def _window(foot_length, foot_width, margin, max_radius, resolution: float) -> i
     return window_cells(max_radius, resolution)
 
 
-def _footprint_height_impl(terrain: Terrain, pose, hl, hw, k: int, off_map_height):
+def _footprint_height_impl(terrain: Terrain, pose, hl, hw, k: int, off_map_height, grad=None):
+    """The largest ``height - grad . (cell centre - foot centre)`` over the cells the rectangle touches (grad
+    (2,) the slope of a tilted sole's plane, m/m; None: level, the plain highest cell)."""
     res = terrain.resolution
     nx, ny = terrain.shape
     pose = jnp.asarray(pose)
@@ -78,6 +81,11 @@ def _footprint_height_impl(terrain: Terrain, pose, hl, hw, k: int, off_map_heigh
     on_map = ((spans.ix >= 0) & (spans.ix < nx))[:, None] & ((iy >= 0) & (iy < ny))[None, :]
     h = terrain.height[jnp.clip(spans.ix, 0, nx - 1)[:, None], jnp.clip(iy, 0, ny - 1)[None, :]]
     h = jnp.where(on_map, h, jnp.asarray(off_map_height, h.dtype))
+    if grad is not None:
+        grad = jnp.where(finite, jnp.asarray(grad, h.dtype), 0.0)
+        du = (spans.ix.astype(h.dtype) + 0.5) * res - cx
+        dv = (iy.astype(h.dtype) + 0.5) * res - cy
+        h = h - grad[0] * du[:, None] - grad[1] * dv[None, :]
     top = jnp.max(jnp.where(mask, h, -jnp.inf))
     return jnp.where(finite, top, jnp.nan)
 
@@ -129,6 +137,95 @@ def footprint_height(
     hl = 0.5 * jnp.asarray(foot_length) + margin
     hw = 0.5 * jnp.asarray(foot_width) + margin
     return _footprint_height(terrain, pose, hl, hw, k, off_map_height)
+
+
+def sole_plane_gradient(roll, pitch, yaw) -> jax.Array:
+    """(2,) world slope (dz/dx, dz/dy) of the plane of a sole turned ``Rz(yaw) Ry(pitch) Rx(roll)`` (radians).
+
+    The sole's normal is ``n = R e_z``; its plane rises ``-n_x / n_z`` per metre
+    along x and ``-n_y / n_z`` along y.
+    """
+    n = kinematics.rpy_to_rot(jnp.stack([roll, pitch, yaw]))[:, 2]
+    return -n[:2] / n[2]
+
+
+@functools.partial(jax.jit, static_argnums=4)
+def _resting_height(terrain, foothold, hl, hw, k: int, off_map_height):
+    foothold = jnp.asarray(foothold)
+    grad = sole_plane_gradient(foothold[3], foothold[4], foothold[5])
+    return _footprint_height_impl(terrain, foothold[jnp.array([0, 1, 5])], hl, hw, k, off_map_height, grad)
+
+
+@jax.jit
+def _resting_height_on_points(terrain, foothold, points, off_map_height):
+    foothold = jnp.asarray(foothold)
+    finite = jnp.all(jnp.isfinite(foothold))
+    foothold = jnp.where(finite, foothold, 0.0)
+    grad = sole_plane_gradient(foothold[3], foothold[4], foothold[5])
+    c, s = jnp.cos(foothold[5]), jnp.sin(foothold[5])
+    d = jnp.stack([c * points[:, 0] - s * points[:, 1], s * points[:, 0] + c * points[:, 1]], axis=1)
+    h = surface_height(terrain, foothold[:2] + d, off_map_height)
+    return jnp.where(finite, jnp.max(h - d @ grad), jnp.nan)
+
+
+def surface_height(terrain: Terrain, xy, off_map_height=0.0) -> jax.Array:
+    """(K,) heights (m) of the surface through the cell-centre samples at world points ``xy`` (K, 2): bilinear
+    between the four samples around each point (MuJoCo's height field, sampled at cell centres, is the same
+    surface cut into two triangles per cell: they differ by less than a cell's height differences). Points
+    beyond the outer cell centres take the edge value; off the map, ``off_map_height``."""
+    res = terrain.resolution
+    nx, ny = terrain.shape
+    u = (xy - terrain.origin) / res - 0.5
+    i0 = jnp.floor(u).astype(jnp.int32)
+    f = u - i0
+    hx = terrain.height
+
+    def at(di, dj):
+        return hx[jnp.clip(i0[:, 0] + di, 0, nx - 1), jnp.clip(i0[:, 1] + dj, 0, ny - 1)]
+
+    h = ((1 - f[:, 0]) * (1 - f[:, 1]) * at(0, 0) + f[:, 0] * (1 - f[:, 1]) * at(1, 0)
+         + (1 - f[:, 0]) * f[:, 1] * at(0, 1) + f[:, 0] * f[:, 1] * at(1, 1))
+    cell = jnp.floor((xy - terrain.origin) / res)
+    on_map = (cell[:, 0] >= 0) & (cell[:, 0] < nx) & (cell[:, 1] >= 0) & (cell[:, 1] < ny)
+    return jnp.where(on_map, h, jnp.asarray(off_map_height, h.dtype))
+
+
+def resting_height(terrain: Terrain, foothold, foot_length, foot_width, *, points=None,
+                   max_radius: float | None = None, off_map_height=0.0) -> jax.Array:
+    """Height (m) of the centre of a tilted sole resting on the terrain at ``foothold``.
+
+    The sole is the foot's rectangle in the plane through its centre turned by
+    the foothold's roll, pitch and yaw; lowered onto the ground, it stops on the
+    cell that stands highest above that plane: the result is ``max over the
+    cells the rectangle touches of (height - g . (cell centre - foot centre))``,
+    g = :func:`sole_plane_gradient`. On a planar terrain with the plane's own
+    tilt it is the plane's height at the centre; with roll = pitch = 0 it is
+    :func:`footprint_height`. The heights are the simulator's samples at cell
+    centres (MuJoCo's height field interpolates between them).
+
+    A sole that touches the ground only at some points (the simulated biped's
+    sole spheres) rests where the first of them touches: with ``points`` (K, 2)
+    (x, y in the sole's frame, m) the result is ``max over the points of
+    (surface height - g . offset)`` on the :func:`surface_height` through the
+    samples, the surface MuJoCo collides them with. A plate sole resting on a
+    bump between such points would otherwise be placed above points that hang
+    in the air.
+
+    Args:
+      terrain: :class:`~ijoy_jax.terrain.Terrain` with physical heights (m).
+      foothold: (6,) x, y, z, roll, pitch, yaw (m, rad; z is ignored).
+      foot_length, foot_width: sole size (m).
+      points: optional (K, 2) contact points of the sole (m, sole frame).
+      max_radius, off_map_height: as in :func:`footprint_height`.
+
+    Returns:
+      () float: the sole centre's height, NaN if ``foothold`` is not finite.
+    """
+    if points is not None:
+        return _resting_height_on_points(terrain, foothold, jnp.asarray(points, jnp.float32), off_map_height)
+    k = _window(foot_length, foot_width, 0.0, max_radius, terrain.resolution)
+    return _resting_height(terrain, foothold, 0.5 * jnp.asarray(foot_length), 0.5 * jnp.asarray(foot_width), k,
+                           off_map_height)
 
 
 def _lerp_pose(start, end, u):
@@ -228,7 +325,7 @@ def swing_apex(
     return jnp.maximum(jnp.maximum(top, start[2]), end[2]) + clearance
 
 
-def _quintic(u):
+def smoothstep(u):
     """Smoothstep 10u^3 - 15u^4 + 6u^5 on u clipped to [0, 1]: zero slope and curvature at both ends."""
     u = jnp.clip(u, 0.0, 1.0)
     return u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
@@ -284,13 +381,13 @@ def _swing_pose(start, end, apex, s, lift):
     a = jnp.clip(jnp.asarray(lift, start.dtype), 1e-3, 0.5)
     s = jnp.clip(jnp.asarray(s, start.dtype), 0.0, 1.0)
     h = jnp.maximum(jnp.maximum(jnp.asarray(apex, start.dtype), start[2]), end[2])
-    up = _quintic(s / a)
-    down = _quintic((s - 1.0 + a) / a)
+    up = smoothstep(s / a)
+    down = smoothstep((s - 1.0 + a) / a)
     z = jnp.where(s <= a, (1.0 - up) * start[2] + up * h, (1.0 - down) * h + down * end[2])
     # 1 - 2a may be 0 (lift = 0.5): then the transfer is a step at s = 0.5.
     span = 1.0 - 2.0 * a
     safe_span = jnp.where(span > 0, span, 1.0)
-    u = jnp.where(span > 0, _quintic((s - a) / safe_span), jnp.where(s >= 0.5, 1.0, 0.0))
+    u = jnp.where(span > 0, smoothstep((s - a) / safe_span), jnp.where(s >= 0.5, 1.0, 0.0))
     planar = _lerp_pose(start[jnp.array([0, 1, 3])], end[jnp.array([0, 1, 3])], u)
     return jnp.stack([planar[0], planar[1], z]), planar[2]
 

@@ -124,9 +124,10 @@ def check_robot(robot: Robot, cfg: WalkConfig) -> None:
 class StepLog(NamedTuple):
     """What one executed step did (recorded per step in ``Trajectory.log``)."""
 
-    landed: jax.Array  # (4,) measured swing sole at the step's end: x, y, z, yaw
+    landed: jax.Array  # (6,) measured swing sole at the step's end: x, y, z, roll, pitch, yaw
     placement_error: jax.Array  # () m, |landed - commanded| in xy (0 when no step was sent)
     yaw_error: jax.Array  # () rad, |wrap(landed - commanded)| yaw
+    tilt_error: jax.Array  # () rad, angle between the landed sole's normal and the commanded one (0 when no step)
     fallen: jax.Array  # () bool, the robot has fallen (now or before)
     obstacle_contact: jax.Array  # () bool, a sole sphere (or shin) touched an obstacle cell during the step
     min_pelvis_height: jax.Array  # () m, lowest pelvis height above the ground during the step
@@ -137,8 +138,8 @@ class StepLog(NamedTuple):
 class SimState(NamedTuple):
     data: mjx.Data
     ctrl: controller.CtrlState
-    soles: jax.Array  # (2, 4) measured soles x, y, z, yaw (row 0 left)
-    planned: jax.Array  # (2, 4) the same soles as the controller commanded them, in its own frame
+    soles: jax.Array  # (2, 6) measured soles x, y, z, roll, pitch, yaw (row 0 left)
+    planned: jax.Array  # (2, 6) the same soles as the controller commanded them, in its own frame
     swing: jax.Array  # () +1 if the left foot swings next
     anchor: jax.Array  # (2,) the ZMP's current support point (controller frame)
     corr: jax.Array  # (controller.correction_length, 2) the dynamics filter's last correction
@@ -147,10 +148,25 @@ class SimState(NamedTuple):
 
 
 def _soles(sim: Sim, d: mjx.Data) -> jax.Array:
+    """(2, 6) the measured soles x, y, z, roll, pitch, yaw (``R = Rz(yaw) Ry(pitch) Rx(roll)``), row 0 left."""
     pos = d.site_xpos[sim.index.sole_site]  # (2, 3)
     mat = d.site_xmat[sim.index.sole_site].reshape(2, 3, 3)
     yaw = jnp.arctan2(mat[:, 1, 0], mat[:, 0, 0])
-    return jnp.concatenate([pos, yaw[:, None]], axis=1)
+    pitch = jnp.arctan2(-mat[:, 2, 0], jnp.hypot(mat[:, 2, 1], mat[:, 2, 2]))
+    roll = jnp.arctan2(mat[:, 2, 1], mat[:, 2, 2])
+    return jnp.concatenate([pos, roll[:, None], pitch[:, None], yaw[:, None]], axis=1)
+
+
+def ankle_wrench(sim: Sim, d: mjx.Data) -> jax.Array:
+    """(2, 6) the ankles' force/torque sensors (``d.sensordata``): force then torque that the shank exerts on the
+    foot, in the foot frame at the ankle point (N, N m), row 0 left."""
+    adr = np.asarray(sim.index.ankle_sensor)[:, :, None] + np.arange(3)
+    return d.sensordata[adr].reshape(2, 6)
+
+
+def _normal(sole) -> jax.Array:
+    """(3,) the unit normal of a sole (6,) x, y, z, roll, pitch, yaw."""
+    return kinematics.rpy_to_rot(sole[3:6])[:, 2]
 
 
 def _tilt(quat) -> jax.Array:
@@ -177,6 +193,29 @@ def _obstacle_contact(sim: Sim, terrain: Terrain, d: mjx.Data) -> jax.Array:
     return jnp.any(active & (~free | ~inside))
 
 
+_PLANAR = np.array([0, 1, 5])  # x, y, yaw of a sole (6,)
+
+
+def start_foothold(terrain: Terrain, pose, foot_length, foot_width) -> jax.Array:
+    """(6,) a start foot's sole: x, y, yaw of ``pose`` (3,), roll and pitch of the plane fitted to the terrain's
+    heights at 5 x 3 points of the footprint (z 0; :func:`swing.resting_height` places it)."""
+    u = jnp.linspace(-0.5, 0.5, 5) * foot_length
+    v = jnp.linspace(-0.5, 0.5, 3) * foot_width
+    uu, vv = (a.ravel() for a in jnp.meshgrid(u, v, indexing="ij"))
+    c, s_ = jnp.cos(pose[2]), jnp.sin(pose[2])
+    dx, dy = c * uu - s_ * vv, s_ * uu + c * vv
+    ij = jnp.floor((pose[:2] + jnp.stack([dx, dy], -1) - terrain.origin) / terrain.resolution).astype(jnp.int32)
+    nx, ny = terrain.shape
+    h = terrain.height[jnp.clip(ij[:, 0], 0, nx - 1), jnp.clip(ij[:, 1], 0, ny - 1)]
+    a = jnp.stack([jnp.ones_like(dx), dx, dy], -1)
+    coef = jnp.linalg.solve(a.T @ a, a.T @ h)
+    gf = coef[1] * c + coef[2] * s_
+    gl = -coef[1] * s_ + coef[2] * c
+    pitch = -jnp.arctan(gf)
+    roll = jnp.arctan2(gl, jnp.sqrt(1.0 + gf * gf))
+    return jnp.stack([pose[0], pose[1], 0.0, roll, pitch, pose[2]])
+
+
 def frame_ticks(sim: Sim, frames_per_step: int) -> np.ndarray:
     """The control ticks (0-based, within a step) whose end states ``StepLog.qpos`` keeps: evenly spaced, the last
     tick last (the touch-down)."""
@@ -196,13 +235,22 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
     """
     params, cfg = sim.params, sim.cfg
     keep = frame_ticks(sim, frames_per_step)
-    phys = terrain.replace(height=model.physical_heights(terrain, params.obstacle_height), has_height=True)
+    # the heights the robot meets: MuJoCo's height field clips them to [z_lo, z_hi] (model.hfield_data)
+    phys = terrain.replace(height=jnp.clip(model.physical_heights(terrain, params.obstacle_height), params.z_lo,
+                                           params.z_hi), has_height=True)
     m = model.put_terrain(sim.mjx_model, params, terrain) if m is None else m
     pgains = controller.gains(cfg)
     foot_l, foot_w = params.foot_length, params.foot_width
 
-    def ground_of(pose):
-        return swing.footprint_height(phys, pose, foot_l, foot_w)
+    contact_points = jnp.asarray(model.sole_points(params)[:, :2], jnp.float32)
+
+    def rest(foothold):
+        """The foothold (6,) with z where the tilted sole's spheres first touch the physical terrain."""
+        return foothold.at[2].set(swing.resting_height(phys, foothold, foot_l, foot_w, points=contact_points))
+
+    def tilt_drop(sole):
+        """How far the lowest sole corner hangs below the centre of a tilted sole (m)."""
+        return 0.5 * foot_l * jnp.abs(jnp.sin(sole[4])) + 0.5 * foot_w * jnp.abs(jnp.sin(sole[3]))
 
     def simulate(d, cs, plan, corr, st, pst):
         """One step of control ticks and physics (``st``, ``pst``: the stance sole measured and as planned).
@@ -220,13 +268,13 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
                                              init=controller.carry_correction(cfg, corr))
         fractions = jnp.arange(1, sim.substeps + 1, dtype=jnp.float32) / sim.substeps
         # World -> the plan's frame: the planar transform that takes the measured stance sole onto the planned one.
-        to_plan = kinematics.rot_z(pst[3] - st[3])
+        to_plan = kinematics.rot_z(pst[5] - st[5])
 
         def tick(carry, k):
             d, cs, touched, low, tilt = carry
             window = None if cfg.filter_passes == 0 else lax.dynamic_slice_in_dim(corr, k, cfg.horizon)
             base = (to_plan @ (d.qpos[:3] - st[:3]) + pst[:3], to_plan @ kinematics.quat_to_rot(d.qpos[3:7]))
-            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, window, base)
+            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, window, base, ankle_wrench(sim, d))
             q0 = d.ctrl
 
             def physics(c, frac):
@@ -251,21 +299,21 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
 
     def init(start, first_swing):
         start = jnp.asarray(start, jnp.float32)
-        ground = jax.vmap(ground_of)(start)
+        planned = jax.vmap(lambda p: rest(start_foothold(phys, p, foot_l, foot_w)))(start)
         # the pelvis cfg.pelvis_height above the lower sole, as the controller holds it
-        qpos = model.stand_pose(params, start, ground, jnp.min(ground) + cfg.pelvis_height)[0]
+        qpos = model.stand_pose(params, start, planned[:, 2], jnp.min(planned[:, 2]) + cfg.pelvis_height,
+                                tilt=planned[:, 3:5])[0]
         d = mjx.make_data(m)
         d = d.replace(qpos=qpos, ctrl=qpos[7:])
         d = mjx.kinematics(m, d)
         d = mjx.com_pos(m, d)
-        planned = jnp.concatenate([start[:, :2], ground[:, None], start[:, 2:]], axis=1)
         swing_side = jnp.asarray(first_swing, jnp.float32)
         cs = controller.init_state(pgains, d.subtree_com[sim.index.pelvis][:2])
         corr = jnp.zeros((controller.correction_length(cfg), 2), jnp.float32)
         soles = _soles(sim, d)
         zero = jnp.float32(0)
-        log = StepLog(soles[0], zero, zero, jnp.bool_(False), jnp.bool_(False), jnp.float32(cfg.pelvis_height), zero,
-                      jnp.zeros((len(keep), m.nq), jnp.float32))
+        log = StepLog(soles[0], zero, zero, zero, jnp.bool_(False), jnp.bool_(False), jnp.float32(cfg.pelvis_height),
+                      zero, jnp.zeros((len(keep), m.nq), jnp.float32))
         # The first execute (the loop's warm-up iteration) stands one step while the preview sees the first
         # step's weight shift coming; it runs the same simulate as every step, so it is compiled once.
         return SimState(d, cs, soles, planned, swing_side, 0.5 * (planned[0, :2] + planned[1, :2]), corr, log,
@@ -273,21 +321,26 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
 
     def stance(s):
         st, sw = split(s.soles, s.swing)
-        return control.StanceInfo(st[jnp.array([0, 1, 3])], -s.swing, sw[jnp.array([0, 1, 3])])
+        return control.StanceInfo(st[_PLANAR], -s.swing, sw[_PLANAR])
 
-    def execute(s, pose, go):
+    def execute(s, foothold, go):
         go = jnp.asarray(go) & ~s.last.fallen & ~s.fresh
         st, sw = split(s.soles, s.swing)
         pst, psw = split(s.planned, s.swing)
-        pose = jnp.asarray(pose, jnp.float32)
-        target = jnp.array([pose[0], pose[1], ground_of(pose), pose[2]])
-        top = swing.corridor_height(phys, sw[jnp.array([0, 1, 3])], pose, foot_l, foot_w)
+        foothold = jnp.asarray(foothold, jnp.float32)
+        if foothold.shape == (3,):  # a planar pose: the sole parallel to the plane fitted under it
+            foothold = start_foothold(phys, foothold, foot_l, foot_w)
+        target = rest(foothold)
+        pose = target[_PLANAR]
+        # the sole's lowest corner clears the swept terrain by the clearance, whatever the soles' tilts
+        top = (swing.corridor_height(phys, sw[_PLANAR], pose, foot_l, foot_w)
+               + jnp.maximum(tilt_drop(psw), tilt_drop(target)))
         # The step relative to the measured stance foot, applied to the commanded one: the plan stays
         # continuous (no jump to the measured soles' millimetres), the foot lands where the selector chose
         # relative to where the stance foot really is.
-        rel = geometry.relative(st[jnp.array([0, 1, 3])], pose)
-        planar = geometry.compose(pst[jnp.array([0, 1, 3])], rel)
-        ptarget = jnp.array([planar[0], planar[1], target[2], planar[2]])
+        rel = geometry.relative(st[_PLANAR], pose)
+        planar = geometry.compose(pst[_PLANAR], rel)
+        ptarget = jnp.concatenate([planar[:2], target[2:5], planar[2:]])
         plan = controller.plan_step(s.anchor, pst, psw, ptarget, go, s.swing, top, cfg.clearance)
         plan = jax.tree_util.tree_map(lambda a, b: jnp.where(s.fresh, a, b),
                                       controller.prepare_plan(pst, psw, s.swing), plan)
@@ -298,14 +351,16 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         planned = jnp.where(left_swings, jnp.stack([plan.swing_to, pst]), jnp.stack([pst, plan.swing_to]))
         fallen = s.last.fallen | (low < sim.fall_height) | (tilt > sim.fall_tilt)
         err = jnp.where(go, jnp.hypot(landed[0] - target[0], landed[1] - target[1]), 0.0)
-        yaw_err = jnp.where(go, jnp.abs(geometry.wrap_angle(landed[3] - target[3])), 0.0)
-        log = StepLog(landed, err, yaw_err, fallen, touched, low, tilt, frames)
+        yaw_err = jnp.where(go, jnp.abs(geometry.wrap_angle(landed[5] - target[5])), 0.0)
+        cos_tilt = jnp.clip(jnp.dot(_normal(landed), _normal(target)), -1.0, 1.0)
+        tilt_err = jnp.where(go, jnp.arccos(cos_tilt), 0.0)
+        log = StepLog(landed, err, yaw_err, tilt_err, fallen, touched, low, tilt, frames)
         anchor = jnp.where(go, pst[:2], 0.5 * (planned[0, :2] + planned[1, :2]))
         return SimState(d, cs, soles, planned, jnp.where(go, -s.swing, s.swing), anchor, corr, log,
                         jnp.bool_(False))
 
     def feet(s):
-        return s.soles[:, jnp.array([0, 1, 3])]
+        return s.soles[:, _PLANAR]
 
     return control.Walker(init, stance, execute, feet, lambda s: s.last, warmup=1)
 
@@ -453,7 +508,8 @@ def summary(traj: control.Trajectory) -> dict[str, jax.Array]:
 
     fell: the robot fell; obstacle_contacts: steps during which a foot (or
     shin) touched an obstacle cell; placement_error_mean / _p95 (m): the
-    touch-down error of the steps taken; yaw_error_mean (rad).
+    touch-down error of the steps taken; yaw_error_mean (rad); tilt_error_p95 (rad): the angle between a
+    landed sole's normal and the commanded foothold's.
     """
     log: StepLog = traj.log
     taken = traj.taken
@@ -466,5 +522,7 @@ def summary(traj: control.Trajectory) -> dict[str, jax.Array]:
         placement_error_mean=jnp.sum(jnp.where(taken, log.placement_error, 0.0), axis=-1) / n,
         placement_error_p95=jnp.where(jnp.any(taken, axis=-1), jnp.nanpercentile(err, 95, axis=-1), 0.0),
         yaw_error_mean=jnp.sum(jnp.where(taken, log.yaw_error, 0.0), axis=-1) / n,
+        tilt_error_p95=jnp.where(jnp.any(taken, axis=-1),
+                                 jnp.nanpercentile(jnp.where(taken, log.tilt_error, jnp.nan), 95, axis=-1), 0.0),
     )
     return out
