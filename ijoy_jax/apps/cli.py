@@ -17,16 +17,32 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--steps", type=int, default=24, help="number of steps (default: %(default)s)")
     demo.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
     bench = sub.add_parser("bench", help="run a benchmark and print JSON lines (see BENCHMARKS.md)")
-    bench.add_argument("name", choices=["footcost", "select", "check", "tune", "sim", "haptics"],
+    bench.add_argument("name", choices=["footcost", "select", "check", "tune", "sim", "walk", "haptics"],
                        help="footcost: evaluations/s; select: decisions/s, rollout steps/s and the NumPy baseline; "
                             "check: fixed decisions saved to / compared with --ref (device agreement); "
                             "tune: seconds per forward-tuning step, compile separate; "
                             "sim: MJX biped physics steps/s by batch size next to multi-threaded C MuJoCo, then "
                             "the closed loop (selector + controller + physics) with falls and placement error; "
+                            "walk: the perfect robot and the MJX biped per terrain family (falls, stops, progress, "
+                            "contacts, placement and tilt errors; JSON lines, a Markdown table and --plot); "
                             "haptics: the ALDURO leg force and filter per call and batched")
     bench.add_argument("--ref", default=None, help="npz of reference decisions for 'check'")
     bench.add_argument("--quick", action="store_true", help="small sizes, for a smoke test")
     bench.add_argument("--json", default=None, help="also write the results to this file")
+    walk = bench.add_argument_group("walk", "options of 'ijoy bench walk' (ijoy_jax/apps/bench_walk.py)")
+    walk.add_argument("--families", default=None,
+                      help="comma-separated terrain families (default: all of flat, clutter2d, uphill, downhill, "
+                           "cross, rough, stones, platforms, stairs_up, stairs_down, image)")
+    walk.add_argument("--batch", type=int, default=None, help="robots (maps) per family (default: 1024; --quick: 4)")
+    walk.add_argument("--steps", type=int, default=None, help="steps per rollout (default: 30; --quick: 6)")
+    walk.add_argument("--commands", choices=["random", "forward", "both"], default=None,
+                      help="a new random command every step, a held forward command, or both (default: both)")
+    walk.add_argument("--resolution", type=float, default=None, help="cell size in metres (default: 0.02)")
+    walk.add_argument("--forward", type=float, default=None, help="held forward command in m/s (default: 0.25)")
+    walk.add_argument("--chunk", type=int, default=None,
+                      help="simulated rollouts per jitted call (default: up to 512 on an accelerator, 32 on a CPU)")
+    walk.add_argument("--seed", type=int, default=None, help="maps and random commands (default: 0)")
+    walk.add_argument("--plot", default=None, help="write the bar plot (PNG) here")
     sweep = sub.add_parser("sweep", help="run a sweep declared in TOML, or summarise a finished one",
                            description="Sweeps over robot/selector parameters, terrains and commands "
                                        "(schema: ijoy_jax/sweep/config.py; examples in sweeps/).")
@@ -112,7 +128,10 @@ def _run(args) -> int:
 
         if args.ref is not None and args.name != "check":
             raise ValueError(f"--ref is read or written by 'ijoy bench check' only, not by '{args.name}'")
-        for path in (args.ref, args.json):  # refused before the benchmark runs, not after
+        walk_only = [f"--{k}" for k in _WALK_OPTIONS if getattr(args, k) is not None]
+        if walk_only and args.name != "walk":
+            raise ValueError(f"{', '.join(walk_only)}: options of 'ijoy bench walk' only, not of '{args.name}'")
+        for path in (args.ref, args.json, args.plot):  # refused before the benchmark runs, not after
             if path is not None and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
                 raise FileNotFoundError(f"no folder for {path!r}")
         if args.name == "sim":
@@ -122,6 +141,8 @@ def _run(args) -> int:
             for row in sim_bench.run(quick=args.quick):
                 print(json.dumps(row), flush=True)
                 rows.append(row)
+        elif args.name == "walk":
+            rows = _bench_walk(args)
         elif args.name == "tune":
             rows = tune_cli.bench(quick=args.quick)
         elif args.name == "haptics":
@@ -136,6 +157,29 @@ def _run(args) -> int:
                 json.dump(rows, f, indent=2)
         return 0
     return 2
+
+
+_WALK_OPTIONS = ("families", "batch", "steps", "commands", "resolution", "forward", "chunk", "seed", "plot")
+
+
+def _bench_walk(args) -> list[dict]:
+    """``ijoy bench walk``: JSON lines as the rows come, then the Markdown table; the plot with --plot."""
+    from ijoy_jax.apps import bench_walk
+
+    def given(value, default):
+        return default if value is None else value
+
+    families = None if args.families is None else [f.strip() for f in args.families.split(",") if f.strip()]
+    kinds = bench_walk.COMMANDS if args.commands in (None, "both") else (args.commands,)
+    rows = bench_walk.run(families, batch=given(args.batch, 4 if args.quick else 1024),
+                          steps=given(args.steps, 6 if args.quick else 30), commands=kinds,
+                          resolution=given(args.resolution, bench_walk.RESOLUTION), seed=given(args.seed, 0),
+                          chunk=args.chunk, forward=given(args.forward, bench_walk.FORWARD),
+                          emit=lambda row: print(json.dumps(row), flush=True))
+    print(bench_walk.markdown_table(rows))
+    if args.plot:
+        bench_walk.plot(rows, args.plot)
+    return rows
 
 
 def _sim(args) -> int:
