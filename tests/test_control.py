@@ -102,11 +102,12 @@ def test_custom_walker_replaces_the_robot_without_touching_the_selector():
     """A walker that lands every step 3 cm short: the loop decides from where the foot really is."""
     base = control.perfect_walker()
 
-    def execute(state, pose, go):
+    def execute(state, foothold, go):
+        planar = jnp.array([0, 1, 5])  # x, y, yaw of the (6,) foothold
         stance = base.stance(state).stance
-        rel = ij.geometry.relative(stance, pose)
+        rel = ij.geometry.relative(stance, foothold[planar])
         short = ij.geometry.compose(stance, rel - jnp.array([0.03, 0.0, 0.0]))
-        return base.execute(state, short, go)
+        return base.execute(state, foothold.at[planar].set(short), go)
 
     walker = control.Walker(base.init, base.stance, execute, base.feet)
     t = ij.terrain.flat(SHAPE, RES)
@@ -124,9 +125,9 @@ def test_walker_warmup_iterations_settle_without_being_recorded():
     def init(start, first_swing):
         return base.init(start, first_swing), jnp.int32(0), jnp.int32(0)
 
-    def execute(state, pose, go):
+    def execute(state, foothold, go):
         inner, calls, gos = state
-        return base.execute(inner, pose, go), calls + 1, gos + go.astype(jnp.int32)
+        return base.execute(inner, foothold, go), calls + 1, gos + go.astype(jnp.int32)
 
     walker = control.Walker(lambda s, f: init(s, f), lambda s: base.stance(s[0]), execute,
                             lambda s: base.feet(s[0]), lambda s: jnp.stack([s[1], s[2]]), warmup=2)

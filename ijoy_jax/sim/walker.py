@@ -275,7 +275,8 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         st, sw = split(s.soles, s.swing)
         return control.StanceInfo(st[jnp.array([0, 1, 3])], -s.swing, sw[jnp.array([0, 1, 3])])
 
-    def execute(s, pose, go):
+    def execute(s, foothold, go):
+        pose = foothold[jnp.array([0, 1, 5])]
         go = jnp.asarray(go) & ~s.last.fallen & ~s.fresh
         st, sw = split(s.soles, s.swing)
         pst, psw = split(s.planned, s.swing)
