@@ -316,7 +316,7 @@ def make_robot(
     clearance=0.10,
     max_step_height=0.10,
     max_sole_pitch: float = math.radians(20.0),
-    max_sole_roll: float = math.radians(15.0),
+    max_sole_roll: float = math.radians(10.0),
     max_sole_distance: float = 0.50,
     metrics: TerrainMetrics | None = None,
     w: float = 1.0,
@@ -336,22 +336,22 @@ def make_robot(
       action_cost, clearance, max_step_height: scalars or (N,) arrays (>= 0).
       max_sole_pitch, max_sole_roll: the sole tilts the ankles can realise
         (rad, >= 0; FootCost's ``ankle`` term). Defaults: HRP-2's, from the
-        MJX biped's joint ranges (:class:`ijoy_jax.sim.model.BipedParams`:
-        ankle pitch [-75, 42] deg, ankle roll [-20, 35] deg on the left leg,
-        mirrored on the right) in the stance its controller holds (pelvis
-        level, 0.65 m above the lower sole; hips 0.06 m either side of it;
-        thigh + shank 0.6 m; ankle 0.105 m above the sole). Pitch: the knee
-        bend of that stance and the legs' fore-aft lean at steps of up to
-        0.3 m leave the ankle a sole pitch of -34.9 to +46.2 deg; 20 deg
-        keeps 14.9 deg of it for tracking and for torque near the joint
-        limit, and equals the default slope limit, so it refuses nothing the
-        slope limit accepts unless that is raised. Roll: the narrow side of
-        the ankle roll (20 deg) less the leg's outward lean in the
-        step-in-place stance (feet 0.19 m apart: the sole 3.5 cm outside
-        its hip, 3.7 deg) leaves 16.3 deg; 15 deg keeps 1.3 deg of it. (In
-        the widest stance, 0.33 m, the lean is 10.9 deg, so a sole rolled
-        down-outward by more than 9 deg there is beyond the joint range: one
-        scalar limit cannot say that.)
+        MJX biped (:class:`ijoy_jax.sim.model.BipedParams`: ankle pitch
+        [-75, 42] deg, ankle roll [-20, 35] deg on the left leg, mirrored on
+        the right; thigh + shank 0.6 m; ankle 0.105 m above the sole; hips
+        0.06 m either side of the pelvis) in the double-support posture its
+        controller holds (pelvis level, midway between the feet, 0.65 m above
+        the soles), solved by its leg IK within every joint range. Pitch: 20
+        deg is realisable in every stance of the action set, at a 0.30 m
+        reach too (25 deg is not: the front ankle's 42 deg), and equals the
+        default slope limit, so it refuses nothing the slope limit accepts
+        unless that is raised. Roll: a stance wider than the hips leans the
+        legs outward, using up the narrow 20 deg side of the ankle roll: at
+        the step-in-place width (0.19 m) a roll of 11.5 deg is realisable in
+        every stance (13.5 deg standing straight), at the widest (0.33 m)
+        only 6 deg. 10 deg keeps 1.5 deg at the former; one scalar cannot
+        follow the width, so a sole rolled by 6 to 10 deg in a wide stance
+        is accepted but beyond this posture's joint range.
       max_sole_distance: the largest 3D distance between the stance and
         swing sole centres (m, >= 0; FootCost's ``reach`` term). Default
         0.50, HRP-2's: with the pelvis 0.65 m above the lower sole and
@@ -543,16 +543,22 @@ def hrp2(margin: float = 0.02, density: float = 1.0, *, reach: float = PAPER_REA
     Stairs. With the paper's reach (steps at most 0.20 m ahead of the stance
     foot) the stance foot's toe is always ahead of the swing foot's heel
     (0.20 - 0.242 / 2 = 0.079 m < 0.242 / 2 + margin), so a riser across both
-    lanes can only be crossed by a foot straddling it, which the roughness,
-    bump and band limits refuse from about 1.3 cm up: the robot marks time
-    before it (the paper's geometry: it stepped onto obstacles in one lane). A
-    foot clears a riser between the feet only if it lands at least
-    ``foot_length + 2 margin`` (0.282 m at 2 cm) ahead of the stance foot:
-    ``reach=0.30`` gives dx in [-30, 30] cm (13 values, 5 cm apart; 13 x 8 x 7
-    - 8 = 720 actions) and, unless overridden, ``max_step_height``
-    :data:`STAIR_STEP_HEIGHT` (15 cm risers). ``clearance`` stays 0.10 m: the
-    swing corridor is measured from the higher foothold, and a stair's nosing
-    between the two footholds is never above it.
+    lanes can only be crossed by a foot straddling it. The roughness, bump and
+    slope terms make that costlier than marking time (at w = 1) from a riser
+    of 1.3 to 2 cm, depending on where it falls under the foot, and their
+    limits refuse it by 5 cm: the robot marks time before it (the paper's
+    geometry: it stepped onto obstacles in one lane). A foot clears a riser
+    between the feet only if it lands at least ``foot_length + 2 margin``
+    (0.282 m at 2 cm) ahead of the stance foot: ``reach=0.30`` gives dx in
+    [-30, 30] cm (13 values, 5 cm apart; 13 x 8 x 7 - 8 = 720 actions) and,
+    unless overridden, ``max_step_height`` :data:`STAIR_STEP_HEIGHT` (15 cm
+    risers). ``clearance`` stays 0.10 m: the swing corridor is measured from
+    the higher foothold, and a stair's nosing between the two footholds is
+    never above it. A tread holds a foot with its margin if it is at least
+    0.282 m deep; with 5 cm steps the feet's x stay on one 5 cm lattice, and
+    the 1.8 cm of slack (0.30 - 0.282) is enough when the risers keep the
+    lattice's phase: treads a multiple of 5 cm (0.30 m: a tread per step;
+    0.40 m: two steps per tread).
 
     Args:
       margin: safety margin (m).
