@@ -586,9 +586,12 @@ def hrp2(margin: float = 0.02, density: float = 1.0, *, reach: float = PAPER_REA
     if reach > PAPER_REACH:
         kwargs["max_step_height"] = STAIR_STEP_HEIGHT
     kwargs.update(overrides)
-    limit = kwargs.get("max_sole_distance", _signature_defaults(make_robot)["max_sole_distance"])
+    try:
+        limit = float(kwargs.get("max_sole_distance", _signature_defaults(make_robot)["max_sole_distance"]))
+    except (TypeError, ValueError):  # not a number (or traced): make_robot's check names it
+        limit = math.nan
     farthest = math.hypot(reach, _HRP2_DY[1])
-    if _is_concrete(limit) and np.isfinite(limit) and farthest > float(limit):
+    if 0 <= limit < farthest:  # NaN, inf or < 0: make_robot's check names it
         raise ValueError(f"reach={reach!r} m puts the farthest action ({reach}, {_HRP2_DY[1]}) {farthest:.3f} m from "
                          f"the stance foot, beyond max_sole_distance = {float(limit)} m: its steps would always be "
                          "refused")
