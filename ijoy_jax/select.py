@@ -234,8 +234,8 @@ def foothold(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None
     plane FootCost fits under the footprint (:func:`ijoy_jax.footcost.xla.plane_metrics`):
     its height at the foot centre and the orientation of a sole lying on it
     (:func:`ijoy_jax.footcost.xla.sole_tilt`, ``R = Rz(yaw) Ry(pitch) Rx(roll)``).
-    Zeros on a 2D terrain; finite wherever the pose is (a pose off the map
-    takes the height of the nearest cell, level). Traceable (one plane fit):
+    Zeros on a 2D terrain; finite wherever the pose is (beyond the map's
+    edge its heights continue the edge's). Traceable (one plane fit):
     :func:`select_step` returns it as :attr:`StepChoice.foothold`.
     ``index``: the terrain's prebuilt index (:func:`prepare`), built inside when None.
     """

@@ -158,7 +158,8 @@ def test_no_valid_step_is_explicit_and_finite():
         assert not bool(ch.valid) and np.isinf(float(ch.cost))
         assert np.all(np.isfinite(np.asarray(ch.pose)))
         # the foothold is the reported pose's, level on a 2D map
-        np.testing.assert_array_equal(np.asarray(ch.foothold), np.asarray(ch.pose)[[0, 1, 0, 0, 0, 2]] * [1, 1, 0, 0, 0, 1])
+        level = np.asarray(ch.pose)[[0, 1, 0, 0, 0, 2]] * [1, 1, 0, 0, 0, 1]
+        np.testing.assert_array_equal(np.asarray(ch.foothold), level)
         if method != "naive":
             assert int(ch.index) == -1
             # the reported pose is stepping in place, never NaN
@@ -234,7 +235,9 @@ def test_no_recompile_across_parameters_and_commands():
     n = select._select_jit._cache_size()
     for r, cmd in [(ROBOT.replace(w=jnp.float32(5.0)), [0.2, 0.1, 0.0]),
                    (ROBOT.replace(margin=jnp.float32(0.1)), [0.0, 0.0, 0.3]),
-                   (ROBOT.replace(step_time=jnp.float32(0.5)), [np.nan, 0.0, 0.0])]:
+                   (ROBOT.replace(step_time=jnp.float32(0.5)), [np.nan, 0.0, 0.0]),
+                   (ROBOT.replace(max_sole_roll=jnp.float32(0.05), max_sole_distance=jnp.float32(0.3)),
+                    [0.2, 0.0, 0.1])]:
         ij.select_step(t, r, *args, cmd, targets=TARGETS)
     assert select._select_jit._cache_size() == n
 
