@@ -124,8 +124,8 @@ class SoftFootCostTerms(NamedTuple):
     (each ``weight * metric + barrier``; 0 on 2D terrains), swing_path
     (clearance barrier on the swing corridor plus its off-map and length
     barriers; 0 without ``swing_from`` or on 2D terrains), ankle (barriers on
-    the sole's |pitch| and |roll| on the soft plane against the robot's
-    ``max_sole_pitch`` and ``max_sole_roll``; 0 on 2D terrains), reach
+    the size of the sole's pitch and roll on the soft plane against the
+    robot's ``max_sole_pitch`` and ``max_sole_roll``; 0 on 2D terrains), reach
     (barrier on the 3D distance of the soles against ``max_sole_distance``).
     Raw: obstacle_mass (cells, soft count of obstacle or off-map cells under
     the grown footprint), slope_angle (rad), roughness_m, bump_m,
