@@ -95,6 +95,8 @@ def test_rollout_does_not_recompile_for_new_values():
     n = control._rollout_jit._cache_size()
     ij.rollout(t.replace(free=t.free.at[110, 30].set(False)), ROBOT.replace(w=jnp.float32(2.0)),
                START + 0.01, [0.1, 0.05, 0.1], STEPS)
+    ij.rollout(t, ROBOT.replace(max_sole_pitch=jnp.float32(0.1), max_sole_roll=jnp.float32(0.05),
+                                max_sole_distance=jnp.float32(0.3)), START, [0.1, 0.05, 0.1], STEPS)
     assert control._rollout_jit._cache_size() == n
 
 

@@ -247,11 +247,12 @@ def test_select_step_with_the_kernel_chooses_the_same_steps(method):
 
     def one(s, c, kernel):
         ch = select.select_step(terrain, robot, s, -1, c, method=method, targets=targets, index=index, kernel=kernel)
-        return ch.index, ch.cost, ch.valid
+        return ch.index, ch.cost, ch.valid, ch.foothold
 
     run = jax.jit(jax.vmap(one, in_axes=(0, 0, None)), static_argnums=2)
-    (ia, ca, va), (ib, cb, vb) = run(stance, command, "xla"), run(stance, command, "pallas")
+    (ia, ca, va, fa), (ib, cb, vb, fb) = run(stance, command, "xla"), run(stance, command, "pallas")
     np.testing.assert_array_equal(np.asarray(ib), np.asarray(ia))
+    np.testing.assert_allclose(np.asarray(fb), np.asarray(fa), atol=1e-6)  # the same step's plane: one XLA fit
     np.testing.assert_array_equal(np.asarray(vb), np.asarray(va))
     assert np.asarray(va).sum() >= n // 2
     np.testing.assert_allclose(np.asarray(cb)[np.asarray(va)], np.asarray(ca)[np.asarray(va)], rtol=RTOL, atol=ATOL)
