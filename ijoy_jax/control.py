@@ -43,8 +43,9 @@ class Walker(NamedTuple):
 
       init(start (2, 3), first_swing ()) -> state
       stance(state) -> StanceInfo              (ComputeStanceLocation)
-      execute(state, pose (3,), go ()) -> state (SendRobotCmd if go else StopWalking,
-                                                 then WaitForNextStep)
+      execute(state, foothold (6,), go ()) -> state
+                                               (SendRobotCmd if go else StopWalking,
+                                                then WaitForNextStep)
       feet(state) -> (2, 3) world poses, row 0 left, row 1 right.
       log(state) -> pytree recorded after every step (optional; e.g. a physically
           simulated robot's placement error and falls), kept in Trajectory.log.
@@ -53,6 +54,11 @@ class Walker(NamedTuple):
           the loop does not stop, and nothing of them is kept in the Trajectory.
           A robot that must stand a step before walking uses it instead of
           stepping in ``init``, so the step's code is traced (and compiled) once.
+
+    ``foothold`` is the chosen step's full sole pose :attr:`ijoy_jax.select.StepChoice.foothold`:
+    x, y, z (m), roll, pitch, yaw (rad), ``R = Rz(yaw) Ry(pitch) Rx(roll)``; z, roll and pitch
+    from the plane fitted under the foot (0 on a 2D terrain). A planar robot reads
+    ``foothold[jnp.array([0, 1, 5])]``, the (x, y, yaw) pose.
     """
 
     init: Callable[[jax.Array, jax.Array], Any]
@@ -78,7 +84,8 @@ def perfect_walker() -> Walker:
         sw = jnp.where(left_swings, s.feet[0], s.feet[1])
         return StanceInfo(st, -s.swing, sw)
 
-    def execute(s, pose, go):
+    def execute(s, foothold, go):
+        pose = foothold[jnp.array([0, 1, 5])]  # x, y, yaw: the planar pose of the sole
         row = jnp.where(s.swing > 0, 0, 1)
         feet = jnp.where(go, s.feet.at[row].set(pose), s.feet)
         return _PerfectState(feet, jnp.where(go, -s.swing, s.swing))
@@ -104,6 +111,10 @@ class Trajectory(NamedTuple):
       commanded: (T, 3) world pose sent to the robot (the chosen step; the
         swing foot's pose when none was sent). With a perfect walker it equals
         ``footsteps`` wherever a step was taken.
+      footholds: (T, 6) the full sole pose passed to the walker with each
+        decision (:attr:`ijoy_jax.select.StepChoice.foothold`: x, y, z, roll,
+        pitch, yaw; m, rad), whether or not it was sent (``taken``): the
+        chosen step's, or the step in place's when none was valid.
       command_ok: False where the command had NaN/inf (treated as zero).
       in_place: the step taken was the step-in-place action p0.
       stationary: the step taken put the swing foot back where it was (the
@@ -145,6 +156,7 @@ class Trajectory(NamedTuple):
     unsupported: jax.Array
     feet: jax.Array
     commanded: jax.Array | None = None
+    footholds: jax.Array | None = None
     log: Any = None
 
     def summary(self) -> dict[str, jax.Array]:
@@ -202,7 +214,7 @@ def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, m
         go = ~stopped & (choice.valid | (method == "naive")) & ~settling
         now_stopped = stopped | (~go & ~settling)
         before = walker.feet(state)
-        new_state = walker.execute(state, choice.pose, go)
+        new_state = walker.execute(state, choice.foothold, go)
         after = walker.feet(new_state)
         swing_row = jnp.where(info.stance_side > 0, 1, 0)
         landed = after[swing_row]
@@ -228,6 +240,7 @@ def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, m
             index=choice.index,
             target=choice.target,
             commanded=jnp.where(go, choice.pose, info.swing_from),
+            footholds=choice.foothold,
             command_ok=choice.command_ok,
             in_place=go & (choice.index >= 0) & jnp.all(
                 jnp.abs(robot.actions[jnp.maximum(choice.index, 0)] - robot.p0) < 1e-6),

@@ -100,6 +100,15 @@ class Robot:
         the start and end footholds higher than this above the higher of the
         two makes the step invalid.
       max_step_height: (N,) allowed |height change| from the stance foothold.
+      max_sole_pitch, max_sole_roll: the largest tilt of the sole from
+        horizontal, about the foot's own y axis (pitch) and x axis (roll), that
+        the ankles can realise (rad): a foothold whose fitted plane tilts the
+        sole further is refused (FootCost's ``ankle`` term). See
+        :func:`make_robot` for HRP-2's values and where they come from.
+      max_sole_distance: the largest distance between the stance and swing
+        sole centres in 3D (m; the horizontal step and the height change of
+        the two fitted planes): beyond it the legs cannot stand on both
+        footholds (FootCost's ``reach`` term). See :func:`make_robot`.
       metrics: TerrainMetrics weights and limits.
       w: weight of dist against FootCost, cost(p) = FootCost + w dist(p, p_next).
       rotation_weight: dist = |translation| + rotation_weight * |rotation|
@@ -124,6 +133,9 @@ class Robot:
     action_cost: jax.Array
     clearance: jax.Array
     max_step_height: jax.Array
+    max_sole_pitch: jax.Array
+    max_sole_roll: jax.Array
+    max_sole_distance: jax.Array
     metrics: TerrainMetrics
     w: jax.Array
     rotation_weight: jax.Array
@@ -200,6 +212,7 @@ OVERLAP_TOL = 1e-5
 """m: overlap of the feet a traced check ignores (float32 rounding of corners of footprints that touch)."""
 
 _PER_ACTION = ("action_cost", "clearance", "max_step_height")
+_LIMITS = ("max_sole_pitch", "max_sole_roll", "max_sole_distance")  # the biped's ankle-tilt and leg-reach limits
 
 
 def _positive(xp, x):
@@ -232,7 +245,7 @@ _ROBOT_RULES = (
     *((n, f"finite, > 0 and <= MAX_SIZE = {MAX_SIZE:g} m", _size) for n in ("foot_length", "foot_width")),
     ("margin", f"finite, >= 0 and <= MAX_SIZE = {MAX_SIZE:g} m", _margin),
     ("step_time", "finite and > 0", _positive),
-    *((n, "finite and >= 0", _nonneg) for n in ("w", "rotation_weight", *_PER_ACTION)),
+    *((n, "finite and >= 0", _nonneg) for n in ("w", "rotation_weight", *_LIMITS, *_PER_ACTION)),
     *((f"metrics.{n}", "finite and >= 0", _nonneg) for n in TerrainMetrics.__dataclass_fields__),
     *((n, "finite", _finite) for n in ("actions", "p0")),
 )
@@ -320,6 +333,9 @@ def make_robot(
     action_cost=0.0,
     clearance=0.10,
     max_step_height=0.10,
+    max_sole_pitch: float = math.radians(20.0),
+    max_sole_roll: float = math.radians(10.0),
+    max_sole_distance: float = 0.50,
     metrics: TerrainMetrics | None = None,
     w: float = 1.0,
     rotation_weight: float = 100.0,
@@ -336,6 +352,34 @@ def make_robot(
       p0: (3,) step-in-place action; default: the action with dx = dtheta = 0
         and the smallest dy, or the action nearest (0, 0.19, 0) if none.
       action_cost, clearance, max_step_height: scalars or (N,) arrays (>= 0).
+      max_sole_pitch, max_sole_roll: the sole tilts the ankles can realise
+        (rad, >= 0; FootCost's ``ankle`` term). Defaults: HRP-2's, from the
+        MJX biped (:class:`ijoy_jax.sim.model.BipedParams`: ankle pitch
+        [-75, 42] deg, ankle roll [-20, 35] deg on the left leg, mirrored on
+        the right; thigh + shank 0.6 m; ankle 0.105 m above the sole; hips
+        0.06 m either side of the pelvis) in the double-support posture its
+        controller holds (pelvis level, midway between the feet, 0.65 m above
+        the soles), solved by its leg IK within every joint range. Pitch: 20
+        deg is realisable in every stance of the action set, at a 0.30 m
+        reach too (25 deg is not: the front ankle's 42 deg), and equals the
+        default slope limit, so it refuses nothing the slope limit accepts
+        unless that is raised. Roll: a stance wider than the hips leans the
+        legs outward, using up the narrow 20 deg side of the ankle roll: at
+        the step-in-place width (0.19 m) a roll of 11.5 deg is realisable in
+        every stance (13.5 deg standing straight), at the widest (0.33 m)
+        only 6 deg. 10 deg keeps 1.5 deg at the former; one scalar cannot
+        follow the width, so a sole rolled by 6 to 10 deg in a wide stance
+        is accepted but beyond this posture's joint range.
+      max_sole_distance: the largest 3D distance between the stance and
+        swing sole centres (m, >= 0; FootCost's ``reach`` term). Default
+        0.50, HRP-2's: with the pelvis 0.65 m above the lower sole and
+        midway between the feet, the lower leg (hip to ankle at most 0.6 m,
+        0.545 m of it vertical) reaches sqrt(0.6^2 - 0.545^2) = 0.251 m
+        sideways or forward from below its hip, so the soles can be
+        2 x 0.251 = 0.502 m apart; the hips' 0.12 m spacing is not credited
+        and the height change counts in full, so the limit is conservative.
+        The paper's farthest action (0.2, 0.33) is 0.386 m away, the 0.3 m
+        reach's (0.3, 0.33) 0.446 m: a 15 cm stair riser still fits.
       metrics: TerrainMetrics; default :func:`default_metrics`.
       w: weight of dist (>= 0). rotation_weight: see :class:`Robot` (>= 0).
       max_margin: largest margin the static windows must cover (m, at most
@@ -367,6 +411,9 @@ def make_robot(
         if v is not None and float(v) > MAX_SIZE:
             raise ValueError(f"{name} must be <= {MAX_SIZE:g} m (robots.MAX_SIZE: the static windows grow with it), "
                              f"got {float(v)}")
+    for name, value in (("max_sole_pitch", max_sole_pitch), ("max_sole_roll", max_sole_roll),
+                        ("max_sole_distance", max_sole_distance)):
+        _check_scalar(name, value, nonneg=True)
     bad = footprints_overlap(acts, float(foot_length), float(foot_width))
     if bad.any():
         raise ValueError(
@@ -409,6 +456,9 @@ def make_robot(
         action_cost=per_action("action_cost", action_cost),
         clearance=per_action("clearance", clearance),
         max_step_height=per_action("max_step_height", max_step_height),
+        max_sole_pitch=f32(max_sole_pitch),
+        max_sole_roll=f32(max_sole_roll),
+        max_sole_distance=f32(max_sole_distance),
         metrics=default_metrics() if metrics is None else metrics,
         w=f32(w),
         rotation_weight=f32(rotation_weight),
@@ -465,25 +515,48 @@ def lattice_actions(
     return grid
 
 
-def density_counts(density: float) -> tuple[int, int, int]:
+DX_SPACING = 0.05
+"""m: spacing of HRP-2's dx lattice at density 1 (the paper's 9 values over [-0.2, 0.2] m)."""
+
+PAPER_REACH = 0.20
+"""m: the paper's largest forward/backward step of HRP-2 (:func:`hrp2`'s default ``reach``)."""
+
+STAIR_STEP_HEIGHT = 0.15
+"""m: HRP-2's ``max_step_height`` with a reach beyond the paper's (:func:`hrp2`): stair risers up to 15 cm."""
+
+
+def density_counts(density: float, reach: float = PAPER_REACH) -> tuple[int, int, int]:
     """Lattice counts for an action-set density; density 1 gives HRP-2's (9, 8, 7) -> 496 actions.
 
     dx and dtheta counts stay odd so that straight steps (dx = 0, dtheta = 0)
     stay in the set. Sizes: density 0.1 -> 10, 0.25 -> 19, 0.5 -> 117,
-    1 -> 496, 2 -> 3307, 3 -> 10442 actions.
+    1 -> 496, 2 -> 3307, 3 -> 10442 actions. ``reach`` (m) is the dx range's
+    half width: at density 1 the dx values stay :data:`DX_SPACING` apart,
+    ``1 + 2 round(reach / 0.05)`` of them (reach 0.30 -> 13: (13, 8, 7) -> 720 actions).
     """
     if not np.isfinite(density) or density <= 0:
         raise ValueError(f"density must be a positive finite number, got {density!r}")
-    n_dx = 1 + 2 * max(1, round(4 * density))
+    _check_reach(reach)
+    half = max(1, round(reach / DX_SPACING))  # dx values either side of 0 at density 1 (4 for the paper's 0.2 m)
+    n_dx = 1 + 2 * max(1, round(half * density))
     n_dy = 1 + max(1, round(7 * density))
     n_dt = 1 + 2 * max(1, round(3 * density))
     return n_dx, n_dy, n_dt
 
 
+def _check_reach(reach) -> None:
+    if isinstance(reach, bool) or not isinstance(reach, (int, float, np.integer, np.floating)):
+        raise ValueError(f"reach must be a number (the largest forward/backward step, m), got {reach!r}")
+    if not (np.isfinite(reach) and reach > 0):
+        raise ValueError(f"reach must be a positive finite number (the largest forward/backward step, m), "
+                         f"got {reach!r}")
+
+
 _HRP2_BODY = {"foot_length": 0.242, "foot_width": 0.13, "step_time": 0.8, "p0": (0.0, 0.19, 0.0)}
+_HRP2_DY = (0.19, 0.33)  # m: HRP-2's lateral range of the swing foot from the stance foot
 
 
-def hrp2(margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
+def hrp2(margin: float = 0.02, density: float = 1.0, *, reach: float = PAPER_REACH, **overrides) -> Robot:
     """The paper's HRP-2: footprint 24.2 x 13 cm, 496 actions per foot.
 
     Actions: dx in [-20, 20] cm (9 values, 5 cm apart), dy in [19, 33] cm from
@@ -493,21 +566,63 @@ def hrp2(margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
     sweeps. Step time 0.8 s; step in place p0 = (0, 0.19 m, 0). Safety margin:
     the paper used 2 cm (motion capture), 5 cm (vision) and 10 cm (real robot).
 
+    Stairs. With the paper's reach (steps at most 0.20 m ahead of the stance
+    foot) the stance foot's toe is always ahead of the swing foot's heel
+    (0.20 - 0.242 / 2 = 0.079 m < 0.242 / 2 + margin), so a riser across both
+    lanes can only be crossed by a foot straddling it. The roughness, bump and
+    slope terms make that costlier than marking time (at w = 1) from a riser
+    of 1.3 to 2 cm, depending on where it falls under the foot, and their
+    limits refuse it by 5 cm: the robot marks time before it (the paper's
+    geometry: it stepped onto obstacles in one lane). A foot clears a riser
+    between the feet only if it lands at least ``foot_length + 2 margin``
+    (0.282 m at 2 cm) ahead of the stance foot: ``reach=0.30`` gives dx in
+    [-30, 30] cm (13 values, 5 cm apart; 13 x 8 x 7 - 8 = 720 actions) and,
+    unless overridden, ``max_step_height`` :data:`STAIR_STEP_HEIGHT` (15 cm
+    risers). ``clearance`` stays 0.10 m: the swing corridor is measured from
+    the higher foothold, and a stair's nosing between the two footholds is
+    never above it. A tread holds a foot with its margin if it is at least
+    0.282 m deep; with 5 cm steps the feet's x stay on one 5 cm lattice, and
+    the 1.8 cm of slack (0.30 - 0.282) is enough when the risers keep the
+    lattice's phase: treads a multiple of 5 cm (0.30 m: a tread per step;
+    0.40 m: two steps per tread).
+
     Args:
       margin: safety margin (m).
       density: action-set density (1.0 -> 496 actions).
+      reach: largest forward/backward step dx (m, > 0; default the paper's
+        0.20). The farthest action must stay within ``max_sole_distance``.
       **overrides: any other :func:`make_robot` keyword (w, rotation_weight,
         step_time, action_cost, clearance, max_step_height, metrics, ...).
+
+    Raises:
+      ValueError: a reach that is not a positive finite number, or one that
+        puts actions beyond ``max_sole_distance``.
 
     Example:
       >>> import ijoy_jax as ij
       >>> robot = ij.robots.hrp2(margin=0.05)
       >>> robot.actions.shape
       (496, 3)
+      >>> stairs = ij.robots.hrp2(reach=0.30)
+      >>> stairs.actions.shape, round(float(stairs.max_step_height[0]), 2)
+      ((720, 3), 0.15)
     """
+    _check_reach(reach)
     kwargs = dict(_HRP2_BODY, margin=margin)
+    if reach > PAPER_REACH:
+        kwargs["max_step_height"] = STAIR_STEP_HEIGHT
     kwargs.update(overrides)
-    return make_robot(lattice_actions(density_counts(density)), **kwargs)
+    try:
+        limit = float(kwargs.get("max_sole_distance", _signature_defaults(make_robot)["max_sole_distance"]))
+    except (TypeError, ValueError):  # not a number (or traced): make_robot's check names it
+        limit = math.nan
+    farthest = math.hypot(reach, _HRP2_DY[1])
+    if 0 <= limit < farthest:  # NaN, inf or < 0: make_robot's check names it
+        raise ValueError(f"reach={reach!r} m puts the farthest action ({reach}, {_HRP2_DY[1]}) {farthest:.3f} m from "
+                         f"the stance foot, beyond max_sole_distance = {float(limit)} m: its steps would always be "
+                         "refused")
+    actions = lattice_actions(density_counts(density, reach), dx_range=(-reach, reach), dy_range=_HRP2_DY)
+    return make_robot(actions, **kwargs)
 
 
 def start_stance(robot: Robot, x, y, theta=0.0, *, width=None) -> jax.Array:
@@ -537,7 +652,8 @@ class LeafSpec(NamedTuple):
       unit: of the value (m, s, rad; cost/m: cost units per metre, m/rad: dist metres per radian).
       positive: True: must be > 0 (sizes, times); False: must be >= 0.
       selector: True for the parameters of the choice (FootCost + w dist), the ones
-        ijoy_jax.tune may tune; False for the robot's body (footprint, step time).
+        ijoy_jax.tune may tune; False for the robot's body (footprint, step time, the
+        ankles' tilt and the legs' reach limits).
     """
 
     unit: str
@@ -553,6 +669,9 @@ SCALAR_LEAVES: Mapping[str, LeafSpec] = MappingProxyType(
         "step_time": LeafSpec("s", True, False),
         "foot_length": LeafSpec("m", True, False),
         "foot_width": LeafSpec("m", True, False),
+        "max_sole_pitch": LeafSpec("rad", False, False),
+        "max_sole_roll": LeafSpec("rad", False, False),
+        "max_sole_distance": LeafSpec("m", False, False),
         "metrics.slope_weight": LeafSpec("cost/rad", False, True),
         "metrics.slope_limit": LeafSpec("rad", False, True),
         "metrics.roughness_weight": LeafSpec("cost/m", False, True),
@@ -579,7 +698,9 @@ def hrp2_defaults() -> dict[str, float]:
     """name -> value of every :data:`SCALAR_LEAVES` leaf of ``hrp2()``, and its ``density``, without building it.
 
     Read from the one source of each number: :func:`hrp2`'s arguments and body,
-    :func:`make_robot`'s and :func:`default_metrics`' keyword defaults.
+    :func:`make_robot`'s and :func:`default_metrics`' keyword defaults. The
+    robot at the paper's reach (``reach`` changes the action set, a shape, and
+    ``max_step_height``, a per-action leaf: neither is a scalar leaf).
 
     Example:
       >>> from ijoy_jax import robots

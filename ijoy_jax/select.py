@@ -39,6 +39,7 @@ from ijoy_jax import geometry
 from ijoy_jax._struct import as_array, check_numeric, pytree_dataclass, static_field
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
 from ijoy_jax.footcost import validate as validate_foot_cost
+from ijoy_jax.footcost.xla import plane_metrics, sole_tilt
 from ijoy_jax.robots import Robot, dist, mirror, side_actions, side_p0, side_sign
 from ijoy_jax.terrain import Terrain
 
@@ -121,6 +122,15 @@ class StepChoice(NamedTuple):
 
       pose: (3,) world pose of the chosen swing foot (the step-in-place pose
         when no step is valid, so it is never NaN).
+      foothold: (6,) float32 full world pose of the sole at ``pose``:
+        x, y (m), z (m), roll, pitch, yaw (rad). x, y and yaw are ``pose``'s;
+        z is the height at the foot centre of the plane fitted under the
+        footprint (the FootCost plane), roll and pitch orient a sole lying on
+        that plane with that yaw, ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (as
+        :func:`ijoy_jax.sim.kinematics.rpy_to_rot`; the sole's z axis is the
+        plane's upward normal: :func:`ijoy_jax.footcost.xla.sole_tilt`). z,
+        roll and pitch are 0 on a 2D terrain. What a robot's footstep message
+        carries; the control loop passes it to the walker.
       valid: () bool, False when no valid step exists: the caller stops walking.
       cost: () float32, FootCost + w * dist of the choice (+inf if not valid).
       foot_cost: () float32, the FootCost part of ``cost`` (action cost plus
@@ -139,6 +149,7 @@ class StepChoice(NamedTuple):
     """
 
     pose: jax.Array
+    foothold: jax.Array
     valid: jax.Array
     cost: jax.Array
     foot_cost: jax.Array
@@ -217,6 +228,30 @@ def on_obstacle(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | N
     return terms.obstacle[0] > 0
 
 
+def foothold(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None = None) -> jax.Array:
+    """(6,) float32 full world pose ``(x, y, z, roll, pitch, yaw)`` of a sole put down at ``pose`` (3,) (m, rad).
+
+    x, y and yaw are the pose's; z, roll and pitch come from the least-squares
+    plane FootCost fits under the footprint (:func:`ijoy_jax.footcost.xla.plane_metrics`):
+    its height at the foot centre and the orientation of a sole lying on it
+    (:func:`ijoy_jax.footcost.xla.sole_tilt`, ``R = Rz(yaw) Ry(pitch) Rx(roll)``).
+    Zeros on a 2D terrain; finite wherever the pose is (beyond the map's
+    edge its heights continue the edge's). Traceable (one plane fit):
+    :func:`select_step` returns it as :attr:`StepChoice.foothold`.
+    ``index``: the terrain's prebuilt index (:func:`prepare`), built inside when None.
+    """
+    pose = jnp.asarray(pose, jnp.float32)
+    zero = jnp.zeros((), jnp.float32)
+    if not terrain.has_height:
+        return jnp.stack([pose[0], pose[1], zero, zero, zero, pose[2]])
+    if index is None:
+        index = index_terrain(terrain, robot)
+    plane = plane_metrics(terrain, index, robot, pose)
+    pitch, roll = sole_tilt(plane.grad_x, plane.grad_y, pose[2])
+    z, roll, pitch = (jnp.where(jnp.isfinite(v), v, zero).astype(jnp.float32) for v in (plane.height, roll, pitch))
+    return jnp.stack([pose[0], pose[1], z, roll, pitch, pose[2]])
+
+
 def validate(terrain, robot, stance, stance_side, command, *, method="exhaustive", swing_from=None, targets=None,
              index=None, kernel="xla"):
     """Check the arguments of :func:`select_step` (raises ValueError / TypeError).
@@ -283,8 +318,10 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     # The naive joystick steps to its action whatever the terrain; the others
     # report no step (index -1, the step-in-place pose) when none is valid.
     chosen = valid | (method == "naive")
+    pose = jnp.where(chosen, steps[best], in_place)
     return StepChoice(
-        pose=jnp.where(chosen, steps[best], in_place),
+        pose=pose,
+        foothold=foothold(terrain, robot, pose, index=index),
         valid=valid,
         cost=jnp.where(valid, cost, jnp.inf),
         foot_cost=jnp.where(valid, fc, jnp.inf),

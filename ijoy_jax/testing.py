@@ -2,7 +2,9 @@
 
 Written apart from the JAX code: cell coverage by separating-axis tests (:func:`rect_touches_cells` over the
 whole grid, :class:`NumpyFootCost` over a bounding box), planes by ``numpy.linalg.lstsq`` (:func:`foot_metrics`),
-the paper's ordered list walked one action at a time with its stopping rule (:func:`ordered_select`). The
+a sole's orientation on a plane from its normal and heading (:func:`sole_frame`, :func:`sole_rpy`,
+:func:`foothold`), the paper's ordered list walked one action at a time with its stopping rule
+(:func:`ordered_select`). The
 NumPy FootCost and search are also the baseline the benchmarks report their speed-up over.
 """
 
@@ -55,11 +57,13 @@ class NumpyFootCost:
         self.action_cost = g(robot.action_cost)
         self.clearance = g(robot.clearance)
         self.max_dh = g(robot.max_step_height)
+        self.max_pitch, self.max_roll = float(robot.max_sole_pitch), float(robot.max_sole_roll)
+        self.max_distance = float(robot.max_sole_distance)
         self.w, self.rw = float(robot.w), float(robot.rotation_weight)
         self.metrics = {k: float(v) for k, v in vars(robot.metrics).items()}
 
     def plane(self, pose):
-        """(height at the centre, slope, roughness, bump, band) of the footprint at ``pose``."""
+        """(height at the centre, slope, roughness, bump, band, (dz/dx, dz/dy)) of the footprint at ``pose``."""
         args = (self.res, self.origin, self.height.shape)
         fx, fy, _ = _touched(pose[0], pose[1], pose[2], self.L / 2, self.W / 2, *args)
         gx, gy, _ = _touched(pose[0], pose[1], pose[2], self.L / 2 + self.m, self.W / 2 + self.m, *args)
@@ -78,19 +82,25 @@ class NumpyFootCost:
             bv = self.origin[1] + (by + 0.5) * self.res - pose[1]
             band_dev = float(np.abs(self.height[bx, by] - coef[0] - coef[1] * bu - coef[2] * bv).max())
         slope = math.atan(math.hypot(coef[1], coef[2]))
-        return coef[0], slope, float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev
+        return coef[0], slope, float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev, (coef[1], coef[2])
 
-    def cost(self, stance_h, start_h, swing_from, pose, a):
-        """FootCost of the swing foot at ``pose`` executing action ``a`` (+inf if invalid)."""
+    def cost(self, stance, stance_h, start_h, swing_from, pose, a):
+        """FootCost of the swing foot at ``pose`` executing action ``a`` from ``stance`` (+inf if invalid)."""
         gx, gy, off = _touched(pose[0], pose[1], pose[2], self.L / 2 + self.m, self.W / 2 + self.m,
                                self.res, self.origin, self.free.shape)
         if off or not self.free[gx, gy].all():
             return math.inf
         total = self.action_cost[a]
+        reach = math.hypot(pose[0] - stance[0], pose[1] - stance[1])
         if not self.has_height:
-            return total
+            return total if reach <= self.max_distance + LIMIT_TOL else math.inf
         m = self.metrics
-        hgt, slope, rough, bump, band = self.plane(pose)
+        hgt, slope, rough, bump, band, grad = self.plane(pose)
+        roll, pitch, _ = sole_rpy(*grad, pose[2])
+        for val, lim in ((abs(pitch), self.max_pitch), (abs(roll), self.max_roll),
+                         (math.hypot(reach, hgt - stance_h), self.max_distance)):
+            if val > lim + LIMIT_TOL:
+                return math.inf
         for val, wt, lim in ((slope, m["slope_weight"], m["slope_limit"]),
                              (rough, m["roughness_weight"], m["roughness_limit"]),
                              (bump, m["bump_weight"], m["bump_limit"]),
@@ -143,7 +153,7 @@ def ordered_select(fc: NumpyFootCost, targets, stance, stance_side, command, swi
     best, best_cost, n = -1, math.inf, len(order)
     for j, a in enumerate(order):
         pose = _compose(stance, fc.actions[a] * mirror)
-        c = fc.cost(stance_h, start_h, swing_from, pose, a) + fc.w * dist[a]
+        c = fc.cost(stance, stance_h, start_h, swing_from, pose, a) + fc.w * dist[a]
         if c < best_cost:
             best, best_cost = int(a), c
         if j + 1 < n and best_cost <= fc.w * dist[order[j + 1]]:
@@ -214,7 +224,36 @@ def foot_metrics(height, res, origin, pose, foot_length, foot_width, margin):
         roughness=np.mean(np.abs(resid)),
         bump=max(resid.max(), 0.0),
         band=np.abs(bres).max() if bres.size else 0.0,
+        grad=(coef[1], coef[2]),
     )
+
+
+def sole_frame(grad_x, grad_y, yaw):
+    """(3, 3) axes (columns x, y, z) of a sole lying on the plane ``z = grad_x x + grad_y y`` (m/m) heading ``yaw``.
+
+    Built from the plane, not from angles: x is the plane's point one metre ahead along the heading's horizontal
+    direction (normalised), z the plane's upward unit normal, y = z cross x.
+    """
+    ahead = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    ahead[2] = grad_x * ahead[0] + grad_y * ahead[1]  # the plane's rise over that horizontal metre
+    x = ahead / np.linalg.norm(ahead)
+    z = np.array([-grad_x, -grad_y, 1.0])
+    z /= np.linalg.norm(z)
+    return np.stack([x, np.cross(z, x), z], 1)
+
+
+def sole_rpy(grad_x, grad_y, yaw):
+    """(roll, pitch, yaw) of :func:`sole_frame` read off as ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (float64, rad)."""
+    r = sole_frame(grad_x, grad_y, yaw)
+    return math.atan2(r[2, 1], r[2, 2]), -math.asin(r[2, 0]), math.atan2(r[1, 0], r[0, 0])
+
+
+def foothold(height, res, origin, pose, foot_length, foot_width):
+    """(6,) the full sole pose (x, y, z, roll, pitch, yaw) at ``pose`` on a height map (float64 brute force):
+    z the least-squares plane's height at the foot centre, roll and pitch those of :func:`sole_rpy`."""
+    ref = foot_metrics(height, res, origin, pose, foot_length, foot_width, 0.0)
+    roll, pitch, _ = sole_rpy(*ref["grad"], pose[2])
+    return np.array([pose[0], pose[1], ref["height"], roll, pitch, pose[2]])
 
 
 def enable_x64():

@@ -95,6 +95,8 @@ def test_rollout_does_not_recompile_for_new_values():
     n = control._rollout_jit._cache_size()
     ij.rollout(t.replace(free=t.free.at[110, 30].set(False)), ROBOT.replace(w=jnp.float32(2.0)),
                START + 0.01, [0.1, 0.05, 0.1], STEPS)
+    ij.rollout(t, ROBOT.replace(max_sole_pitch=jnp.float32(0.1), max_sole_roll=jnp.float32(0.05),
+                                max_sole_distance=jnp.float32(0.3)), START, [0.1, 0.05, 0.1], STEPS)
     assert control._rollout_jit._cache_size() == n
 
 
@@ -102,11 +104,12 @@ def test_custom_walker_replaces_the_robot_without_touching_the_selector():
     """A walker that lands every step 3 cm short: the loop decides from where the foot really is."""
     base = control.perfect_walker()
 
-    def execute(state, pose, go):
+    def execute(state, foothold, go):
+        planar = jnp.array([0, 1, 5])  # x, y, yaw of the (6,) foothold
         stance = base.stance(state).stance
-        rel = ij.geometry.relative(stance, pose)
+        rel = ij.geometry.relative(stance, foothold[planar])
         short = ij.geometry.compose(stance, rel - jnp.array([0.03, 0.0, 0.0]))
-        return base.execute(state, short, go)
+        return base.execute(state, foothold.at[planar].set(short), go)
 
     walker = control.Walker(base.init, base.stance, execute, base.feet)
     t = ij.terrain.flat(SHAPE, RES)
@@ -117,6 +120,42 @@ def test_custom_walker_replaces_the_robot_without_touching_the_selector():
     np.testing.assert_allclose(np.asarray(traj.deviation), 0.03, atol=1e-5)
 
 
+def test_the_walker_gets_the_full_foothold_and_the_trajectory_records_it():
+    """On a 6 deg ramp along x, turning left: the walker is passed (x, y, z, roll, pitch, yaw) of each chosen step,
+    the trajectory records what it was passed, and z, roll and pitch are the ramp's at each foothold (closed form
+    of a sole on the plane z = tan(a) x with yaw theta: pitch = -atan(tan(a) cos(theta)),
+    roll = atan2(-tan(a) sin(theta), sqrt(1 + (tan(a) cos(theta))^2)))."""
+    base = control.perfect_walker()
+    slope = np.tan(np.radians(6.0))
+
+    def init(start, first_swing):
+        return base.init(start, first_swing), jnp.zeros(6, jnp.float32)
+
+    def execute(state, foothold, go):
+        return base.execute(state[0], foothold, go), foothold
+
+    walker = control.Walker(init, lambda s: base.stance(s[0]), execute, lambda s: base.feet(s[0]), lambda s: s[1])
+    h = slope * (np.arange(SHAPE[0]) + 0.5)[:, None] * RES * np.ones((1, SHAPE[1]))
+    t = ij.terrain.from_arrays(h, None, RES)
+    traj = ij.rollout(t, ROBOT, START, [0.2, 0.0, 0.15], STEPS, walker=walker)
+    fh = np.asarray(traj.footholds, np.float64)
+    assert fh.shape == (STEPS, 6) and np.asarray(traj.taken).all()
+    np.testing.assert_array_equal(np.asarray(traj.log), np.asarray(traj.footholds))  # what the walker was passed
+    np.testing.assert_array_equal(fh[:, [0, 1, 5]], np.asarray(traj.commanded))
+    np.testing.assert_array_equal(np.asarray(traj.footsteps), np.asarray(traj.commanded))  # a perfect walker
+    yaw = fh[:, 5]
+    assert np.ptp(yaw) > 0.3  # it turned: roll and pitch vary
+    gf = slope * np.cos(yaw)
+    np.testing.assert_allclose(fh[:, 2], slope * fh[:, 0], atol=2e-5)
+    np.testing.assert_allclose(fh[:, 4], -np.arctan(gf), atol=2e-5)
+    np.testing.assert_allclose(fh[:, 3], np.arctan2(-slope * np.sin(yaw), np.sqrt(1 + gf**2)), atol=2e-5)
+    # The default walker is passed the same footholds (a 2D map: the poses, level at z = 0).
+    plain = ij.rollout(ij.terrain.flat(SHAPE, RES), ROBOT, START, [0.2, 0.0, 0.15], STEPS)
+    fh2 = np.asarray(plain.footholds)
+    np.testing.assert_array_equal(fh2[:, [0, 1, 5]], np.asarray(plain.commanded))
+    np.testing.assert_array_equal(fh2[:, 2:5], 0.0)
+
+
 def test_walker_warmup_iterations_settle_without_being_recorded():
     """warmup=2: two extra executes with go=False come first; the trajectory holds only the real steps."""
     base = control.perfect_walker()
@@ -124,9 +163,9 @@ def test_walker_warmup_iterations_settle_without_being_recorded():
     def init(start, first_swing):
         return base.init(start, first_swing), jnp.int32(0), jnp.int32(0)
 
-    def execute(state, pose, go):
+    def execute(state, foothold, go):
         inner, calls, gos = state
-        return base.execute(inner, pose, go), calls + 1, gos + go.astype(jnp.int32)
+        return base.execute(inner, foothold, go), calls + 1, gos + go.astype(jnp.int32)
 
     walker = control.Walker(lambda s, f: init(s, f), lambda s: base.stance(s[0]), execute,
                             lambda s: base.feet(s[0]), lambda s: jnp.stack([s[1], s[2]]), warmup=2)

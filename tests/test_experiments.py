@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import types
 
 import jax
 import jax.numpy as jnp
@@ -768,3 +769,116 @@ def test_exhaustive_and_ordered_walk_identical_trajectories(kind):
             np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=f"{name}.{field}")
         np.testing.assert_allclose(a.cost, b.cost, rtol=1e-6, err_msg=name)
         assert np.all(b.evaluated <= a.evaluated)
+
+
+# ---------------------------------------------------------------------------------------------
+# 7. Stairs (issue 20): the paper's 20 cm reach stops at a full-width riser; a 30 cm reach climbs
+# ---------------------------------------------------------------------------------------------
+
+SHAPE_STAIRS = (200, 60)  # 4 m x 1.2 m
+STAIR_X = 1.0  # m: the first riser (a cell edge, 15 cm ahead of a foothold of the 5 cm lattice from x = 0.3)
+STAIR_STEPS = 14
+NUM_RISERS = 3
+
+
+def _stairs(rise, run, first_x=STAIR_X):
+    """A 2.5D staircase along +x (ijoy_jax.terrain's stairs family): NUM_RISERS risers of ``rise`` (negative: down)
+    every ``run`` metres from ``first_x``, the start landing at height 0 around the start feet (x = 0.3)."""
+    params = ij.terrain.generators.StairParams(rise=rise, run=run, num_steps=NUM_RISERS, first=first_x - X0,
+                                               start_x=X0 / (SHAPE_STAIRS[0] * RES), start_y=0.5, start_radius=0.0)
+    return ij.terrain.generators.stairs(0, params, shape=SHAPE_STAIRS, resolution=RES, has_height=True)
+
+
+@functools.partial(jax.jit, static_argnames="num_steps")
+def _stair_rollouts(terrains, robot, targets, command, num_steps):
+    start = jnp.asarray(_start(y=0.6))
+    return jax.vmap(lambda t: rollout(t, robot, start, command, num_steps, targets=targets))(terrains)
+
+
+@functools.cache
+def _stair_runs(reach, cases):
+    """Roll out the perfect robot (hrp2(reach=...), full speed forward) on every (rise, run, first riser) case."""
+    robot = ij.robots.hrp2(margin=0.02, reach=reach)
+    terrains = [_stairs(*c) for c in cases]
+    batch = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *terrains)
+    command = jnp.array([reach / float(robot.step_time), 0.0, 0.0], jnp.float32)  # p_next = the longest step
+    traj = jax.tree_util.tree_map(np.asarray, _stair_rollouts(batch, robot, ij.make_targets(robot), command,
+                                                              STAIR_STEPS))
+    heights = [np.asarray(t.height) for t in terrains]
+    return robot, [(heights[i], jax.tree_util.tree_map(lambda x, i=i: x[i], traj)) for i in range(len(cases))]
+
+
+def _under(height, pose):
+    """(min, max) height under the bare footprint at ``pose``."""
+    h = height[_cells(height.shape, pose, 0.0)]
+    return float(h.min()), float(h.max())
+
+
+BLOCKING_RISERS = ((0.013, 0.3, STAIR_X), (0.02, 0.3, STAIR_X), (0.02, 0.3, STAIR_X + 0.03), (0.05, 0.3, STAIR_X),
+                   (0.10, 0.3, STAIR_X), (0.15, 0.3, STAIR_X), (-0.05, 0.3, STAIR_X), (-0.10, 0.3, STAIR_X),
+                   (-0.15, 0.3, STAIR_X), (0.013, 0.3, STAIR_X + 0.03))
+
+
+def test_the_papers_reach_marks_time_before_a_full_width_riser():
+    """The 20 cm limit and its geometry. An action lands the swing foot at most L = 0.20 m ahead of the stance
+    foot, so the stance foot's toe (+0.121) is always ahead of the swing foot's heel (L - 0.121 = 0.079), and
+    further than the margin (0.02) in front of a riser that the swing foot's grown heel has passed: a riser across
+    both lanes can only be crossed by a foot straddling it. Straddling is valid for low risers, but with w = 1 it
+    costs more than marking time: the perfect robot walks up to the riser and marks time before every full-width
+    riser of 2 cm or more, up or down, and before one of 1.3 cm where it falls 15 cm ahead of a foothold (at 18 cm
+    it straddles that one: its roughness and slope cost less there). Stairs need a longer reach
+    (test_a_longer_reach_climbs_and_descends_stairs)."""
+    robot, runs = _stair_runs(0.20, BLOCKING_RISERS)
+    acts = np.asarray(robot.actions)
+    assert acts[:, 0].max() - HL < HL + float(robot.margin)  # the geometry: toe ahead of the heel, by > the margin
+    for (rise, _, first), (height, traj) in zip(BLOCKING_RISERS, runs, strict=True):
+        name = f"rise {rise} at x = {first}"
+        assert traj.taken.all() and not traj.stopped.any() and traj.valid.all(), name
+        crossed = [t for t in range(STAIR_STEPS) if min(abs(v) for v in _under(height, traj.footsteps[t])) > 1e-6]
+        if first == STAIR_X + 0.03 and rise == 0.013:  # the straddle is cheaper here: it walks on
+            assert crossed and traj.feet[:, 0].min() > first + 0.5, name
+            continue
+        assert not crossed, (name, traj.footsteps[crossed[0]])  # no foot ever wholly beyond the riser
+        assert traj.in_place[-4:].all() and _repeats(traj), name  # marking time ...
+        assert np.all(first - (traj.feet[:, 0] + HL) < float(robot.margin) + TOL), (name, traj.feet)  # ... at it
+        assert all(_under(height, f) == (0.0, 0.0) for f in traj.feet), name  # on the start landing
+        np.testing.assert_array_equal(traj.footholds[-4:, 2:5], 0.0)
+
+
+STAIR_CASES = tuple((sign * rise, run) for sign in (1.0, -1.0) for rise in (0.05, 0.10, 0.15) for run in (0.30, 0.40))
+
+
+def test_a_longer_reach_climbs_and_descends_stairs():
+    """hrp2(reach=0.30): a step lands up to 0.30 m ahead, beyond foot_length + 2 margin = 0.282 m, so a foot
+    passes a riser while the stance foot stands before it. The perfect robot climbs and descends three risers of 5,
+    10 and 15 cm (max_step_height 0.15 m) to the top (bottom) landing. Treads: a foot with its 2 cm margin needs
+    0.282 m; the feet's x stay on one 5 cm lattice (no rotation is commanded), and the 1.8 cm of slack between
+    0.282 and 0.30 holds a lattice point only if every riser keeps the first one's phase: a tread of 0.30 m takes
+    one step per tread, one of 0.40 m two (the second foot comes up 5 cm further); risers lie on cell edges (2 cm
+    cells). Every foothold stands wholly on one tread, with its full foothold there (z the tread's height, level);
+    no step changes level by more than one riser, and every step between levels is the longest one."""
+    robot, runs = _stair_runs(0.30, tuple((rise, run, STAIR_X) for rise, run in STAIR_CASES))
+    foot_plus_margins = float(robot.foot_length) + 2 * float(robot.margin)
+    for (rise, run), (height, traj) in zip(STAIR_CASES, runs, strict=True):
+        name = f"rise {rise}, tread {run}"
+        assert traj.taken.all() and not traj.stopped.any() and traj.valid.all(), name
+        levels = []
+        for t in range(STAIR_STEPS):
+            lo, hi = _under(height, traj.footsteps[t])
+            assert hi - lo < 1e-6, (name, t, traj.footsteps[t], lo, hi)  # never straddling a riser
+            np.testing.assert_allclose(traj.footholds[t, 2:5], [lo, 0.0, 0.0], atol=1e-5, err_msg=f"{name} {t}")
+            levels.append(round(lo / rise))
+        top = NUM_RISERS * rise
+        for foot in traj.feet:  # both feet on the top (bottom) landing
+            assert _under(height, foot) == pytest.approx((top, top), abs=1e-6), (name, traj.feet)
+        stance = _stances(types.SimpleNamespace(start=_start(y=0.6)), traj)
+        rel = _relative(stance, traj.footsteps)
+        stance_levels = np.array([round(_under(height, s)[0] / rise) for s in stance])
+        change = np.array(levels) - stance_levels
+        assert np.abs(change).max() == 1 and (change != 0).sum() >= NUM_RISERS, (name, change)
+        np.testing.assert_allclose(rel[change != 0, 0], 0.30, atol=EPS, err_msg=name)
+        assert 0.30 >= foot_plus_margins
+        steps_per_tread = {0.30: 1, 0.40: 2}[run]  # one step up per tread, or two (see the docstring)
+        first_up = [t for t in range(STAIR_STEPS) if levels[t] == 1][0]
+        second_up = [t for t in range(STAIR_STEPS) if levels[t] == 2][0]
+        assert second_up - first_up == steps_per_tread, (name, levels)

@@ -12,7 +12,9 @@ from jax.test_util import check_grads
 
 import ijoy_jax as ij
 from ijoy_jax import footcost
-from ijoy_jax.testing import foot_metrics, rect_touches_cells
+from ijoy_jax.footcost.xla import sole_tilt
+from ijoy_jax.sim.kinematics import rpy_to_rot
+from ijoy_jax.testing import foot_metrics, rect_touches_cells, sole_rpy
 
 RES = 0.02
 ROBOT = ij.robots.hrp2(margin=0.02)
@@ -38,7 +40,7 @@ def test_single_cell_obstacle_exact_at_many_poses():
         jnp.asarray(frees))
     poses = np.column_stack([rng.uniform(0.25, 0.55, (n_terrains * n_poses, 2)),
                              rng.uniform(-np.pi, np.pi, n_terrains * n_poses)]).reshape(n_terrains, n_poses, 3)
-    stance = jnp.array([0.1, 0.1, 0.0])
+    stance = jnp.array([0.4, 0.4, 0.0])  # every pose within the legs' reach (max_sole_distance) of it
     cost = jax.jit(jax.vmap(lambda t, s: ij.foot_cost(t, ROBOT, stance, -1, s, action_index=0)))(
         terrains, jnp.asarray(poses, jnp.float32))
     cost = np.asarray(cost)
@@ -223,6 +225,13 @@ def test_height_metrics_match_numpy_reference():
         assert float(terms.bump_m[i]) == pytest.approx(ref["bump"], abs=2e-5)
         assert float(terms.band_m[i]) == pytest.approx(ref["band"], abs=2e-5)
         assert float(terms.step_height_m[i]) == pytest.approx(ref["height"] - ref_stance["height"], abs=3e-5)
+        # The sole on that plane (an independent construction from its normal) and the 3D distance of the soles.
+        roll, pitch, _ = sole_rpy(*ref["grad"], p[2])
+        assert float(terms.sole_pitch_rad[i]) == pytest.approx(pitch, abs=2e-4)
+        assert float(terms.sole_roll_rad[i]) == pytest.approx(roll, abs=2e-4)
+        dz = ref["height"] - ref_stance["height"]
+        reach = math.sqrt((p[0] - stance[0]) ** 2 + (p[1] - stance[1]) ** 2 + dz**2)
+        assert float(terms.sole_distance_m[i]) == pytest.approx(reach, abs=3e-5)
         checked += 1
     assert checked > 0.9 * n
 
@@ -245,7 +254,7 @@ def test_step_height_term_and_per_action_limit():
     h = np.zeros((60, 60))
     h[30:, :] = 0.05
     t = ij.terrain.from_arrays(h, None, RES)
-    stance = np.array([0.3, 0.6, 0.0])
+    stance = np.array([0.45, 0.6, 0.0])  # on the low side, within the legs' reach of the step onto the high one
     onto = np.array([[0.9, 0.6, 0.0]])
     terms = ij.foot_cost_terms(t, ROBOT, stance, -1, onto, action_index=[0])
     assert float(terms.step_height_m[0]) == pytest.approx(0.05, abs=1e-6)
@@ -256,6 +265,92 @@ def test_step_height_term_and_per_action_limit():
     edge = np.array([[0.6 + 0.121 + 0.01, 0.6, 0.0]])
     e = ij.foot_cost_terms(t, ROBOT, stance, -1, edge, action_index=[0])
     assert np.isinf(e.band[0]) and e.obstacle[0] == 0 and float(e.band_m[0]) == pytest.approx(0.05, abs=1e-6)
+
+
+# float32 rotation entries of angles from float32 gradients: a few ulps of 1 (measured < 3e-7).
+ROT_TOL = 2e-6
+grads = st.floats(-3.0, 3.0, allow_subnormal=False)  # up to 72 deg each way
+
+
+@given(gx=grads, gy=grads, yaw=st.floats(-7.0, 7.0, allow_subnormal=False))
+def test_sole_tilt_puts_the_sole_on_the_plane_through_rpy_to_rot(gx, gy, yaw):
+    """R = Rz(yaw) Ry(pitch) Rx(roll) of sole_tilt's angles (the MJX walker's rpy_to_rot): its z axis is the plane's
+    upward normal, its x axis lies in the plane with the heading's horizontal direction; and the angles equal
+    those read off a frame built from the normal and the heading (testing.sole_rpy, float64)."""
+    pitch, roll = sole_tilt(jnp.float32(gx), jnp.float32(gy), jnp.float32(yaw))
+    r = np.asarray(rpy_to_rot(jnp.stack([roll, pitch, jnp.float32(yaw)])), np.float64)
+    normal = np.array([-gx, -gy, 1.0]) / math.sqrt(1.0 + gx * gx + gy * gy)
+    np.testing.assert_allclose(r[:, 2], normal, atol=ROT_TOL)
+    x = r[:, 0]
+    assert x[2] == pytest.approx(gx * x[0] + gy * x[1], abs=ROT_TOL)  # in the plane
+    heading = np.array([math.cos(yaw), math.sin(yaw)])
+    assert x[:2] @ heading > 0 and abs(x[0] * heading[1] - x[1] * heading[0]) < ROT_TOL  # along the heading
+    want_roll, want_pitch, _ = sole_rpy(gx, gy, yaw)
+    assert float(pitch) == pytest.approx(want_pitch, abs=ROT_TOL)
+    assert float(roll) == pytest.approx(want_roll, abs=ROT_TOL)
+
+
+def _ramp(alpha, shape=(60, 60)):
+    """A plane rising at ``alpha`` rad along +x (heights at cell centres)."""
+    xs = (np.arange(shape[0]) + 0.5) * RES
+    return ij.terrain.from_arrays(np.tan(alpha) * xs[:, None] * np.ones((1, shape[1])), None, RES)
+
+
+def _lenient(robot):
+    """The robot with every terrain limit but the ankles' out of the way: the ankle term alone decides."""
+    return robot.replace(metrics=robot.metrics.replace(slope_limit=jnp.float32(1.2)),
+                         max_step_height=jnp.full(robot.num_actions, 1.0, jnp.float32))
+
+
+@pytest.mark.parametrize("across", [False, True])
+def test_a_sole_tilted_beyond_the_ankles_is_refused_by_the_ankle_term(across):
+    """A ramp along the foot pitches the sole, across it rolls it: beyond max_sole_pitch (along) or max_sole_roll
+    (across) by 2 deg the ankle term (alone) refuses the foothold; 2 deg within, it is accepted."""
+    robot = _lenient(ROBOT)
+    limit = float(robot.max_sole_roll if across else robot.max_sole_pitch)
+    yaw = math.pi / 2 if across else 0.0  # the foot faces across the ramp (+y) or up it (+x)
+    pose = np.array([[0.6, 0.6, yaw]])
+    for alpha, refused in ((limit + math.radians(2.0), True), (limit - math.radians(2.0), False)):
+        terms = ij.foot_cost_terms(_ramp(alpha), robot, [0.6, 0.41, 0.0], -1, pose, action_index=[0])
+        want_pitch, want_roll = (0.0, -alpha) if across else (-alpha, 0.0)  # up the ramp: toe up; across: right side up
+        assert float(terms.sole_pitch_rad[0]) == pytest.approx(want_pitch, abs=1e-4)
+        assert float(terms.sole_roll_rad[0]) == pytest.approx(want_roll, abs=1e-4)
+        assert np.isinf(terms.ankle[0]) == refused and np.isinf(terms.total[0]) == refused
+        others = sum(float(getattr(terms, k)[0]) for k in ("action", "obstacle", "slope", "roughness", "bump", "step",
+                                                           "band", "swing_path", "reach", "unsupported"))
+        assert np.isfinite(others)  # the ankle term is the one that names the reason
+
+
+def test_the_default_ankle_limits_roll_tighter_than_they_pitch():
+    """HRP-2's ankles (make_robot's defaults): a slope between the two limits is a foothold along it, not across."""
+    robot = _lenient(ROBOT)
+    pitch, roll = float(robot.max_sole_pitch), float(robot.max_sole_roll)
+    assert roll < pitch <= float(ROBOT.metrics.slope_limit) + 1e-7  # pitch never refuses what the slope limit accepts
+    t = _ramp(0.5 * (pitch + roll))
+    terms = ij.foot_cost_terms(t, robot, [0.6, 0.41, 0.0], -1, [[0.6, 0.6, 0.0], [0.6, 0.6, math.pi / 2]],
+                               action_index=[0, 0])
+    assert np.isfinite(terms.total[0]) and np.isinf(terms.ankle[1])
+
+
+@pytest.mark.parametrize("has_height", [False, True])
+def test_soles_farther_apart_than_the_legs_reach_are_refused_by_the_reach_term(has_height):
+    """The reach term: the 3D distance of the sole centres against max_sole_distance (0.50 m for HRP-2). On a
+    2.5D map the height change counts: 0.45 m ahead and 0.25 m up is 0.515 m away."""
+    limit = float(ROBOT.max_sole_distance)
+    h = np.zeros((60, 60))
+    if has_height:
+        h[35:, :] = 0.25  # a platform from x = 0.7 m
+    t = ij.terrain.from_arrays(h, None, RES) if has_height else ij.terrain.flat(h.shape, RES)
+    robot = _lenient(ROBOT)
+    stance = np.array([0.4, 0.6, 0.0])
+    steps = np.array([[0.4 + limit - 0.01, 0.6, 0.0], [0.4 + limit + 0.01, 0.6, 0.0], [0.85, 0.6, 0.0]])
+    terms = ij.foot_cost_terms(t, robot, stance, -1, steps, action_index=[0, 0, 0])
+    dz = np.asarray(terms.step_height_m)
+    np.testing.assert_allclose(np.asarray(terms.sole_distance_m), np.hypot(steps[:, 0] - 0.4, dz), atol=1e-5)
+    assert np.isinf(np.asarray(terms.reach)).tolist() == [has_height, True, has_height]
+    np.testing.assert_array_equal(np.isinf(np.asarray(terms.total)), np.isinf(np.asarray(terms.reach)))
+    if has_height:
+        np.testing.assert_allclose(dz, 0.25, atol=1e-5)
 
 
 @pytest.mark.parametrize("bar, valid", [(0.08, True), (0.12, False)])
@@ -294,7 +389,7 @@ def test_never_negative_and_inf_means_invalid(seed, margin):
     assert not np.isnan(total).any() and (total >= 0).all()
     finite_terms = np.stack([np.asarray(getattr(terms, k)) for k in
                              ("action", "obstacle", "slope", "roughness", "bump", "step", "band",
-                              "swing_path", "unsupported")])
+                              "swing_path", "ankle", "reach", "unsupported")])
     np.testing.assert_array_equal(np.isinf(total), np.isinf(finite_terms).any(0))
     assert np.all(total[np.isfinite(total)] < 1e3)  # valid costs are small; invalid is inf, not "big"
 
@@ -354,6 +449,8 @@ def test_no_recompile_when_parameters_or_terrain_values_change():
         ROBOT.replace(w=jnp.float32(3.0), rotation_weight=jnp.float32(5.0)),
         ROBOT.replace(foot_length=jnp.float32(0.2), step_time=jnp.float32(0.6)),
         ROBOT.replace(metrics=ROBOT.metrics.replace(bump_limit=jnp.float32(0.05))),
+        ROBOT.replace(max_sole_pitch=jnp.float32(0.1), max_sole_roll=jnp.float32(0.05),
+                      max_sole_distance=jnp.float32(0.3)),
     ]
     for r in variants:
         ij.foot_cost(t, r, stance, -1, steps, **kw)

@@ -133,13 +133,15 @@ def test_steps_far_off_the_map_are_inf_at_every_magnitude():
 def test_one_rule_for_limits_a_metric_at_its_limit_is_decided_alike_on_both_paths():
     """Limits are set to the XLA path's own metrics, shifted by less than float32 rounding, by half the
     tolerance and by three times it: at the limit (to rounding) and within LIMIT_TOL above it, both paths accept;
-    beyond it, both reject. Per-action step limits put every candidate at its limit at once."""
+    beyond it, both reject. Per-action step limits put every candidate at its limit at once; the slope, the sole's
+    pitch and roll and the soles' distance are set at one step's."""
     tol = footcost.xla.LIMIT_TOL
     terrain = _terrain("25d", seed=5)
     loose = ij.robots.hrp2(margin=0.02)
     loose = loose.replace(metrics=loose.metrics.replace(
         slope_limit=jnp.float32(1.5), roughness_limit=jnp.float32(1.0), bump_limit=jnp.float32(1.0),
-        band_limit=jnp.float32(1.0)), max_step_height=jnp.full(loose.num_actions, 1.0, jnp.float32))
+        band_limit=jnp.float32(1.0)), max_step_height=jnp.full(loose.num_actions, 1.0, jnp.float32),
+        max_sole_pitch=jnp.float32(1.5), max_sole_roll=jnp.float32(1.5), max_sole_distance=jnp.float32(1.0))
     stance = jnp.array([[0.45, 0.5, 0.3]], jnp.float32)
     idx = np.arange(0, loose.num_actions, 31)[:16]
     steps = ij.action_steps(loose, stance[0], -1)[idx]
@@ -148,7 +150,9 @@ def test_one_rule_for_limits_a_metric_at_its_limit_is_decided_alike_on_both_path
     assert open_.sum() >= 8
     dh = np.abs(np.asarray(terms.step_height_m))
     slope = np.asarray(terms.slope_angle)
-    i = int(np.flatnonzero(open_ & (slope > 0.05))[0])
+    pitch, roll = np.asarray(terms.sole_pitch_rad), np.asarray(terms.sole_roll_rad)
+    distance = np.asarray(terms.sole_distance_m)
+    i = int(np.flatnonzero(open_ & (slope > 0.05) & (np.abs(pitch) > 0.02) & (np.abs(roll) > 0.02))[0])
 
     def totals(robot):
         return _both(terrain, robot, stance, None, steps)  # steps given: action_index cycles over them
@@ -162,6 +166,44 @@ def test_one_rule_for_limits_a_metric_at_its_limit_is_decided_alike_on_both_path
         steep = loose.replace(metrics=loose.metrics.replace(slope_limit=jnp.float32(slope[i] - d)))
         xla, fused = totals(steep)
         assert np.isfinite(xla[0, i]) == np.isfinite(fused[0, i]) == accept, (d, xla[0, i], fused[0, i])
+        # The ankle's pitch and roll limits and the legs' reach, at the XLA path's own metrics of step i.
+        for leaf, metric in (("max_sole_pitch", abs(pitch[i])), ("max_sole_roll", abs(roll[i])),
+                             ("max_sole_distance", distance[i])):
+            xla, fused = totals(loose.replace(**{leaf: jnp.float32(metric - d)}))
+            assert np.isfinite(xla[0, i]) == np.isfinite(fused[0, i]) == accept, (leaf, d, xla[0, i], fused[0, i])
+
+
+@pytest.mark.parametrize("kind", ["2d", "25d"])
+def test_ankle_and_reach_terms_match_the_xla_path(kind):
+    """The sole's tilt on the fitted plane against max_sole_pitch / max_sole_roll, and the soles' 3D distance
+    against max_sole_distance, decided alike on both paths: on a tilted swell (up to ~20 deg) with limits tightened
+    so that each of them alone refuses some steps that every other term accepts."""
+    robot = ij.robots.hrp2(margin=0.02)
+    robot = robot.replace(metrics=robot.metrics.replace(slope_limit=jnp.float32(1.2), roughness_limit=jnp.float32(1.0),
+                                                        bump_limit=jnp.float32(1.0), band_limit=jnp.float32(1.0)),
+                          max_step_height=jnp.full(robot.num_actions, 1.0, jnp.float32),
+                          max_sole_pitch=jnp.float32(0.2), max_sole_roll=jnp.float32(0.12),
+                          max_sole_distance=jnp.float32(0.33))
+    x, y = np.meshgrid(np.arange(SHAPE[0]) * RES, np.arange(SHAPE[1]) * RES, indexing="ij")
+    h = (0.08 * x + 0.05 * y + 0.05 * np.sin(6 * x) * np.cos(5 * y)).astype(np.float32)
+    terrain = ij.terrain.from_arrays(h if kind == "25d" else None, np.ones(SHAPE, bool), RES)
+    stance, swing = _queries(4, seed=12)
+    stance = jnp.clip(stance, 0.35, 0.6).at[:, 2].set(stance[:, 2])  # every step on the map
+    xla, fused = _both(terrain, robot, stance, swing if kind == "25d" else None)
+    _assert_same(xla, fused)
+    terms = jax.vmap(lambda s: footcost.foot_cost_terms(terrain, robot, s, -1, ij.action_steps(robot, s, -1),
+                                                        action_index=jnp.arange(robot.num_actions)))(stance)
+    others = sum(np.asarray(getattr(terms, f)) for f in ("action", "obstacle", "slope", "roughness", "bump", "step",
+                                                          "band", "unsupported"))
+    ankle, reach = np.isinf(np.asarray(terms.ankle)), np.isinf(np.asarray(terms.reach))
+    assert (reach & ~ankle & np.isfinite(others)).sum() >= 50  # steps only the reach term refuses
+    if kind == "25d":
+        assert (ankle & ~reach & np.isfinite(others)).sum() >= 50  # ... and only the ankle term
+        pitch_only = np.abs(np.asarray(terms.sole_pitch_rad)) > 0.2 + 1e-4
+        roll_only = np.abs(np.asarray(terms.sole_roll_rad)) > 0.12 + 1e-4
+        assert (pitch_only & ~roll_only).any() and (roll_only & ~pitch_only).any()
+    else:
+        assert not ankle.any()  # level soles on a 2D map
 
 
 @settings(max_examples=15)  # each example is ~500 interpreted candidates on 2.5D; the CI has 2 cores
@@ -205,11 +247,12 @@ def test_select_step_with_the_kernel_chooses_the_same_steps(method):
 
     def one(s, c, kernel):
         ch = select.select_step(terrain, robot, s, -1, c, method=method, targets=targets, index=index, kernel=kernel)
-        return ch.index, ch.cost, ch.valid
+        return ch.index, ch.cost, ch.valid, ch.foothold
 
     run = jax.jit(jax.vmap(one, in_axes=(0, 0, None)), static_argnums=2)
-    (ia, ca, va), (ib, cb, vb) = run(stance, command, "xla"), run(stance, command, "pallas")
+    (ia, ca, va, fa), (ib, cb, vb, fb) = run(stance, command, "xla"), run(stance, command, "pallas")
     np.testing.assert_array_equal(np.asarray(ib), np.asarray(ia))
+    np.testing.assert_allclose(np.asarray(fb), np.asarray(fa), atol=1e-6)  # the same step's plane: one XLA fit
     np.testing.assert_array_equal(np.asarray(vb), np.asarray(va))
     assert np.asarray(va).sum() >= n // 2
     np.testing.assert_allclose(np.asarray(cb)[np.asarray(va)], np.asarray(ca)[np.asarray(va)], rtol=RTOL, atol=ATOL)
@@ -481,7 +524,8 @@ def _probe(robot, metric):
     weights = {f"{k}_weight": one if k == metric else zero for k in BAND_METRICS}
     limits = {f"{k}_limit": far for k in BAND_METRICS if k != "step"}
     return robot.replace(metrics=robot.metrics.replace(**weights, **limits), action_cost=zero * robot.action_cost,
-                         max_step_height=jnp.full_like(robot.max_step_height, far))
+                         max_step_height=jnp.full_like(robot.max_step_height, far), max_sole_pitch=far,
+                         max_sole_roll=far, max_sole_distance=far)
 
 
 @jax.jit

@@ -76,6 +76,9 @@ def test_footprint_overlap_reference():
         ([[0.0, 0.2, 0.0]], dict(action_cost=-1.0), "action_cost"),
         ([[0.0, 0.2, 0.0]], dict(clearance=[0.1, 0.1]), "clearance"),
         ([[0.0, 0.2, 0.0]], dict(margin=0.2, max_margin=0.1), "max_margin"),
+        ([[0.0, 0.2, 0.0]], dict(max_sole_pitch=-0.1), "max_sole_pitch must be >= 0"),
+        ([[0.0, 0.2, 0.0]], dict(max_sole_roll=float("nan")), "max_sole_roll must be finite"),
+        ([[0.0, 0.2, 0.0]], dict(max_sole_distance=float("inf")), "max_sole_distance must be finite"),
     ],
 )
 def test_make_robot_rejects_bad_input(actions, kwargs, match):
@@ -112,14 +115,18 @@ def test_dotted_leaf_access():
 
 def test_scalar_leaf_table_names_every_scalar_leaf():
     r = ij.robots.hrp2(density=0.25)
-    scalars = {"foot_length", "foot_width", "margin", "step_time", "w", "rotation_weight"}
+    body = ("foot_length", "foot_width", "step_time", "max_sole_pitch", "max_sole_roll", "max_sole_distance")
+    scalars = {"margin", "w", "rotation_weight", *body}
     scalars |= {f"metrics.{f.name}" for f in dataclasses.fields(robots.TerrainMetrics)}
     assert set(robots.SCALAR_LEAVES) == scalars
+    # every scalar leaf of the Robot pytree is listed (none forgotten when a leaf is added)
+    per_action = {"actions", "p0", "action_cost", "clearance", "max_step_height"}
+    tops = {f.name for f in dataclasses.fields(robots.Robot) if not f.metadata.get("static")} - per_action
+    assert {n for n in scalars if not n.startswith("metrics.")} == tops - {"metrics"}
     for name, spec in robots.SCALAR_LEAVES.items():
         assert np.shape(robots.get_leaf(r, name)) == (), name
         assert spec.unit and isinstance(spec.positive, bool), name
-    assert robots.SELECTOR_LEAVES == tuple(n for n in robots.SCALAR_LEAVES if n not in
-                                           ("foot_length", "foot_width", "step_time"))
+    assert robots.SELECTOR_LEAVES == tuple(n for n in robots.SCALAR_LEAVES if n not in body)
 
 
 def test_hrp2_defaults_are_hrp2s_leaves():
@@ -275,6 +282,9 @@ REPLACED = [
     (dict(foot_length=0.40), "overlap"),  # fits a window built for it, but the stance footprint overlaps
     (dict(foot_width=float("nan")), "foot_width"),
     (dict(step_time=0.0), "step_time"),
+    (dict(max_sole_pitch=-0.1), "max_sole_pitch"),
+    (dict(max_sole_roll=float("nan")), "max_sole_roll"),
+    (dict(max_sole_distance=-1.0), "max_sole_distance"),
 ]
 
 
@@ -308,3 +318,114 @@ def test_robot_supported_flags_the_same_values_inside_jit(changes, match):
     flag = jax.jit(lambda r: robots.robot_supported(r))
     assert bool(flag(robot))
     assert not bool(flag(robot.replace(**{k: jnp.float32(v) for k, v in changes.items()})))
+
+
+# ---------------------------------------------------------------------------------------------
+# A longer reach for stairs (issue 20)
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("reach, n_dx, size", [(0.20, 9, 496), (0.30, 13, 720), (0.25, 11, 608), (0.10, 5, 272)])
+def test_reach_widens_the_dx_lattice_keeping_its_5cm_spacing(reach, n_dx, size):
+    r = ij.robots.hrp2(reach=reach)
+    a = np.asarray(r.actions, np.float64)
+    assert a.shape == (size, 3) and size == n_dx * 8 * 7 - 8
+    np.testing.assert_allclose(np.unique(np.round(a[:, 0], 6)), np.linspace(-reach, reach, n_dx), atol=1e-6)
+    np.testing.assert_allclose(np.diff(np.unique(np.round(a[:, 0], 6))), 0.05, atol=1e-6)
+    np.testing.assert_allclose([a[:, 1].min(), a[:, 1].max()], [0.19, 0.33], atol=1e-6)
+    assert np.any(np.all(np.isclose(a, [0, 0.19, 0], atol=1e-7), axis=1)), "p0 must stay in S"
+    assert not robots.footprints_overlap(a, 0.242, 0.13).any()
+    # The static windows follow the action set: the swing window covers the longest swing, F spans S.
+    assert r.max_swing == pytest.approx(2 * np.hypot(a[:, 0], a[:, 1]).max() + 0.13)
+    lo, step, counts = r.target_grid
+    assert lo[0] == pytest.approx(-reach - 0.05) and lo[0] + step[0] * (counts[0] - 1) == pytest.approx(reach + 0.05)
+    # Beyond the paper's reach the step-height limit admits 15 cm stair risers; the rest is HRP-2's.
+    want_dh = 0.10 if reach <= 0.20 else robots.STAIR_STEP_HEIGHT
+    np.testing.assert_allclose(np.asarray(r.max_step_height), want_dh, atol=1e-7)
+    np.testing.assert_allclose(np.asarray(r.clearance), 0.10, atol=1e-7)
+    base = ij.robots.hrp2()
+    for name in robots.SCALAR_LEAVES:
+        assert float(robots.get_leaf(r, name)) == float(robots.get_leaf(base, name)), name
+
+
+def test_reach_keeps_the_paper_default_and_overrides_win():
+    a, b = ij.robots.hrp2(), ij.robots.hrp2(reach=0.20)
+    np.testing.assert_array_equal(np.asarray(a.actions), np.asarray(b.actions))
+    assert robots.hrp2_defaults() == robots.hrp2_defaults()  # fresh each call
+    r = ij.robots.hrp2(reach=0.30, max_step_height=0.12)
+    np.testing.assert_allclose(np.asarray(r.max_step_height), 0.12, atol=1e-7)
+    assert ij.robots.hrp2(reach=0.30, density=0.5).num_actions == ij.robots.hrp2(density=0.5).num_actions + 2 * 5 * 5
+
+
+@pytest.mark.parametrize("reach, match", [
+    (0.0, "positive finite"), (-0.1, "positive finite"), (float("nan"), "positive finite"),
+    (float("inf"), "positive finite"), ("0.3", "must be a number"), (True, "must be a number"),
+    (None, "must be a number"), (0.45, "beyond max_sole_distance"),
+])
+def test_bad_reach_is_refused_naming_it(reach, match):
+    with pytest.raises(ValueError, match=match):
+        ij.robots.hrp2(reach=reach)
+    # a larger leg reach admits the longer step
+    assert ij.robots.hrp2(reach=0.45, max_sole_distance=0.6).num_actions == 19 * 8 * 7 - 8
+
+
+def test_density_counts_at_the_papers_reach_are_unchanged():
+    for density in (0.1, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 1.0, 1.5, 2.0, 3.0):
+        n = 1 + 2 * max(1, round(4 * density))  # the formula before reach existed
+        assert robots.density_counts(density)[0] == n == robots.density_counts(density, 0.20)[0], density
+    assert robots.density_counts(1.0, 0.30) == (13, 8, 7)
+
+
+# ---------------------------------------------------------------------------------------------
+# HRP-2's ankle-tilt limits against the MJX biped's kinematics (issue 20)
+# ---------------------------------------------------------------------------------------------
+
+PELVIS_HEIGHT = 0.65  # m above the soles: the MJX controller's (sim.controller.WalkConfig.pelvis_height)
+
+
+def _stances_realisable(actions, roll, pitch, tilted_row):
+    """(N,) bool: with the right foot at the origin and the left at each action (dx, dy, dtheta), the pelvis level
+    midway between them at PELVIS_HEIGHT and yawed halfway, the sole of one foot (row 0 left, 1 right) tilted by
+    (roll, pitch) in its own frame: do both legs' analytic IK solutions reach and stay within the joint ranges?"""
+    from ijoy_jax.sim import kinematics, model
+
+    params = model.BipedParams()
+
+    def leg_ok(side, pos, rot, pelvis, pelvis_rot):
+        q, reachable = kinematics.leg_ik(params, side, pelvis, pelvis_rot, pos, rot)
+        lo, hi = (jnp.asarray(v, jnp.float32) for v in params.joint_range(side))
+        return reachable & jnp.all(q >= lo - 1e-5) & jnp.all(q <= hi + 1e-5)
+
+    def one(a):
+        tilt = kinematics.rpy_to_rot(jnp.stack([jnp.float32(roll), jnp.float32(pitch), jnp.float32(0.0)]))
+        left_rot = kinematics.rot_z(a[2]) @ (tilt if tilted_row == 0 else jnp.eye(3))
+        right_rot = tilt if tilted_row == 1 else jnp.eye(3)
+        pelvis = jnp.stack([0.5 * a[0], 0.5 * a[1], jnp.float32(PELVIS_HEIGHT)])
+        pelvis_rot = kinematics.rot_z(0.5 * a[2])
+        return (leg_ok(1, jnp.stack([a[0], a[1], 0.0]), left_rot, pelvis, pelvis_rot)
+                & leg_ok(-1, jnp.zeros(3), right_rot, pelvis, pelvis_rot))
+
+    return np.asarray(jax.jit(jax.vmap(one))(jnp.asarray(actions, jnp.float32)))
+
+
+@pytest.mark.parametrize("reach", [0.20, 0.30])
+def test_hrp2_ankle_limits_are_realisable_by_the_biped(reach):
+    """make_robot's defaults (HRP-2's ankles) against the MJX biped's leg IK and joint ranges, in the controller's
+    double-support posture: a sole pitched by +-max_sole_pitch is realisable in every stance of the action set
+    (either foot tilted); one rolled by +-max_sole_roll in every stance at the step-in-place width (0.19 m, any
+    step length and rotation). Wider stances lean the legs outward, which leaves the ankle roll less room: at the
+    widest (0.33 m) the largest roll realisable in every stance is smaller (the docstring's 6 deg), the one thing
+    a scalar roll limit does not capture."""
+    robot = ij.robots.hrp2(reach=reach)
+    acts = np.asarray(robot.actions)
+    pitch, roll = float(robot.max_sole_pitch), float(robot.max_sole_roll)
+    for row in (0, 1):
+        for sign in (1.0, -1.0):
+            assert _stances_realisable(acts, 0.0, sign * pitch, row).all(), (row, sign)
+            nominal = np.isclose(acts[:, 1], float(robot.p0[1]))
+            ok = _stances_realisable(acts, sign * roll, 0.0, row)
+            assert ok[nominal].all(), (row, sign, acts[nominal & ~ok])
+    # The allowance is small: 4 deg more roll (14 deg) is not realisable even standing straight, 0.19 m apart.
+    straight = acts[np.all(np.isclose(acts, robot.p0), axis=1)]
+    assert not (_stances_realisable(straight, -roll - math.radians(4.0), 0.0, 0).all()
+                and _stances_realisable(straight, roll + math.radians(4.0), 0.0, 0).all())

@@ -112,7 +112,8 @@ def test_terrain_replace_is_checked_at_the_boundary_and_flagged_inside_jit(field
 # ----- robot constructors and replace -----
 
 @EXAMPLES
-@given(name=st.sampled_from(["margin", "foot_length", "foot_width", "step_time", "w", "rotation_weight"]),
+@given(name=st.sampled_from(["margin", "foot_length", "foot_width", "step_time", "w", "rotation_weight",
+                             "max_sole_pitch", "max_sole_roll", "max_sole_distance", "reach"]),
        v=hostile)
 def test_hrp2_refuses_or_builds_a_checked_robot(name, v):
     try:
@@ -175,7 +176,7 @@ def _one(robot, terrain, stance, command):
 _select_jit = jax.jit(lambda t, r, s, c: _one(r, t, s, c))
 
 LEAVES = ["margin", "foot_length", "foot_width", "step_time", "w", "rotation_weight", "metrics.slope_weight",
-          "metrics.band_limit"]
+          "metrics.band_limit", "max_sole_pitch", "max_sole_roll", "max_sole_distance"]
 
 
 @EXAMPLES
@@ -196,6 +197,7 @@ def test_robot_replace_refused_at_the_boundary_iff_flagged_inside_jit(name, v):
     c = _select_jit(TERRAIN_25D, bad, jnp.asarray(STANCE), jnp.array([0.1, 0.0, 0.0]))
     assert bool(c.unsupported) == refused
     assert np.all(np.isfinite(np.asarray(c.pose))) and not np.isnan(float(c.cost))
+    assert np.all(np.isfinite(np.asarray(c.foothold)))
     assert float(c.cost) >= 0 and float(c.foot_cost) >= 0
     if refused:
         assert not bool(c.valid) and float(c.cost) == np.inf and int(c.index) == -1
@@ -229,6 +231,7 @@ def test_select_step_refuses_or_flags_hostile_poses_and_commands(stance, command
         assert not np.all(np.isfinite(stance.astype(np.float32))) and _names(e, "stance", "swing_from"), e
         return
     assert np.all(np.isfinite(np.asarray(c.pose))) and float(c.cost) >= 0 and not np.isnan(float(c.cost))
+    assert np.all(np.isfinite(np.asarray(c.foothold)))
     assert bool(c.command_ok) == bool(np.all(np.isfinite(command.astype(np.float32))))
     c = _select_jit(TERRAIN_25D, ROBOT, jnp.asarray(stance, jnp.float32), jnp.asarray(command, jnp.float32))
     assert np.all(np.isfinite(np.asarray(c.pose))) and float(c.cost) >= 0

@@ -6,10 +6,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import select
-from ijoy_jax.testing import NumpyFootCost, ordered_select
+from ijoy_jax.testing import NumpyFootCost, foothold, ordered_select, rect_touches_cells
 
 RES = 0.02
 ROBOT = ij.robots.hrp2(margin=0.02)
@@ -71,6 +73,8 @@ def _agree(a, b):
     differ = ia != ib
     # Different indices only where the two costs tie to rounding.
     assert np.all(np.abs(ca[differ & fin] - cb[differ & fin]) <= TIE)
+    # The same step has the same full foothold (one plane fit of the same pose in either program).
+    np.testing.assert_allclose(np.asarray(a.foothold)[~differ], np.asarray(b.foothold)[~differ], atol=1e-6)
     return differ.mean()
 
 
@@ -153,10 +157,20 @@ def test_no_valid_step_is_explicit_and_finite():
         ch = ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], method=method)
         assert not bool(ch.valid) and np.isinf(float(ch.cost))
         assert np.all(np.isfinite(np.asarray(ch.pose)))
+        # the foothold is the reported pose's, level on a 2D map
+        level = np.asarray(ch.pose)[[0, 1, 0, 0, 0, 2]] * [1, 1, 0, 0, 0, 1]
+        np.testing.assert_array_equal(np.asarray(ch.foothold), level)
         if method != "naive":
             assert int(ch.index) == -1
             # the reported pose is stepping in place, never NaN
             np.testing.assert_allclose(np.asarray(ch.pose), [0.5, 0.69, 0.0], atol=1e-6)
+    # On a 2.5D map with no valid step: the step in place's foothold, on the plane under it (a 10 deg ramp).
+    h = np.tan(math.radians(10.0)) * (np.arange(SHAPE[0]) + 0.5)[:, None] * RES * np.ones((1, SHAPE[1]))
+    t = ij.terrain.from_arrays(h, np.zeros(SHAPE, bool), RES)
+    ch = ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], targets=TARGETS)
+    assert not bool(ch.valid) and int(ch.index) == -1
+    np.testing.assert_allclose(np.asarray(ch.foothold), [0.5, 0.69, math.tan(math.radians(10.0)) * 0.5, 0.0,
+                                                         -math.radians(10.0), 0.0], atol=2e-5)
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
@@ -221,7 +235,9 @@ def test_no_recompile_across_parameters_and_commands():
     n = select._select_jit._cache_size()
     for r, cmd in [(ROBOT.replace(w=jnp.float32(5.0)), [0.2, 0.1, 0.0]),
                    (ROBOT.replace(margin=jnp.float32(0.1)), [0.0, 0.0, 0.3]),
-                   (ROBOT.replace(step_time=jnp.float32(0.5)), [np.nan, 0.0, 0.0])]:
+                   (ROBOT.replace(step_time=jnp.float32(0.5)), [np.nan, 0.0, 0.0]),
+                   (ROBOT.replace(max_sole_roll=jnp.float32(0.05), max_sole_distance=jnp.float32(0.3)),
+                    [0.2, 0.0, 0.1])]:
         ij.select_step(t, r, *args, cmd, targets=TARGETS)
     assert select._select_jit._cache_size() == n
 
@@ -318,6 +334,7 @@ def test_non_finite_origin_set_by_replace():
     assert bool(f(jnp.zeros(2)).valid)
     c = f(jnp.array([jnp.nan, 0.0]))
     assert not bool(c.valid) and bool(c.unsupported) and np.all(np.isfinite(c.pose))
+    assert np.all(np.isfinite(c.foothold))
 
 
 @pytest.mark.parametrize("side", ["left", True, None])
@@ -325,3 +342,79 @@ def test_stance_side_that_is_not_a_number_gets_a_clear_error(side):
     t = ij.terrain.flat(SHAPE, RES)
     with pytest.raises(ValueError, match=r"stance_side must be \+1 .* or -1"):
         ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], side, [0.1, 0.0, 0.0], targets=TARGETS)
+
+
+# ---------------------------------------------------------------------------------------------
+# The full foothold (issue 20): StepChoice.foothold against an independent plane fit
+# ---------------------------------------------------------------------------------------------
+
+FOOT_Z_TOL = 3e-5  # m: float32 least squares over ~90 cells of heights up to ~0.4 m (relative to the centre cell)
+FOOT_ANGLE_TOL = 3e-4  # rad: the float32 plane gradient (~1e-5 m/m over a 0.24 m foot) through atan
+SLIVER = 1e-5  # m: a footprint edge this close to a cell edge may touch the cell or not in float32
+LENIENT = ROBOT.replace(
+    metrics=ROBOT.metrics.replace(slope_limit=jnp.float32(1.2), roughness_limit=jnp.float32(1.0),
+                                  bump_limit=jnp.float32(1.0), band_limit=jnp.float32(1.0)),
+    max_step_height=jnp.full(ROBOT.num_actions, 1.0, jnp.float32), max_sole_pitch=jnp.float32(1.2),
+    max_sole_roll=jnp.float32(1.2))  # every limit out of the way: the choice is mostly valid, on any slope
+
+
+def _sliver(pose, length, width):
+    """Whether the footprint's cells at ``pose`` may differ under float32 rounding (an edge within SLIVER)."""
+    inner = rect_touches_cells(*pose, length / 2 - SLIVER, width / 2 - SLIVER, RES, SHAPE)
+    outer = rect_touches_cells(*pose, length / 2 + SLIVER, width / 2 + SLIVER, RES, SHAPE)
+    return bool(np.any(inner != outer))
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**16), rough=st.booleans())
+def test_foothold_matches_an_independent_plane_fit(seed, rough):
+    """foothold = (x, y, z, roll, pitch, yaw): x, y, yaw the chosen pose's; z the least-squares plane's height at
+    the foot centre and roll, pitch the sole lying on it, both from numpy.linalg.lstsq over the footprint's cell
+    centres (testing.foothold), on random planes (up to 17 deg each way) and on rough maps (plus noise and bumps).
+    A pure plane also has its closed form: z = the plane at the foot centre."""
+    rng = np.random.default_rng(seed)
+    gx, gy = rng.uniform(-0.3, 0.3, 2)
+    centres = (np.arange(SHAPE[0]) + 0.5) * RES
+    xc, yc = np.meshgrid(centres, centres, indexing="ij")
+    h = 0.1 + gx * xc + gy * yc
+    if rough:
+        h = h + 0.01 * rng.standard_normal(SHAPE) + 0.05 * np.sin(7 * xc + rng.uniform(0, 6)) * np.cos(5 * yc)
+    h = h.astype(np.float32)
+    t = ij.terrain.from_arrays(h, None, RES)
+    stance = np.array([*rng.uniform(0.4, 0.55, 2), rng.uniform(-np.pi, np.pi)], np.float32)
+    command = rng.uniform([-0.3, -0.2, -0.5], [0.3, 0.2, 0.5]).astype(np.float32)
+    ch = ij.select_step(t, LENIENT, stance, int(rng.choice([-1, 1])), command, targets=TARGETS)
+    pose = np.asarray(ch.pose, np.float64)
+    got = np.asarray(ch.foothold, np.float64)
+    assert got.shape == (6,) and ch.foothold.dtype == jnp.float32
+    np.testing.assert_array_equal(got[[0, 1, 5]], np.asarray(ch.pose)[[0, 1, 2]])
+    if _sliver(pose, 0.242, 0.13):
+        return  # the cell set itself is ambiguous to float32 (rare)
+    ref = foothold(h.astype(np.float64), RES, (0.0, 0.0), pose, 0.242, 0.13)
+    assert got[2] == pytest.approx(ref[2], abs=FOOT_Z_TOL)
+    np.testing.assert_allclose(got[3:5], ref[3:5], atol=FOOT_ANGLE_TOL)
+    if not rough:  # the fit of an exact plane is the plane
+        assert got[2] == pytest.approx(0.1 + gx * pose[0] + gy * pose[1], abs=FOOT_Z_TOL)
+
+
+def test_foothold_is_the_pose_with_zero_height_and_tilt_on_2d_maps_under_vmap():
+    terrains = _random_terrains(31, 4, False)
+    stance, side, command, swing_from = _random_queries(32, 64)
+    got = _batched("exhaustive", False)(jax.tree_util.tree_map(lambda x: jnp.repeat(x, 16, axis=0), terrains),
+                                        stance, side, command, swing_from)
+    fh, pose = np.asarray(got.foothold), np.asarray(got.pose)
+    assert fh.shape == (64, 6) and np.asarray(got.valid).sum() > 16
+    np.testing.assert_array_equal(fh[:, [0, 1, 5]], pose)
+    np.testing.assert_array_equal(fh[:, 2:5], 0.0)
+
+
+@pytest.mark.parametrize("method", ["ordered", "naive"])
+def test_foothold_of_every_method_is_that_of_its_pose(method):
+    """Whatever pose a method reports (a step, the naive action, the step in place), the foothold is its plane's."""
+    terrains = _random_terrains(33, 1, True)
+    t = jax.tree_util.tree_map(lambda x: x[0], terrains)
+    stance, side, command, _ = _random_queries(34, 8)
+    for q in range(8):
+        ch = ij.select_step(t, ROBOT, stance[q], side[q], command[q], method=method, targets=TARGETS)
+        want = select.foothold(t, ROBOT, ch.pose)
+        np.testing.assert_allclose(np.asarray(ch.foothold), np.asarray(want), atol=1e-6)

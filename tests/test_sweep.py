@@ -66,6 +66,8 @@ BAD = [
     ('[sweep]\nmethod = "greedy"\n', "sweep.method", "must be one of"),
     ('[sweep]\nkernel = "cuda"\n', "sweep.kernel", "must be one of"),
     ("[robot]\nmargin = -0.01\n", "robot.margin", "must be >= 0"),
+    ("[robot]\nmax_sole_roll = -0.1\n", "robot.max_sole_roll", "must be >= 0"),
+    ('[grid]\n"robot.max_sole_distance" = [0.5, nan]\n', "grid.robot.max_sole_distance[1]", "must be finite"),
     ("[robot]\nstep_time = 0\n", "robot.step_time", "must be > 0"),
     ("[robot]\nw = true\n", "robot.w", "must be a number"),
     ("[robot]\nmetrics.slope_wait = 1.0\n", "robot.metrics.slope_wait", "unknown key"),

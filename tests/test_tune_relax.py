@@ -148,6 +148,9 @@ SCALAR_LEAVES = (
     "metrics.step_weight",
     "metrics.band_weight",
     "metrics.band_limit",
+    "max_sole_pitch",
+    "max_sole_roll",
+    "max_sole_distance",
 )
 
 

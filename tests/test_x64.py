@@ -21,6 +21,10 @@ SUBSET = " or ".join([
     "test_matches_numpy_reference",  # ordered, 2D and 2.5D with swing_from, against NumPy
     "test_no_valid_step",  # every method
     "test_flat_forward_walk",  # rollout at its defaults
+    "test_foothold_matches_an_independent_plane_fit",  # StepChoice.foothold against NumPy
+    "test_the_walker_gets_the_full_foothold",  # the rollout's footholds on a ramp
+    "test_a_sole_tilted_beyond_the_ankles",  # the ankle term
+    "test_soles_farther_apart_than_the_legs_reach",  # the reach term, 2D and 2.5D
 ])
 
 

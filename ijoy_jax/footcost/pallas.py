@@ -17,7 +17,8 @@ broad phase: when the highest cell of a box holding all of a block's corridors
 is within every step's clearance (on most terrain), the exact walk is skipped.
 
 Same definitions as the XLA path, term by term (exact cell coverage, the
-least-squares plane and its metrics, step height, safety band, swing corridor,
+least-squares plane and its metrics, step height, safety band, the sole's tilt
+on that plane against the ankles' limits, the reach, swing corridor,
 unsupported flags); sums run in a different order, so totals agree to float32
 rounding. Validity follows one rule for every limit on both paths
 (:func:`~ijoy_jax.footcost.xla.exceeds`: beyond the limit by more than
@@ -41,13 +42,24 @@ from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
 from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max, window_cells
-from ijoy_jax.footcost.xla import SLACK, checked_query, exceeds, metric_term, plane_metrics, query_supported, solve3
+from ijoy_jax.footcost.xla import (
+    SLACK,
+    checked_query,
+    exceeds,
+    metric_term,
+    plane_metrics,
+    query_supported,
+    sole_distance,
+    sole_tilt,
+    solve3,
+)
 from ijoy_jax.robots import Robot, nearest_actions
 from ijoy_jax.terrain import Terrain
 
 # Scalars of one decision, packed into one float32 vector (indices into ``par``).
 (_OX, _OY, _GHL, _GHW, _FHL, _FHW, _STANCE_H, _START_H, _SWX, _SWY, _SWING_MAX, _FW, _TOO_BIG,
- _SLOPE_W, _SLOPE_L, _ROUGH_W, _ROUGH_L, _BUMP_W, _BUMP_L, _STEP_W, _BAND_W, _BAND_L) = range(22)
+ _SLOPE_W, _SLOPE_L, _ROUGH_W, _ROUGH_L, _BUMP_W, _BUMP_L, _STEP_W, _BAND_W, _BAND_L,
+ _STX, _STY, _PITCH_L, _ROLL_L, _DIST_L) = range(27)
 _NUM_PAR = 32
 # Rows of the per-candidate block ``cand``.
 _X, _Y, _T, _COST, _STEP_LIMIT, _CLEARANCE = range(6)
@@ -190,6 +202,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
     cx = x - p[_OX]
     cy = y - p[_OY]
     c, s = jnp.cos(t), jnp.sin(t)
+    zero_f = jnp.zeros_like(cx)
     grown = _Rect(cx, cy, c, s, p[_GHL], p[_GHW], res, native)
     ix0 = grown.ix_first
     too_big = (p[_TOO_BIG] > 0.0) | grown.overflow(ix0, k)
@@ -208,10 +221,15 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
 
     # A centre off the map is an obstacle (footcost.index.centre_off_map), whatever the spans below find.
     total = cand_ref[_COST, :] + jnp.where(centre_off_map(cx, cy, shape, res), jnp.inf, 0.0)
-    if not has_height:  # 2D: obstacles only, one pass over the grown footprint's columns
+
+    def out_of_reach(dz):
+        """(C,) bool: the sole centres farther apart in 3D than the legs reach (footcost.xla's ``reach``)."""
+        return exceeds(sole_distance(x - p[_STX], y - p[_STY], dz), p[_DIST_L])
+
+    if not has_height:  # 2D: obstacles and reach only, one pass over the grown footprint's columns
         blocked = _column_loop(num_cols, ix0, (grown,), lambda ix, spans, acc: acc | hits_obstacle(ix, *spans[0]),
                                finite & False)
-        total = total + jnp.where(blocked, jnp.inf, 0.0)
+        total = total + jnp.where(blocked | out_of_reach(zero_f), jnp.inf, 0.0)
     else:
         foot = _Rect(cx, cy, c, s, p[_FHL], p[_FHW], res, native)
         stride = ny + 2 * k  # hp_ref is the edge-padded height map, flattened row-major
@@ -242,7 +260,6 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
         # the map's padded border this is footcost.plane_metrics' window cell; beyond it the step is
         # off the map and already +inf.
         h_ref = hp_ref[column_start(_floor_i32(cx / res, native), _floor_i32(cy / res, native))]
-        zero_f = jnp.zeros_like(cx)
 
         def rows_of(j0, j1, touched):
             """Rows the block visits in a column: its longest span there (beyond k: too big, +inf anyway)."""
@@ -333,10 +350,14 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
         bump = jnp.where(ok, top, 0.0)
         band = jnp.where(ok, band, 0.0)
         dh = height - p[_STANCE_H]
+        # The sole on the fitted plane (footcost.xla.sole_tilt) and the reach over the height change.
+        pitch, roll = sole_tilt(jnp.where(ok, b, 0.0), jnp.where(ok, cc, 0.0), t)
+        ankle_bad = exceeds(jnp.abs(pitch), p[_PITCH_L]) | exceeds(jnp.abs(roll), p[_ROLL_L])
         total = (total + metric_term(p[_SLOPE_W], slope, p[_SLOPE_L])
                  + metric_term(p[_ROUGH_W], rough, p[_ROUGH_L]) + metric_term(p[_BUMP_W], bump, p[_BUMP_L])
                  + metric_term(p[_STEP_W], jnp.abs(dh), cand_ref[_STEP_LIMIT, :])
-                 + metric_term(p[_BAND_W], band, p[_BAND_L]))
+                 + metric_term(p[_BAND_W], band, p[_BAND_L])
+                 + jnp.where(ankle_bad | out_of_reach(dh), jnp.inf, 0.0))
 
         if has_swing:
             # The swing corridor: the foot-wide rectangle from the swing start to the step.
@@ -494,7 +515,8 @@ def foot_cost_fused(
            stance_h, start_h, swx, swy, robot.max_swing + SLACK, robot.foot_width,
            jnp.where(unsupported, 1.0, 0.0),
            m.slope_weight, m.slope_limit, m.roughness_weight, m.roughness_limit, m.bump_weight, m.bump_limit,
-           m.step_weight, m.band_weight, m.band_limit]
+           m.step_weight, m.band_weight, m.band_limit, stance[0], stance[1], robot.max_sole_pitch,
+           robot.max_sole_roll, robot.max_sole_distance]
     par = jnp.stack([f32(q) for q in par] + [zero] * (_NUM_PAR - len(par)))
     padded = -(-num // block) * block
     order = None

@@ -2,13 +2,18 @@
 
 2D (occupancy grid): a step is valid iff every cell touched by the footprint
 grown by the safety margin is free and inside the map (exact coverage, see
-:mod:`ijoy_jax.geometry`); FootCost is then the action's cost, else +inf.
+:mod:`ijoy_jax.geometry`) and the swing sole centre is within the legs' reach
+of the stance one (``robot.max_sole_distance``); FootCost is then the
+action's cost, else +inf.
 
 2.5D (height map): additionally a plane is fitted to the heights of the cells
 the footprint touches, and slope, roughness, largest bump, step height from
 the stance foothold, and the safety band (cells touched only by the grown
 footprint) are scored against :class:`ijoy_jax.robots.TerrainMetrics`: beyond
-a limit the cost is +inf, below it ``weight * metric`` is added. With
+a limit the cost is +inf, below it ``weight * metric`` is added. A sole lying
+on the fitted plane must tilt no further than the ankles realise
+(``robot.max_sole_pitch`` along the foot, ``robot.max_sole_roll`` across it)
+and the reach counts the height change between the two planes. With
 ``swing_from`` given, terrain in the swing corridor (the foot-wide rectangle
 between the start and end foot centres) higher than the action's clearance
 above the higher of the two footholds invalidates the step.
@@ -116,6 +121,11 @@ class FootCostTerms(NamedTuple):
         the metric's limit (0 on 2D terrains).
       swing_path: 0, or +inf if the swing corridor is too high (or leaves the
         map) for the action's clearance.
+      ankle: 0, or +inf if a sole on the fitted plane would tilt beyond what
+        the ankles realise: ``|sole_pitch_rad|`` above ``robot.max_sole_pitch``
+        or ``|sole_roll_rad|`` above ``robot.max_sole_roll`` (0 on 2D terrains).
+      reach: 0, or +inf if the stance and swing sole centres are farther apart
+        (``sole_distance_m``) than ``robot.max_sole_distance``.
       unsupported: 0, or +inf if the pose is not finite, the footprint,
         margin or swing is larger than the robot's static windows cover, a
         plane fit overflows float32 (heights beyond ~1e35 m), or the robot's
@@ -131,7 +141,12 @@ class FootCostTerms(NamedTuple):
       slope_angle (rad), roughness_m, bump_m, step_height_m (signed, up is
       positive), band_m, path_height_m (corridor height above the higher
       foothold; -inf if no check), foot_height_m (plane height at the foot
-      centre), action_index (int32, the action whose cost/limits were used).
+      centre), sole_pitch_rad and sole_roll_rad (the orientation of a sole on
+      the fitted plane with the step's heading, ``R = Rz(yaw) Ry(pitch)
+      Rx(roll)``: :func:`sole_tilt`; 0 on 2D terrains), sole_distance_m (3D
+      distance from the stance sole centre: the horizontal step and
+      step_height_m), action_index (int32, the action whose cost/limits were
+      used).
     """
 
     total: jax.Array
@@ -143,6 +158,8 @@ class FootCostTerms(NamedTuple):
     step: jax.Array
     band: jax.Array
     swing_path: jax.Array
+    ankle: jax.Array
+    reach: jax.Array
     unsupported: jax.Array
     slope_angle: jax.Array
     roughness_m: jax.Array
@@ -151,17 +168,56 @@ class FootCostTerms(NamedTuple):
     band_m: jax.Array
     path_height_m: jax.Array
     foot_height_m: jax.Array
+    sole_pitch_rad: jax.Array
+    sole_roll_rad: jax.Array
+    sole_distance_m: jax.Array
     action_index: jax.Array
 
 
 
 class Plane(NamedTuple):
+    """The least-squares plane under a footprint and its metrics (:func:`plane_metrics`; () float32 each).
+
+    The plane is ``z = height + grad_x (x - cx) + grad_y (y - cy)`` in world axes about the foot centre
+    ``(cx, cy)``.
+    """
+
     height: jax.Array  # plane height at the foot centre (m)
     slope: jax.Array  # angle from horizontal (rad)
     roughness: jax.Array  # mean |residual| under the foot (m)
     bump: jax.Array  # largest residual under the foot (m)
     band: jax.Array  # largest |residual| in the safety band (m)
     fitted: jax.Array  # () bool: the fit is finite (False: heights beyond float32's range; metrics then 0)
+    grad_x: jax.Array  # dz/dx of the plane along world x (m/m)
+    grad_y: jax.Array  # dz/dy of the plane along world y (m/m)
+
+
+def sole_tilt(grad_x, grad_y, yaw):
+    """(pitch, roll) of a sole lying on the plane of gradient ``(grad_x, grad_y)`` (m/m) with heading ``yaw``.
+
+    The sole's orientation is ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (as
+    :func:`ijoy_jax.sim.kinematics.rpy_to_rot`): its x axis (the foot's
+    length) lies in the plane along the heading and its z axis is the plane's
+    upward normal. With ``gf`` and ``gl`` the plane's slopes along and across
+    the foot::
+
+      gf = grad_x cos(yaw) + grad_y sin(yaw),  gl = -grad_x sin(yaw) + grad_y cos(yaw),
+      pitch = -atan(gf),  roll = atan2(gl, sqrt(1 + gf^2))      (rad)
+
+    Ground rising ahead of the foot lifts its toe: pitch < 0; ground rising
+    to its left lifts its left edge: roll > 0. Elementwise (any broadcastable
+    shapes); jnp only, so both FootCost paths use it.
+    """
+    c, s = jnp.cos(yaw), jnp.sin(yaw)
+    gf = grad_x * c + grad_y * s
+    gl = grad_y * c - grad_x * s
+    return -jnp.arctan(gf), jnp.arctan2(gl, jnp.sqrt(1.0 + gf * gf))
+
+
+def sole_distance(dx, dy, dz):
+    """3D distance between two sole centres ``sqrt(dx^2 + dy^2 + dz^2)`` (m): the ``reach`` metric, one formula
+    for both FootCost paths (plain products and a square root, as the fused kernel lowers them)."""
+    return jnp.sqrt(dx * dx + dy * dy + dz * dz)
 
 
 def solve3(a00, a01, a02, a11, a12, a22, r0, r1, r2):
@@ -238,7 +294,15 @@ def query_supported(terrain: Terrain, robot: Robot) -> jax.Array:
 
 
 def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> Plane:
-    """Least-squares plane under the footprint at ``pose`` (world) and the metrics around it."""
+    """Least-squares plane under the footprint at ``pose`` (3,) (world x, y, yaw) and the metrics around it.
+
+    The fit is over the centres and heights of the cells the footprint touches; the safety band is the
+    cells the footprint grown by the robot's margin touches besides. A degenerate fit (no cells: a pose
+    far off the map) gives the height of the cell under the foot centre and zero gradient and metrics.
+
+    Returns:
+      :class:`Plane` of () float32 values.
+    """
     res = terrain.resolution
     k = index.pad
     origin = jnp.asarray(terrain.origin, jnp.float32)  # float32 also under x64 (an origin may be float64)
@@ -293,13 +357,15 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
         bump=jnp.where(ok, bump, z),
         band=jnp.where(ok, band, z),
         fitted=ok,
+        grad_x=jnp.where(ok, b, z),
+        grad_y=jnp.where(ok, c, z),
     )
 
 
 def exceeds(metric, limit):
     """The one rule for limits, on both paths: a metric rejects a step when it exceeds its limit by more than
-    :data:`LIMIT_TOL` (slope, roughness, bump, step height, band, and the swing corridor's height against the
-    action's clearance)."""
+    :data:`LIMIT_TOL` (slope, roughness, bump, step height, band, the swing corridor's height against the
+    action's clearance, the sole's pitch and roll and the distance between the soles)."""
     return metric > limit + LIMIT_TOL
 
 
@@ -312,8 +378,9 @@ def _inf_if(flag):
     return jnp.where(flag, jnp.inf, 0.0).astype(jnp.float32)
 
 
-def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, step, action_index) -> FootCostTerms:
-    """FootCost terms of one candidate step (world pose (3,)) executing ``action_index``."""
+def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_from, step,
+                action_index) -> FootCostTerms:
+    """FootCost terms of one candidate step (world pose (3,)) executing ``action_index`` from ``stance`` (3,)."""
     res = terrain.resolution
     k = index.pad
     finite = jnp.all(jnp.isfinite(step))
@@ -341,9 +408,14 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
         band = metric_term(metrics.band_weight, plane.band, metrics.band_limit)
         raw = (plane.slope, plane.roughness, plane.bump, dh, plane.band, plane.height)
         too_big = too_big | ~plane.fitted | ~stance_plane.fitted
+        pitch, roll = sole_tilt(plane.grad_x, plane.grad_y, step[2])
     else:
         slope = rough = bump = stepc = band = zero
         raw = (zero, zero, zero, zero, zero, zero)
+        pitch = roll = zero
+    ankle_bad = exceeds(jnp.abs(pitch), robot.max_sole_pitch) | exceeds(jnp.abs(roll), robot.max_sole_roll)
+    distance = sole_distance(step[0] - stance[0], step[1] - stance[1], raw[3])
+    reach_bad = exceeds(distance, robot.max_sole_distance)
     path_height = neg_inf
     path_bad = jnp.bool_(False)
     if terrain.has_height and swing_from is not None:
@@ -359,13 +431,16 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
     action = robot.action_cost[action_index]
     obstacle = _inf_if(blocked)
     swing = _inf_if(path_bad)
+    ankle = _inf_if(ankle_bad)
+    reach = _inf_if(reach_bad)
     flagged = too_big | ~finite
     unsupported = _inf_if(flagged)
     # +inf where flagged, whatever the other terms hold; a term that an unsupported value (a NaN weight, cost
     # or limit) makes NaN cannot be evaluated, and reads +inf too: no cost term is ever NaN.
     action, slope, rough, bump, stepc, band = (jnp.where(jnp.isnan(t), jnp.inf, t)
                                                for t in (action, slope, rough, bump, stepc, band))
-    total = jnp.where(flagged, jnp.inf, action + obstacle + slope + rough + bump + stepc + band + swing)
+    total = jnp.where(flagged, jnp.inf,
+                      action + obstacle + slope + rough + bump + stepc + band + swing + ankle + reach)
     return FootCostTerms(
         total=total,
         action=action,
@@ -376,6 +451,8 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
         step=stepc,
         band=band,
         swing_path=swing,
+        ankle=ankle,
+        reach=reach,
         unsupported=unsupported,
         slope_angle=raw[0],
         roughness_m=raw[1],
@@ -384,6 +461,9 @@ def _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, st
         band_m=raw[4],
         path_height_m=path_height,
         foot_height_m=raw[5],
+        sole_pitch_rad=pitch,
+        sole_roll_rad=roll,
+        sole_distance_m=distance,
         action_index=jnp.asarray(action_index, jnp.int32),
     )
 
@@ -405,7 +485,7 @@ def _foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, act
             start_plane = plane_metrics(terrain, index, robot, swing_from)
 
     def one(step, a):
-        return _step_terms(terrain, index, robot, stance_plane, start_plane, swing_from, step, a)
+        return _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_from, step, a)
 
     return jax.vmap(one)(steps, action_index)
 

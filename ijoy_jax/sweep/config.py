@@ -41,7 +41,8 @@ A sweep file has these tables (every key optional unless noted; units in bracket
     "robot.margin" = [0.0, 0.1]
 
 Parameter names are ``robot.<name>`` (``w``, ``rotation_weight``, ``margin``,
-``step_time``, ``foot_length``, ``foot_width``, ``density``,
+``step_time``, ``foot_length``, ``foot_width``, ``max_sole_pitch``,
+``max_sole_roll``, ``max_sole_distance``, ``density``,
 ``metrics.<TerrainMetrics field>``) and ``terrain.<field of the family's
 parameter class>``. In ``[grid]`` and ``[random]`` they may be written quoted
 (``"robot.w" = [...]``) or as nested tables (``[grid.robot] w = [...]``).

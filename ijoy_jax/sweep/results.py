@@ -50,6 +50,7 @@ UNITS = {
     "unsupported_decisions": "decisions", "robot.w": "cost units per m",
     "robot.rotation_weight": "cost units per rad",
     "robot.margin": "m", "robot.step_time": "s", "robot.foot_length": "m", "robot.foot_width": "m",
+    "robot.max_sole_pitch": "rad", "robot.max_sole_roll": "rad", "robot.max_sole_distance": "m",
     "robot.density": "x HRP-2's 496 actions", "command.vx": "m/s", "command.vy": "m/s", "command.wz": "rad/s",
     "bars_crossed": "bars", "crossed": "fraction", "terrain.width": "m",
 }

@@ -26,11 +26,14 @@ constant in every parameter, so its gradient is useless. This module replaces
   clearances are >= 0), and the clearance check is the softplus barrier above;
   corridor cells off the map count like obstacles, and a swing longer than the
   path window (``max_swing``) gets a softplus barrier.
+* the ankle-tilt and reach limits (the sole's pitch and roll on the soft
+  plane, the 3D distance of the soles) by the same softplus barriers;
 * the argmin by a Boltzmann distribution ``p_i ~ exp(-cost_i / tau)``.
 
 Every output is finite for finite inputs and differentiable with respect to
 every Robot leaf (w, rotation_weight, margin, foot size, step_time, action
-costs, step-height limits, clearances, metric weights and limits) and the
+costs, step-height limits, clearances, metric weights and limits, ankle-tilt
+and reach limits) and the
 poses. Not relaxed: the static-window ``unsupported`` check of the footprint
 (a window that leaves the padded map gets a constant finite barrier instead).
 
@@ -46,6 +49,7 @@ import jax.numpy as jnp
 
 from ijoy_jax import geometry
 from ijoy_jax.footcost import foot_cost_terms, window_cells
+from ijoy_jax.footcost.xla import sole_tilt
 from ijoy_jax.robots import Robot, dist, side_actions, side_p0, side_sign
 from ijoy_jax.select import Targets, make_targets
 from ijoy_jax.terrain import Terrain
@@ -119,11 +123,16 @@ class SoftFootCostTerms(NamedTuple):
     (barrier on the soft obstacle mass), slope, roughness, bump, step, band
     (each ``weight * metric + barrier``; 0 on 2D terrains), swing_path
     (clearance barrier on the swing corridor plus its off-map and length
-    barriers; 0 without ``swing_from`` or on 2D terrains).
+    barriers; 0 without ``swing_from`` or on 2D terrains), ankle (barriers on
+    the size of the sole's pitch and roll on the soft plane against the
+    robot's ``max_sole_pitch`` and ``max_sole_roll``; 0 on 2D terrains), reach
+    (barrier on the 3D distance of the soles against ``max_sole_distance``).
     Raw: obstacle_mass (cells, soft count of obstacle or off-map cells under
     the grown footprint), slope_angle (rad), roughness_m, bump_m,
     step_height_m (signed), band_m, foot_height_m (m), path_height_m (m, soft
-    ``max(0, corridor top - higher foothold)``; 0 when not checked).
+    ``max(0, corridor top - higher foothold)``; 0 when not checked),
+    sole_pitch_rad, sole_roll_rad (:func:`ijoy_jax.footcost.xla.sole_tilt` of
+    the soft plane), sole_distance_m (m).
     """
 
     total: jax.Array
@@ -143,6 +152,11 @@ class SoftFootCostTerms(NamedTuple):
     foot_height_m: jax.Array
     swing_path: jax.Array
     path_height_m: jax.Array
+    ankle: jax.Array
+    reach: jax.Array
+    sole_pitch_rad: jax.Array
+    sole_roll_rad: jax.Array
+    sole_distance_m: jax.Array
 
 
 class _Patch(NamedTuple):
@@ -181,6 +195,8 @@ class _SoftPlane(NamedTuple):
     roughness: jax.Array
     bump: jax.Array
     band: jax.Array
+    grad_x: jax.Array  # dz/dx (m/m, world axes)
+    grad_y: jax.Array  # dz/dy (m/m)
 
 
 def _soft_max0(values, weights, temp):
@@ -225,7 +241,7 @@ def _soft_plane(patch: _Patch, m_foot, m_grown, res: float, temp) -> _SoftPlane:
     bump = _soft_max0(m_foot * resid, ones, temp)
     m_band = m_grown * (1.0 - m_foot)
     band = _soft_max0(m_band * _smooth_abs(resid, temp), ones, temp)
-    return _SoftPlane(height, slope, roughness, bump, band)
+    return _SoftPlane(height, slope, roughness, bump, band, b / res, c / res)
 
 
 def _memberships(patch: _Patch, robot: Robot, theta, res: float, sharpness):
@@ -368,18 +384,26 @@ def soft_foot_cost_terms(
             stepc = term(metrics.step_weight, adh, robot.max_step_height[a])
             band = term(metrics.band_weight, pl.band, metrics.band_limit)
             raw = (pl.slope, pl.roughness, pl.bump, dh, pl.band, pl.height)
+            pitch, roll = sole_tilt(pl.grad_x, pl.grad_y, step[2])
+            angle_eps = temp / res  # rad: 1 / sharpness
+            ankle = (_barrier(_smooth_abs(pitch, angle_eps), robot.max_sole_pitch, sharpness, barrier_weight)
+                     + _barrier(_smooth_abs(roll, angle_eps), robot.max_sole_roll, sharpness, barrier_weight))
         else:
-            slope = rough = bump = stepc = band = zero
+            slope = rough = bump = stepc = band = ankle = zero
             raw = (zero,) * 6
+            pitch = roll = zero
+        distance = geometry.safe_norm(geometry.safe_norm(step[0] - stance[0], step[1] - stance[1]), raw[3])
+        reach = _barrier(distance, robot.max_sole_distance, sharpness, barrier_weight)
         swing = path_height = zero
         if check_path:
             h_ref = temp * jnp.logaddexp(start_height / temp, raw[5] / temp)  # soft max of the two footholds
             swing, path_height = _swing_path(
                 terrain, robot, on_pad, hp_pad, kp, swing_from, step, h_ref, a, sharpness, barrier_weight, temp
             )
-        total = action + obstacle + slope + rough + bump + stepc + band + swing
+        total = action + obstacle + slope + rough + bump + stepc + band + swing + ankle + reach
         return SoftFootCostTerms(
-            total, action, obstacle, slope, rough, bump, stepc, band, mass, *raw, swing, path_height
+            total, action, obstacle, slope, rough, bump, stepc, band, mass, *raw, swing, path_height, ankle, reach,
+            pitch, roll, distance
         )
 
     return jax.vmap(one)(steps, action_index)
