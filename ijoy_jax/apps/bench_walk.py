@@ -498,11 +498,8 @@ def aggregate(traj: control.Trajectory, start) -> dict[str, Any]:
     With a simulated robot's log (:class:`ijoy_jax.sim.walker.StepLog`), also ``obstacle_contacts``
     (steps begun standing during which a sole or shin touched an obstacle cell) and
     ``robots_with_contact``; over every step made by every robot, ``placement_error_mean_m`` /
-    ``_p95_m`` and ``yaw_error_p95_rad``; and ``tilt_error_p95_rad``, the sole tilt error, from
-    ``tilt_error_source``: "log" (pooled as the placement error) when the log records ``tilt_error``
-    per step, else "summary" (the 95th percentile over robots of ``tilt_error_p95`` from
-    :func:`ijoy_jax.sim.walker.summary`) when the summary has it, else "absent" (None). These are None
-    for the perfect robot (not measured).
+    ``_p95_m``, ``yaw_error_p95_rad`` and ``tilt_error_p95_rad`` (the angle between a landed sole's normal
+    and its foothold's, ``StepLog.tilt_error``). These are None for the perfect robot (not measured).
     """
     taken = np.asarray(traj.taken, bool)
     b = taken.shape[0]
@@ -528,26 +525,17 @@ def aggregate(traj: control.Trajectory, start) -> dict[str, Any]:
     )
     if log is None:
         out.update(obstacle_contacts=None, robots_with_contact=None, placement_error_mean_m=None,
-                   placement_error_p95_m=None, yaw_error_p95_rad=None, tilt_error_p95_rad=None,
-                   tilt_error_source="absent")
+                   placement_error_p95_m=None, yaw_error_p95_rad=None, tilt_error_p95_rad=None)
         return out
     contact = np.asarray(log.obstacle_contact, bool) & upright
     err = np.asarray(log.placement_error, np.float64)[made]
-    tilt, source = None, "absent"
-    if hasattr(log, "tilt_error"):
-        tilt, source = _percentile(np.asarray(log.tilt_error, np.float64)[made], 95), "log"
-    else:
-        summary = W.summary(traj)
-        if "tilt_error_p95" in summary:
-            tilt, source = _percentile(np.asarray(summary["tilt_error_p95"]), 95), "summary"
     out.update(
         obstacle_contacts=int(contact.sum()),
         robots_with_contact=int(contact.any(axis=1).sum()),
         placement_error_mean_m=float(err.mean()) if err.size else None,
         placement_error_p95_m=_percentile(err, 95),
         yaw_error_p95_rad=_percentile(np.asarray(log.yaw_error, np.float64)[made], 95),
-        tilt_error_p95_rad=tilt,
-        tilt_error_source=source,
+        tilt_error_p95_rad=_percentile(np.asarray(log.tilt_error, np.float64)[made], 95),
     )
     return out
 

@@ -481,8 +481,8 @@ class ModelIndex(NamedTuple):
       hfield_geom: () the terrain geom id.
       imu_site: () site at the pelvis origin.
       torso_site: () site in the torso.
-      ankle_sensor: (2, 2) ``sensordata`` addresses of each ankle's force and torque (3 values each, in the
-        foot frame at the ankle point: what the shank exerts on the foot).
+      ankle_sensor: (2, 2) sensordata addresses of each ankle's force and torque (3 values each, foot frame,
+      at the ankle point: what the shank exerts on the foot).
     """
 
     qpos_adr: np.ndarray
