@@ -75,7 +75,7 @@ def test_zmp_on_a_raised_support_plane(setup, zmp_fn):
     traj = np.tile(np.asarray(qpos, np.float32), (7, 1))
     traj[:, 0] += 0.5 * acc * t**2
     flat, fz = zmp_fn(m, jnp.asarray(traj), dt=dt)
-    raised, _ = dynamics.motion_zmp(m, jnp.asarray(traj), dt, jnp.full(5, 0.3))
+    raised, _ = zmp_fn(m, jnp.asarray(traj), dt=dt, ground=jnp.full(5, 0.3, jnp.float32))
     np.testing.assert_allclose(np.asarray(raised - flat)[:, 0], 0.3 * mass * acc / np.asarray(fz), atol=ZMP_TOL)
     np.testing.assert_allclose(np.asarray(raised - flat)[:, 1], 0.0, atol=ZMP_TOL)
     np.testing.assert_allclose(np.asarray(flat)[:, 0] - (com[0] + traj[1:-1, 0] - qpos[0]),
