@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from ijoy_jax import geometry, robots
+from ijoy_jax import geometry, robots, select
 from ijoy_jax import terrain as T
 from ijoy_jax.sim import controller, dynamics, kinematics, model, swing
 from ijoy_jax.sim import walker as W
@@ -70,6 +70,9 @@ def sim():
     return W.make_sim((200, 200), 0.02, robot=robots.hrp2())  # 4 m x 4 m, centred on the start
 
 
+_FOOTHOLD = jax.jit(select.foothold)  # the selector's foothold of a planar pose (the plane fitted under it)
+
+
 @functools.lru_cache(maxsize=4)
 def _programs(sim):
     """The jitted control tick and dynamics filter of a Sim, compiled once per Sim for every walk of the file."""
@@ -91,7 +94,7 @@ class _Native:
     pelvis and the ankles' damping control the ankle force/torque sensors.
     ``heights`` (the Sim's grid, m; flat by default) is the ground: soles
     land parallel to the plane fitted under them, resting on it
-    (:func:`W.start_foothold`, :func:`swing.resting_height`), and swing over
+    (:func:`ijoy_jax.select.foothold`, :func:`swing.resting_height`), and swing over
     the highest terrain under the swept foot.
     """
 
@@ -124,7 +127,7 @@ class _Native:
     def foothold(self, pose):
         """(6,) the sole at planar ``pose`` (3,) resting on the ground, parallel to the plane fitted under it."""
         foot = (self.params.foot_length, self.params.foot_width)
-        f = W.start_foothold(self.terr, jnp.asarray(pose, jnp.float32), *foot)
+        f = _FOOTHOLD(self.terr, robots.hrp2(), jnp.asarray(pose, jnp.float32))
         return f.at[2].set(swing.resting_height(self.terr, f, *foot, points=model.sole_points(self.params)[:, :2]))
 
     def soles(self):

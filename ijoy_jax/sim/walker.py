@@ -31,7 +31,7 @@ import numpy as np
 from jax import lax
 from mujoco import mjx
 
-from ijoy_jax import control, geometry
+from ijoy_jax import control, geometry, select
 from ijoy_jax import terrain as terrain_mod
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import METHODS, Targets
@@ -196,26 +196,6 @@ def _obstacle_contact(sim: Sim, terrain: Terrain, d: mjx.Data) -> jax.Array:
 _PLANAR = np.array([0, 1, 5])  # x, y, yaw of a sole (6,)
 
 
-def start_foothold(terrain: Terrain, pose, foot_length, foot_width) -> jax.Array:
-    """(6,) a start foot's sole: x, y, yaw of ``pose`` (3,), roll and pitch of the plane fitted to the terrain's
-    heights at 5 x 3 points of the footprint (z 0; :func:`swing.resting_height` places it)."""
-    u = jnp.linspace(-0.5, 0.5, 5) * foot_length
-    v = jnp.linspace(-0.5, 0.5, 3) * foot_width
-    uu, vv = (a.ravel() for a in jnp.meshgrid(u, v, indexing="ij"))
-    c, s_ = jnp.cos(pose[2]), jnp.sin(pose[2])
-    dx, dy = c * uu - s_ * vv, s_ * uu + c * vv
-    ij = jnp.floor((pose[:2] + jnp.stack([dx, dy], -1) - terrain.origin) / terrain.resolution).astype(jnp.int32)
-    nx, ny = terrain.shape
-    h = terrain.height[jnp.clip(ij[:, 0], 0, nx - 1), jnp.clip(ij[:, 1], 0, ny - 1)]
-    a = jnp.stack([jnp.ones_like(dx), dx, dy], -1)
-    coef = jnp.linalg.solve(a.T @ a, a.T @ h)
-    gf = coef[1] * c + coef[2] * s_
-    gl = -coef[1] * s_ + coef[2] * c
-    pitch = -jnp.arctan(gf)
-    roll = jnp.arctan2(gl, jnp.sqrt(1.0 + gf * gf))
-    return jnp.stack([pose[0], pose[1], 0.0, roll, pitch, pose[2]])
-
-
 def frame_ticks(sim: Sim, frames_per_step: int) -> np.ndarray:
     """The control ticks (0-based, within a step) whose end states ``StepLog.qpos`` keeps: evenly spaced, the last
     tick last (the touch-down)."""
@@ -225,8 +205,12 @@ def frame_ticks(sim: Sim, frames_per_step: int) -> np.ndarray:
     return np.round(np.arange(1, frames_per_step + 1) * n / max(frames_per_step, 1)).astype(int) - 1
 
 
-def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_per_step: int = 0) -> control.Walker:
+def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_per_step: int = 0, *,
+               robot: Robot) -> control.Walker:
     """The Walker of the simulated biped on ``terrain`` (call inside jit; ``m`` = the model with its height field).
+
+    ``execute`` takes the selector's foothold (6,) (:attr:`ijoy_jax.select.StepChoice.foothold`); the start
+    feet stand on the footholds :func:`ijoy_jax.select.foothold` gives ``robot`` there (the same plane fit).
 
     The terrain's heights as the robot feels them (2D obstacles raised to
     ``params.obstacle_height``) also place the footholds' heights and the
@@ -299,7 +283,7 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
 
     def init(start, first_swing):
         start = jnp.asarray(start, jnp.float32)
-        planned = jax.vmap(lambda p: rest(start_foothold(phys, p, foot_l, foot_w)))(start)
+        planned = jax.vmap(lambda p: rest(select.foothold(terrain, robot, p)))(start)
         # the pelvis cfg.pelvis_height above the lower sole, as the controller holds it
         qpos = model.stand_pose(params, start, planned[:, 2], jnp.min(planned[:, 2]) + cfg.pelvis_height,
                                 tilt=planned[:, 3:5])[0]
@@ -328,8 +312,6 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         st, sw = split(s.soles, s.swing)
         pst, psw = split(s.planned, s.swing)
         foothold = jnp.asarray(foothold, jnp.float32)
-        if foothold.shape == (3,):  # a planar pose: the sole parallel to the plane fitted under it
-            foothold = start_foothold(phys, foothold, foot_l, foot_w)
         target = rest(foothold)
         pose = target[_PLANAR]
         # the sole's lowest corner clears the swept terrain by the clearance, whatever the soles' tilts
@@ -372,7 +354,7 @@ _OPTIONS = ("num_steps", "method", "swing_path", "quantize", "frames_per_step")
 def _rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, first_swing, targets, *, num_steps: int,
              method: str, swing_path: bool, quantize: bool, frames_per_step: int) -> control.Trajectory:
     """The loop of :func:`rollout`, jitted, its inputs checked by the caller."""
-    walker = mjx_walker(sim, terrain, frames_per_step=frames_per_step)
+    walker = mjx_walker(sim, terrain, frames_per_step=frames_per_step, robot=robot)
     return control.rollout(terrain, robot, start, commands, num_steps, method=method, first_swing=first_swing,
                            walker=walker, swing_path=swing_path, quantize=quantize, targets=targets)
 
