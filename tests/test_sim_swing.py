@@ -274,3 +274,43 @@ def test_level_sole_rests_on_the_highest_cell():
     assert float(sw.resting_height(t, foothold, FOOT_L, FOOT_W)) == float(
         sw.footprint_height(t, jnp.array([pose[0], pose[1], 0.3]), FOOT_L, FOOT_W))
     assert np.isnan(float(sw.resting_height(t, foothold.at[3].set(jnp.nan), FOOT_L, FOOT_W)))
+
+
+def test_surface_height_is_the_bilinear_surface_through_the_cell_centres():
+    """Independent reference: SciPy's linear interpolation on the grid of cell centres (edge values beyond the
+    outer centres); off the map, off_map_height."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    rng = np.random.default_rng(5)
+    t = random_terrain(rng)
+    org = np.asarray(t.origin, np.float64)
+    nx, ny = t.shape
+    xc, yc = org[0] + (np.arange(nx) + 0.5) * RES, org[1] + (np.arange(ny) + 0.5) * RES
+    ref = RegularGridInterpolator((xc, yc), np.asarray(t.height, np.float64))
+    xy = org + rng.uniform(0.0, 1.0, (200, 2)) * np.array([nx, ny]) * RES
+    want = ref(np.clip(xy, [xc[0], yc[0]], [xc[-1], yc[-1]]))
+    got = np.asarray(sw.surface_height(t, jnp.asarray(xy, jnp.float32)))
+    np.testing.assert_allclose(got, want, atol=1e-5)  # float32 weights of heights up to 0.2 m
+    off = np.asarray(sw.surface_height(t, jnp.asarray(org[None] - 0.5, jnp.float32), off_map_height=-0.3))
+    np.testing.assert_allclose(off, [-0.3])
+
+
+def test_resting_height_on_contact_points():
+    """On a plane with the sole turned to its tilt every point touches at once: the plane's height at the centre.
+    On rough ground: the largest surface height above the sole's plane over the points (brute force)."""
+    pts = np.array([[0.11, 0.05], [0.11, -0.05], [-0.11, 0.05], [-0.11, -0.05], [0.0, 0.05], [0.0, -0.05]])
+    b, c, yaw = 0.12, -0.08, 0.4
+    t = _plane_terrain(b, c)
+    gf, gl = b * np.cos(yaw) + c * np.sin(yaw), -b * np.sin(yaw) + c * np.cos(yaw)
+    pitch, roll = -np.arctan(gf), np.arctan2(gl, np.sqrt(1 + gf * gf))
+    fh = jnp.array([0.05, -0.02, 0.0, roll, pitch, yaw], jnp.float32)
+    np.testing.assert_allclose(sw.resting_height(t, fh, FOOT_L, FOOT_W, points=pts), 0.1 + b * 0.05 - c * 0.02,
+                               atol=1e-5)
+    rough = random_terrain(np.random.default_rng(6))
+    fh = jnp.asarray(np.concatenate([np.asarray(rough.origin) + 0.4, [0.0, 0.1, -0.05, 1.0]]), jnp.float32)
+    g = np.asarray(sw.sole_plane_gradient(fh[3], fh[4], fh[5]))
+    cs, sn = np.cos(1.0), np.sin(1.0)
+    d = np.stack([cs * pts[:, 0] - sn * pts[:, 1], sn * pts[:, 0] + cs * pts[:, 1]], 1)
+    h = np.asarray(sw.surface_height(rough, jnp.asarray(np.asarray(fh[:2]) + d, jnp.float32)))
+    np.testing.assert_allclose(sw.resting_height(rough, fh, FOOT_L, FOOT_W, points=pts), np.max(h - d @ g),
+                               atol=1e-6)
