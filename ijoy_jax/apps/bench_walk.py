@@ -71,8 +71,8 @@ START = (0.5, 1.0)
 """Where every robot stands (m): the midpoint of its feet, facing +x."""
 START_RADIUS = 0.35
 """Start zone radius (m, the generators' default): it holds HRP-2's double stance and is flat (or the plane)."""
-HEIGHT_RANGE = (-1.0, 1.0)
-"""z_lo, z_hi (m) of the Sim's height field: every family's heights lie inside (tested)."""
+HEIGHT_RANGE = (model.BipedParams.z_lo, model.BipedParams.z_hi)
+"""z_lo, z_hi (m) of the Sim's height field (the biped's defaults): every family's heights lie inside (tested)."""
 FORWARD = 0.25
 """Held forward command (m/s): 0.12 m steps, so 30 steps (3.6 m) end inside the 5 m map. At the action set's
 fastest, 0.25 m/s (0.2 m steps), the robot reaches the far edge after about 21 steps and marks time there."""
@@ -670,8 +670,7 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
     base = robots.hrp2()
     sim = None
     if "mjx" in walkers:
-        params = model.biped_params(base, z_lo=HEIGHT_RANGE[0], z_hi=HEIGHT_RANGE[1])
-        sim = W.make_sim(shape, resolution, params, robot=base)
+        sim = W.make_sim(shape, resolution, robot=base)
     info = _device_info()
     programs0, t_all = W.compiled_programs(), time.perf_counter()
     perfect_compile = 0.0
