@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     walk.add_argument("--resolution", type=float, default=None, help="cell size in metres (default: 0.02)")
     walk.add_argument("--forward", type=float, default=None, help="held forward command in m/s (default: 0.25)")
     walk.add_argument("--chunk", type=int, default=None,
-                      help="simulated rollouts per jitted call (default: up to 512 on an accelerator, 32 on a CPU)")
+                      help="simulated rollouts per jitted call (default: up to 1024 on an accelerator, 32 on a CPU)")
     walk.add_argument("--seed", type=int, default=None, help="maps and random commands (default: 0)")
     walk.add_argument("--plot", default=None, help="write the bar plot (PNG) here")
     sweep = sub.add_parser("sweep", help="run a sweep declared in TOML, or summarise a finished one",
