@@ -171,7 +171,8 @@ def test_stairs_risers_and_treads(maps, name, sign):
         edges = 0.5 * (xs[at] + xs[at + 1])
         assert abs(edges[0] - (B.START[0] + B.STAIR_FIRST)) <= CELL
         treads = np.diff(edges)
-        assert np.all((B.STAIR_RUN[0] - CELL <= treads) & (treads <= B.STAIR_RUN[1] + CELL)), treads
+        assert np.all(np.min(np.abs(treads[:, None] - np.asarray(B.STAIR_RUNS)), axis=1) <= CELL), treads
+        np.testing.assert_allclose(treads, treads[0], atol=CELL)  # one tread depth per map
         assert np.all(h[b, xs < edges[0]] == 0)  # the bottom landing, with the start on it
 
 
@@ -259,21 +260,23 @@ def test_image_windows_are_the_png(tmp_path):
     assert len({tuple(o) for o in offsets.tolist()}) == 3
 
 
-def test_stairs_skip_or_run_with_reach():
-    """The stairs' robot is ``robots.hrp2(reach=0.30)``: until hrp2 takes ``reach`` the family is skipped with the
-    reason, and every other family still runs."""
-    try:
-        robots.hrp2(reach=B.STAIR_REACH)
-        takes_reach = True
-    except TypeError:
-        takes_reach = False
-    rows = B.run(["flat", "stairs_up"], batch=2, steps=2, commands=("forward",), walkers=("perfect",))
-    stairs = [r for r in rows if r.get("family") == "stairs_up"]
-    assert any(r.get("family") == "flat" and r["walker"] == "perfect" for r in rows)
-    if takes_reach:
-        assert len(stairs) == 1 and "skipped" not in stairs[0] and stairs[0]["robot"] == "hrp2(reach=0.3)"
-    else:
-        assert len(stairs) == 1 and "reach" in stairs[0]["skipped"] and "walker" not in stairs[0]
+def test_the_perfect_robot_climbs_and_descends_the_stairs():
+    """The stairs' robot is ``robots.hrp2(reach=0.30)`` with the held :data:`STAIR_FORWARD` (the longest step): on
+    every map of both stair families (treads of 30 and 40 cm) the perfect robot walks past the last riser onto the
+    far landing, without a stop. The family's own forward command overrides the run's ``forward``."""
+    last = B.STAIR_FIRST + (B.STAIR_COUNT - 1) * max(B.STAIR_RUNS)  # the far landing's start, at most (m)
+    rows = B.run(["stairs_up", "stairs_down"], batch=BATCH, steps=20, commands=("forward",), walkers=("perfect",))
+    assert [r["family"] for r in rows if r["name"] == "walk"] == ["stairs_up", "stairs_down"]
+    for r in rows[:2]:
+        assert r["robot"] == "hrp2(reach=0.3)" and r["forward_m_s"] == B.STAIR_FORWARD, r
+        assert r["stops"] == 0 and r["footholds_on_obstacles"] == 0, r
+        assert r["progress_min_m"] > last + 0.5 * float(robots.hrp2().foot_length), r
+    assert B.STAIR_FORWARD * float(robots.hrp2(reach=B.STAIR_REACH).step_time) == pytest.approx(B.STAIR_REACH)
+    slow = B.run(["stairs_up"], batch=BATCH, steps=20, commands=("forward",), walkers=("perfect",),
+                 forward=B.FORWARD)
+    assert slow[0]["forward_m_s"] == B.STAIR_FORWARD  # the family's own command wins over the run's
+    flat = B.run(["flat"], batch=BATCH, steps=2, commands=("forward",), walkers=("perfect",), forward=0.1)
+    assert flat[0]["forward_m_s"] == 0.1
 
 
 # --------------------------------------------------------------------------------------------- aggregation

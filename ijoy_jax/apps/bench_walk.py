@@ -27,10 +27,9 @@ One compile for everything. Every family is a 2.5D map (``has_height=True``; 2D 
 family, so :func:`ijoy_jax.sim.walker.rollout_batch` compiles once and every later family only changes
 traced heights and free masks; each row says how many new programs its call compiled
 (:func:`ijoy_jax.sim.walker.compiled_programs`) and the last record gives the total. A family whose robot
-has another action set (the stairs, with ``robots.hrp2(reach=0.30)``, once ``hrp2`` takes ``reach``; until
-then they are reported as skipped) compiles once more.
+has another action set (the stairs, with ``robots.hrp2(reach=0.30)``) compiles once more.
 The Sim's height field spans :data:`HEIGHT_RANGE` (the stairs and 10 deg slopes rise or fall up to
-0.9 m over the map; the biped's default range, -0.2 to 0.6 m, would clip them).
+0.9 m over the map).
 
 Outputs: JSON records (:func:`run`), the Markdown table of BENCHMARKS.md (:func:`markdown_table`) and a
 bar plot of falls, stops and progress per family, perfect and simulated side by side (:func:`plot`).
@@ -74,8 +73,8 @@ START_RADIUS = 0.35
 HEIGHT_RANGE = (model.BipedParams.z_lo, model.BipedParams.z_hi)
 """z_lo, z_hi (m) of the Sim's height field (the biped's defaults): every family's heights lie inside (tested)."""
 FORWARD = 0.25
-"""Held forward command (m/s): 0.12 m steps, so 30 steps (3.6 m) end inside the 5 m map. At the action set's
-fastest, 0.25 m/s (0.2 m steps), the robot reaches the far edge after about 21 steps and marks time there."""
+"""Held forward command (m/s): the paper's action set's fastest, 0.2 m steps of 0.8 s; on open ground the robot
+reaches the far edge of the 5 m map after about 21 steps and marks time there."""
 COMMANDS = ("random", "forward")
 SLOPE_DEG = (2.0, 10.0)
 """Slope angles (deg), uniform per map."""
@@ -85,14 +84,22 @@ ROUGH_CORRELATION = (0.10, 0.20)
 """Rough ground correlation length (m), uniform per map."""
 STAIR_RISE = (0.05, 0.15)
 """Stair riser heights (m), uniform per map (negative for stairs_down)."""
-STAIR_RUN = (0.30, 0.36)
-"""Stair tread depths (m), uniform per map: a 24.2 cm foot with its 2 cm margins fits a tread."""
+STAIR_RUNS = (0.30, 0.40)
+"""Stair tread depths (m), one of these per map (equally likely). A 24.2 cm foot with its 2 cm margins needs
+0.282 m, and without turning the feet stay on the action set's 5 cm lattice of x, so a tread holds a foothold
+only at some phases of that lattice: with risers at :data:`STAIR_FIRST` + k x tread, a tread of 0.30 m takes
+one 0.30 m step and one of 0.40 m two (0.30 + 0.10); the perfect robot climbs both to the top, while on
+treads of 0.35 m it marks time before the second riser (measured; tests/test_experiments.py section 7 has
+the geometry)."""
 STAIR_COUNT = 6
 """Risers per stair (6 x 15 cm = 0.9 m at most, inside :data:`HEIGHT_RANGE`)."""
 STAIR_FIRST = 0.6
 """Distance (m) from the start point to the first riser."""
 STAIR_REACH = 0.30
 """``robots.hrp2(reach=...)`` for the stairs (m)."""
+STAIR_FORWARD = 0.375
+"""Held forward command on the stairs (m/s): :data:`STAIR_REACH` per 0.8 s step, the longest step, which is
+the one that crosses a riser (at :data:`FORWARD`, 0.2 m steps, the robot marks time before the first one)."""
 PLATFORM_HEIGHT_MIN = 0.02
 """Lowest platform (m); the highest is the robot's ``max_step_height`` (0.10 m for HRP-2)."""
 IMAGE_PIXELS = (512, 512)
@@ -123,12 +130,14 @@ class WalkFamily:
         of ``shape`` (nx, ny) cells of ``resolution`` m (origin (0, 0)), each drawn from the family's range.
       ranges: the parameter ranges, in words (for the table).
       reach: None for ``robots.hrp2()``; else the ``reach`` (m) of ``robots.hrp2(reach=...)``.
+      forward: the held forward command (m/s) of the family's "forward" rows; None: the run's ``forward``.
     """
 
     name: str
     make: Callable[..., Terrain]
     ranges: str
     reach: float | None = None
+    forward: float | None = None
 
     def robot(self) -> robots.Robot:
         """The family's robot; raises TypeError when ``robots.hrp2`` does not take ``reach`` (yet)."""
@@ -322,9 +331,9 @@ def platforms(key, batch: int, *, shape, resolution: float, max_height: float | 
 def _stairs(sign: float):
     def make(key, batch: int, *, shape, resolution: float) -> Terrain:
         k_rise, k_run, k_map = jax.random.split(as_key(key), 3)
-        params = generators.StairParams(rise=sign * _uniform(k_rise, batch, *STAIR_RISE),
-                                        run=_uniform(k_run, batch, *STAIR_RUN), num_steps=STAIR_COUNT,
-                                        first=STAIR_FIRST, **start_zone(shape, resolution))
+        run = jax.random.choice(k_run, jnp.asarray(STAIR_RUNS, jnp.float32), (batch,))
+        params = generators.StairParams(rise=sign * _uniform(k_rise, batch, *STAIR_RISE), run=run,
+                                        num_steps=STAIR_COUNT, first=STAIR_FIRST, **start_zone(shape, resolution))
         return generators.batch("stairs", _keys(k_map, batch), params, shape=shape, resolution=resolution,
                                 has_height=True, max_count=STAIR_COUNT)
 
@@ -332,9 +341,9 @@ def _stairs(sign: float):
 
 
 stairs_up = _stairs(1.0)
-stairs_up.__doc__ = "Stairs rising along +x: 6 risers of :data:`STAIR_RISE`, treads of :data:`STAIR_RUN`."
+stairs_up.__doc__ = "Stairs rising along +x: 6 risers of :data:`STAIR_RISE`, treads of :data:`STAIR_RUNS`."
 stairs_down = _stairs(-1.0)
-stairs_down.__doc__ = "Stairs falling along +x: 6 risers of :data:`STAIR_RISE`, treads of :data:`STAIR_RUN`."
+stairs_down.__doc__ = "Stairs falling along +x: 6 risers of :data:`STAIR_RISE`, treads of :data:`STAIR_RUNS`."
 
 
 def ground_image(seed: int = 0, pixels=IMAGE_PIXELS) -> np.ndarray:
@@ -416,8 +425,10 @@ FAMILIES: Mapping[str, WalkFamily] = MappingProxyType({f.name: f for f in (
     WalkFamily("rough", rough, "RMS 1-3 cm, correlation 10-20 cm"),
     WalkFamily("stones", stones, "36 cm stones, 4 cm gaps, rows staggered by 20 cm"),
     WalkFamily("platforms", platforms, "one lane, 2-10 cm high"),
-    WalkFamily("stairs_up", stairs_up, "6 risers 5-15 cm, treads 30-36 cm", reach=STAIR_REACH),
-    WalkFamily("stairs_down", stairs_down, "6 risers 5-15 cm down, treads 30-36 cm", reach=STAIR_REACH),
+    WalkFamily("stairs_up", stairs_up, "6 risers 5-15 cm, treads 30 or 40 cm", reach=STAIR_REACH,
+               forward=STAIR_FORWARD),
+    WalkFamily("stairs_down", stairs_down, "6 risers 5-15 cm down, treads 30 or 40 cm",
+               reach=STAIR_REACH, forward=STAIR_FORWARD),
     WalkFamily("image", image, "fractal ground image (PNG), 1.5 cm RMS"),
 )})
 """The benchmark's terrain families by name, in table order; read-only."""
@@ -643,7 +654,7 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
         accelerator (a rollout holds tens of MB of selector windows; on an H100 1024 ran 1.6x the physics
         steps/s of 512), 32 on a CPU.
       walkers: some of :data:`WALKERS`.
-      forward: the held forward command (m/s).
+      forward: the held forward command (m/s) of families without their own (:attr:`WalkFamily.forward`).
       emit: called with each record as soon as it exists (e.g. to print JSON lines).
 
     Returns:
@@ -652,7 +663,8 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
       rest of the wall time), ``physics_steps_per_s`` (simulated: robots x (steps + the standing step) x
       physics steps per step / run time) or ``decisions_per_s`` (perfect), ``new_compiles`` (programs the
       simulated rows' calls added to :func:`ijoy_jax.sim.walker.compiled_programs`), and the setup;
-      ``skipped`` (the reason) for a family whose robot cannot be built; and a last record ``name`` "walk_compiles" with the totals.
+      ``skipped`` (the reason) for a family whose robot cannot be built; and a last record ``name``
+      "walk_compiles" with the totals.
     """
     names = check_options(families, batch=batch, steps=steps, commands=commands, resolution=resolution,
                           chunk=chunk, walkers=walkers, forward=forward)
@@ -694,11 +706,12 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
             raise ValueError(f"family {name}: heights {lo:.3f}..{hi:.3f} m leave the Sim's range {HEIGHT_RANGE}")
         starts = start_stances(robot, batch)
         targets = select.make_targets(robot)
+        speed = forward if fam.forward is None else fam.forward
         for kind in commands:
             cmd = jax.block_until_ready(
-                commands_for(kind, jax.random.fold_in(k_cmd, COMMANDS.index(kind)), robot, batch, steps, forward))
+                commands_for(kind, jax.random.fold_in(k_cmd, COMMANDS.index(kind)), robot, batch, steps, speed))
             common = dict(name="walk", family=name, commands=kind, robot=robot_name, ranges=fam.ranges,
-                          maps_s=round(maps_s, 3), **setup)
+                          maps_s=round(maps_s, 3), **dict(setup, forward_m_s=speed))
             if "perfect" in walkers:
                 traj, comp, run_s = _timed(perfect_rollouts, maps, robot, starts, cmd, num_steps=steps,
                                            targets=targets)
