@@ -40,7 +40,7 @@ Example:
   >>> import jax.numpy as jnp
   >>> from ijoy_jax.sim import physics
   >>> d = physics.Dynamics(friction=jnp.array([0.3, 1.0]), mass_scale=jnp.array([1.0, 1.2]))
-  >>> float(d.friction[0]), float(physics.NOMINAL.kp_scale)
+  >>> round(float(d.friction[0]), 3), float(physics.NOMINAL.kp_scale)
   (0.3, 1.0)
 """
 
