@@ -329,8 +329,9 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
     on a log axis with the paper's 496 (:data:`PAPER_ACTIONS`) marked. Returns ``out``.
 
     A physics parameter (``sim.*``) on the x axis has its nominal value
-    marked. So a margin sweep crossed with an execution-error level draws
-    the collision and fall rates against the margin, one line per level.
+    marked; a rate's interval (a ``fraction`` metric) is clipped to [0, 1].
+    So a margin sweep crossed with an execution-error level draws the
+    collision and fall rates against the margin, one line per level.
 
     Aggregates of a bar-crossing sweep (a ``crossed`` metric and a swept
     ``terrain.width``) with the default ``metrics`` and ``x`` go to
@@ -364,7 +365,11 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
             g = g.sort_values(x)
             key = key if isinstance(key, tuple) else (key,)
             label = ", ".join(f"{c.partition('.')[2]} = {v:g}" for c, v in zip(others, key, strict=True))
-            ax.errorbar(xv(g[x]), g[f"{m}.mean"], yerr=g[f"{m}.ci95"], marker="o", capsize=3, label=label or None)
+            mean, ci = g[f"{m}.mean"].to_numpy(np.float64), np.nan_to_num(g[f"{m}.ci95"].to_numpy(np.float64))
+            # a rate's interval stays within [0, 1]
+            lo, hi = (np.clip(mean - ci, 0, 1), np.clip(mean + ci, 0, 1)) if UNITS.get(m) == "fraction" else (
+                mean - ci, mean + ci)
+            ax.errorbar(xv(g[x]), mean, yerr=[mean - lo, hi - mean], marker="o", capsize=3, label=label or None)
         if x == "robot.density":
             ax.axvline(PAPER_ACTIONS, color="0.4", ls="--", lw=1, label=f"paper's {PAPER_ACTIONS} actions (HRP-2)")
             ax.set_xscale("log")
@@ -374,12 +379,13 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
             ax.set_xlabel("actions in the set S, per foot (count)")
         else:
             default = ROBOT_DEFAULTS.get(x.partition(".")[2]) if x.startswith("robot.") else None
+            what = "library default"
             if x.startswith("sim."):
                 from ijoy_jax.sim import physics
 
-                default = getattr(physics.NOMINAL, x.partition(".")[2])
+                default, what = getattr(physics.NOMINAL, x.partition(".")[2]), "nominal robot"
             if default is not None:
-                ax.axvline(default, color="0.4", ls="--", lw=1, label=f"library default ({default:g})")
+                ax.axvline(default, color="0.4", ls="--", lw=1, label=f"{what} ({default:g})")
             pos = agg[x][agg[x] > 0] if x in agg else []
             if len(pos) and agg[x].max() >= 20 * pos.min():
                 ax.set_xscale("symlog", linthresh=float(pos.min()), linscale=0.5)
