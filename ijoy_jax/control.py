@@ -10,6 +10,12 @@ The robot that executes the steps is a :class:`Walker`: three pure functions
 over a state pytree. :func:`perfect_walker` is the paper's simulated robot
 (every step executed exactly); a physically simulated robot implements the
 same three functions, and the selector is untouched.
+
+The step chooser is the other seam, a :class:`Selector`: :func:`exact_selector`
+is the paper's (``select.select_step`` and the Trajectory's metrics); the
+relaxed, differentiable one of :mod:`ijoy_jax.tune.relaxed_rollout` is another.
+:func:`loop` is Algorithm 1's bookkeeping (stance, stop, execute, the scan)
+for any walker and selector, so every rollout in the package is this loop.
 """
 
 from __future__ import annotations
@@ -72,11 +78,14 @@ class _PerfectState(NamedTuple):
     feet: jax.Array  # (2, 3) row 0 left, row 1 right
     swing: jax.Array  # () +1 if the left foot swings next
 
-def perfect_walker() -> Walker:
-    """The paper's simulated robot: each commanded step lands exactly where it was sent."""
+def perfect_walker(dtype=jnp.float32) -> Walker:
+    """The paper's simulated robot: each commanded step lands exactly where it was sent.
+
+    ``dtype``: of its feet (float32; the relaxed rollout keeps float64 under x64).
+    """
 
     def init(start, first_swing):
-        return _PerfectState(jnp.asarray(start, jnp.float32), jnp.asarray(first_swing, jnp.float32))
+        return _PerfectState(jnp.asarray(start, dtype), jnp.asarray(first_swing, dtype))
 
     def stance(s):
         left_swings = s.swing > 0
@@ -91,6 +100,76 @@ def perfect_walker() -> Walker:
         return _PerfectState(feet, jnp.where(go, -s.swing, s.swing))
 
     return Walker(init, stance, execute, lambda s: s.feet)
+
+
+class Selector(NamedTuple):
+    """How the loop chooses each step (a tuple of pure functions, like :class:`Walker`): the seam of Algorithm 1's
+    GetNextStep, so the exact selector and a relaxed one share :func:`loop`.
+
+    Fields::
+
+      choose(info: StanceInfo, command (3,), key) -> (foothold (6,), sendable () bool, choice)
+          foothold: the sole pose the walker is sent (x, y, z, roll, pitch, yaw; ``Walker.execute``);
+          sendable: whether it may be sent (Algorithm 1 stops walking when not); choice: any pytree
+          handed on to ``record``. ``key``: this step's PRNG key (None unless :func:`loop` got keys).
+      record(info, command, choice, go (), stopped (), before (2, 3), after (2, 3)) -> dict
+          the step's records (scanned into arrays with a leading step axis): ``go`` whether the step
+          was sent, ``stopped`` whether the robot has stopped, the feet before and after it.
+    """
+
+    choose: Callable[[StanceInfo, jax.Array, Any], tuple[jax.Array, jax.Array, Any]]
+    record: Callable[..., dict]
+
+
+def loop(walker: Walker, selector: Selector, start, first_swing, commands, *, keys=None,
+         remat: bool = False) -> tuple[Any, dict]:
+    """Algorithm 1's bookkeeping for any walker and selector, as one ``lax.scan`` (trace it inside jit).
+
+    Each iteration: the walker's stance (ComputeStanceLocation), the selector's choice, SendRobotCmd if it is
+    sendable and the robot has not stopped, else StopWalking (the robot stays stopped), then the records. The
+    walker's ``warmup`` iterations run first with nothing sent and nothing kept.
+
+    Args:
+      walker: the robot (:class:`Walker`).
+      selector: the step chooser (:class:`Selector`).
+      start: (2, 3) the feet, row 0 left (as the walker's ``init`` takes them).
+      first_swing: () +1 if the left foot swings first.
+      commands: (T, 3) one command per decision.
+      keys: (T,) PRNG keys handed to ``selector.choose`` step by step (None: None each step).
+      remat: recompute each step on the backward pass (:func:`jax.checkpoint`) instead of storing it.
+
+    Returns:
+      ``(final walker state, records)``: the records of :attr:`Selector.record` with a leading T axis, plus
+      ``"log"`` (the walker's :attr:`Walker.log` after every step) when the walker has one.
+    """
+    state0 = walker.init(start, first_swing)
+
+    def step(carry, xs):
+        command, settling, key = xs
+        state, stopped = carry
+        info = walker.stance(state)
+        foothold, sendable, choice = selector.choose(info, command, key)
+        go = ~stopped & sendable & ~settling
+        now_stopped = stopped | (~go & ~settling)
+        before = walker.feet(state)
+        new_state = walker.execute(state, foothold, go)
+        record = selector.record(info, command, choice, go, now_stopped, before, walker.feet(new_state))
+        if walker.log is not None:
+            record["log"] = walker.log(new_state)
+        return (new_state, now_stopped), record
+
+    warm = int(walker.warmup)
+    num_steps = commands.shape[0]
+    commands = jnp.concatenate([jnp.zeros((warm, 3), commands.dtype), commands])
+    settling = jnp.arange(warm + num_steps) < warm
+    if keys is not None and warm:
+        keys = jnp.concatenate([keys[:1]] * warm + [keys])
+    body = jax.checkpoint(step, prevent_cse=False) if remat else step
+    (state, _), rec = lax.scan(body, (state0, jnp.bool_(False)), (commands, settling, keys))
+    if warm:
+        rec = jax.tree_util.tree_map(lambda a: a[warm:], rec)
+    return state, rec
+
 
 class Trajectory(NamedTuple):
     """One rollout of the control loop (T = num_steps; vmapped rollouts add axes).
@@ -192,30 +271,27 @@ class Trajectory(NamedTuple):
             "unsupported_decisions": count(self.unsupported),
         }
 
-def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, method, walker, swing_path, quantize,
-             kernel) -> Trajectory:
-    """The body of :func:`rollout`, run through :data:`_rollout_jit` or inlined into a caller's trace."""
-    walker = perfect_walker() if walker is None else walker
-    index, targets = select.prepare(terrain, robot, targets=targets)
-    commands = jnp.asarray(commands, jnp.float32)
-    if commands.ndim == 1:
-        commands = jnp.broadcast_to(commands, (num_steps, 3))
-    state0 = walker.init(jnp.asarray(start, jnp.float32), jnp.asarray(first_swing, jnp.float32))
+def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive", swing_path: bool = True,
+                   quantize: bool = True, targets: Targets | None = None, kernel: str = "xla",
+                   index=None) -> Selector:
+    """The paper's GetNextStep as a :class:`Selector`: :func:`ijoy_jax.select.select_step` (its full foothold
+    sent; sendable when valid, always for ``"naive"``), recording the :class:`Trajectory` fields per step.
 
-    def step(carry, xs):
-        command, settling = xs
-        state, stopped = carry
-        info = walker.stance(state)
+    Options as in :func:`rollout`; ``index`` and ``targets``: the terrain's index and the targets, built by
+    :func:`ijoy_jax.select.prepare` once per rollout (call it inside jit).
+    """
+    if index is None or targets is None:
+        index, targets = select.prepare(terrain, robot, index=index, targets=targets)
+
+    def choose(info, command, key):
         choice = select.select_step(
             terrain, robot, info.stance, info.stance_side, command, method=method,
             swing_from=info.swing_from if swing_path else None, quantize=quantize, targets=targets, index=index,
             kernel=kernel,
         )
-        go = ~stopped & (choice.valid | (method == "naive")) & ~settling
-        now_stopped = stopped | (~go & ~settling)
-        before = walker.feet(state)
-        new_state = walker.execute(state, choice.foothold, go)
-        after = walker.feet(new_state)
+        return choice.foothold, choice.valid | (method == "naive"), choice
+
+    def record(info, command, choice, go, stopped, before, after):
         swing_row = jnp.where(info.stance_side > 0, 1, 0)
         landed = after[swing_row]
         on_obs = select.on_obstacle(terrain, robot, landed, index=index)
@@ -229,12 +305,12 @@ def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, m
         norm = jnp.sqrt(jnp.sum(dir_world**2))
         unit = jnp.where(norm > 0, dir_world / jnp.where(norm > 0, norm, 1.0), 0.0)
         move = jnp.mean(after[:, :2], axis=0) - jnp.mean(before[:, :2], axis=0)
-        record = dict(
+        return dict(
             footsteps=landed,
             sides=-info.stance_side.astype(jnp.int32),
             valid=choice.valid,
             taken=go,
-            stopped=now_stopped,
+            stopped=stopped,
             cost=choice.cost,
             foot_cost=choice.foot_cost,
             index=choice.index,
@@ -253,16 +329,22 @@ def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, m
             evaluated=choice.evaluated,
             unsupported=choice.unsupported,
         )
-        if walker.log is not None:
-            record["log"] = walker.log(new_state)
-        return (new_state, now_stopped), record
 
-    warm = int(walker.warmup)
-    commands = jnp.concatenate([jnp.zeros((warm, 3), jnp.float32), commands[:num_steps]])
-    settling = jnp.arange(warm + num_steps) < warm
-    (state, _), rec = lax.scan(step, (state0, jnp.bool_(False)), (commands, settling))
-    if warm:
-        rec = jax.tree_util.tree_map(lambda a: a[warm:], rec)
+    return Selector(choose, record)
+
+
+def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, method, walker, swing_path, quantize,
+             kernel) -> Trajectory:
+    """The body of :func:`rollout`, run through :data:`_rollout_jit` or inlined into a caller's trace."""
+    walker = perfect_walker() if walker is None else walker
+    index, targets = select.prepare(terrain, robot, targets=targets)
+    commands = jnp.asarray(commands, jnp.float32)
+    if commands.ndim == 1:
+        commands = jnp.broadcast_to(commands, (num_steps, 3))
+    selector = exact_selector(terrain, robot, method=method, swing_path=swing_path, quantize=quantize,
+                              targets=targets, kernel=kernel, index=index)
+    state, rec = loop(walker, selector, jnp.asarray(start, jnp.float32), jnp.asarray(first_swing, jnp.float32),
+                      commands[:num_steps])
     return Trajectory(feet=walker.feet(state), **rec)
 
 _rollout_jit = jax.jit(_rollout, static_argnames=("num_steps", "method", "walker", "swing_path", "quantize", "kernel"))

@@ -24,7 +24,6 @@ CASES = [
     (["bench", "sim", "--batch", "4"], "--batch: options of 'ijoy bench walk' only"),
     (["sweep", "run", "no_such_sweep.toml"], "cannot read"),
     (["sweep", "summarize", "no_such_results"], "no result parts"),
-    (["sim", "margins", "--margins", "0,0.2"], "margins must be"),
     (["sim", "render", "--size", "big"], "invalid literal"),
     (["tune", "forward", "--out", "o", "--set", "bogus=1"], "unknown config field(s) ['bogus']"),
     (["tune", "inverse", "--out", "o", "--config", "no_such.toml"], "No such file or directory"),

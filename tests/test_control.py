@@ -120,6 +120,31 @@ def test_custom_walker_replaces_the_robot_without_touching_the_selector():
     np.testing.assert_allclose(np.asarray(traj.deviation), 0.03, atol=1e-5)
 
 
+def test_the_loop_runs_any_selector_stops_for_good_and_hands_each_step_its_key():
+    """A selector that always steps 10 cm ahead of the stance foot, sendable while the command's x is positive:
+    the loop (control.loop, also the relaxed rollout's) sends it, stops at the first unsendable step and stays
+    stopped though later ones are sendable; each step's key is the one given for it."""
+    walker = control.perfect_walker()
+
+    def choose(info, command, key):
+        pose = ij.geometry.compose(info.stance, jnp.array([0.1, 0.19 * -info.stance_side, 0.0]))
+        foothold = jnp.concatenate([pose[:2], jnp.zeros(3), pose[2:]])
+        return foothold, command[0] > 0, jax.random.key_data(key)
+
+    def record(info, command, choice, go, stopped, before, after):
+        return dict(go=go, stopped=stopped, key=choice, moved=jnp.max(jnp.abs(after - before)))
+
+    keys = jax.random.split(jax.random.key(5), 5)
+    commands = jnp.array([[0.1, 0, 0], [0.1, 0, 0], [0.0, 0, 0], [0.1, 0, 0], [0.1, 0, 0]], jnp.float32)
+    state, rec = jax.jit(lambda c, k: control.loop(walker, control.Selector(choose, record), jnp.asarray(START),
+                                                   jnp.float32(1), c, keys=k))(commands, keys)
+    assert np.asarray(rec["go"]).tolist() == [True, True, False, False, False]
+    assert np.asarray(rec["stopped"]).tolist() == [False, False, True, True, True]
+    np.testing.assert_array_equal(rec["key"], jax.random.key_data(keys))
+    np.testing.assert_allclose(rec["moved"], [0.1, 0.2, 0, 0, 0], atol=1e-6)  # each lands 10 cm past the other
+    np.testing.assert_allclose(walker.feet(state)[:, 0], [0.4, 0.5], atol=1e-6)
+
+
 def test_the_walker_gets_the_full_foothold_and_the_trajectory_records_it():
     """On a 6 deg ramp along x, turning left: the walker is passed (x, y, z, roll, pitch, yaw) of each chosen step,
     the trajectory records what it was passed, and z, roll and pitch are the ramp's at each foothold (closed form

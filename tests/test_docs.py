@@ -84,5 +84,5 @@ def test_each_public_object_has_one_home_at_its_shortest_public_path():
 
 def test_cli_help_covers_every_subcommand():
     paths = [p for p, _ in ijoy_api._walk(ijoy_api.cli_parser(), "ijoy")]
-    for expected in ["ijoy", "ijoy bench", "ijoy sweep run", "ijoy sweep summarize", "ijoy sim margins", "ijoy tune"]:
+    for expected in ["ijoy", "ijoy bench", "ijoy sweep run", "ijoy sweep summarize", "ijoy sim render", "ijoy tune"]:
         assert expected in paths

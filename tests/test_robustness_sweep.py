@@ -51,21 +51,28 @@ TERRAIN_FIELDS = [f.name for f in dataclasses.fields(FAMILY.params)]
 PARAMS = [f"robot.{k}" for k in sweep.ROBOT_DEFAULTS] + [f"terrain.{k}" for k in TERRAIN_FIELDS]
 
 # (TOML text before the key, the key as written, the key the error must name)
+MJX = '[sweep]\nwalker = "mjx"\n'
+SIM = ("friction", "mass_scale", "kp_scale", "latency", "stance_noise", "push")
 KEYS = ([("[sweep]\n", k, f"sweep.{k}") for k in ("name", "description", "seed", "scenarios_per_cell", "num_steps",
-                                                  "method", "kernel", "random_samples")]
+                                                  "method", "kernel", "random_samples", "walker")]
         + [("[terrain]\n", k, f"terrain.{k}") for k in ("family", "shape", "resolution", "has_height", "max_count")]
         + [("[terrain.params]\n", k, f"terrain.params.{k}") for k in TERRAIN_FIELDS]
         + [("[robot]\n", k, f"robot.{k}") for k in sweep.ROBOT_DEFAULTS]
         + [("[command]\n", k, f"command.{k}") for k in sweep.COMMAND_KEYS]
         + [("[grid]\n", f'"{p}"', f"grid.{p}") for p in PARAMS]
-        + [("[sweep]\nrandom_samples = 2\n[random]\n", f'"{p}"', f"random.{p}") for p in PARAMS])
+        + [("[sweep]\nrandom_samples = 2\n[random]\n", f'"{p}"', f"random.{p}") for p in PARAMS]
+        # the physics of a walker = "mjx" sweep: [sim] values and ranges, grid axes, random ranges
+        + [(f"{MJX}[sim]\n", k, f"sim.{k}") for k in SIM]
+        + [(f"{MJX}[grid]\n", f'"sim.{k}"', f"grid.sim.{k}") for k in SIM]
+        + [(f"{MJX}random_samples = 2\n[random]\n", f'"sim.{k}"', f"random.sim.{k}") for k in SIM])
 
 
 def _check_accepted(cfg: sweep.SweepConfig) -> None:
     """An accepted config: every number finite in float32 and within its documented bound; the table builds."""
     numbers = [*cfg.robot.values(), *cfg.terrain_params.values(), cfg.resolution,
                *(v for lo_hi in cfg.command.values() for v in lo_hi),
-               *(v for vs in cfg.grid.values() for v in vs), *(v for lo_hi in cfg.random.values() for v in lo_hi)]
+               *(v for vs in cfg.grid.values() for v in vs), *(v for lo_hi in cfg.random.values() for v in lo_hi),
+               *(v for lo_hi in cfg.sim.values() for v in lo_hi)]
     for v in numbers:
         assert isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and abs(v) <= F32_MAX, v
     assert 0 <= cfg.seed < 2**63 and 1 <= cfg.num_steps <= sweep_config.MAX_NUM_STEPS
@@ -76,6 +83,13 @@ def _check_accepted(cfg: sweep.SweepConfig) -> None:
             assert 0 < v <= robots.MAX_SIZE
     for v in [cfg.robot.get("density", 1.0), *cfg.grid.get("robot.density", ())]:
         assert 0 < v <= sweep_config.MAX_DENSITY
+    if cfg.walker == "mjx":
+        from ijoy_jax.sim import physics
+
+        for k in SIM:
+            for v in [*cfg.sim.get(k, ()), *cfg.grid.get(f"sim.{k}", ()), *cfg.random.get(f"sim.{k}", ())]:
+                b = physics.BOUNDS[k]
+                assert (v > b.lo if b.strict else v >= b.lo) and v <= b.hi, (k, v)
     table = sweep.scenarios(cfg, 4)
     assert 1 <= len(table) <= 4
     numeric = table.select_dtypes("number").to_numpy(np.float64)

@@ -1,5 +1,7 @@
 """The sweep files shipped in sweeps/ are valid, hold the grids their comments and sweeps/README.md describe,
-and run: a tiny slice of each through ``sweep.run`` gives the documented metrics."""
+and run: a tiny slice of each perfect-robot sweep through ``sweep.run`` gives the documented metrics. The physics
+sweeps (``walker = "mjx"``) are validated and their tables built here; running one compiles MJX for its 200 x 100
+map (about a minute on a CPU), so the physics path is run at tiny shapes in tests/test_sweep_physics.py."""
 
 from pathlib import Path
 
@@ -7,6 +9,7 @@ import numpy as np
 import pytest
 
 import ijoy_jax as ij
+import ijoy_jax.sim.physics  # noqa: F401  (ij.sim.physics)
 from ijoy_jax import sweep
 
 DIR = Path(__file__).parents[1] / "sweeps"
@@ -27,7 +30,18 @@ EXPECTED = {
               "terrain.width": tuple(round(0.01 * i, 2) for i in range(1, 17))},
         family="bars", has_height=False, shape=(120, 60), resolution=0.02, scenarios_per_cell=40, num_steps=10,
         method="ordered", num_scenarios=6 * 16 * 40, extra_metrics=("bars_crossed", "crossed")),
+    "margin_physics.toml": dict(
+        grid={"robot.margin": tuple(round(0.01 * i, 2) for i in range(11))}, family="obstacles", has_height=False,
+        shape=(200, 100), resolution=0.02, scenarios_per_cell=256, num_steps=16, method="ordered",
+        num_scenarios=11 * 256, extra_metrics=(), walker="mjx"),
+    "margin_vs_execution_error.toml": dict(
+        grid={"robot.margin": (0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.08, 0.10),
+              "sim.stance_noise": (0.0, 0.01, 0.02, 0.04)}, family="obstacles", has_height=True,
+        shape=(200, 100), resolution=0.02, scenarios_per_cell=128, num_steps=16, method="ordered",
+        num_scenarios=9 * 4 * 128, extra_metrics=(), walker="mjx"),
 }
+PERFECT = sorted(n for n, e in EXPECTED.items() if e.get("walker", "perfect") == "perfect")
+PHYSICS = sorted(n for n, e in EXPECTED.items() if e.get("walker") == "mjx")
 
 
 def test_every_shipped_sweep_is_described_here_and_in_the_readme():
@@ -48,6 +62,7 @@ def test_shipped_sweep_validates_with_its_documented_grid(name):
     for field in ("family", "has_height", "shape", "resolution", "scenarios_per_cell", "num_steps", "method",
                   "num_scenarios"):
         assert getattr(cfg, field) == want[field], field
+    assert cfg.walker == want.get("walker", "perfect")
     assert cfg.kernel == "xla"  # runs on a CPU as shipped (the README says to add pallas on a GPU)
 
 
@@ -68,7 +83,26 @@ def test_margin_sweep_brackets_the_papers_bound():
         assert widths.max() > b and (b <= 0 or widths.min() < b), m
 
 
-@pytest.mark.parametrize("name", sorted(EXPECTED))
+@pytest.mark.parametrize("name", PHYSICS)
+def test_physics_sweeps_cross_the_margin_with_the_simulated_robots_errors(name):
+    """0 to 10 cm of margin (the paper's 2 cm and 10 cm included); every scenario's physics in its table: the
+    nominal robot, except for the stance noise swept against the margin; the same map, command and noise draws
+    for replicate r in every cell."""
+    cfg = sweep.load_config(DIR / name)
+    margins = cfg.grid["robot.margin"]
+    assert margins[0] == 0.0 and margins[-1] == 0.10 and {0.02, 0.10} <= set(margins)
+    table = sweep.scenarios(cfg)
+    for k in ("friction", "mass_scale", "kp_scale", "latency", "push"):
+        assert (table[f"sim.{k}"] == getattr(ij.sim.physics.NOMINAL, k)).all(), k
+    noise = table["sim.stance_noise"].unique().tolist()
+    assert noise == ([0.0] if name == "margin_physics.toml" else [0.0, 0.01, 0.02, 0.04])
+    per_cell = cfg.scenarios_per_cell
+    first, last = table.iloc[:per_cell], table.iloc[-per_cell:]
+    for c in ("command.vx", "command.vy", "command.wz", "replicate"):
+        assert first[c].tolist() == last[c].tolist(), c
+
+
+@pytest.mark.parametrize("name", PERFECT)
 def test_a_tiny_slice_of_the_shipped_sweep_runs(name, tmp_path):
     cfg = sweep.load_config(DIR / name)
     stats = sweep.run(cfg, tmp_path / "o", chunk_size=2, max_scenarios=2, progress=False)

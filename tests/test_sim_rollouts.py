@@ -10,7 +10,8 @@ through ``walker.rollout_batch``, compiled once:
   turning on the spot; plus two steps in place and fourteen 0.2 m steps
   forward on an empty map. Obstacle cells stand ``BipedParams.obstacle_height``
   (0.1 m) tall in the physics.
-* the margin sweep (``ijoy_jax.sim.margins``) on two clutter maps at 0 and 10 cm.
+* the safety margin in clutter: two clutter maps at 0 and 10 cm (the margin sweep with physics is
+  ``sweeps/margin_physics.toml``, run by the sweep engine; tests/test_sweep_physics.py).
 * the states recorded for rendering, and the renderer (``ijoy_jax.sim.render``).
 
 The controller's physics is tested with native MuJoCo in test_sim_controller.py.
@@ -29,8 +30,9 @@ import pytest
 from test_experiments import HL, RES, SHAPE_2D, STEPS_2D, _start, scenario, scenarios_2d
 
 import ijoy_jax as ij
-from ijoy_jax.sim import margins, render
+from ijoy_jax.sim import physics, render
 from ijoy_jax.sim import walker as W
+from ijoy_jax.terrain import generators
 
 NAMES = ("wall-m0.05-x1.44", "over-m0.02-b0.04-x1.0", "turn-1", "flat-forward")
 PLACEMENT_TOL = 0.03  # m (measured up to 0.6 cm on these scenarios, 1.1 cm for action-set steps natively)
@@ -163,21 +165,30 @@ def test_headless_rendering_without_egl_says_what_to_set():
     assert out.returncode != 0 and "MUJOCO_GL=egl" in out.stderr
 
 
-def test_margin_sweep_reuses_the_compiled_rollout(runs, sim):
-    """Margins 0, 5 and 10 cm on two clutter maps, in chunks of 4 (the last one wraps round): the same program as
-    the scenarios (no new compile)."""
-    res = margins.run(margins=[0.0, 0.05, 0.10], batch=2, num_steps=STEPS_2D, seed=3, sim=sim, chunk=4,
-                      frames_per_step=FRAMES)
-    assert res["compiles"] == 0
-    assert res["contact"].shape == (3, 2) and res["traj"].taken.shape == (3, 2, STEPS_2D)
-    assert not res["fell"].any()
-    # 10 cm is far beyond the placement error: nothing touched, no foothold on an obstacle.
-    assert res["contact"][2].sum() == 0 and res["on_obstacle"][2].sum() == 0
-    assert res["contacts_per_step"][0] >= res["contacts_per_step"][2]
-    assert res["mean_progress"][0] >= res["mean_progress"][2] - 0.05  # a wider margin never opens a path
-    assert np.all(res["steps"] == STEPS_2D)
-    terr = jax.tree_util.tree_map(lambda a: np.asarray(a)[0], res["terrains"])
-    assert not terr.has_height and (~terr.free).sum() > 50  # clutter, raised in the physics
+def test_margins_in_clutter_reuse_the_compiled_rollout(runs, sim):
+    """Margins 0 and 10 cm on two clutter maps (sweeps/margin_physics.toml's clutter), the same maps and commands
+    at each: 4 rollouts of the scenarios' shapes, so the same program (no new compile)."""
+    params = generators.ObstacleParams(count=14, size_min=0.04, size_max=0.12)
+    maps = jax.vmap(lambda k: generators.obstacles(k, params, shape=SHAPE_2D, resolution=RES, max_count=16))(
+        jax.random.split(jax.random.key(3), 2))
+    terrains = jax.tree_util.tree_map(lambda a: jnp.concatenate([a, a]), maps)
+    robots = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *[ij.robots.hrp2(margin=m, w=1.0)
+                                                                for m in (0.0, 0.0, 0.10, 0.10)])
+    x, y = np.asarray(generators.start_point(params, shape=SHAPE_2D, resolution=RES))
+    starts = jnp.stack([ij.robots.start_stance(ij.robots.hrp2(), x, y)] * 4)
+    commands = jnp.broadcast_to(jnp.asarray([0.2, 0.0, 0.0], jnp.float32), (4, STEPS_2D, 3))
+    before = W.compiled_programs()
+    traj = jax.tree_util.tree_map(np.asarray, W.rollout_batch(sim, terrains, robots, starts, commands,
+                                                              num_steps=STEPS_2D, method="ordered",
+                                                              frames_per_step=FRAMES))
+    assert W.compiled_programs() == before
+    s = {k: np.asarray(v) for k, v in W.summary(traj).items()}
+    assert not s["fell"].any() and (s["steps_taken"] == STEPS_2D).all()
+    # 10 cm is far beyond the placement error: nothing touched, no foothold on an obstacle
+    assert s["obstacle_contacts"][2:].sum() == 0 and s["footholds_on_obstacles"][2:].sum() == 0
+    assert s["obstacle_contacts"][:2].sum() >= s["obstacle_contacts"][2:].sum()
+    assert (s["distance_along"][:2] >= s["distance_along"][2:] - 0.05).all()  # a wider margin never opens a path
+    assert not maps.has_height and (~np.asarray(maps.free[0])).sum() > 50  # clutter, raised in the physics
 
 
 def test_bad_inputs_are_refused_before_compiling(sim):
@@ -199,15 +210,22 @@ def test_bad_inputs_are_refused_before_compiling(sim):
     slow = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), robot, ij.robots.hrp2(step_time=0.6))
     with pytest.raises(ValueError, match="step_time"):
         W.rollout_batch(sim, batch, slow, np.zeros((2, 2, 3)), np.zeros((2, 3)), num_steps=1)
-    with pytest.raises(ValueError, match="margins must be"):
-        margins.run(margins=[0.0, 0.2], sim=sim)
+    with pytest.raises(ValueError, match="dynamics.friction must be finite, >= 0"):
+        W.rollout_batch(sim, batch, robots2, np.zeros((2, 2, 3)), np.zeros((2, 3)), num_steps=1,
+                        dynamics=physics.Dynamics(friction=np.array([1.0, -1.0])))
+    with pytest.raises(ValueError, match=r"dynamics.push must be a scalar or shape \(2,\)"):
+        W.rollout_batch(sim, batch, robots2, np.zeros((2, 2, 3)), np.zeros((2, 3)), num_steps=1,
+                        dynamics=physics.Dynamics(push=np.zeros(3)))
+    with pytest.raises(ValueError, match="key must be one PRNG key"):
+        W.rollout_batch(sim, batch, robots2, np.zeros((2, 2, 3)), np.zeros((2, 3)), num_steps=1,
+                        key=jax.random.split(jax.random.key(0), 3))
+    with pytest.raises(ValueError, match="dynamics.latency must be finite"):
+        W.rollout(sim, good, robot, np.zeros((2, 3)), np.zeros(3), num_steps=1, dynamics=physics.Dynamics(latency=1.0))
     with pytest.raises(ValueError, match="no states"):
         render.states(SimpleNamespace(log=SimpleNamespace(qpos=np.zeros((3, 0, 19)))))  # rolled out with 0 frames
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["sim", "margins", "--margins", "0,0.2"], "margins must be"),
-    (["sim", "margins", "--margins", "0,x"], "could not convert"),
     (["sim", "render", "--size", "big"], "invalid literal"),
     (["sim", "render", "--frames", "200", "--steps", "1"], "frames_per_step"),
 ])

@@ -490,7 +490,7 @@ def test_scenario_bytes_from_the_compiled_chunk(base_file):
 def test_run_sizes_chunks_from_a_fake_device_memory(base_file, tmp_path, monkeypatch):
     # As on a GPU reporting 40 MiB with 1 MiB per scenario: 16 per chunk, and a resume keeps it.
     monkeypatch.setattr(execute, "_device_bytes", lambda device: 40 * MiB)
-    monkeypatch.setattr(execute, "scenario_bytes", lambda cfg, table, base: (1 * MiB, 0))
+    monkeypatch.setattr(execute, "scenario_bytes", lambda cfg, table, base, sim=None: (1 * MiB, 0))
     s = sweep.run(base_file, tmp_path / "o", max_scenarios=4, progress=False)
     assert (s.chunk_size, s.chunks) == (16, 1)
     monkeypatch.setattr(execute, "_device_bytes", lambda device: 400 * MiB)  # another GPU on resume
@@ -531,7 +531,7 @@ def test_summary_plot_is_a_grid_of_distinct_panels(tmp_path, monkeypatch):
 
     from ijoy_jax.sweep import results
 
-    metrics = results.plot.__defaults__[1]
+    metrics = results.PLOT_METRICS
     w = [0.0, 0.3, 1.0, 3.0, 10.0]
     agg = pd.DataFrame({"cell": range(10), "robot.w": w * 2, "robot.margin": [0.0] * 5 + [0.04] * 5, "n": 8})
     for i, m in enumerate(metrics):

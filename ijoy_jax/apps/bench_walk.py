@@ -181,11 +181,11 @@ def flat(key, batch: int, *, shape, resolution: float) -> Terrain:
 
 
 CLUTTER = dict(count=17, size_min=0.04, size_max=0.12)
-"""2D clutter: :data:`ijoy_jax.sim.margins.CLUTTER`'s obstacles at its density (14 on 8 m^2, here 17 on 10 m^2)."""
+"""2D clutter: `sweeps/margin_physics.toml`'s obstacles at its density (14 on 8 m^2, here 17 on 10 m^2)."""
 
 
 def clutter2d(key, batch: int, *, shape, resolution: float) -> Terrain:
-    """2D obstacles (the margins benchmark's clutter), stored as the 2.5D map the physics makes of them.
+    """2D obstacles (the margin sweep's clutter), stored as the 2.5D map the physics makes of them.
 
     A 2D map's obstacle cells stand ``BipedParams.obstacle_height`` (0.1 m) tall in the simulation
     (:func:`ijoy_jax.sim.model.physical_heights`); here they carry that height and stay obstacles

@@ -1,4 +1,13 @@
-"""The ``ijoy`` command line."""
+"""The ``ijoy`` command line.
+
+Every command keeps JAX's compiled programs in a persistent cache on disk (JAX's compilation cache), so a
+second run of the same sweep, benchmark or tuning run loads its programs instead of compiling them (an MJX
+sweep's ~1 minute of compiles becomes seconds). The cache lives in :func:`compile_cache_dir` (``$IJOY_CACHE_DIR``,
+else ``$JAX_COMPILATION_CACHE_DIR``, else ``$XDG_CACHE_HOME/ijoy_jax/jax_compilation_cache``, by default
+``~/.cache/ijoy_jax/jax_compilation_cache``); ``ijoy --no-compile-cache ...`` or ``IJOY_COMPILE_CACHE=0`` turns it
+off. Entries are keyed by the program, the JAX/XLA versions, flags and devices, so a hit runs the same code; the
+folder may be deleted at any time.
+"""
 
 from __future__ import annotations
 
@@ -6,10 +15,49 @@ import argparse
 import json
 import os
 import sys
+from pathlib import Path
+
+CACHE_MIN_COMPILE_S = 0.1
+"""Programs that took at least this long to compile (s) are kept in the persistent cache (tiny eager ops are not)."""
+
+
+def compile_cache_dir(env=None) -> Path | None:
+    """The persistent compilation cache's folder for this environment, or None where it is switched off
+    (``IJOY_COMPILE_CACHE`` = 0, false, no or off). See the module docstring for the order of the variables."""
+    env = os.environ if env is None else env
+    if env.get("IJOY_COMPILE_CACHE", "").strip().lower() in ("0", "false", "no", "off"):
+        return None
+    for var in ("IJOY_CACHE_DIR", "JAX_COMPILATION_CACHE_DIR"):
+        if env.get(var):
+            return Path(env[var]).expanduser()
+    base = Path(env["XDG_CACHE_HOME"]).expanduser() if env.get("XDG_CACHE_HOME") else Path.home() / ".cache"
+    return base / "ijoy_jax" / "jax_compilation_cache"
+
+
+def _use_compile_cache(enabled: bool) -> Path | None:
+    """Point JAX's persistent compilation cache at :func:`compile_cache_dir` (before any compile); its folder."""
+    path = compile_cache_dir() if enabled else None
+    if path is None:
+        return None
+    import jax
+
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as e:  # a read-only home: run without the cache rather than not at all
+        print(f"ijoy: warning: no compilation cache ({path}: {e.strerror})", file=sys.stderr)
+        return None
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", CACHE_MIN_COMPILE_S)
+    return path
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ijoy", description="The intelligent joystick for legged robots, in JAX.")
+    parser.add_argument("--no-compile-cache", action="store_true",
+                        help="do not keep compiled programs on disk (env IJOY_COMPILE_CACHE=0); by default they are "
+                             "kept in $IJOY_CACHE_DIR, $JAX_COMPILATION_CACHE_DIR or "
+                             "~/.cache/ijoy_jax/jax_compilation_cache, so a second run compiles nothing")
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="walk HRP-2 through clutter with the intelligent and a naive joystick; "
                                        "write a PNG of the footholds")
@@ -74,19 +122,9 @@ def main(argv: list[str] | None = None) -> int:
     ssum.add_argument("dir", help="a sweep's output folder")
     ssum.add_argument("--png", default=None, help="plot to write (default: DIR/summary.png)")
     ssum.add_argument("--x", default=None, help="parameter on the plot's x axis (default: the most varied)")
-    simp = sub.add_parser("sim", help="the MJX biped: margin sweep in clutter, or a rendered rollout")
+    simp = sub.add_parser("sim", help="the MJX biped: a rendered rollout (physics sweeps: 'ijoy sweep run' with "
+                                      "walker = \"mjx\", e.g. sweeps/margin_physics.toml)")
     sim_sub = simp.add_subparsers(dest="sim_command", required=True)
-    marg = sim_sub.add_parser("margins", help="safety margin against obstacle contacts of the simulated biped in "
-                                              "random clutter; prints JSON per margin and writes a plot")
-    marg.add_argument("--margins", default=",".join(str(0.01 * i)[:4] for i in range(11)),
-                      help="comma-separated margins in metres, each in [0, 0.1] (default: 0 to 0.1 by 0.01)")
-    marg.add_argument("--batch", type=int, default=64, help="clutter maps per margin (default: %(default)s)")
-    marg.add_argument("--steps", type=int, default=16, help="steps per rollout (default: %(default)s)")
-    marg.add_argument("--seed", type=int, default=0)
-    marg.add_argument("--chunk", type=int, default=None,
-                      help="rollouts per jitted call (default: 512 on a GPU, 32 on a CPU)")
-    marg.add_argument("--png", default="margins.png", help="plot to write (default: %(default)s)")
-    marg.add_argument("--json", default=None, help="also write the per-margin rows to this file")
     rend = sim_sub.add_parser("render", help="walk the simulated biped through clutter and write a GIF "
                                              "(offscreen; headless Linux uses EGL)")
     rend.add_argument("--out", default="ijoy_walk.gif", help="GIF to write (default: %(default)s)")
@@ -101,6 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     tune_cli.add_parser(sub)
     args = parser.parse_args(argv)
     try:
+        _use_compile_cache(not args.no_compile_cache)
         return _run(args)
     except (ValueError, TypeError, FileNotFoundError) as e:  # bad input: one line, like argparse's own errors
         print(f"ijoy: error: {e}", file=sys.stderr)
@@ -182,42 +221,32 @@ def _bench_walk(args) -> list[dict]:
     return rows
 
 
+# ``ijoy sim render``'s map: sweeps/margin_physics.toml's clutter (4 x 2 m at 2 cm, 14 obstacles of 4-12 cm).
+_RENDER_SHAPE, _RENDER_RESOLUTION = (200, 100), 0.02
+_RENDER_CLUTTER = dict(count=14, size_min=0.04, size_max=0.12)
+_RENDER_COMMAND = (0.2, 0.0, 0.0)  # m/s, m/s, rad/s: forward at 80 % of the top speed
+
+
 def _sim(args) -> int:
-    """``ijoy sim margins`` / ``ijoy sim render``."""
-    import numpy as np
-
-    from ijoy_jax.sim import margins
-
-    if args.sim_command == "margins":
-        values = [float(v) for v in args.margins.split(",") if v.strip()]
-        res = margins.run(values, batch=args.batch, num_steps=args.steps, seed=args.seed, chunk=args.chunk)
-        rows = [dict(margin=float(m), collision_rate=float(c), contacts_per_step=float(p), fall_rate=float(f),
-                     mean_progress=float(g), footholds_on_obstacles=int(o.sum()), batch=args.batch,
-                     steps=args.steps) for m, c, p, f, g, o in zip(res["margin"], res["collision_rate"],
-                                                                    res["contacts_per_step"], res["fall_rate"],
-                                                                    res["mean_progress"], res["on_obstacle"],
-                                                                    strict=True)]
-        for row in rows:
-            print(json.dumps(row))
-        print(json.dumps(dict(wall_s=round(res["wall_s"], 2), compiles=res["compiles"], png=args.png)))
-        margins.plot(res, args.png)
-        if args.json:
-            with open(args.json, "w") as f:
-                json.dump(rows, f, indent=2)
-        return 0
+    """``ijoy sim render``: the simulated biped through one clutter map, as a GIF."""
     import jax
+    import numpy as np
 
     from ijoy_jax import robots
     from ijoy_jax.sim import render
     from ijoy_jax.sim import walker as W
+    from ijoy_jax.terrain import generators
 
     width, height = (int(v) for v in args.size.lower().split("x"))
     robot = robots.hrp2(margin=args.margin)
-    sim = W.make_sim(margins.SHAPE, margins.RESOLUTION, robot=robot)
-    terrains, starts = margins.clutter(args.seed, 1)
-    command = margins.forward_commands(args.seed + 1, 1, robot)[0]
-    terrain = jax.tree_util.tree_map(lambda a: a[0], terrains)
-    traj = W.rollout(sim, terrain, robot, starts[0], command, num_steps=args.steps, frames_per_step=args.frames)
+    sim = W.make_sim(_RENDER_SHAPE, _RENDER_RESOLUTION, robot=robot)
+    params = generators.ObstacleParams(**_RENDER_CLUTTER)
+    terrain = generators.obstacles(jax.random.key(args.seed), params, shape=_RENDER_SHAPE,
+                                   resolution=_RENDER_RESOLUTION, max_count=16)
+    x, y = np.asarray(generators.start_point(params, shape=_RENDER_SHAPE, resolution=_RENDER_RESOLUTION))
+    start = robots.start_stance(robot, x, y)
+    traj = W.rollout(sim, terrain, robot, start, np.asarray(_RENDER_COMMAND, np.float32), num_steps=args.steps,
+                     frames_per_step=args.frames)
     frames = render.render(sim, terrain, render.states(traj), width=width, height=height,
                            footsteps=traj.commanded, sides=traj.sides, smooth=args.frames)
     render.write_gif(args.out, frames, fps=args.frames / sim.cfg.step_time)
@@ -243,16 +272,21 @@ def _sweep(args) -> int:
         sweep.distributed.initialize(lay)
         stats = sweep.run(cfg, args.out, chunk_size=args.chunk, max_scenarios=args.max_scenarios,
                           devices=args.devices)
-        print(json.dumps({"out": str(stats.out), "scenarios": stats.scenarios, "computed": stats.computed,
-                          "chunks": stats.chunks, "skipped_chunks": stats.skipped, "compiles": stats.compiles,
-                          "first_chunk_s": stats.first_chunk_s, "run_s": round(stats.run_s, 3)}, indent=2))
+        row = {"out": str(stats.out), "scenarios": stats.scenarios, "computed": stats.computed,
+               "chunks": stats.chunks, "skipped_chunks": stats.skipped, "compiles": stats.compiles,
+               "chunk_size": stats.chunk_size, "first_chunk_s": stats.first_chunk_s, "run_s": round(stats.run_s, 3),
+               "scenarios_per_s": round(stats.rate, 3)}
+        if stats.physics_steps:
+            row["physics_steps_per_s"] = round(stats.rate * stats.physics_steps)
+        print(json.dumps(row, indent=2))
         return 0
     import pandas as pd
 
     agg = sweep.load_aggregates(args.dir)  # FileNotFoundError, or IncompleteSweepError (a ValueError)
-    show = [c for c in agg.columns if c.startswith(("robot.", "terrain.")) or c == "n"]
+    show = [c for c in agg.columns if c.startswith(("robot.", "terrain.", "sim.")) or c == "n"]
     table = agg[show].copy()
-    for m in ("distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles"):
+    physics = ("collided", "fell", "placement_error_mean") if "fell.mean" in agg else ()
+    for m in (*physics, "distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles"):
         unit = sweep.UNITS[m]
         table[f"{m} ({unit})"] = [f"{a:.3g} +- {b:.2g}" for a, b in zip(agg[f"{m}.mean"], agg[f"{m}.ci95"],
                                                                         strict=True)]

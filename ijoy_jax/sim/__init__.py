@@ -5,9 +5,12 @@ Modules: :mod:`.model` (the MjSpec robot and the terrain's height field),
 :mod:`.preview` (LIPM/ZMP preview control), :mod:`.swing` (swing-foot paths
 over the terrain), :mod:`.controller` (the walking pattern generator: a
 footstep to joint targets, tick by tick), :mod:`.walker` (the MJX robot as a
-:class:`ijoy_jax.control.Walker` and its rollout), :mod:`.render`
-(offscreen images of a rollout),
-:mod:`.margins` (safety margin against collisions under execution error).
+:class:`ijoy_jax.control.Walker` and its rollout), :mod:`.physics` (the
+traced :class:`~ijoy_jax.sim.physics.Dynamics` a user varies per robot: friction,
+mass, actuator stiffness, control delay, stance noise, pushes), :mod:`.render`
+(offscreen images of a rollout). Sweeps over the physics (the safety margin under
+execution error, ``sweeps/margin_physics.toml``) run in :mod:`ijoy_jax.sweep`
+with ``walker = "mjx"``.
 
 Importing this package on a Linux machine without a display that has
 libEGL, before ``mujoco`` and with ``MUJOCO_GL`` unset, sets
@@ -50,3 +53,5 @@ def _import_mjx_warp_quietly() -> None:
 
 
 _import_mjx_warp_quietly()
+
+from ijoy_jax.sim.physics import Dynamics as Dynamics  # noqa: E402  (sim.Dynamics, documented in sim.physics)

@@ -100,7 +100,8 @@ class BipedParams:
       shin_contacts: shin capsules also collide with the terrain (off by default:
         each capsule-hfield pair costs MJX a sub-grid of prisms as large as the capsule).
       shin_radius, thigh_radius: capsule radii of the shank and thigh.
-      friction: sliding friction of the sole spheres.
+      friction: sliding friction of the sole spheres and of the ground (MuJoCo takes the larger of two
+        geoms' coefficients, so both carry it); per robot and traced: ``sim.physics.Dynamics.friction``.
 
     Simulation::
 
@@ -359,7 +360,8 @@ def build_spec(params: BipedParams, shape=(200, 200), resolution: float = 0.02, 
     size, pos = _hfield_geometry(params, (nx, ny), float(resolution), origin)
     spec.add_hfield(name="terrain", nrow=ny, ncol=nx, size=size, userdata=[0.0] * (nx * ny))
     spec.worldbody.add_geom(name="terrain", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="terrain", pos=pos,
-                            contype=0, conaffinity=1, condim=3, rgba=[0.55, 0.6, 0.5, 1])
+                            contype=0, conaffinity=1, condim=3, friction=[params.friction, 0.005, 0.0001],
+                            rgba=[0.55, 0.6, 0.5, 1])
     spec.worldbody.add_light(name="sun", pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     _add_robot(spec, params)
     qpos = standing_qpos(params)

@@ -33,9 +33,10 @@ from mujoco import mjx
 
 from ijoy_jax import control, geometry, select
 from ijoy_jax import terrain as terrain_mod
+from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import METHODS, Targets
-from ijoy_jax.sim import controller, dynamics, kinematics, model, swing
+from ijoy_jax.sim import controller, dynamics, kinematics, model, physics, swing
 from ijoy_jax.sim.controller import WalkConfig
 from ijoy_jax.terrain import Terrain
 
@@ -46,6 +47,13 @@ class Sim:
 
     Build it once with :func:`make_sim` (it compiles nothing); every terrain of
     that grid shape reuses it, its heights go into the height field per call.
+
+    A pytree: its two MJX models are its leaves, traced arguments of every
+    compiled program (never constants baked into it), and the rest is static
+    metadata compared by value (``params``, ``cfg``, grid and fall limits, of
+    which the models are built), so every Sim built with the same settings
+    shares one compiled program, and ``jax.jit(f)(sim, ...)`` needs no
+    ``static_argnums``.
     """
 
     params: model.BipedParams
@@ -62,6 +70,38 @@ class Sim:
     @property
     def substeps(self) -> int:
         return int(round(self.cfg.control_dt / self.mj_model.opt.timestep))
+
+
+_SIM_MODELS = ("mjx_model", "mjx_free")
+
+
+class _SimSettings:
+    """A Sim's static part (pytree metadata): every field but its MJX models, compared and hashed by the
+    settings the rest is built of (``params``, ``cfg``, grid, fall limits), not by the host objects' identity."""
+
+    __slots__ = ("fields",)
+
+    def __init__(self, fields: dict):
+        self.fields = fields
+
+    def key(self) -> tuple:
+        f = self.fields
+        return f["params"], f["cfg"], f["shape"], f["resolution"], f["fall_height"], f["fall_tilt"]
+
+    def __hash__(self) -> int:
+        return hash(self.key())
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, _SimSettings) and self.key() == other.key()
+
+
+def _flatten_sim(sim: Sim):
+    static = {f.name: getattr(sim, f.name) for f in dataclasses.fields(Sim) if f.name not in _SIM_MODELS}
+    return tuple(getattr(sim, n) for n in _SIM_MODELS), _SimSettings(static)
+
+
+jax.tree_util.register_pytree_node(
+    Sim, _flatten_sim, lambda settings, models: Sim(**settings.fields, **dict(zip(_SIM_MODELS, models, strict=True))))
 
 
 def make_sim(shape, resolution: float, params: model.BipedParams | None = None, cfg: WalkConfig | None = None,
@@ -133,6 +173,7 @@ class StepLog(NamedTuple):
     min_pelvis_height: jax.Array  # () m, lowest pelvis height above the ground during the step
     max_tilt: jax.Array  # () rad, largest torso tilt during the step
     qpos: jax.Array  # (frames_per_step, nq) snapshots of the state through the step, for rendering (0 by default)
+    dynamics_invalid: jax.Array  # () bool, a Dynamics value was out of bounds and replaced by its nominal one
 
 
 class SimState(NamedTuple):
@@ -145,6 +186,9 @@ class SimState(NamedTuple):
     corr: jax.Array  # (controller.correction_length, 2) the dynamics filter's last correction
     last: StepLog
     fresh: jax.Array  # () bool, nothing simulated yet: the next execute stands (the Walker's warm-up step)
+    key: jax.Array  # () PRNG key of the stance noise and the pushes still to come
+    belief: jax.Array  # (2,) m, the measured stance's error for the next decision (physics.Dynamics.stance_noise)
+    sent: jax.Array  # (latency ticks + 1, nu) the last joint targets, newest first (physics.Dynamics.latency)
 
 
 def _soles(sim: Sim, d: mjx.Data) -> jax.Array:
@@ -206,7 +250,8 @@ def frame_ticks(sim: Sim, frames_per_step: int) -> np.ndarray:
 
 
 def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_per_step: int = 0, *,
-               robot: Robot) -> control.Walker:
+               robot: Robot, dynamics: physics.Dynamics | None = None, key=None,
+               free: mjx.Model | None = None) -> control.Walker:
     """The Walker of the simulated biped on ``terrain`` (call inside jit; ``m`` = the model with its height field).
 
     ``execute`` takes the selector's foothold (6,) (:attr:`ijoy_jax.select.StepChoice.foothold`); the start
@@ -216,6 +261,11 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
     ``params.obstacle_height``) also place the footholds' heights and the
     swing paths' apexes. ``frames_per_step`` (static) states per step are kept
     in ``StepLog.qpos`` (at :func:`frame_ticks`) for :mod:`ijoy_jax.sim.render`.
+
+    ``dynamics`` (default :data:`ijoy_jax.sim.physics.NOMINAL`, scalar leaves) is written into ``m``
+    (:func:`ijoy_jax.sim.physics.put_dynamics`) and sets the walker's control delay, stance noise and pushes,
+    drawn from ``key`` (default key 0); ``free`` (default ``sim.mjx_free``) is the controller's own nominal
+    model for its dynamics filter.
     """
     params, cfg = sim.params, sim.cfg
     keep = frame_ticks(sim, frames_per_step)
@@ -223,6 +273,13 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
     phys = terrain.replace(height=jnp.clip(model.physical_heights(terrain, params.obstacle_height), params.z_lo,
                                            params.z_hi), has_height=True)
     m = model.put_terrain(sim.mjx_model, params, terrain) if m is None else m
+    free = sim.mjx_free if free is None else free
+    dyn, dyn_invalid = physics.sanitize(nominal_dynamics(sim) if dynamics is None else dynamics)
+    m = physics.put_dynamics(m, dyn)
+    key0 = as_key(0 if key is None else key)
+    delay = physics.latency_ticks(dyn.latency, cfg.control_dt)
+    n_sent = physics.max_latency_ticks(cfg.control_dt) + 1
+    push_dv = dyn.push / jnp.sum(m.body_mass)  # m/s: the impulse's velocity change of the whole robot
     pgains = controller.gains(cfg)
     foot_l, foot_w = params.foot_length, params.foot_width
 
@@ -236,32 +293,37 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         """How far the lowest sole corner hangs below the centre of a tilted sole (m)."""
         return 0.5 * foot_l * jnp.abs(jnp.sin(sole[4])) + 0.5 * foot_w * jnp.abs(jnp.sin(sole[3]))
 
-    def simulate(d, cs, plan, corr, st, pst):
+    def simulate(d, cs, plan, corr, st, pst, sent, kick):
         """One step of control ticks and physics (``st``, ``pst``: the stance sole measured and as planned).
 
         Returns (data, ctrl state, filter correction, obstacle touched, lowest pelvis, max tilt, kept qpos
-        frames). Each tick's joint targets reach the actuators interpolated linearly over its physics steps
-        from the previous tick's (a servo's first-order hold): held as steps every 10 ms, they jolt the stiff
-        joints and the robot falls within a few 0.2 m steps (measured on the native loop; interpolated, it walks).
+        frames, joint targets sent). Each tick's joint targets reach the actuators interpolated linearly over its
+        physics steps from the previous tick's (a servo's first-order hold): held as steps every 10 ms, they
+        jolt the stiff joints and the robot falls within a few 0.2 m steps (measured on the native loop;
+        interpolated, it walks). The actuators get the targets of ``delay`` ticks before (``sent``, newest
+        first); ``kick`` = (tick, (2,) velocity change) is the step's push.
         """
         ground = jnp.minimum(plan.stance[2], plan.swing_to[2])  # as the controller holds the pelvis above it
 
         cs = cs._replace(t=jnp.zeros((), jnp.float32))
         if cfg.filter_passes > 0:
-            corr = controller.zmp_correction(sim.mjx_free, params, cfg, pgains, plan, cs, cfg.filter_passes,
+            corr = controller.zmp_correction(free, params, cfg, pgains, plan, cs, cfg.filter_passes,
                                              init=controller.carry_correction(cfg, corr))
         fractions = jnp.arange(1, sim.substeps + 1, dtype=jnp.float32) / sim.substeps
         # World -> the plan's frame: the planar transform that takes the measured stance sole onto the planned one.
         to_plan = kinematics.rot_z(pst[5] - st[5])
 
         def tick(carry, k):
-            d, cs, touched, low, tilt = carry
+            d, cs, touched, low, tilt, sent = carry
             window = None if cfg.filter_passes == 0 else lax.dynamic_slice_in_dim(corr, k, cfg.horizon)
             base = (to_plan @ (d.qpos[:3] - st[:3]) + pst[:3], to_plan @ kinematics.quat_to_rot(d.qpos[3:7]))
             q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, window, base, ankle_wrench(sim, d))
+            sent = jnp.concatenate([q[None], sent[:-1]])
+            q = sent[delay]  # what the actuators receive now: the targets of `delay` ticks ago
+            d = d.replace(qvel=d.qvel.at[:2].add(jnp.where(k == kick[0], kick[1], 0.0)))
             q0 = d.ctrl
 
-            def physics(c, frac):
+            def step_physics(c, frac):
                 d, touched, low, tilt = c
                 d = mjx.step(m, d.replace(ctrl=q0 + frac * (q - q0)))
                 low = jnp.minimum(low, d.qpos[2] - ground)
@@ -269,13 +331,13 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
                 touched = touched | _obstacle_contact(sim, terrain, d)
                 return (d, touched, low, tilt), None
 
-            (d, touched, low, tilt), _ = lax.scan(physics, (d, touched, low, tilt), fractions)
-            return (d, cs, touched, low, tilt), d.qpos if frames_per_step else None
+            (d, touched, low, tilt), _ = lax.scan(step_physics, (d, touched, low, tilt), fractions)
+            return (d, cs, touched, low, tilt, sent), d.qpos if frames_per_step else None
 
-        carry0 = (d, cs, jnp.bool_(False), jnp.float32(jnp.inf), jnp.float32(0))
-        (d, cs, touched, low, tilt), qs = lax.scan(tick, carry0, jnp.arange(cfg.ticks_per_step))
+        carry0 = (d, cs, jnp.bool_(False), jnp.float32(jnp.inf), jnp.float32(0), sent)
+        (d, cs, touched, low, tilt, sent), qs = lax.scan(tick, carry0, jnp.arange(cfg.ticks_per_step))
         frames = qs[keep] if frames_per_step else jnp.zeros((0, m.nq), jnp.float32)
-        return d, cs, corr, touched, low, tilt, frames
+        return d, cs, corr, touched, low, tilt, frames, sent
 
     def split(soles, swing_side):
         left_swings = swing_side > 0
@@ -297,15 +359,25 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
         soles = _soles(sim, d)
         zero = jnp.float32(0)
         log = StepLog(soles[0], zero, zero, zero, jnp.bool_(False), jnp.bool_(False), jnp.float32(cfg.pelvis_height),
-                      zero, jnp.zeros((len(keep), m.nq), jnp.float32))
+                      zero, jnp.zeros((len(keep), m.nq), jnp.float32), dyn_invalid)
+        key, k_belief = jax.random.split(key0)
+        sent = jnp.broadcast_to(d.ctrl, (n_sent, m.nu))
         # The first execute (the loop's warm-up iteration) stands one step while the preview sees the first
         # step's weight shift coming; it runs the same simulate as every step, so it is compiled once.
         return SimState(d, cs, soles, planned, swing_side, 0.5 * (planned[0, :2] + planned[1, :2]), corr, log,
-                        jnp.bool_(True))
+                        jnp.bool_(True), key, believed_error(k_belief), sent)
+
+    def believed_error(k):
+        """(2,) m: the error of the stance position the next decision is given (Dynamics.stance_noise)."""
+        return dyn.stance_noise * jax.random.normal(k, (2,), jnp.float32)
+
+    def believed(pose, s):
+        """A planar pose (3,) as the robot believes it: shifted by its current position error."""
+        return pose.at[:2].add(s.belief)
 
     def stance(s):
         st, sw = split(s.soles, s.swing)
-        return control.StanceInfo(st[_PLANAR], -s.swing, sw[_PLANAR])
+        return control.StanceInfo(believed(st[_PLANAR], s), -s.swing, believed(sw[_PLANAR], s))
 
     def execute(s, foothold, go):
         go = jnp.asarray(go) & ~s.last.fallen & ~s.fresh
@@ -319,27 +391,33 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
                + jnp.maximum(tilt_drop(psw), tilt_drop(target)))
         # The step relative to the measured stance foot, applied to the commanded one: the plan stays
         # continuous (no jump to the measured soles' millimetres), the foot lands where the selector chose
-        # relative to where the stance foot really is.
-        rel = geometry.relative(st[_PLANAR], pose)
+        # relative to where the stance foot really is (as the robot believes it: with stance noise, off by
+        # the error the decision was given).
+        rel = geometry.relative(believed(st[_PLANAR], s), pose)
         planar = geometry.compose(pst[_PLANAR], rel)
         ptarget = jnp.concatenate([planar[:2], target[2:5], planar[2:]])
         plan = controller.plan_step(s.anchor, pst, psw, ptarget, go, s.swing, top, cfg.clearance)
         plan = jax.tree_util.tree_map(lambda a, b: jnp.where(s.fresh, a, b),
                                       controller.prepare_plan(pst, psw, s.swing), plan)
-        d, cs, corr, touched, low, tilt, frames = simulate(s.data, s.ctrl, plan, s.corr, st, pst)
+        key, k_belief, k_tick, k_dir = jax.random.split(s.key, 4)
+        angle = jax.random.uniform(k_dir, (), jnp.float32, 0.0, 2 * jnp.pi)
+        dv = jnp.where(s.fresh, 0.0, push_dv) * jnp.stack([jnp.cos(angle), jnp.sin(angle)])
+        kick = (jax.random.randint(k_tick, (), 0, cfg.ticks_per_step), dv)
+        d, cs, corr, touched, low, tilt, frames, sent = simulate(s.data, s.ctrl, plan, s.corr, st, pst, s.sent, kick)
         soles = _soles(sim, d)
         left_swings = s.swing > 0
         landed = jnp.where(left_swings, soles[0], soles[1])
         planned = jnp.where(left_swings, jnp.stack([plan.swing_to, pst]), jnp.stack([pst, plan.swing_to]))
-        fallen = s.last.fallen | (low < sim.fall_height) | (tilt > sim.fall_tilt)
+        # a diverged simulation (NaN state, e.g. a stiffness beyond the timestep's limit) counts as a fall
+        fallen = s.last.fallen | (low < sim.fall_height) | (tilt > sim.fall_tilt) | ~jnp.all(jnp.isfinite(d.qpos))
         err = jnp.where(go, jnp.hypot(landed[0] - target[0], landed[1] - target[1]), 0.0)
         yaw_err = jnp.where(go, jnp.abs(geometry.wrap_angle(landed[5] - target[5])), 0.0)
         cos_tilt = jnp.clip(jnp.dot(_normal(landed), _normal(target)), -1.0, 1.0)
         tilt_err = jnp.where(go, jnp.arccos(cos_tilt), 0.0)
-        log = StepLog(landed, err, yaw_err, tilt_err, fallen, touched, low, tilt, frames)
+        log = StepLog(landed, err, yaw_err, tilt_err, fallen, touched, low, tilt, frames, dyn_invalid)
         anchor = jnp.where(go, pst[:2], 0.5 * (planned[0, :2] + planned[1, :2]))
         return SimState(d, cs, soles, planned, jnp.where(go, -s.swing, s.swing), anchor, corr, log,
-                        jnp.bool_(False))
+                        jnp.bool_(False), key, believed_error(k_belief), sent)
 
     def feet(s):
         return s.soles[:, _PLANAR]
@@ -347,37 +425,48 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
     return control.Walker(init, stance, execute, feet, lambda s: s.last, warmup=1)
 
 
-_OPTIONS = ("num_steps", "method", "swing_path", "quantize", "frames_per_step")
+_OPTIONS = ("num_steps", "method", "swing_path", "quantize", "frames_per_step", "kernel")
 
 
-@functools.partial(jax.jit, static_argnames=("sim",) + _OPTIONS)
-def _rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, first_swing, targets, *, num_steps: int,
-             method: str, swing_path: bool, quantize: bool, frames_per_step: int) -> control.Trajectory:
-    """The loop of :func:`rollout`, jitted, its inputs checked by the caller."""
-    walker = mjx_walker(sim, terrain, frames_per_step=frames_per_step, robot=robot)
+def nominal_dynamics(sim: Sim) -> physics.Dynamics:
+    """The :class:`~ijoy_jax.sim.physics.Dynamics` of the robot as ``sim`` built it (its ``params.friction``,
+    :data:`~ijoy_jax.sim.physics.NOMINAL` otherwise): what a rollout without ``dynamics`` simulates."""
+    return physics.NOMINAL.replace(friction=float(sim.params.friction))
+
+
+@functools.partial(jax.jit, static_argnames=_OPTIONS)
+def _rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, first_swing, targets, dynamics, key, *,
+             num_steps: int, method: str, swing_path: bool, quantize: bool, frames_per_step: int,
+             kernel: str) -> control.Trajectory:
+    """The loop of :func:`rollout`, jitted (the Sim's models are traced arguments), its inputs checked by the
+    caller; inside a caller's trace it is inlined."""
+    walker = mjx_walker(sim, terrain, frames_per_step=frames_per_step, robot=robot, dynamics=dynamics, key=key)
     return control.rollout(terrain, robot, start, commands, num_steps, method=method, first_swing=first_swing,
-                           walker=walker, swing_path=swing_path, quantize=quantize, targets=targets)
+                           walker=walker, swing_path=swing_path, quantize=quantize, targets=targets, kernel=kernel)
 
 
-@functools.partial(jax.jit, static_argnames=("sim",) + _OPTIONS)
-def _rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, first_swing, targets, *,
-                   num_steps: int, method: str, swing_path: bool, quantize: bool,
-                   frames_per_step: int) -> control.Trajectory:
-    """:func:`_rollout` vmapped over terrains, robots, starts, commands and first swings, as one jitted program."""
+@functools.partial(jax.jit, static_argnames=_OPTIONS)
+def _rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, first_swing, targets, dynamics,
+                   keys, *, num_steps: int, method: str, swing_path: bool, quantize: bool, frames_per_step: int,
+                   kernel: str) -> control.Trajectory:
+    """:func:`_rollout` vmapped over terrains, robots, starts, commands, first swings, dynamics and keys, as one
+    jitted program (the Sim's models shared)."""
 
-    def one(t, r, s, c, f):
-        return _rollout(sim, t, r, s, c, f, targets, num_steps=num_steps, method=method, swing_path=swing_path,
-                        quantize=quantize, frames_per_step=frames_per_step)
+    def one(t, r, s, c, f, d, k):
+        return _rollout(sim, t, r, s, c, f, targets, d, k, num_steps=num_steps, method=method, swing_path=swing_path,
+                        quantize=quantize, frames_per_step=frames_per_step, kernel=kernel)
 
-    return jax.vmap(one)(terrains, robots, starts, commands, first_swing)
+    return jax.vmap(one)(terrains, robots, starts, commands, first_swing, dynamics, keys)
 
 
 def compiled_programs() -> int:
     """How many programs :func:`rollout` and :func:`rollout_batch` hold compiled (in this process).
 
     Read it before and after a loop of calls to learn how many compiles the
-    loop caused: each new Sim, input shape or static option compiles once,
-    new terrain heights, robot parameters or commands reuse the program.
+    loop caused: each new input shape, static option or Sim setting (grid,
+    ``params``, ``cfg``) compiles once; new terrain heights, robot parameters,
+    commands, dynamics or keys reuse the program, and so does a Sim built again
+    with the same settings.
     """
     return _rollout._cache_size() + _rollout_batch._cache_size()
 
@@ -387,7 +476,7 @@ def _is_traced(x) -> bool:
 
 
 def _check(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_steps, method: str, first_swing,
-           frames_per_step: int, batch: int | None) -> None:
+           frames_per_step: int, batch: int | None, dynamics, kernel: str) -> None:
     """The inputs of one rollout (``batch`` None) or of ``batch`` rollouts: shapes and static options always,
     values only where they are concrete (so the checks pass through a caller's jit or vmap)."""
     lead = () if batch is None else (batch,)
@@ -400,7 +489,11 @@ def _check(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_ste
         raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if kernel not in select.KERNELS:
+        raise ValueError(f"kernel must be one of {select.KERNELS}, got {kernel!r}")
     frame_ticks(sim, frames_per_step)
+    if dynamics is not None:
+        physics.check(dynamics, batch)
     if np.shape(first_swing) not in ((), lead) or (
             not _is_traced(first_swing) and not np.all(np.isin(np.asarray(first_swing), (LEFT, -LEFT)))):
         raise ValueError(f"first_swing must be +1 (left) or -1 (right) (one, or one per rollout), got {first_swing!r}")
@@ -416,9 +509,24 @@ def _check(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_ste
         raise ValueError(f"commands must have shape {shapes[0]} or {shapes[1]}, got {np.shape(commands)}")
 
 
+def _keys(key, batch: int | None) -> jax.Array:
+    """One rollout's typed key (``batch`` None) or B of them: an int seed or key (split into B), or B keys."""
+    k = as_key(0 if key is None else key)
+    if batch is None:
+        if k.shape != ():
+            raise ValueError(f"key must be one PRNG key or int seed, got keys of shape {k.shape}")
+        return k
+    if k.shape == ():
+        return jax.random.split(k, batch)
+    if k.shape != (batch,):
+        raise ValueError(f"key must be one PRNG key (split into the batch) or {batch} keys, got shape {k.shape}")
+    return k
+
+
 def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_steps: int, method: str = "exhaustive",
             first_swing: int = LEFT, targets: Targets | None = None, swing_path: bool = True,
-            quantize: bool = True, frames_per_step: int = 0) -> control.Trajectory:
+            quantize: bool = True, frames_per_step: int = 0, dynamics: physics.Dynamics | None = None, key=None,
+            kernel: str = "xla") -> control.Trajectory:
     """Walk the simulated biped with the joystick for ``num_steps`` steps (jitted as one scan).
 
     Same arguments and result as :func:`ijoy_jax.rollout`, with the physics in
@@ -430,7 +538,9 @@ def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_st
 
     Call it inside your own ``jax.jit`` or ``jax.vmap`` as well: the checks
     read shapes and skip traced values (``jax.vmap(lambda c: rollout(sim,
-    terrain, robot, start, c, num_steps=n))(commands)`` is one batch).
+    terrain, robot, start, c, num_steps=n))(commands)`` is one batch). ``sim``
+    is a pytree: pass it as an argument of your jitted function and its MJX
+    models are traced there too.
 
     Args:
       sim: the :class:`Sim` of the terrain's grid shape.
@@ -439,21 +549,28 @@ def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_st
       start: (2, 3) world foot poses, row 0 left, row 1 right (m, rad; :func:`ijoy_jax.robots.start_stance`).
       commands: (3,) or (num_steps, 3) joystick commands (m/s, m/s, rad/s).
       num_steps: steps (static).
-      method, first_swing, targets, swing_path, quantize: as in :func:`ijoy_jax.rollout`.
+      method, first_swing, targets, swing_path, quantize, kernel: as in :func:`ijoy_jax.rollout`.
       frames_per_step: states kept per step in ``log.qpos`` (static; at most the control ticks per step).
+      dynamics: the robot's :class:`~ijoy_jax.sim.physics.Dynamics` (scalar leaves; traced: new values never
+        recompile); None: :func:`nominal_dynamics`.
+      key: PRNG key or int seed of the stance noise and pushes (default 0).
 
     Returns:
       A :class:`ijoy_jax.control.Trajectory` whose ``log`` is a :class:`StepLog` per step.
     """
     _check(sim, terrain, robot, start, commands, num_steps=num_steps, method=method, first_swing=first_swing,
-           frames_per_step=frames_per_step, batch=None)
-    return _rollout(sim, terrain, robot, start, commands, first_swing, targets, num_steps=int(num_steps),
-                    method=method, swing_path=swing_path, quantize=quantize, frames_per_step=int(frames_per_step))
+           frames_per_step=frames_per_step, batch=None, dynamics=dynamics, kernel=kernel)
+    dyn = jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32),
+                                 nominal_dynamics(sim) if dynamics is None else dynamics)
+    return _rollout(sim, terrain, robot, start, commands, first_swing, targets, dyn, _keys(key, None),
+                    num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
+                    frames_per_step=int(frames_per_step), kernel=kernel)
 
 
 def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, *, num_steps: int,
                   method: str = "exhaustive", first_swing=LEFT, targets: Targets | None = None,
-                  swing_path: bool = True, quantize: bool = True, frames_per_step: int = 0) -> control.Trajectory:
+                  swing_path: bool = True, quantize: bool = True, frames_per_step: int = 0,
+                  dynamics: physics.Dynamics | None = None, key=None, kernel: str = "xla") -> control.Trajectory:
     """:func:`rollout` for B robots at once: one jitted ``vmap`` of the simulated joystick loop.
 
     Args:
@@ -464,34 +581,47 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, 
       commands: (B, 3) or (B, num_steps, 3) joystick commands (m/s, m/s, rad/s).
       num_steps: steps per rollout (static).
       first_swing: () or (B,), +1 for the left foot first.
-      method, targets, swing_path, quantize, frames_per_step: as in :func:`rollout`.
+      dynamics: a batched :class:`~ijoy_jax.sim.physics.Dynamics`, each leaf () (shared) or (B,) (one per
+        robot: frictions, mass and stiffness scales, latencies, stance noises, pushes); None:
+        :func:`nominal_dynamics` for all.
+      key: PRNG key or int seed, split into B keys, or (B,) keys: each robot's stance noise and pushes
+        (default 0).
+      method, targets, swing_path, quantize, frames_per_step, kernel: as in :func:`rollout`.
 
     Returns:
       A :class:`ijoy_jax.control.Trajectory` with a leading axis B on every leaf.
 
     Shapes and static arguments key the compile cache: batches of the same B,
     grid and ``num_steps`` reuse one compiled program whatever the terrains,
-    robots' parameters (margins, weights) or commands (:func:`compiled_programs`
-    counts them).
+    robots' parameters (margins, weights), commands or dynamics
+    (:func:`compiled_programs` counts them).
+
+    Example:
+      >>> # friction 0.3 and 1.0, the second robot 20 % heavier, in one compiled batch:
+      >>> # dyn = physics.Dynamics(friction=jnp.array([0.3, 1.0]), mass_scale=jnp.array([1.0, 1.2]))
+      >>> # traj = rollout_batch(sim, terrains, robots, starts, commands, num_steps=8, dynamics=dyn)
     """
     b = np.shape(terrains.free)[0] if np.ndim(terrains.free) == 3 else None
     if b is None:
         raise ValueError(f"terrains must have a leading batch axis, got a grid of shape {np.shape(terrains.free)}")
     _check(sim, terrains, robots, starts, commands, num_steps=num_steps, method=method, first_swing=first_swing,
-           frames_per_step=frames_per_step, batch=b)
+           frames_per_step=frames_per_step, batch=b, dynamics=dynamics, kernel=kernel)
     first = jnp.broadcast_to(jnp.asarray(first_swing, jnp.float32), (b,))
-    return _rollout_batch(sim, terrains, robots, starts, commands, first, targets, num_steps=int(num_steps),
-                          method=method, swing_path=swing_path, quantize=quantize,
-                          frames_per_step=int(frames_per_step))
+    dyn = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float32), (b,)),
+                                 nominal_dynamics(sim) if dynamics is None else dynamics)
+    return _rollout_batch(sim, terrains, robots, starts, commands, first, targets, dyn, _keys(key, b),
+                          num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
+                          frames_per_step=int(frames_per_step), kernel=kernel)
 
 
 def summary(traj: control.Trajectory) -> dict[str, jax.Array]:
     """Per-rollout totals of a simulated rollout, on top of ``traj.summary()``.
 
     fell: the robot fell; obstacle_contacts: steps during which a foot (or
-    shin) touched an obstacle cell; placement_error_mean / _p95 (m): the
+    shin) touched an obstacle cell; collided: any did (bool); placement_error_mean / _p95 (m): the
     touch-down error of the steps taken; yaw_error_mean (rad); tilt_error_p95 (rad): the angle between a
-    landed sole's normal and the commanded foothold's.
+    landed sole's normal and the commanded foothold's; dynamics_invalid: a
+    :class:`~ijoy_jax.sim.physics.Dynamics` value was out of bounds and simulated as its nominal one.
     """
     log: StepLog = traj.log
     taken = traj.taken
@@ -500,11 +630,13 @@ def summary(traj: control.Trajectory) -> dict[str, jax.Array]:
     out = dict(traj.summary())
     out.update(
         fell=jnp.any(log.fallen, axis=-1),
-        obstacle_contacts=jnp.sum(log.obstacle_contact, axis=-1),
+        obstacle_contacts=jnp.sum(log.obstacle_contact, axis=-1, dtype=jnp.int32),
+        collided=jnp.any(log.obstacle_contact, axis=-1),
         placement_error_mean=jnp.sum(jnp.where(taken, log.placement_error, 0.0), axis=-1) / n,
         placement_error_p95=jnp.where(jnp.any(taken, axis=-1), jnp.nanpercentile(err, 95, axis=-1), 0.0),
         yaw_error_mean=jnp.sum(jnp.where(taken, log.yaw_error, 0.0), axis=-1) / n,
         tilt_error_p95=jnp.where(jnp.any(taken, axis=-1),
                                  jnp.nanpercentile(jnp.where(taken, log.tilt_error, jnp.nan), 95, axis=-1), 0.0),
+        dynamics_invalid=jnp.any(log.dynamics_invalid, axis=-1),
     )
     return out

@@ -12,6 +12,9 @@ Public names::
   default_chunk_size / auto_chunk_size / scenario_bytes          chunks sized to device memory
   distributed                                                    several processes/hosts (jax.distributed)
   load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table (union of processes), 95% CIs, plot
+  PLOT_METRICS / PHYSICS_PLOT_METRICS                            the plot's default panels
+  WALKERS / PHYSICS_METRICS / SIM_MIN_RESOLUTION                 walker = "mjx": the MJX biped, its metrics
+                                                                 (falls, collisions, placement errors)
   IncompleteSweepError / action_counts / PAPER_ACTIONS           missing chunks, parts of another plan;
                                                                  density as action counts
   plan_hash / part_plan                                          the plan every part records (its hash)
@@ -38,6 +41,8 @@ from ijoy_jax.sweep.config import (
     MAX_SCENARIOS,
     MIN_RESOLUTION,
     ROBOT_DEFAULTS,
+    SIM_MIN_RESOLUTION,
+    WALKERS,
     SweepConfig,
     SweepConfigError,
     cells,
@@ -61,6 +66,9 @@ from ijoy_jax.sweep.results import (
     EXTRA_METRICS,
     METRICS,
     PAPER_ACTIONS,
+    PHYSICS_METRICS,
+    PHYSICS_PLOT_METRICS,
+    PLOT_METRICS,
     UNITS,
     IncompleteSweepError,
     action_counts,
@@ -90,8 +98,13 @@ __all__ = [
     "MIN_RESOLUTION",
     "METRICS",
     "PAPER_ACTIONS",
+    "PHYSICS_METRICS",
+    "PHYSICS_PLOT_METRICS",
+    "PLOT_METRICS",
     "ROBOT_DEFAULTS",
+    "SIM_MIN_RESOLUTION",
     "UNITS",
+    "WALKERS",
     "IncompleteSweepError",
     "RunStats",
     "SweepConfig",

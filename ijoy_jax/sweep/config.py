@@ -13,6 +13,7 @@ A sweep file has these tables (every key optional unless noted; units in bracket
     method = "exhaustive"         # "exhaustive", "ordered" or "naive"
     kernel = "xla"                # FootCost: "xla" or "pallas" (the fused kernel: GPU; interpreted elsewhere)
     random_samples = 0            # cells drawn from [random] (crossed with the grid)
+    walker = "perfect"            # "perfect" (every step lands as sent) or "mjx" (the MuJoCo XLA biped)
 
     [robot]                       # fixed robot values (HRP-2's defaults otherwise)
     margin = 0.02                 # [m]
@@ -40,12 +41,29 @@ A sweep file has these tables (every key optional unless noted; units in bracket
     [random]                      # uniform [lo, hi] per random cell (not density)
     "robot.margin" = [0.0, 0.1]
 
+    [sim]                         # walker = "mjx" only: the physics (ijoy_jax.sim.physics.Dynamics),
+    friction = 0.8                # a number, or [lo, hi] uniform per replicate as the commands
+    stance_noise = [0.0, 0.02]    # [m]; also mass_scale, kp_scale, latency [s], push [N s]
+
 Parameter names are ``robot.<name>`` (``w``, ``rotation_weight``, ``margin``,
 ``step_time``, ``foot_length``, ``foot_width``, ``max_sole_pitch``,
 ``max_sole_roll``, ``max_sole_distance``, ``density``,
-``metrics.<TerrainMetrics field>``) and ``terrain.<field of the family's
-parameter class>``. In ``[grid]`` and ``[random]`` they may be written quoted
-(``"robot.w" = [...]``) or as nested tables (``[grid.robot] w = [...]``).
+``metrics.<TerrainMetrics field>``), ``terrain.<field of the family's
+parameter class>`` and, with ``walker = "mjx"``, ``sim.<field>`` (the fields of
+:class:`ijoy_jax.sim.physics.Dynamics`: ``friction``, ``mass_scale``, ``kp_scale``,
+``latency`` [s], ``stance_noise`` [m], ``push`` [N s]; bounds in
+:data:`ijoy_jax.sim.physics.BOUNDS`). In ``[grid]`` and
+``[random]`` they may be written quoted (``"robot.w" = [...]``) or as nested tables
+(``[grid.robot] w = [...]``).
+
+The simulated walker (``walker = "mjx"``) walks the MJX biped
+(:func:`ijoy_jax.sim.walker.rollout_batch`) in place of the perfect robot: the same
+scenarios plus the per-scenario physics metrics (:data:`ijoy_jax.sweep.PHYSICS_METRICS`).
+Its body is static, so the sweep must fit it, checked before compute: the step time
+is the controller's (``robot.step_time`` 0.8 s, not swept), the footprint is the
+physical foot's (``robot.foot_length``/``foot_width`` fixed in ``[robot]``, not
+swept), the map's cells are at least :data:`SIM_MIN_RESOLUTION` wide, and the robot
+standing at the start zone's centre stands on the map.
 
 A *cell* is one combination of grid values (times one random sample); each cell
 runs ``scenarios_per_cell`` scenarios, replicate ``r`` of every cell on the same
@@ -96,6 +114,8 @@ from ijoy_jax.terrain.family import Family, ParamError
 
 __all__ = [
     "COMMAND_KEYS",
+    "SIM_MIN_RESOLUTION",
+    "WALKERS",
     "HOST_MEMORY_FRACTION",
     "MAX_DENSITY",
     "MAX_MAP_CELLS",
@@ -147,6 +167,13 @@ MAX_OBJECT_SLOTS = 1024
 COMMAND_KEYS = ("vx", "vy", "wz")
 """Joystick command components: forward (m/s), left (m/s), turn (rad/s), in the stance foot's frame."""
 
+WALKERS = ("perfect", "mjx")
+"""``[sweep] walker``: the paper's perfect robot, or the MuJoCo XLA biped (:mod:`ijoy_jax.sim`)."""
+
+SIM_MIN_RESOLUTION = 0.01
+"""Finest map resolution (m) of a ``walker = "mjx"`` sweep: MJX collides each 9 mm sole sphere with
+``(ceil(2 r / res) + 1)^2`` height-field prisms per physics step, 4 at 2 cm, 9 at 1 cm, 25 at 5 mm."""
+
 MAX_SCENARIOS = 10**8
 """Most scenarios one sweep may declare (cells x scenarios_per_cell): their host tables alone take tens of GB."""
 HOST_MEMORY_FRACTION = 0.5
@@ -154,9 +181,9 @@ HOST_MEMORY_FRACTION = 0.5
 _TABLE_COPIES = 3  # the scenario table, its index by scenario while running, the loaded results at the end
 _PROGRESS_EVERY = 1 << 22  # replicates between progress lines while drawing commands (~1 s)
 
-_SECTIONS = ("sweep", "robot", "terrain", "command", "grid", "random")
+_SECTIONS = ("sweep", "robot", "terrain", "command", "grid", "random", "sim")
 _SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps", "method", "kernel",
-               "random_samples")
+               "random_samples", "walker")
 _TERRAIN_KEYS = ("family", "shape", "resolution", "has_height", "max_count", "params")
 
 
@@ -179,13 +206,15 @@ class SweepConfig:
       kernel: FootCost path, one of :data:`ijoy_jax.select.KERNELS` (static): "pallas" runs the fused
         kernel (the same decisions; several times faster on a GPU, slow interpreted on a CPU).
       random_samples: random cells drawn from ``random`` (0: none).
+      walker: who executes the steps, one of :data:`WALKERS` (static).
       family: terrain family name; shape (nx, ny) cells; resolution (m);
         has_height; max_count (static object slots, None: the family's default).
       robot: fixed robot values, ``{name: float}`` (names as in :data:`ROBOT_DEFAULTS`).
       terrain_params: fixed terrain parameters, ``{field: number}``.
       command: ``{component: (lo, hi)}``, lo == hi for a fixed value (m/s, rad/s).
-      grid: ``{"robot.x" | "terrain.x": (values...)}``.
-      random: ``{"robot.x" | "terrain.x": (lo, hi)}``.
+      grid: ``{"robot.x" | "terrain.x" | "sim.x": (values...)}``.
+      random: ``{"robot.x" | "terrain.x" | "sim.x": (lo, hi)}``.
+      sim: ``{key: (lo, hi)}`` of the ``[sim]`` table, lo == hi for a fixed value (``walker = "mjx"``).
       source: the file it came from; text: the file's text (saved with the results).
     """
 
@@ -197,6 +226,7 @@ class SweepConfig:
     method: str = "exhaustive"
     kernel: str = "xla"
     random_samples: int = 0
+    walker: str = "perfect"
     family: str = "obstacles"
     shape: tuple[int, int] = (150, 100)
     resolution: float = 0.02
@@ -208,6 +238,7 @@ class SweepConfig:
         default_factory=lambda: {"vx": (0.25, 0.25), "vy": (0.0, 0.0), "wz": (0.0, 0.0)})
     grid: Mapping[str, tuple] = dataclasses.field(default_factory=dict)
     random: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
+    sim: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
     source: str = "<string>"
     text: str = ""
 
@@ -331,6 +362,19 @@ def _robot_value(chk: _Checker, key: str, name: str, value) -> float:
     return v
 
 
+def _sim_value(chk: _Checker, key: str, name: str, value) -> float:
+    """Check one physics value (``name`` a :class:`ijoy_jax.sim.physics.Dynamics` field) against its bounds."""
+    from ijoy_jax.sim import physics
+
+    v = chk.number(key, value)
+    b = physics.BOUNDS[name]
+    if v < b.lo or (b.strict and v == b.lo) or v > b.hi:
+        lo = f"> {b.lo:g}" if b.strict else f">= {b.lo:g}"
+        chk.fail(key, f"must be {lo} and <= {b.hi:g}{' ' + b.unit if b.unit else ''} ({b.why}; "
+                      f"ijoy_jax.sim.physics.BOUNDS), got {v}")
+    return v
+
+
 def _terrain_value(chk: _Checker, key: str, fam: Family, name: str, value, max_count: int | None):
     """Check one terrain parameter value by its family's rule (:meth:`ijoy_jax.terrain.family.Family.check`)."""
     chk.int64(key, value)  # a longer integer would overflow in the float conversion
@@ -390,6 +434,10 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         kw["method"] = chk.string("sweep.method", sweep["method"], METHODS)
     if "kernel" in sweep:
         kw["kernel"] = chk.string("sweep.kernel", sweep["kernel"], KERNELS)
+    if "walker" in sweep:
+        kw["walker"] = chk.string("sweep.walker", sweep["walker"], WALKERS)
+    mjx = kw.get("walker") == "mjx"
+    sim_fields = _sim_fields() if mjx else ()
 
     terrain = chk.table("terrain", raw.get("terrain", {}))
     chk.unknown("terrain.", terrain, _TERRAIN_KEYS)
@@ -442,20 +490,38 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         cmd[k] = chk.range(f"command.{k}", v) if isinstance(v, list) else (chk.number(f"command.{k}", v),) * 2
     kw["command"] = cmd
 
+    sim = chk.table("sim", raw.get("sim", {}))
+    if sim and not mjx:
+        chk.fail(f"sim.{next(iter(sim))}", 'physics needs [sweep] walker = "mjx" (the perfect robot has none)')
+    chk.unknown("sim.", sim, sim_fields)
+    kw["sim"] = {k: (tuple(_sim_value(chk, f"sim.{k}[{i}]", k, x) for i, x in enumerate(chk.range(f"sim.{k}", v)))
+                     if isinstance(v, list) else (_sim_value(chk, f"sim.{k}", k, v),) * 2) for k, v in sim.items()}
+
     def param(dotted: str, key: str, value):
-        """Validate one swept value of the parameter ``dotted`` ("robot.x" or "terrain.x"), reported as ``key``."""
+        """Validate one swept value of the parameter ``dotted`` ("robot.x", "terrain.x" or "sim.x"), reported as
+        ``key``."""
         head, _, name = dotted.partition(".")
         if head == "robot":
             return _robot_value(chk, key, name, value)
+        if head == "sim":
+            return _sim_value(chk, key, name, value)
         return _terrain_value(chk, key, fam, name, value, max_count)
 
     def check_name(section: str, key: str) -> None:
         head, _, name = key.partition(".")
-        known = tuple(f"robot.{k}" for k in ROBOT_DEFAULTS) + tuple(f"terrain.{k}" for k in fields)
+        if head == "sim" and not mjx:
+            chk.fail(f"{section}.{key}", 'physics needs [sweep] walker = "mjx" (the perfect robot has none)')
+        known = (tuple(f"robot.{k}" for k in ROBOT_DEFAULTS) + tuple(f"terrain.{k}" for k in fields)
+                 + tuple(f"sim.{k}" for k in sim_fields))
         if key not in known:
             chk.fail(f"{section}.{key}", f"unknown parameter; known: {', '.join(known)}")
-        if (head == "robot" and name in kw["robot"]) or (head == "terrain" and name in kw["terrain_params"]):
+        fixed = {"robot": kw["robot"], "terrain": kw["terrain_params"], "sim": kw["sim"]}[head]
+        if name in fixed:
             chk.fail(f"{section}.{key}", f"also set as a fixed value in [{head}]; set it in one place")
+        if mjx and key in ("robot.step_time", "robot.foot_length", "robot.foot_width"):
+            what = ("the simulated controller's step time (WalkConfig.step_time)" if name == "step_time" else
+                    "the simulated foot's size (the MuJoCo model's, one per sweep)")
+            chk.fail(f"{section}.{key}", f'is {what} with walker = "mjx": fix it in [robot], do not sweep it')
 
     grid = _flatten(chk.table("grid", raw.get("grid", {})))
     out_grid = {}
@@ -489,6 +555,8 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
 
     cfg = SweepConfig(**kw)
     _check_size(chk, cfg)  # before cells() or scenarios() allocate anything
+    if mjx:
+        _check_walker(chk, cfg)
     # Cross-field checks (the family's ordered ranges) on every cell's resolved values, still before any compute.
     # The start zone must leave room for the terrain on the sweep's map (family.Family.validate).
     # Only the terrain values matter: each distinct combination is checked once, in cell order (the first
@@ -501,7 +569,48 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
                          resolution=cfg.resolution)
         except ParamError as e:
             chk.fail(_blame(fam, e.field, kw), e.reason)
+        if mjx:
+            _check_start_fits(chk, cfg, _terrain_of(cfg, row, "start_x"), _terrain_of(cfg, row, "start_y"))
     return cfg
+
+
+def _sim_fields() -> tuple[str, ...]:
+    """The ``sim.<field>`` names (:data:`ijoy_jax.sim.physics.FIELDS`; imported only for a ``walker = "mjx"``
+    sweep, which needs MuJoCo anyway)."""
+    from ijoy_jax.sim import physics
+
+    return physics.FIELDS
+
+
+def _check_walker(chk: _Checker, cfg: SweepConfig) -> None:
+    """A ``walker = "mjx"`` sweep fits the simulated biped: its step time and resolution (before compute)."""
+    from ijoy_jax.sim.controller import WalkConfig
+
+    step = WalkConfig().step_time
+    if abs(cfg.robot.get("step_time", ROBOT_DEFAULTS["step_time"]) - step) > 1e-6:
+        chk.fail("robot.step_time", f'must be the simulated controller\'s {step} s with walker = "mjx" '
+                                    f"(WalkConfig.step_time), got {cfg.robot['step_time']}")
+    if cfg.resolution < SIM_MIN_RESOLUTION:
+        chk.fail("terrain.resolution", f'must be >= {SIM_MIN_RESOLUTION} m with walker = "mjx" '
+                                       f"(sweep.config.SIM_MIN_RESOLUTION: each sole sphere meets "
+                                       f"(ceil(2 r / res) + 1)^2 height-field prisms per physics step), "
+                                       f"got {cfg.resolution}")
+
+
+def _check_start_fits(chk: _Checker, cfg: SweepConfig, start_x: float, start_y: float) -> None:
+    """The simulated robot standing at the start point (feet side by side, the step-in-place width apart, facing
+    +x) must stand on the map: MuJoCo's height field ends at its edges."""
+    length = cfg.robot.get("foot_length", ROBOT_DEFAULTS["foot_length"])
+    width = cfg.robot.get("foot_width", ROBOT_DEFAULTS["foot_width"])
+    apart = float(robots.hrp2().p0[1])  # the step in place, HRP-2's at every footprint and density
+    ext_x, ext_y = cfg.shape[0] * cfg.resolution, cfg.shape[1] * cfg.resolution
+    x, y = start_x * ext_x, start_y * ext_y
+    half_x, half_y = length / 2, apart / 2 + width / 2
+    if x - half_x < 0 or x + half_x > ext_x or y - half_y < 0 or y + half_y > ext_y:
+        chk.fail("terrain.shape", f"the simulated robot standing at the start point ({x:.3g}, {y:.3g}) m needs "
+                                  f"[{x - half_x:.3g}, {x + half_x:.3g}] x [{y - half_y:.3g}, {y + half_y:.3g}] m "
+                                  f"of ground, beyond the {ext_x:.3g} x {ext_y:.3g} m map (its height field ends "
+                                  f"there): a larger map or another start_x/start_y")
 
 
 def _blame(fam: Family, field: str, kw: dict) -> str:
@@ -536,10 +645,12 @@ def table_bytes(cfg: SweepConfig, num_scenarios: int | None = None) -> int:
       >>> 100_000 < table_bytes(cfg) < 10_000_000
       True
     """
-    from ijoy_jax.sweep.results import METRICS
+    from ijoy_jax.sweep.results import METRICS, PHYSICS_METRICS
 
     fam = generators.FAMILIES[cfg.family]
     columns = 4 + len(ROBOT_DEFAULTS) + len(fam.rules) + len(COMMAND_KEYS) + len(METRICS) + len(fam.metric_names)
+    if cfg.walker == "mjx":
+        columns += len(_sim_fields()) + len(PHYSICS_METRICS)
     n = cfg.num_scenarios if num_scenarios is None else num_scenarios
     return n * columns * 8 * _TABLE_COPIES
 
@@ -621,10 +732,12 @@ def cells(cfg: SweepConfig):
     return df
 
 
-def _draw_commands(cfg: SweepConfig, reps: int, progress: bool) -> np.ndarray:
+def _draw_commands(cfg: SweepConfig, reps: int, progress: bool, stream: int = 2,
+                   ranges: list | None = None) -> np.ndarray:
     """(reps, 3): replicate r's command, ``np.random.default_rng([seed, 2, r]).uniform(lo, hi)`` per component
     (vectorised, bit-identical: :func:`ijoy_jax.sweep.seeding.uniform_draws`); a progress line on stderr each
-    time another :data:`_PROGRESS_EVERY` replicates are done."""
+    time another :data:`_PROGRESS_EVERY` replicates are done. With ``stream`` and ``ranges``: the same for
+    other per-replicate draws (the ``[sim]`` ranges: ``default_rng([seed, 3, r])``), (reps, len(ranges))."""
     t0 = time.perf_counter()
     shown = 0
 
@@ -636,10 +749,12 @@ def _draw_commands(cfg: SweepConfig, reps: int, progress: bool) -> np.ndarray:
             return
         shown = done
         rate = done / max(time.perf_counter() - t0, 1e-9)
-        print(f"[ijoy sweep] drawing commands: {done}/{reps} replicates  {rate:.0f}/s  "
+        what = "commands" if stream == 2 else "physics"
+        print(f"[ijoy sweep] drawing {what}: {done}/{reps} replicates  {rate:.0f}/s  "
               f"ETA {(reps - done) / rate:.0f} s", file=sys.stderr, flush=True)
 
-    return seeding.uniform_draws([cfg.seed, 2], [cfg.command[k] for k in COMMAND_KEYS], reps, on_block=report,
+    ranges = [cfg.command[k] for k in COMMAND_KEYS] if ranges is None else ranges
+    return seeding.uniform_draws([cfg.seed, stream], ranges, reps, on_block=report,
                                  on_replicate=lambda i: report(i + 1))
 
 
@@ -649,11 +764,15 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     Scenario ``cell * scenarios_per_cell + replicate``; its terrain key is
     ``fold_in(key(seed), replicate)`` and its command is drawn per replicate
     from ``np.random.default_rng([seed, 2, replicate])``, so replicate r is the
-    same terrain and command in every cell.
+    same terrain and command in every cell. The ``[sim]`` ranges of a
+    ``walker = "mjx"`` sweep are drawn per replicate as well, from
+    ``np.random.default_rng([seed, 3, replicate])`` (paired across cells too).
 
     Columns: ``scenario``, ``cell``, ``replicate``, ``robot.<name>`` (all of
     :data:`ROBOT_DEFAULTS`), ``terrain.<field>`` (all of the family's
-    parameters), ``command.vx`` (m/s), ``command.vy`` (m/s), ``command.wz`` (rad/s).
+    parameters), ``command.vx`` (m/s), ``command.vy`` (m/s), ``command.wz`` (rad/s),
+    and for ``walker = "mjx"`` ``sim.<field>`` (every :class:`ijoy_jax.sim.physics.Dynamics`
+    field: the grid's, random cell's, ``[sim]``'s or the nominal value).
 
     Args:
       cfg: the sweep.
@@ -682,8 +801,10 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     # fancy indexing per column, then pandas stacking the columns into a block, took ~22 s of 28).
     rules = generators.FAMILIES[cfg.family].rules
     fields = [f.name for f in dataclasses.fields(cfg.params_class)]
+    sim_fields = _sim_fields() if cfg.walker == "mjx" else ()
     names = ["scenario", "cell", "replicate", *(f"robot.{n}" for n in ROBOT_DEFAULTS),
-             *(f"terrain.{n}" for n in fields), *(f"command.{k}" for k in COMMAND_KEYS)]
+             *(f"terrain.{n}" for n in fields), *(f"command.{k}" for k in COMMAND_KEYS),
+             *(f"sim.{k}" for k in sim_fields)]
     ints = {"scenario", "cell", "replicate", *(f"terrain.{n}" for n in fields if rules[n].integer)}
     floats = [n for n in names if n not in ints]
     block = np.empty((len(floats), total))
@@ -717,6 +838,20 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
             out[:] = np.asarray(value).astype(out.dtype)
     for j, k in enumerate(COMMAND_KEYS):
         per_replicate(cols[f"command.{k}"], cmd[:, j])
+    if sim_fields:
+        from ijoy_jax.sim import physics
+
+        drawn = [k for k, (lo, hi) in cfg.sim.items() if lo != hi]
+        draws = (_draw_commands(cfg, reps, progress, stream=3, ranges=[cfg.sim[k] for k in drawn])
+                 if drawn else np.zeros((reps, 0)))
+        for k in sim_fields:
+            out = cols[f"sim.{k}"]
+            if f"sim.{k}" in c:
+                per_cell(out, c[f"sim.{k}"].to_numpy().astype(out.dtype))
+            elif k in drawn:
+                per_replicate(out, draws[:, drawn.index(k)])
+            else:
+                out[:] = cfg.sim.get(k, (getattr(physics.NOMINAL, k),) * 2)[0]
     df = pd.DataFrame(block.T, columns=floats, copy=False)
     for i, n in enumerate(names):
         if n in ints:

@@ -22,10 +22,23 @@ metric weights), the start stance from the terrain's start zone, and
 :meth:`ijoy_jax.Trajectory.summary` plus the family's extra metrics
 (:meth:`ijoy_jax.terrain.family.Family.metrics`; bars: whether the robot got past them).
 
+Physics (``walker = "mjx"``). The MJX biped (:func:`ijoy_jax.sim.walker.make_sim`
+for the sweep's grid and footprint, built once per run) walks instead of the
+perfect robot, each scenario with its :class:`ijoy_jax.sim.physics.Dynamics`
+(the ``sim.*`` columns) and noise key (``fold_in(terrain key, 1)``: replicate r
+is pushed alike in every cell). A chunk is three programs: a vmap that
+generates the terrains, robots and starts, the batch of simulated rollouts
+through :func:`ijoy_jax.sim.walker.rollout_batch` itself (the Sim's MJX models
+are traced arguments, shared and replicated like the targets; its program
+is the one any caller of those shapes uses), and a vmap of
+:func:`ijoy_jax.sim.walker.summary` and the family metrics. Everything else
+(plan, chunk sizes, sharding, parts, resume, processes, aggregates) is the
+same as for the perfect robot.
+
 Compiles (measured by :func:`trace_count`, tested): parameter values never
-recompile; each density value compiles once (its action-set size is a shape;
-no padding of action sets). Static too: the terrain family, grid shape,
-resolution, 2D/2.5D flag, ``num_steps``, ``method``, ``kernel`` and the chunk shape
+recompile (physics values neither: they are traced leaves); each density value compiles once (its
+action-set size is a shape; no padding of action sets). Static too: the terrain family, grid shape,
+resolution, 2D/2.5D flag, ``num_steps``, ``method``, ``kernel``, ``walker`` and the chunk shape
 ``min(chunk_size, scenarios of that density)`` rounded up to a multiple of
 the device count. When ``robot.rotation_weight`` is not swept, the targets F
 and L_i are built once per density outside the jit and shared by every
@@ -141,10 +154,11 @@ class _Static(NamedTuple):
     num_steps: int
     method: str
     kernel: str
+    walker: str
 
 
-def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_vals, terrain_vals, command):
-    """One scenario: terrain, robot, start and rollout; returns the trajectory's summary (scalars)."""
+def _setup(static: _Static, base: robots.Robot, key, seed, robot_vals, terrain_vals):
+    """One scenario's terrain key, terrain parameters, terrain, robot and start stance."""
     fam = generators.FAMILIES[static.family]
     params = fam.params(**terrain_vals)
     kw = {} if static.max_count is None else {"max_count": static.max_count}
@@ -154,13 +168,22 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_val
     robot = robots.set_leaves(base, {k: robot_vals[k] for k in robots.SCALAR_LEAVES})
     centre = generators.start_point(params, shape=static.shape, resolution=static.resolution)
     start = robots.start_stance(base, centre[0], centre[1])  # side by side at the step-in-place width, facing +x
+    return tkey, params, terrain, robot, start
+
+
+def _family_metrics(static: _Static, tkey, params, feet, robot) -> dict:
+    """The family's extra metrics (bars: whether the robot got past them), from the terrain it generated."""
+    fam = generators.FAMILIES[static.family]
+    return fam.metrics(tkey, params, feet, robot.foot_length, robot.foot_width, shape=static.shape,
+                       resolution=static.resolution, max_count=static.max_count)
+
+
+def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_vals, terrain_vals, command):
+    """One scenario of the perfect robot: terrain, robot, start and rollout; the trajectory's summary (scalars)."""
+    tkey, params, terrain, robot, start = _setup(static, base, key, seed, robot_vals, terrain_vals)
     traj = rollout(terrain, robot, start, command, static.num_steps, method=static.method, targets=targets,
                    kernel=static.kernel)
-    summary = traj.summary()
-    # The family's extra metrics (bars: whether the robot got past them), from the terrain it generated.
-    summary.update(fam.metrics(tkey, params, traj.feet, robot.foot_length, robot.foot_width, shape=static.shape,
-                               resolution=static.resolution, max_count=static.max_count))
-    return summary
+    return {**traj.summary(), **_family_metrics(static, tkey, params, traj.feet, robot)}
 
 
 def _counting_traces(fn):
@@ -177,7 +200,8 @@ def _counting_traces(fn):
     return counted, lambda: traces
 
 
-def _chunk(static: _Static, base, targets, key, seeds, robot_vals, terrain_vals, commands):
+def _chunk(static: _Static, base, targets, key, sim, seeds, robot_vals, terrain_vals, commands, sim_vals):
+    """A chunk of the perfect robot: one vmapped program (``sim`` and ``sim_vals`` are None and {})."""
     fn = lambda s, r, t, c: _scenario(static, base, targets, key, s, r, t, c)  # noqa: E731
     return jax.vmap(fn)(seeds, robot_vals, terrain_vals, commands)
 
@@ -186,9 +210,57 @@ _counted_chunk, _chunk_traces = _counting_traces(_chunk)
 _run_chunk = jax.jit(_counted_chunk, static_argnames=("static",))
 
 
+def _prepare(static: _Static, base, key, seeds, robot_vals, terrain_vals):
+    """A physics chunk's inputs of :func:`ijoy_jax.sim.walker.rollout_batch`: per scenario the terrain, robot,
+    start and the key of its stance noise and pushes (``fold_in(terrain key, 1)``: replicate r's in every cell)."""
+
+    def one(seed, r, t):
+        tkey, _, terrain, robot, start = _setup(static, base, key, seed, r, t)
+        return terrain, robot, start, jax.random.fold_in(tkey, 1)
+
+    return jax.vmap(one)(seeds, robot_vals, terrain_vals)
+
+
+def _finish(static: _Static, base, key, seeds, robot_vals, terrain_vals, traj) -> dict:
+    """A physics chunk's per-scenario summary (:func:`ijoy_jax.sim.walker.summary`) and family metrics."""
+    from ijoy_jax.sim import walker
+
+    def one(seed, r, t, tr):
+        tkey, params, _, robot, _ = _setup(static, base, key, seed, r, t)  # the terrain itself is not used
+        return {**walker.summary(tr), **_family_metrics(static, tkey, params, tr.feet, robot)}
+
+    return jax.vmap(one)(seeds, robot_vals, terrain_vals, traj)
+
+
+_counted_prepare, _prepare_traces = _counting_traces(_prepare)
+_run_prepare = jax.jit(_counted_prepare, static_argnames=("static",))
+_run_finish = jax.jit(_finish, static_argnames=("static",))
+
+
+def _physics_chunk(static: _Static, base, targets, key, sim, seeds, robot_vals, terrain_vals, commands, sim_vals):
+    """A chunk of the MJX biped: the scenarios' terrains, robots and starts (one small program), their rollouts
+    through :func:`ijoy_jax.sim.walker.rollout_batch` (its own program, shared with any other caller of the
+    same shapes) with the scenarios' :class:`ijoy_jax.sim.physics.Dynamics`, then the summaries (another small
+    program). Traced under one jit (:func:`scenario_bytes`) the three are one program."""
+    from ijoy_jax.sim import physics, walker
+
+    terrains, robots_, starts, keys = _run_prepare(static, base, key, seeds, robot_vals, terrain_vals)
+    traj = walker.rollout_batch(sim, terrains, robots_, starts, commands, num_steps=static.num_steps,
+                                method=static.method, targets=targets, kernel=static.kernel,
+                                dynamics=physics.Dynamics(**sim_vals), key=keys)
+    return _run_finish(static, base, key, seeds, robot_vals, terrain_vals, traj)
+
+
+def _chunk_runner(static: _Static):
+    """The function that runs a chunk: the perfect robot's jitted chunk or the physics chunk's three programs."""
+    return _run_chunk if static.walker == "perfect" else _physics_chunk
+
+
 def trace_count() -> int:
-    """How many times the chunk function has been traced (compiled) in this process."""
-    return _chunk_traces()
+    """How many chunk programs have been traced (compiled) in this process: the perfect robot's chunk function,
+    plus each physics chunk shape's preparation (its rollouts are :func:`ijoy_jax.sim.walker.rollout_batch`'s
+    program, counted by :func:`ijoy_jax.sim.walker.compiled_programs`)."""
+    return _chunk_traces() + _prepare_traces()
 
 
 @dataclasses.dataclass
@@ -205,6 +277,10 @@ class RunStats:
         plan's chunk size (the requested one rounded up to a multiple of devices).
       first_chunk_s: per density, wall time of its first chunk (includes compile).
       run_s: total wall time of this call.
+      rate: scenarios/s over the chunks after each density's first (0 when there were none).
+      physics_steps: physics steps per scenario (``walker = "mjx"``: the steps and the robot's one standing
+        step, times the control ticks per step and the physics steps per tick; 0 for the perfect robot), so
+        ``rate * physics_steps`` is the physics steps/s.
     """
 
     out: Path
@@ -217,6 +293,8 @@ class RunStats:
     chunk_size: int = 0
     first_chunk_s: dict = dataclasses.field(default_factory=dict)
     run_s: float = 0.0
+    rate: float = 0.0
+    physics_steps: int = 0
 
 
 def _base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
@@ -375,10 +453,12 @@ def _local_devices(devices) -> list:
     return local[:devices]
 
 
-def _progress(done: int, total: int, rate: float, chunk: int, nchunks: int, who: str = "") -> None:
+def _progress(done: int, total: int, rate: float, chunk: int, nchunks: int, who: str = "",
+              physics_steps: int = 0) -> None:
     eta = (total - done) / rate if rate > 0 else float("nan")
+    physics = f" ({rate * physics_steps / 1e6:.3g} M physics steps/s)" if physics_steps else ""
     line = (f"[ijoy sweep{who}] {done}/{total} scenarios  chunk {chunk}/{nchunks}  "
-            f"{rate:.1f} scenarios/s  ETA {eta:.0f} s")
+            f"{rate:.1f} scenarios/s{physics}  ETA {eta:.0f} s")
     end = "\r" if sys.stderr.isatty() and done < total else "\n"
     print(line.ljust(78), end=end, file=sys.stderr, flush=True)
 
@@ -399,8 +479,9 @@ def _process_layout(process_id, num_processes) -> tuple[int, int]:
     return process_id, num_processes
 
 
-def _batch(rows, size: int, robot_cols, terrain_cols):
-    """Per-scenario inputs of a chunk: ``rows`` padded to ``size`` by repeating the last one (NumPy)."""
+def _batch(rows, size: int, robot_cols, terrain_cols, sim_cols=()):
+    """Per-scenario inputs of a chunk: ``rows`` padded to ``size`` by repeating the last one (NumPy): the
+    replicates, robot values, terrain values, commands and physics values ({} for the perfect robot)."""
     n = len(rows)
     pad = np.concatenate([np.arange(n), np.full(size - n, n - 1)])
 
@@ -411,7 +492,8 @@ def _batch(rows, size: int, robot_cols, terrain_cols):
     terrain_vals = {c.partition(".")[2]: col(c, np.int32 if rows[c].dtype.kind == "i" else np.float32)
                     for c in terrain_cols}
     commands = np.stack([col(f"command.{k}", np.float32) for k in COMMAND_KEYS], axis=-1)
-    return col("replicate", np.int32), robot_vals, terrain_vals, commands
+    sim_vals = {c.partition(".")[2]: col(c, np.float32) for c in sim_cols}
+    return col("replicate", np.int32), robot_vals, terrain_vals, commands, sim_vals
 
 
 def _shared(table, base):
@@ -423,7 +505,8 @@ def _shared(table, base):
 
 def _cols(table):
     robot_cols = [f"robot.{k}" for k in ROBOT_DEFAULTS if k != "density"]
-    return robot_cols, [c for c in table.columns if c.startswith("terrain.")]
+    return (robot_cols, [c for c in table.columns if c.startswith("terrain.")],
+            [c for c in table.columns if c.startswith("sim.")])
 
 
 def _device_bytes(device) -> int | None:
@@ -440,26 +523,47 @@ def _device_bytes(device) -> int | None:
 
 def _static(cfg: SweepConfig) -> _Static:
     return _Static(cfg.family, cfg.shape, cfg.resolution, cfg.has_height, cfg.static_max_count,
-                   cfg.num_steps, cfg.method, cfg.kernel)
+                   cfg.num_steps, cfg.method, cfg.kernel, cfg.walker)
 
 
-def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot) -> tuple[int, int]:
+def _make_sim(cfg: SweepConfig, table):
+    """The MJX biped of a ``walker = "mjx"`` sweep (its map's grid, the sweep's fixed footprint; host-side, no
+    compile), or None for the perfect robot."""
+    if cfg.walker != "mjx":
+        return None
+    from ijoy_jax.sim import walker
+
+    size = {k: float(table[f"robot.{k}"].iloc[0]) for k in ("foot_length", "foot_width")}
+    return walker.make_sim(cfg.shape, cfg.resolution, robot=robots.hrp2(**size))
+
+
+def _physics_steps(sim, num_steps: int) -> int:
+    """Physics steps of one simulated rollout of ``num_steps`` steps (:attr:`RunStats.physics_steps`): the steps
+    and the standing warm-up step, each of control ticks of physics steps; 0 without a Sim."""
+    return 0 if sim is None else (num_steps + 1) * sim.cfg.ticks_per_step * sim.substeps
+
+
+def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot, sim=None) -> tuple[int, int]:
     """Device bytes of a chunk, from the compiled chunk function for one scenario (AOT: nothing runs).
 
     ``jit(...).lower(...).compile().memory_analysis()`` of a one-scenario chunk with ``base`` (pass
     the largest action set: memory grows with it), split into what every scenario adds (its inputs,
     outputs and XLA temporaries) and what the chunk holds once (the shared base robot, target tables
-    and key, e.g. 27 MB for 496 actions, 0.9 GB for 3307). The per-scenario part is an upper bound
-    of the temporaries' measured slope over batch sizes (BENCHMARKS.md has the figures).
+    and key, e.g. 27 MB for 496 actions, 0.9 GB for 3307; with ``walker = "mjx"`` also the MJX models of
+    ``sim``, built when None). The per-scenario part is an upper bound of the temporaries' measured slope
+    over batch sizes (BENCHMARKS.md has the figures). A physics chunk is measured as one program (its
+    three programs traced under one jit).
 
     Returns:
       ``(per_scenario, shared)`` in bytes.
     """
-    robot_cols, terrain_cols = _cols(table)
+    robot_cols, terrain_cols, sim_cols = _cols(table)
     base, targets = _shared(table, base)
     key = jax.random.key(cfg.seed)
-    batch = _batch(table.iloc[:1], 1, robot_cols, terrain_cols)
-    compiled = _run_chunk.lower(_static(cfg), base, targets, key, *batch).compile()
+    sim = _make_sim(cfg, table) if sim is None else sim
+    batch = _batch(table.iloc[:1], 1, robot_cols, terrain_cols, sim_cols)
+    runner = _run_chunk if cfg.walker == "perfect" else jax.jit(_physics_chunk, static_argnames=("static",))
+    compiled = runner.lower(_static(cfg), base, targets, key, sim, *batch).compile()
     mem = compiled.memory_analysis()
     if mem is None:
         raise RuntimeError("the backend reports no memory analysis")
@@ -493,19 +597,20 @@ def auto_chunk_size(bytes_per_scenario: int, device_bytes: int, num_devices: int
     return min(per_device * num_devices, cap)
 
 
-def default_chunk_size(cfg: SweepConfig, table, bases: dict, devices: list) -> int:
+def default_chunk_size(cfg: SweepConfig, table, bases: dict, devices: list, sim=None) -> int:
     """The chunk size used when none is given: :data:`DEFAULT_CHUNK` on CPU, else sized to device memory.
 
     On an accelerator with a known memory limit: :func:`auto_chunk_size` of
     :func:`scenario_bytes` for the largest action set (one extra ahead-of-time
-    compile); :data:`DEFAULT_CHUNK` when the backend reports no memory figure.
+    compile; ``sim``: a physics sweep's MJX biped); :data:`DEFAULT_CHUNK` when
+    the backend reports no memory figure.
     """
     mem = _device_bytes(devices[0])
     if mem is None:
         return DEFAULT_CHUNK
     base = max(bases.values(), key=lambda b: b.num_actions)
     try:
-        per, shared = scenario_bytes(cfg, table, base)
+        per, shared = scenario_bytes(cfg, table, base, sim)
     except RuntimeError:
         return DEFAULT_CHUNK
     return auto_chunk_size(per, mem, len(devices), shared_bytes=shared)
@@ -573,16 +678,17 @@ def run(
     table = scenarios(cfg, max_scenarios, progress=progress)
     # Host-side robots per density (cheap, no compile): footprint problems surface before any output.
     bases = {d: _base_robot(cfg, table, d) for d in dict.fromkeys(table["robot.density"].tolist())}
+    sim = _make_sim(cfg, table)  # the MJX biped of a physics sweep (host-side), before any output
     lock = _FolderLock(out, pid, nproc)  # one run per folder (members of a multi-process run share it)
     try:
-        return _run_locked(cfg, out, table, bases, devs, pid, nproc, chunk_size=chunk_size,
+        return _run_locked(cfg, out, table, bases, sim, devs, pid, nproc, chunk_size=chunk_size,
                            max_scenarios=max_scenarios, progress=progress, barrier_timeout_s=barrier_timeout_s,
                            t_start=t_start)
     finally:
         lock.release()
 
 
-def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, devs: list, pid: int, nproc: int, *,
+def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list, pid: int, nproc: int, *,
                 chunk_size, max_scenarios, progress: bool, barrier_timeout_s: float, t_start: float) -> RunStats:
     """:func:`run` once it holds the folder's lock."""
     ndev = len(devs)
@@ -595,7 +701,7 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, devs: list, pid
         # Resume with the folder's chunk size; otherwise process 0 sizes it and the others take its figure.
         prev = (old or mine or {}).get("plan", {}).get("chunk_size")
         chunk_size = distributed.agree(f"ijoy_sweep/chunk_size/{cfg.name}/{max_scenarios}",
-                                       lambda: prev or default_chunk_size(cfg, table, bases, devs), pid)
+                                       lambda: prev or default_chunk_size(cfg, table, bases, devs, sim), pid)
     chunk_size = -(-chunk_size // ndev) * ndev  # a multiple of the device count
     if ndev > 1:
         mesh = Mesh(np.array(devs), ("scenarios",))
@@ -645,10 +751,12 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, devs: list, pid
     manifest["sessions"].append(session)
     _write_json(record, manifest)
 
-    stats = RunStats(out=out, scenarios=len(table), chunks=len(plan), devices=ndev, chunk_size=chunk_size)
+    stats = RunStats(out=out, scenarios=len(table), chunks=len(plan), devices=ndev, chunk_size=chunk_size,
+                     physics_steps=_physics_steps(sim, cfg.num_steps))
     static = _static(cfg)
+    run_chunk = _chunk_runner(static)
     key = jax.random.key(cfg.seed)
-    robot_cols, terrain_cols = _cols(table)
+    robot_cols, terrain_cols, sim_cols = _cols(table)
     # Scenarios per density, counted once (per chunk, a pass over the whole table cost ~20 ms at 2e7 rows).
     per_density = {d: int(n) for d, n in table["robot.density"].value_counts(sort=False).items()}
     todo = [p for p in mine_plan if not (parts / _PART.format(p[0])).exists()]
@@ -665,17 +773,17 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, devs: list, pid
         t0 = time.perf_counter()
         if density not in shared_of:
             # Shared by every scenario: replicated on every device of the mesh.
-            shared = (*_shared(table, bases[density]), key)
+            shared = (*_shared(table, bases[density]), key, sim)
             shared_of[density] = shared if replicated is None else jax.device_put(shared, replicated)
-        base_d, targets, key_d = shared_of[density]
+        base_d, targets, key_d, sim_d = shared_of[density]
         rows = by_id.loc[ids]
         n = len(rows)
         size = min(chunk_size, per_density[density])
         size = -(-size // ndev) * ndev  # every device gets the same number of rows
-        batch = _batch(rows, size, robot_cols, terrain_cols)
+        batch = _batch(rows, size, robot_cols, terrain_cols, sim_cols)
         # Per-scenario inputs: split along the scenario axis over the mesh (one device: default device).
         batch = jax.tree.map(jnp.asarray, batch) if batched is None else jax.device_put(batch, batched)
-        summary = _run_chunk(static, base_d, targets, key_d, *batch)
+        summary = run_chunk(static, base_d, targets, key_d, sim_d, *batch)
         summary = jax.device_get(jax.block_until_ready(summary))
         result = rows.reset_index(drop=True).copy()
         for k, v in summary.items():
@@ -694,8 +802,9 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, devs: list, pid
         if progress:
             # Rate over compiled chunks only (the first chunk of a density includes its compile).
             rate = steady_n / steady_s if steady_n else n / dt
-            _progress(done_before + computed, total, rate, chunk_id + 1, len(plan), who)
+            _progress(done_before + computed, total, rate, chunk_id + 1, len(plan), who, stats.physics_steps)
     stats.computed = computed
+    stats.rate = steady_n / steady_s if steady_n else 0.0
     stats.compiles = trace_count() - traces0
     stats.run_s = time.perf_counter() - t_start
 
@@ -707,7 +816,8 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, devs: list, pid
 
         aggregate(load(out), cfg.swept).to_parquet(out / "aggregates.parquet", index=False)
     session.update(finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), run_s=stats.run_s,
-                   computed=computed, skipped_chunks=stats.skipped, compiles=stats.compiles,
+                   computed=computed, skipped_chunks=stats.skipped, compiles=stats.compiles, rate=stats.rate,
+                   physics_steps_per_scenario=stats.physics_steps,
                    first_chunk_s={str(k): v for k, v in stats.first_chunk_s.items()}, complete=complete)
     _write_json(record, manifest)
     if progress and not todo:

@@ -4,13 +4,16 @@ Per-scenario table (:func:`load`): one row per scenario with its parameters
 (``robot.*``, ``terrain.*``, ``command.*``), ids (``scenario``, ``cell``,
 ``replicate``, ``chunk``) and the metrics of :meth:`ijoy_jax.Trajectory.summary`
 (:data:`METRICS`, units in :data:`UNITS`), plus the terrain family's extra
-metrics (:data:`EXTRA_METRICS`, e.g. ``crossed`` for bars) when it has any.
+metrics (:data:`EXTRA_METRICS`, e.g. ``crossed`` for bars) when it has any, and for
+a ``walker = "mjx"`` sweep its physics (``sim.*``) and the physics metrics of
+:func:`ijoy_jax.sim.walker.summary` (:data:`PHYSICS_METRICS`).
 
 Aggregates (:func:`aggregate`): per cell and metric, ``mean``, ``std``
 (sample, ddof 1), ``n``, ``sem = std / sqrt(n)`` and the half-width
 ``ci95 = t_{0.975, n-1} * sem`` of a two-sided 95% Student-t interval for the
-mean (``mean +- ci95``; NaN for n < 2). Boolean metrics (``stopped``) are
-averaged as fractions. The t quantile comes from a table (n - 1 <= 30) and a
+mean (``mean +- ci95``; NaN for n < 2). Boolean metrics (``stopped``;
+``fell`` and ``collided``: the fall and collision rates) are averaged as
+fractions. The t quantile comes from a table (n - 1 <= 30) and a
 Cornish-Fisher expansion beyond (:func:`t_quantile`; no SciPy needed).
 Scenarios of a replicate share terrain and command across cells (paired), so
 differences between cells are estimated more precisely than these marginal
@@ -28,7 +31,8 @@ import numpy as np
 
 from ijoy_jax.terrain import generators
 
-__all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "PLAN_KEY", "UNITS", "IncompleteSweepError", "action_counts",
+__all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "PHYSICS_METRICS", "PHYSICS_PLOT_METRICS", "PLAN_KEY",
+           "PLOT_METRICS", "UNITS", "IncompleteSweepError", "action_counts",
            "aggregate", "b_max", "check_plans", "describe_plan", "load", "load_aggregates", "part_plan", "plan_hash",
            "plot", "plot_crossing", "t_quantile"]
 
@@ -36,6 +40,12 @@ METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "foot
            "invalid_footholds", "distance_along", "distance_across", "mean_deviation", "mean_foot_cost",
            "commands_not_finite", "unsupported_decisions")
 """Rollout metrics (:meth:`ijoy_jax.Trajectory.summary`) in every results table."""
+
+PHYSICS_METRICS = ("fell", "collided", "obstacle_contacts", "placement_error_mean", "placement_error_p95",
+                   "yaw_error_mean", "tilt_error_p95", "dynamics_invalid")
+"""Per-scenario metrics of a ``walker = "mjx"`` sweep (:func:`ijoy_jax.sim.walker.summary`): the robot fell,
+touched an obstacle (``collided``) and in how many steps, its touch-down errors (m, rad), and whether a
+physics value was out of bounds (``dynamics_invalid``; refused before compute, so False)."""
 
 EXTRA_METRICS = generators.METRIC_NAMES
 """Family-specific metrics (every family's ``metric_names``, :data:`ijoy_jax.terrain.generators.METRIC_NAMES`),
@@ -53,6 +63,10 @@ UNITS = {
     "robot.max_sole_pitch": "rad", "robot.max_sole_roll": "rad", "robot.max_sole_distance": "m",
     "robot.density": "x HRP-2's 496 actions", "command.vx": "m/s", "command.vy": "m/s", "command.wz": "rad/s",
     "bars_crossed": "bars", "crossed": "fraction", "terrain.width": "m",
+    "fell": "fraction", "collided": "fraction", "obstacle_contacts": "steps", "placement_error_mean": "m",
+    "placement_error_p95": "m", "yaw_error_mean": "rad", "tilt_error_p95": "rad", "dynamics_invalid": "fraction",
+    "sim.friction": "coefficient", "sim.mass_scale": "x nominal", "sim.kp_scale": "x nominal", "sim.latency": "s",
+    "sim.stance_noise": "m", "sim.push": "N s",
 }
 """Units of metrics and parameters, for tables and axis labels."""
 
@@ -239,7 +253,7 @@ def aggregate(df, by=None):
     Args:
       df: a per-scenario table (:func:`load`).
       by: parameter columns to keep alongside ``cell`` (default: every
-        ``robot.*``/``terrain.*`` column that varies).
+        ``robot.*``/``terrain.*``/``sim.*`` column that varies).
 
     Returns:
       pandas.DataFrame, one row per cell: ``cell``, the ``by`` columns, and
@@ -248,12 +262,12 @@ def aggregate(df, by=None):
     import pandas as pd
 
     if by is None:
-        by = [c for c in df.columns if c.startswith(("robot.", "terrain.")) and df[c].nunique() > 1]
+        by = [c for c in df.columns if c.startswith(("robot.", "terrain.", "sim.")) and df[c].nunique() > 1]
     rows = []
     for cell, g in df.groupby("cell", sort=True):
         row = {"cell": cell, **{c: g[c].iloc[0] for c in by}, "n": len(g)}
         t = t_quantile(len(g) - 1)
-        for m in METRICS + tuple(e for e in EXTRA_METRICS if e in df.columns):
+        for m in METRICS + tuple(e for e in EXTRA_METRICS + PHYSICS_METRICS if e in df.columns):
             x = g[m].to_numpy(np.float64)
             std = float(np.std(x, ddof=1)) if len(x) > 1 else math.nan
             sem = std / math.sqrt(len(x))
@@ -285,8 +299,18 @@ def action_counts(densities) -> np.ndarray:
     return np.array([sizes[v] for v in d.tolist()], np.float64).reshape(d.shape)
 
 
-def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_foot_cost", "steps_in_place",
-                                     "steps_stationary", "footholds_on_obstacles"), title: str = ""):
+PLOT_METRICS = ("distance_along", "mean_deviation", "mean_foot_cost", "steps_in_place", "steps_stationary",
+                "footholds_on_obstacles")
+"""The panels :func:`plot` draws by default for a perfect-robot sweep."""
+
+PHYSICS_PLOT_METRICS = ("collided", "fell", "obstacle_contacts", "placement_error_mean", "distance_along",
+                        "footholds_on_obstacles")
+"""The panels :func:`plot` draws by default for a ``walker = "mjx"`` sweep: collision and fall rates first."""
+
+_TITLES = {"collided": "collision rate (rollouts touching an obstacle)", "fell": "fall rate (rollouts that fell)"}
+
+
+def plot(agg, out, x=None, metrics=None, title: str = ""):
     """Plot aggregates against one swept parameter, one panel per metric (up to 3 columns, titled with the
     metric and its unit), points at the mean over scenarios with 95% CI error bars.
 
@@ -294,7 +318,8 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
       agg: :func:`aggregate` output.
       out: PNG path.
       x: the parameter on the x axis (default: the swept column with most values).
-      metrics: the metrics to plot (one panel each).
+      metrics: the metrics to plot (one panel each; default :data:`PHYSICS_PLOT_METRICS` for a physics sweep,
+        else :data:`PLOT_METRICS`).
       title: figure title.
 
     Other swept columns become one line each (legend). A robot parameter's
@@ -303,13 +328,19 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
     density is drawn as the number of actions per foot (:func:`action_counts`)
     on a log axis with the paper's 496 (:data:`PAPER_ACTIONS`) marked. Returns ``out``.
 
+    A physics parameter (``sim.*``) on the x axis has its nominal value
+    marked; a rate's interval (a ``fraction`` metric) is clipped to [0, 1].
+    So a margin sweep crossed with an execution-error level draws the
+    collision and fall rates against the margin, one line per level.
+
     Aggregates of a bar-crossing sweep (a ``crossed`` metric and a swept
     ``terrain.width``) with the default ``metrics`` and ``x`` go to
     :func:`plot_crossing` instead.
     """
-    if ("crossed.mean" in agg and "terrain.width" in agg and x in (None, "terrain.width")
-            and metrics == plot.__defaults__[1]):
+    if "crossed.mean" in agg and "terrain.width" in agg and x in (None, "terrain.width") and metrics is None:
         return plot_crossing(agg, out, title=title)
+    if metrics is None:
+        metrics = PHYSICS_PLOT_METRICS if "fell.mean" in agg else PLOT_METRICS
     import matplotlib
 
     from ijoy_jax.sweep.config import ROBOT_DEFAULTS
@@ -317,7 +348,7 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    params = [c for c in agg.columns if c.startswith(("robot.", "terrain."))]
+    params = [c for c in agg.columns if c.startswith(("robot.", "terrain.", "sim."))]
     if x is None:
         x = max(params, key=lambda c: agg[c].nunique()) if params else "cell"
     others = [c for c in params if c != x]
@@ -334,7 +365,11 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
             g = g.sort_values(x)
             key = key if isinstance(key, tuple) else (key,)
             label = ", ".join(f"{c.partition('.')[2]} = {v:g}" for c, v in zip(others, key, strict=True))
-            ax.errorbar(xv(g[x]), g[f"{m}.mean"], yerr=g[f"{m}.ci95"], marker="o", capsize=3, label=label or None)
+            mean, ci = g[f"{m}.mean"].to_numpy(np.float64), np.nan_to_num(g[f"{m}.ci95"].to_numpy(np.float64))
+            # a rate's interval stays within [0, 1]
+            lo, hi = (np.clip(mean - ci, 0, 1), np.clip(mean + ci, 0, 1)) if UNITS.get(m) == "fraction" else (
+                mean - ci, mean + ci)
+            ax.errorbar(xv(g[x]), mean, yerr=[mean - lo, hi - mean], marker="o", capsize=3, label=label or None)
         if x == "robot.density":
             ax.axvline(PAPER_ACTIONS, color="0.4", ls="--", lw=1, label=f"paper's {PAPER_ACTIONS} actions (HRP-2)")
             ax.set_xscale("log")
@@ -344,15 +379,20 @@ def plot(agg, out, x=None, metrics=("distance_along", "mean_deviation", "mean_fo
             ax.set_xlabel("actions in the set S, per foot (count)")
         else:
             default = ROBOT_DEFAULTS.get(x.partition(".")[2]) if x.startswith("robot.") else None
+            what = "library default"
+            if x.startswith("sim."):
+                from ijoy_jax.sim import physics
+
+                default, what = getattr(physics.NOMINAL, x.partition(".")[2]), "nominal robot"
             if default is not None:
-                ax.axvline(default, color="0.4", ls="--", lw=1, label=f"library default ({default:g})")
+                ax.axvline(default, color="0.4", ls="--", lw=1, label=f"{what} ({default:g})")
             pos = agg[x][agg[x] > 0] if x in agg else []
             if len(pos) and agg[x].max() >= 20 * pos.min():
                 ax.set_xscale("symlog", linthresh=float(pos.min()), linscale=0.5)
                 ax.set_xlim(min(0.0, float(agg[x].min())) - 0.3 * float(pos.min()), 1.5 * float(agg[x].max()))
             ax.set_xlabel(f"{x.partition('.')[2] or x} ({UNITS.get(x, '-')})")
         ax.set_ylabel(f"mean ({UNITS[m]})")
-        ax.set_title(f"{m.replace('_', ' ')} ({UNITS[m]})", fontsize=10)
+        ax.set_title(_TITLES.get(m, f"{m.replace('_', ' ')} ({UNITS[m]})"), fontsize=10)
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=8)
     return _finish(fig, agg, title, out)

@@ -1,7 +1,9 @@
 """A relaxed rollout of the joystick control loop, differentiable end to end over tens of steps.
 
 Each step of :func:`ijoy_jax.control.rollout` (Algorithm 1 with the
-perfect walker) becomes smooth: the relaxed selector
+perfect walker: the same :func:`ijoy_jax.control.loop`, with the relaxed
+:class:`~ijoy_jax.control.Selector` of :func:`relaxed_selector` in place of
+the exact one) becomes smooth: the relaxed selector
 (:func:`ijoy_jax.tune.relax.relaxed_select`, swing-path check included) gives
 a Boltzmann distribution over the action set, the foot is put down at a pose
 drawn from it by one of three estimators, and the next decision is taken from
@@ -45,7 +47,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ijoy_jax import geometry
+from ijoy_jax import control, geometry
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot, side_actions, side_p0
 from ijoy_jax.terrain import Terrain
@@ -144,56 +146,65 @@ def relaxed_rollout(
     if commands.ndim == 1:
         commands = jnp.broadcast_to(commands, (num_steps, 3))
     commands = commands[:num_steps]
-    if estimator == "gumbel":
-        key = as_key(key)
-        keys = jax.random.split(key, num_steps)
-    else:
-        keys = jnp.zeros((num_steps,), jnp.uint32)  # unused placeholder, keeps one scan signature
-    feet0 = jnp.asarray(start, dtype).reshape(2, 3)
-    swing0 = jnp.asarray(first_swing, dtype)
+    keys = jax.random.split(as_key(key), num_steps) if estimator == "gumbel" else None
+    selector = relaxed_selector(terrain, robot, sharpness=sharpness, tau=tau, barrier_weight=barrier_weight,
+                                estimator=estimator, swing_path=swing_path, quantize=quantize)
+    walker = control.perfect_walker(dtype)
+    state, rec = control.loop(walker, selector, jnp.asarray(start, dtype).reshape(2, 3),
+                              jnp.asarray(first_swing, dtype), commands, keys=keys, remat=remat)
+    return RelaxedTrajectory(feet=walker.feet(state), **rec)
 
-    def step(carry, xs):
-        feet, swing = carry
-        command, k = xs
-        left_swings = swing > 0
-        stance = jnp.where(left_swings, feet[1], feet[0])
-        swing_from = jnp.where(left_swings, feet[0], feet[1])
+
+def relaxed_selector(terrain: Terrain, robot: Robot, *, sharpness, tau, barrier_weight=1.0,
+                     estimator: str = "expected", swing_path: bool = True, quantize: bool = False) -> control.Selector:
+    """The relaxed GetNextStep as a :class:`ijoy_jax.control.Selector`: the Boltzmann distribution of
+    :func:`ijoy_jax.tune.relax.relaxed_select` over the action set, the foot put down at the pose the
+    ``estimator`` draws from it (always sendable: the relaxed robot never stops), recording the
+    :class:`RelaxedTrajectory` fields per step. Arguments as in :func:`relaxed_rollout`; ``"gumbel"`` needs
+    the loop's per-step keys.
+    """
+    if estimator not in ESTIMATORS:
+        raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
+
+    def choose(info, command, key):
         choice = relax.relaxed_select(
-            terrain, robot, stance, -swing, command, sharpness=sharpness, tau=tau, barrier_weight=barrier_weight,
-            quantize=quantize, exact=False, swing_from=swing_from if swing_path else None,
+            terrain, robot, info.stance, info.stance_side, command, sharpness=sharpness, tau=tau,
+            barrier_weight=barrier_weight, quantize=quantize, exact=False,
+            swing_from=info.swing_from if swing_path else None,
         )
-        acts = side_actions(robot, swing).astype(dtype)
-        steps = geometry.compose(stance, acts)  # (N, 3)
+        steps = geometry.compose(info.stance, side_actions(robot, -info.stance_side).astype(info.stance.dtype))
         mode_pose = steps[choice.mode]
         if estimator == "expected":
             pose = choice.expected_pose
         elif estimator == "straight_through":
             pose = choice.expected_pose + jax.lax.stop_gradient(mode_pose - choice.expected_pose)
         else:
-            g = jax.random.gumbel(k, choice.log_probs.shape, dtype)
+            g = jax.random.gumbel(key, choice.log_probs.shape, info.stance.dtype)
             pose = jax.nn.softmax(choice.log_probs + g) @ steps
-        row = jnp.where(left_swings, 0, 1)
-        new_feet = jnp.where((jnp.arange(2) == row)[:, None], pose[None, :], feet)
-        p_next = side_p0(robot, swing).astype(dtype) + robot.step_time * command
-        err = geometry.relative(stance, pose) - p_next
+        zero = jnp.zeros((3,), pose.dtype)
+        foothold = jnp.concatenate([pose[:2], zero, pose[2:]])  # a planar sole: x, y, (z, roll, pitch) 0, yaw
+        return foothold, jnp.bool_(True), (choice, pose, mode_pose)
+
+    def record(info, command, decision, go, stopped, before, after):
+        choice, pose, mode_pose = decision
+        swing = -info.stance_side
+        p_next = side_p0(robot, swing).astype(pose.dtype) + robot.step_time * command
+        err = geometry.relative(info.stance, pose) - p_next
         err = err.at[2].set(geometry.wrap_angle(err[2]))
-        record = dict(
+        return dict(
             footsteps=pose,
-            sides=jnp.where(left_swings, 1, -1).astype(jnp.int32),
+            sides=jnp.where(swing > 0, 1, -1).astype(jnp.int32),
             probs=choice.probs,
             expected_pose=choice.expected_pose,
             mode_pose=mode_pose,
             mode=choice.mode,
             expected_cost=choice.expected_cost,
-            target=geometry.compose(stance, p_next),
+            target=geometry.compose(info.stance, p_next),
             error=err,
             deviation=geometry.safe_norm(err[0], err[1]),
         )
-        return (new_feet, -swing), record
 
-    body = jax.checkpoint(step, prevent_cse=False) if remat else step
-    (feet, _), rec = jax.lax.scan(body, (feet0, swing0), (commands, keys))
-    return RelaxedTrajectory(feet=feet, **rec)
+    return control.Selector(choose, record)
 
 
 relaxed_rollout_jit = jax.jit(
