@@ -24,6 +24,8 @@ import pandas as pd
 import pytest
 import scipy.stats
 from _sweep_util import tiny_sweep, write  # tests/ is on sys.path (pytest rootdir import)
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import select, sweep
@@ -365,7 +367,13 @@ def test_cli_run_and_summarize(base_file, tmp_path, capsys):
                      "--max-scenarios", "4"]) == 0
     printed = capsys.readouterr()
     assert '"computed": 4' in printed.out and "scenarios/s" in printed.err and "ETA" in printed.err
+    row = json.loads(printed.out)
+    assert row["chunks"] == 4 // CHUNK and row["scenarios_per_s"] > 0  # timed on the chunks after the first
     assert len(sweep.load(out)) == 4
+    assert cli.main(["sweep", "run", str(base_file), "--out", str(tmp_path / "one"), "--chunk", "4",
+                     "--max-scenarios", "4"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["chunks"] == 1 and row["scenarios_per_s"] is None  # one chunk: its time includes the compile
     assert cli.main(["sweep", "summarize", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "robot.w" in printed and "distance_along (m)" in printed
@@ -466,6 +474,25 @@ def test_auto_chunk_size_leaves_room_for_the_shared_tables():
     assert sweep.auto_chunk_size(MiB, 40 * MiB, shared_bytes=4 * MiB) == 16
     assert sweep.auto_chunk_size(MiB, 40 * MiB, shared_bytes=10 * MiB) == 8
     assert sweep.auto_chunk_size(MiB, 40 * MiB, shared_bytes=30 * MiB) == 1  # nothing fits: one per device
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(cap_per_device=st.integers(1, 1000), total=st.integers(1, 20_000), ndev=st.integers(1, 8))
+def test_balanced_chunk_size_keeps_the_chunk_count_and_pads_least(cap_per_device, total, ndev):
+    """Against the brute force: of the chunk sizes (multiples of the device count, at most ``cap``) that need
+    as few chunks as ``cap``, the smallest."""
+    cap = cap_per_device * ndev
+    got = sweep.balanced_chunk_size(cap, total, ndev)
+    chunks = -(-total // cap)
+    fits = [c for c in range(ndev, cap + 1, ndev) if -(-total // c) == chunks]
+    assert got == min(fits) and got % ndev == 0 and got <= cap
+    assert got * chunks - total < chunks * ndev  # padding under one device-row per chunk
+
+
+def test_balanced_chunk_size_refuses_nonsense():
+    for bad in ((0, 10, 1), (10, 0, 1), (10, 10, 0)):
+        with pytest.raises(ValueError, match="need cap"):
+            sweep.balanced_chunk_size(*bad)
 
 
 def test_default_chunk_size_is_the_cpu_default_here(base_file):

@@ -275,9 +275,10 @@ def _sweep(args) -> int:
         row = {"out": str(stats.out), "scenarios": stats.scenarios, "computed": stats.computed,
                "chunks": stats.chunks, "skipped_chunks": stats.skipped, "compiles": stats.compiles,
                "chunk_size": stats.chunk_size, "first_chunk_s": stats.first_chunk_s, "run_s": round(stats.run_s, 3),
-               "scenarios_per_s": round(stats.rate, 3)}
+               # null when every chunk was its density's first (its time includes the compile)
+               "scenarios_per_s": round(stats.rate, 3) if stats.rate > 0 else None}
         if stats.physics_steps:
-            row["physics_steps_per_s"] = round(stats.rate * stats.physics_steps)
+            row["physics_steps_per_s"] = round(stats.rate * stats.physics_steps) if stats.rate > 0 else None
         print(json.dumps(row, indent=2))
         return 0
     import pandas as pd

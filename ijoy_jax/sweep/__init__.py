@@ -9,7 +9,8 @@ Public names::
   MAX_OBJECT_SLOTS                                               static shapes
   run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks sharded over local
                                                                  devices, parquet parts, resume
-  default_chunk_size / auto_chunk_size / scenario_bytes          chunks sized to device memory
+  default_chunk_size / auto_chunk_size / scenario_bytes /        chunks sized to device memory (physics:
+  balanced_chunk_size                                            balanced, no padded chunk)
   distributed                                                    several processes/hosts (jax.distributed)
   load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table (union of processes), 95% CIs, plot
   PLOT_METRICS / PHYSICS_PLOT_METRICS                            the plot's default panels
@@ -57,6 +58,7 @@ from ijoy_jax.sweep.execute import (
     MEMORY_FRACTION,
     RunStats,
     auto_chunk_size,
+    balanced_chunk_size,
     default_chunk_size,
     run,
     scenario_bytes,
@@ -112,6 +114,7 @@ __all__ = [
     "action_counts",
     "aggregate",
     "auto_chunk_size",
+    "balanced_chunk_size",
     "b_max",
     "cells",
     "default_chunk_size",
