@@ -96,6 +96,9 @@ MIN_UNIT = 1e-6
 CLIP_SLACK = 1.0
 """Distance units: commands further than this outside the cells' hull are clipped hard before the soft clip
 (where the soft clip is exact to ``exp(-1 / T)``), so a huge finite command cannot overflow it."""
+ROUNDING_ULPS = 16
+"""The depth is reduced by this many ulps of the two soft mins compared: their float rounding (a few ulps)
+must not turn an open command into a blocked one."""
 DEFAULT_TRAVEL = 0.03
 """m: stick deflection at full scale for :func:`device_effects` (half of a consumer stick's ~6 cm travel)."""
 
@@ -150,7 +153,11 @@ def make_params(*, c1=DEFAULT_C1, decay=None, c2=None, scales=(1.0, 1.0, 1.0),
         decay = -1.0 / jnp.log(jnp.asarray(c2, jnp.float32))
     elif decay is None:
         decay = DEFAULT_DECAY
-    p = CueParams(c1=_f32(c1), decay=_f32(decay), scales=jnp.broadcast_to(_f32(scales), (3,)),
+    scales = _f32(scales)
+    if scales.shape not in ((), (3,)):
+        raise ValueError(f"scales must be a number or have shape (3,) (forward, sideways, turn), got shape "
+                         f"{scales.shape}")
+    p = CueParams(c1=_f32(c1), decay=_f32(decay), scales=jnp.broadcast_to(scales, (3,)),
                   temperature=_f32(temperature))
     check_params(p)
     return p
@@ -338,7 +345,11 @@ def feasible_commands(terrain: Terrain, robot: Robot, stance, stance_side, swing
     stance, swing_from = as_array("stance", stance), as_array("swing_from", swing_from)
     select.validate(terrain, robot, stance, stance_side, np.zeros(3), swing_from=swing_from, index=index,
                     kernel=kernel)
-    return _feasible_jit(terrain, robot, stance, stance_side, swing_from, index, kernel=kernel)
+    # One program whatever the caller's array types (lists, NumPy float64, Python ints).
+    stance = jnp.asarray(stance, jnp.float32)
+    swing_from = None if swing_from is None else jnp.asarray(swing_from, jnp.float32)
+    return _feasible_jit(terrain, robot, stance, jnp.asarray(stance_side, jnp.int32), swing_from, index,
+                         kernel=kernel)
 
 
 class CueForce(NamedTuple):
@@ -413,7 +424,8 @@ def _force(feasible: FeasibleCommands, command, params: CueParams) -> CueForce:
     Written for the haptic tick: one pass over the action set for the distances, one reduction for the
     two soft mins' maxima and one matrix product for every sum they weigh; one exp and one sqrt per action.
     """
-    command = jnp.asarray(command, jnp.float32)
+    dtype = jnp.result_type(feasible.commands.dtype, jnp.float32)  # float64 feasible sets compute in float64
+    command = jnp.asarray(command, dtype)
     finite = _all3(jnp.isfinite(command))
     j = jnp.where(finite, command, 0.0)
     ok = _params_ok(params)
@@ -443,7 +455,8 @@ def _force(feasible: FeasibleCommands, command, params: CueParams) -> CueForce:
     sums = w @ jnp.stack([jnp.ones_like(d), d, *near], axis=1)  # (2, 5)
     d_valid = -t * (top[1] + jnp.log(sums[1, 0]))  # <= min over the valid cells
     m_all = sums[0, 1] / sums[0, 0]  # >= min over all cells
-    depth = d_valid - m_all
+    # <= 0 where the command is open, but for rounding: a few ulps of the distances are not a blockage.
+    depth = d_valid - m_all - ROUNDING_ULPS * jnp.finfo(dtype).eps * (jnp.abs(d_valid) + jnp.abs(m_all))
     mag = c1 * -jnp.expm1(-_ramp(depth, t) / decay)
     nearest_z = sums[1, 2:] / sums[1, 0]
     n = _unit_vector((nearest_z - zc) / full, t)  # towards the nearest feasible command, stick coordinates
@@ -541,6 +554,7 @@ def force_terms(feasible: FeasibleCommands, command, params: CueParams | None = 
     command = as_array("command", command)
     _check_command(command)
     p = _resolve_params(params, dict(c1=c1, decay=decay, c2=c2, scales=scales, temperature=temperature))
+    command = jnp.asarray(command, jnp.result_type(feasible.commands.dtype, jnp.float32))  # one program
     return _force_jit(feasible, command, p)
 
 
