@@ -576,3 +576,27 @@ def test_bad_feasible_sets_and_reach_arguments_are_refused():
         ij.select_step(WALL, ROBOT, STANCE, -1, [0.1, 0.0, 0.0], foot_costs=f.cost, method="ordered")
     with pytest.raises(ValueError, match="foot_costs"):
         ij.select_step(WALL, ROBOT, STANCE, -1, [0.1, 0.0, 0.0], foot_costs=np.full(N, -1.0))
+
+
+def test_the_prepared_tick_is_the_force_split_at_the_rate_boundary():
+    f = _wall_feasible()
+    rng = np.random.default_rng(5)
+    cmds = rng.uniform([-0.3, -0.2, -0.5], [0.3, 0.2, 0.5], (200, 3)).astype(np.float32)
+    p = cue.make_params(c1=0.6, decay=0.05, scales=[1.0, 2.0, 0.5])
+    tick = cue.prepare_tick(f, p)
+    assert tick.cells.shape == (4, N) and tick.consts.shape == (20,)
+    got = np.asarray(jax.jit(jax.vmap(cue.tick_force, in_axes=(None, 0)))(tick, jnp.asarray(cmds)))
+    want = np.asarray(_forces(f, jnp.asarray(cmds), p).force)
+    np.testing.assert_array_equal(got, want)
+    assert np.any(want != 0)
+    cue.tick_force(tick, cmds[0])
+    n = field._tick_jit._cache_size()
+    for kw in (dict(c1=0.1), dict(decay=0.3), dict(temperature=0.003)):
+        cue.tick_force(cue.prepare_tick(f, **kw), cmds[1])
+    assert field._tick_jit._cache_size() == n  # the parameters live in the tick's arrays: no recompile
+    with pytest.raises(TypeError, match="CueTick"):
+        cue.tick_force(f, cmds[0])
+    with pytest.raises(ValueError, match="command"):
+        cue.tick_force(tick, [np.nan, 0.0, 0.0])
+    out = jax.jit(cue.tick_force)(tick, jnp.array([np.inf, 0.0, 0.0]))  # traced: flagged as zero force
+    assert np.all(np.asarray(out) == 0)

@@ -3,13 +3,15 @@
 Measures on the CPU (or whatever device JAX uses by default), HRP-2 (496 actions) on a 4 m x 2.4 m
 clutter map at 2 cm (the demo's scene):
 
-* ``tick``: one haptic tick, ``jax.jit(cue.force)`` on the step's feasible set: compile time, then the
+* ``tick``: one haptic tick, ``jax.jit(cue.tick_force)`` on the step's prepared tick
+  (:func:`ijoy_jax.cue.prepare_tick`) and ``jax.jit(cue.force)`` on its feasible set: compile time, then the
   median (10th / 90th percentile) wall time per call over many calls, each synchronised with
-  ``block_until_ready``, and the process CPU time per call. Timed in a fresh Python process for each of
-  JAX's two CPU dispatch modes: synchronous (``jax_cpu_enable_async_dispatch = False``, set before any
-  JAX work: what a 1 kHz haptic loop's process should use) and the default asynchronous one, which hands
-  every program of more than one kernel to another thread (about 10 us more per call). The target is a
-  median under 20 us. Also the public call outside any jit (``cue.force``, with its input checks).
+  ``block_until_ready``, and the process CPU time per call. Timed in a fresh Python process per setting:
+  synchronous CPU dispatch (``jax_cpu_enable_async_dispatch = False``, set before any JAX work) with the
+  process pinned to one CPU, as a 1 kHz haptic loop's process should run; synchronous, not pinned; and
+  JAX's defaults (asynchronous dispatch hands every program of more than one kernel to another thread,
+  about 10 us more per call). The target is a median under 20 us. Also the public call outside any jit
+  (``cue.force``, with its input checks: use the jitted call in a loop).
 * ``step``: once per step, :func:`ijoy_jax.cue.feasible_commands` (one FootCost evaluation of the
   action set) and :func:`ijoy_jax.cue.reach` (32 directions): compile and median per call.
 * ``tick_batched``: ``jax.vmap`` of the force over B commands on one feasible set: evaluations/s.
@@ -42,8 +44,16 @@ def _workload():
     return terrain, robot, feasible, jnp.array([0.25, 0.05, 0.1], jnp.float32), cue.make_params()
 
 
-def tick(calls: int, sync: bool) -> dict:
-    """Time one haptic tick in this process (call it first thing in a fresh process: see the module docstring)."""
+def tick(calls: int, sync: bool, pin: bool = False) -> dict:
+    """Time one haptic tick in this process (call it first thing in a fresh process: see the module docstring).
+
+    ``pin``: first pin this process to one CPU (Linux ``sched_setaffinity``), as a haptic loop's process would
+    be: XLA's CPU thread pool then has no second core to hand work to.
+    """
+    pinned = None
+    if pin and hasattr(os, "sched_setaffinity"):
+        pinned = max(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {pinned})
     import jax
 
     jax.config.update(SYNC_FLAG, not sync)
@@ -51,7 +61,8 @@ def tick(calls: int, sync: bool) -> dict:
     from ijoy_jax.apps.bench_haptics import single_call
 
     _, _, feasible, command, params = _workload()
-    out = {"dispatch": "synchronous" if sync else "asynchronous (JAX's default)"}
+    out = {"dispatch": "synchronous" if sync else "asynchronous (JAX's default)", "pinned_cpu": pinned}
+    out["jit_tick_force"] = single_call(jax.jit(cue.tick_force), (cue.prepare_tick(feasible, params), command), calls)
     out["jit_force"] = single_call(jax.jit(cue.force), (feasible, command, params), calls)
     out["public_force"] = single_call(cue.force, (feasible, command, params), max(50, calls // 10))
     blocked = cue.force_terms(feasible, command, params)
@@ -59,10 +70,12 @@ def tick(calls: int, sync: bool) -> dict:
     return out
 
 
-def _tick_in_subprocess(calls: int, sync: bool) -> dict:
+def _tick_in_subprocess(calls: int, sync: bool, pin: bool) -> dict:
     cmd = [sys.executable, "-m", "ijoy_jax.apps.bench_cue", "--tick-only", "--calls", str(calls)]
     if sync:
         cmd.append("--sync")
+    if pin:
+        cmd.append("--pin")
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=dict(os.environ))
     if proc.returncode != 0:
         raise RuntimeError(f"the tick benchmark's process failed:\n{proc.stderr[-3000:]}")
@@ -87,7 +100,7 @@ def run(quick: bool = False, calls: int | None = None, sizes: tuple[int, ...] | 
     out = {"device": str(jax.devices()[0]), "platform": jax.default_backend(), "jax": jax.__version__,
            "python": sys.version.split()[0], "host": _host.machine(), "cpu_count": os.cpu_count(),
            "loadavg_1min_start": _loadavg(), "dtype": "float32", "quick": quick, "actions": 496}
-    out["tick"] = [_tick_in_subprocess(n, sync) for sync in (True, False)]
+    out["tick"] = [_tick_in_subprocess(n, sync, pin) for sync, pin in ((True, True), (True, False), (False, False))]
     steps = max(20, n // 100)
     import ijoy_jax as ij
     from ijoy_jax.apps.demo import demo_scene
@@ -129,7 +142,9 @@ def format_report(r: dict) -> str:
                 f"{s['calls']} calls")
 
     for t in r["tick"]:
-        lines.append(f"tick, {t['dispatch']} dispatch:")
+        where = f"pinned to CPU {t['pinned_cpu']}" if t.get("pinned_cpu") is not None else "not pinned"
+        lines.append(f"tick, {t['dispatch']} dispatch, {where}:")
+        lines.append("  " + row("jit(cue.tick_force)", t["jit_tick_force"]))
         lines.append("  " + row("jit(cue.force)", t["jit_force"]))
         lines.append("  " + row("cue.force (checked, eager)", t["public_force"]))
     lines.append(row("per step: feasible_commands", r["feasible_commands"]))
@@ -149,9 +164,10 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--sizes", help="comma-separated batch sizes, e.g. 1,64,1024")
     parser.add_argument("--tick-only", action="store_true", help="only the tick, in this process (JSON line)")
     parser.add_argument("--sync", action="store_true", help="with --tick-only: synchronous CPU dispatch")
+    parser.add_argument("--pin", action="store_true", help="with --tick-only: pin the process to one CPU")
     args = parser.parse_args(argv)
     if args.tick_only:
-        result = tick(args.calls or 2000, args.sync)
+        result = tick(args.calls or 2000, args.sync, args.pin)
         print(json.dumps(result))
         return result
     sizes = tuple(int(v) for v in args.sizes.split(",")) if args.sizes else None

@@ -418,16 +418,30 @@ def _params_ok(params: CueParams) -> jax.Array:
             & (t > 0) & jnp.isfinite(t))
 
 
-def _force(feasible: FeasibleCommands, command, params: CueParams) -> CueForce:
-    """The body of :func:`force_terms` (one command, one feasible set; jit/vmap/grad).
+@pytree_dataclass
+class CueTick:
+    """What the haptic tick needs, prepared once per step (and whenever the parameters change): two leaves.
 
-    Written for the haptic tick: one pass over the action set for the distances, one reduction for the
-    two soft mins' maxima and one matrix product for every sum they weigh; one exp and one sqrt per action.
+    :func:`prepare_tick` builds it from a :class:`FeasibleCommands` and :class:`CueParams`;
+    :func:`tick_force` evaluates the force from it alone. Vmapped calls add leading axes.
+
+    Attributes:
+      cells: (4, N) float32: rows 0-2 each action's command in distance units (``commands / (unit *
+        scales)``), one contiguous row per axis; row 3 is 1.0 for the cells the soft min over feasible
+        commands runs over (the valid ones; all of them when none is valid), else 0.0.
+      consts: (20,) float32, in distance units where they have one: half cell (3), hull lo (3), hull hi (3),
+        the distance unit ``unit * scales`` in command units (3), the full scale (3), then C1, the decay,
+        the temperature (safe stand-ins where the parameters were out of range), 1.0 if the parameters
+        were in range, 1.0 if any action is valid.
     """
+
+    cells: jax.Array
+    consts: jax.Array
+
+
+def _prepare(feasible: FeasibleCommands, params: CueParams) -> CueTick:
+    """The body of :func:`prepare_tick` (traceable, differentiable in the parameters)."""
     dtype = jnp.result_type(feasible.commands.dtype, jnp.float32)  # float64 feasible sets compute in float64
-    command = jnp.asarray(command, dtype)
-    finite = _all3(jnp.isfinite(command))
-    j = jnp.where(finite, command, 0.0)
     ok = _params_ok(params)
     # Safe stand-ins: neither the value nor the gradient sees out-of-range parameters.
     c1 = jnp.where(ok, params.c1, 0.0)
@@ -435,28 +449,48 @@ def _force(feasible: FeasibleCommands, command, params: CueParams) -> CueForce:
     t = jnp.where(ok, params.temperature, DEFAULT_TEMPERATURE)
     u = feasible.unit * jnp.where(ok, params.scales, 1.0)  # (3,) command units per unit of distance
     g = feasible.frame / u  # (5, 3) half cell, hull lo, hull hi, unit, full scale, in distance units
-    hs, lo, hi, full = g[0], g[1], g[2], jnp.maximum(g[4], MIN_UNIT / u)
+    any_valid = feasible.any_valid
+    use = (feasible.valid | ~any_valid).astype(dtype)
+    cells = jnp.concatenate([(feasible.commands / u).T, use[None]]).astype(dtype)
+    full = jnp.maximum(g[4], MIN_UNIT / u)
+    flags = jnp.stack([ok, any_valid]).astype(dtype)
+    consts = jnp.concatenate([g[0], g[1], g[2], u, full, jnp.stack([c1, decay, t]), flags]).astype(dtype)
+    return CueTick(cells=cells, consts=consts)
+
+
+def _tick(tick: CueTick, command) -> CueForce:
+    """The cue from a prepared tick (one command; jit/vmap/grad).
+
+    One pass over the action set for the distances (one contiguous row per axis), one reduction for the two
+    soft mins' maxima and one matrix product for every sum they weigh: one exp (per soft min) and one sqrt
+    per action.
+    """
+    k = tick.consts
+    hs, lo, hi, u, full = k[0:3], k[3:6], k[6:9], k[9:12], k[12:15]
+    c1, decay, t, ok, any_valid = k[15], k[16], k[17], k[18] > 0, k[19] > 0
+    command = jnp.asarray(command, k.dtype)
+    finite = _all3(jnp.isfinite(command))
+    j = jnp.where(finite, command, 0.0)
     z = jnp.clip(j / u, lo - CLIP_SLACK, hi + CLIP_SLACK)
-    zc = _soft_clip(z, lo, hi, t)  # (3,) the command inside the cells' hull
-    rows = [feasible.commands[:, k] / u[k] for k in range(3)]  # (N,) per axis: the cells' centres
-    e = [_relu(jnp.abs(zc[k] - rows[k]) - hs[k], t) for k in range(3)]  # smooth excess beyond each cell
+    zc = _soft_clip(z, lo, hi, t)  # (3,) the command inside the cells' hull, distance units
+    rows = [tick.cells[i] for i in range(3)]  # (N,) per axis: the cells' centres
+    e = [_relu(jnp.abs(zc[i] - rows[i]) - hs[i], t) for i in range(3)]  # smooth excess beyond each cell
     sq = e[0] * e[0] + e[1] * e[1]
     pos = sq > 0
     d = jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0) + e[2]  # (N,) distance to each cell
-    any_valid = feasible.any_valid
     # Soft mins by log-sum-exp over all cells and over the valid ones, each shifted by its maximum (no
     # gradient: the shift cancels); with no valid cell the second runs over all cells (a finite stand-in,
-    # not used). Invalid cells get logit -inf, weight exactly 0.
+    # not used). Cells left out get logit -inf, weight exactly 0.
     logits = -d / t
-    both = jnp.stack([logits, jnp.where(feasible.valid | ~any_valid, logits, -jnp.inf)])  # (2, N)
+    both = jnp.stack([logits, jnp.where(tick.cells[3] > 0, logits, -jnp.inf)])  # (2, N)
     top = jax.lax.stop_gradient(jnp.max(both, axis=1))  # (2,)
     w = jnp.exp(both - top[:, None])
-    near = [_soft_clip(zc[k], rows[k] - hs[k], rows[k] + hs[k], t) for k in range(3)]  # nearest point per cell
+    near = [_soft_clip(zc[i], rows[i] - hs[i], rows[i] + hs[i], t) for i in range(3)]  # nearest point per cell
     sums = w @ jnp.stack([jnp.ones_like(d), d, *near], axis=1)  # (2, 5)
     d_valid = -t * (top[1] + jnp.log(sums[1, 0]))  # <= min over the valid cells
     m_all = sums[0, 1] / sums[0, 0]  # >= min over all cells
     # <= 0 where the command is open, but for rounding: a few ulps of the distances are not a blockage.
-    depth = d_valid - m_all - ROUNDING_ULPS * jnp.finfo(dtype).eps * (jnp.abs(d_valid) + jnp.abs(m_all))
+    depth = d_valid - m_all - ROUNDING_ULPS * jnp.finfo(k.dtype).eps * (jnp.abs(d_valid) + jnp.abs(m_all))
     mag = c1 * -jnp.expm1(-_ramp(depth, t) / decay)
     nearest_z = sums[1, 2:] / sums[1, 0]
     n = _unit_vector((nearest_z - zc) / full, t)  # towards the nearest feasible command, stick coordinates
@@ -474,6 +508,11 @@ def _force(feasible: FeasibleCommands, command, params: CueParams) -> CueForce:
         nonfinite_command=~finite,
         bad_params=~ok,
     )
+
+
+def _force(feasible: FeasibleCommands, command, params: CueParams) -> CueForce:
+    """The body of :func:`force_terms`: the tick of the prepared step (one mechanism; jit/vmap/grad)."""
+    return _tick(_prepare(feasible, params), command)
 
 
 _force_jit = jax.jit(_force)
@@ -582,6 +621,57 @@ def force(feasible: FeasibleCommands, command, params: CueParams | None = None, 
     """
     return force_terms(feasible, command, params, c1=c1, decay=decay, c2=c2, scales=scales,
                        temperature=temperature).force
+
+
+_prepare_jit = jax.jit(_prepare)
+_tick_jit = jax.jit(lambda tick, command: _tick(tick, command).force)
+
+
+def prepare_tick(feasible: FeasibleCommands, params: CueParams | None = None, *, c1=None, decay=None, c2=None,
+                 scales=None, temperature=None) -> CueTick:
+    """The step's half of the force: everything the haptic tick needs, in two arrays (:class:`CueTick`).
+
+    ``tick_force(prepare_tick(feasible, params), command) == force(feasible, command, params)``: the same
+    computation split at the rate boundary, so the tick passes two arrays instead of the feasible set's and
+    the parameters' eleven (each costs dispatch time) and divides nothing by the units. Call it once per
+    step, and again when the parameters change. Arguments, checks and flags as :func:`force_terms`.
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> from ijoy_jax import cue
+      >>> f = cue.feasible_commands(ij.terrain.flat((100, 100), 0.02), ij.robots.hrp2(), [1.0, 1.0, 0.0], -1)
+      >>> tick = cue.prepare_tick(f, c1=0.5)
+      >>> tick.cells.shape, cue.tick_force(tick, [0.2, 0.1, 0.0]).tolist()
+      ((4, 496), [0.0, 0.0, 0.0])
+    """
+    _check_feasible(feasible)
+    p = _resolve_params(params, dict(c1=c1, decay=decay, c2=c2, scales=scales, temperature=temperature))
+    return _prepare_jit(feasible, p)
+
+
+def tick_force(tick: CueTick, command) -> jax.Array:
+    """(3,) the cue force at one command from a prepared step (:func:`prepare_tick`): the haptic tick.
+
+    The same force as :func:`force` (forward, sideways, turn, each in [-1, 1] of the device's maximum). In a
+    1 kHz loop call ``jax.jit(cue.tick_force)`` (the checks below skip traced values; docs/cue.md gives the
+    CPU settings the tick's latency was measured with).
+
+    Args:
+      tick: :class:`CueTick` of the current step.
+      command: (3,) m/s, m/s, rad/s in the stance foot's frame.
+
+    Raises:
+      TypeError, ValueError: a tick that is not a :class:`CueTick`, a command of the wrong shape or
+      (concrete) not finite. Traced non-finite commands give zero force.
+    """
+    if not isinstance(tick, CueTick):
+        raise TypeError(f"tick must be an ijoy_jax.cue.CueTick (prepare_tick), got {type(tick).__name__}")
+    if np.ndim(tick.cells) != 2 or np.shape(tick.cells)[0] != 4 or np.shape(tick.consts) != (20,):
+        raise ValueError(f"tick must be one step's CueTick (cells (4, N), consts (20,); vmap for batches), got "
+                         f"{np.shape(tick.cells)}, {np.shape(tick.consts)}")
+    command = as_array("command", command)
+    _check_command(command)
+    return _tick_jit(tick, jnp.asarray(command, tick.consts.dtype))
 
 
 def _hard_open(feasible: FeasibleCommands, commands) -> jax.Array:

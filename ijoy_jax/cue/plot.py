@@ -142,22 +142,34 @@ def scenario_figure(cases, robot: Robot, params: field.CueParams | None = None, 
 
 
 def study_figure(result: dict, *, out: str | None = None, metrics=None):
-    """Bar chart of :func:`ijoy_jax.cue.study.compare`'s means with 95% intervals, one panel per metric."""
+    """:func:`ijoy_jax.cue.study.compare`'s means with 95% intervals (top row) and, when it has them, the paired
+    differences from the baseline condition with theirs (bottom row), one column per metric."""
     import matplotlib.pyplot as plt
 
     from ijoy_jax.cue.study import METRICS, UNITS
 
     metrics = METRICS if metrics is None else metrics
     names = list(result["summary"])
-    fig, axes = plt.subplots(1, len(metrics), figsize=(2.6 * len(metrics), 3.4), squeeze=False)
-    colours = ["0.6", "tab:orange", "tab:green", "tab:purple"]
-    for ax, m in zip(axes[0], metrics, strict=True):
+    diffs = list(result.get("difference", {}))
+    rows = 2 if diffs else 1
+    fig, axes = plt.subplots(rows, len(metrics), figsize=(2.6 * len(metrics), 3.2 * rows), squeeze=False)
+    colours = ["0.6", "tab:orange", "tab:green", "tab:purple", "tab:brown"]
+    for k, m in enumerate(metrics):
+        ax = axes[0, k]
         means = [result["summary"][c][m][0] for c in names]
         cis = [np.nan_to_num(result["summary"][c][m][1]) for c in names]
         ax.bar(range(len(names)), means, yerr=cis, capsize=4, color=colours[: len(names)])
         ax.set_xticks(range(len(names)), names, rotation=20)
         ax.set_title(f"{m}\n({UNITS[m]})", fontsize=9)
-    fig.suptitle(f"cue on and off, n = {result['n']} scenarios (mean +- 95% CI)", fontsize=10)
+        if diffs:
+            ax = axes[1, k]
+            means = [result["difference"][c][m][0] for c in diffs]
+            cis = [np.nan_to_num(result["difference"][c][m][1]) for c in diffs]
+            ax.bar(range(len(diffs)), means, yerr=cis, capsize=4, color=colours[1: len(diffs) + 1])
+            ax.axhline(0.0, color="k", lw=0.8)
+            ax.set_xticks(range(len(diffs)), [f"{c} - {names[0]}" for c in diffs], rotation=20)
+            ax.set_title(f"paired difference: {m}", fontsize=9)
+    fig.suptitle(f"n = {result['n']} scenarios, the same for every condition (mean +- 95% CI)", fontsize=10)
     fig.tight_layout()
     if out is not None:
         fig.savefig(out, dpi=100)

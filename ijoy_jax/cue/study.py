@@ -74,7 +74,7 @@ from ijoy_jax.tune import loop
 
 FAMILIES = ("clutter", "wall", "slide")
 """Scenario families (:func:`make_scenarios`): small obstacles to step around on the way to a goal
-ahead; a wall across the way with the goal just before it (walk up to it, the paper's Fig. 5a); a wall
+ahead; a wall across the way with the goal just before it (walk up against it, the paper's Fig. 5a); a wall
 across the way, open on one side, with the goal beyond it on that side (sidestep along it, the paper's
 "commanded forward and to the side, the robot sidesteps along the blockage")."""
 SHAPE = (200, 120)
@@ -193,9 +193,9 @@ def _scenario(key, family: int, robot: Robot) -> Scenario:
         yaw = _uniform(k5, 0.0, math.pi, (n,))
         boxes = jnp.column_stack([centre, yaw, size * clear[:, None], jnp.full((n,), 0.1)])
         terrain = scene.rasterize(base, boxes=boxes)
-    elif family == 1:  # a wall across the way, the goal 0.3 m before it
+    elif family == 1:  # a wall across the way, the goal 0.15 m before it (the feet stop 0.21 m before it)
         xw = _uniform(kg, 2.0, 3.0)
-        goal = jnp.stack([xw - 0.3, sy + _uniform(k1, -0.3, 0.3)])
+        goal = jnp.stack([xw - 0.15, sy + _uniform(k1, -0.3, 0.3)])
         terrain = scene.rasterize(base, boxes=jnp.stack([xw + 0.05, width / 2, 0.0, 0.1, 2 * width, 0.1])[None])
     else:  # a wall across the way, open on one side; the goal beyond it on that side: slide along it
         side = jnp.where(jax.random.bernoulli(kg), 1.0, -1.0)
@@ -215,7 +215,8 @@ def make_scenarios(key, num: int, families=FAMILIES, *, robot: Robot | None = No
     Maps are :data:`SHAPE` cells at :data:`RESOLUTION` m, the feet start side by side at :data:`START`
     facing +x. ``clutter``: :data:`CLUTTER_COUNT` boxes of 4-10 cm sides (each kept only if its centre
     is more than 0.45 m from the start and the goal) between x = 0.9 and 3.4 m; goal at x 3.2-3.5 m, y
-    within 0.5 m of the start's. ``wall``: a 10 cm wall across the map at x 2-3 m; goal 0.3 m before it.
+    within 0.5 m of the start's. ``wall``: a 10 cm wall across the map at x 2-3 m; goal 0.15 m before it
+    (the feet's centres stop 0.21 m before it: the goal is reached with the robot's front against the wall).
     ``slide``: a 10 cm wall across the map at x 1.5-2 m from one edge to 0.2-0.4 m past the start's lane;
     goal at x 3-3.4 m, 0.4-0.6 m beyond the wall's end.
 
