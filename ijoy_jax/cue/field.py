@@ -233,28 +233,28 @@ class FeasibleCommands:
 
     @property
     def half_cell(self) -> jax.Array:
-        """(3,) half the action lattice's spacing per axis (command units): a cell's half-width."""
+        """(3,) half the action lattice's spacing per axis in command units, a cell's half-width."""
         return self.frame[..., 0, :]
 
     @property
     def lo(self) -> jax.Array:
-        """(3,) the low corner of the cells' hull: min of ``commands`` minus ``half_cell``."""
+        """(3,) the low corner of the cells' hull, the min of ``commands`` minus ``half_cell``."""
         return self.frame[..., 1, :]
 
     @property
     def hi(self) -> jax.Array:
-        """(3,) the high corner of the cells' hull: max of ``commands`` plus ``half_cell``."""
+        """(3,) the high corner of the cells' hull, the max of ``commands`` plus ``half_cell``."""
         return self.frame[..., 2, :]
 
     @property
     def unit(self) -> jax.Array:
-        """(3,) command units of one unit of distance: ``(s, s, s / rotation_weight)``, ``s`` the largest
+        """(3,) command units of one unit of distance, ``(s, s, s / rotation_weight)`` with ``s`` the largest
         forward command of the action set (so the distance is the selector's dist, in full forward deflections)."""
         return self.frame[..., 3, :]
 
     @property
     def full_scale(self) -> jax.Array:
-        """(3,) the largest ``|command|`` per axis over both feet: a full stick deflection."""
+        """(3,) the largest ``|command|`` per axis over both feet, a full stick deflection."""
         return self.frame[..., 4, :]
 
 
