@@ -491,7 +491,7 @@ def select_step(
       >>> robot = ij.robots.hrp2(margin=0.02)
       >>> c = ij.select_step(terrain, robot, [0.8, 1.0, 0.0], -1, [0.25, 0.0, 0.0])
       >>> bool(c.valid), round(float(c.pose[0]), 2)   # as far forward as the wall allows
-      (True, 0.9)
+      (True, 0.95)
     """
     stance, command, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("command", command),
                                                                ("swing_from", swing_from)))

@@ -576,6 +576,16 @@ def test_bad_feasible_sets_and_reach_arguments_are_refused():
         ij.select_step(WALL, ROBOT, STANCE, -1, [0.1, 0.0, 0.0], foot_costs=f.cost, method="ordered")
     with pytest.raises(ValueError, match="foot_costs"):
         ij.select_step(WALL, ROBOT, STANCE, -1, [0.1, 0.0, 0.0], foot_costs=np.full(N, -1.0))
+    out, cfg = cue.force_terms(f, [0.2, 0.0, 0.0]), haptics.default_joystick_config()
+    with pytest.raises(TypeError, match="CueForce"):
+        cue.device_effects(out.force, f, [0.2, 0.0, 0.0], cfg)
+    with pytest.raises(TypeError, match="JoystickForceConfig"):
+        cue.device_effects(out, f, [0.2, 0.0, 0.0], {"max_force": 5.0})
+    for travel in (0.0, -0.01, np.inf, [0.03, 0.03]):
+        with pytest.raises(ValueError, match="travel"):
+            cue.device_effects(out, f, [0.2, 0.0, 0.0], cfg, travel=travel)
+    with pytest.raises(ValueError, match="command"):
+        cue.device_effects(out, f, [0.2, np.nan, 0.0], cfg)
 
 
 def test_the_prepared_tick_is_the_force_split_at_the_rate_boundary():

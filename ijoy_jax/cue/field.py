@@ -587,7 +587,7 @@ def force_terms(feasible: FeasibleCommands, command, params: CueParams | None = 
       >>> f = cue.feasible_commands(ij.terrain.from_arrays(None, free, 0.02), ij.robots.hrp2(), [0.8, 1.0, 0.0], -1)
       >>> out = cue.force_terms(f, [0.25, 0.0, 0.0])
       >>> bool(out.blocked), bool(out.force[0] < -0.5), round(float(out.nearest[0]), 3)
-      (True, True, 0.125)
+      (True, True, 0.219)
     """
     _check_feasible(feasible)
     command = as_array("command", command)
@@ -743,7 +743,7 @@ def reach(feasible: FeasibleCommands, num_directions: int, *, turn_rate=0.0, sam
       >>> free = np.ones((100, 100), bool); free[55:, :] = False        # a wall at x = 1.1 m
       >>> f = cue.feasible_commands(ij.terrain.from_arrays(None, free, 0.02), ij.robots.hrp2(), [0.8, 1.0, 0.0], -1)
       >>> [round(float(v), 3) for v in cue.reach(f, 4)]   # forward, left, backward, right (m/s)
-      [0.156, 0.175, 0.25, 0.175]
+      [0.219, 0.175, 0.25, 0.175]
     """
     _check_feasible(feasible)
     for name, v, least in (("num_directions", num_directions, 1), ("samples", samples, 2)):
@@ -796,6 +796,10 @@ def device_effects(cue: CueForce, feasible: FeasibleCommands, command, config: f
     Returns:
       :class:`CueEffects`.
 
+    Raises:
+      TypeError, ValueError: arguments of the wrong type or shape, a concrete non-finite command, a travel
+      that is not a finite scalar > 0 (traced values are not checked).
+
     Example:
       >>> import numpy as np, ijoy_jax as ij
       >>> from ijoy_jax import cue, haptics
@@ -804,8 +808,18 @@ def device_effects(cue: CueForce, feasible: FeasibleCommands, command, config: f
       >>> out = cue.force_terms(f, [0.25, 0.0, 0.0])
       >>> e = cue.device_effects(out, f, [0.25, 0.0, 0.0], haptics.default_joystick_config())
       >>> round(float(e.constant.magnitude), 2), round(float(e.constant.direction), 2)  # N, rad: backwards
-      (3.99, 3.14)
+      (2.85, 3.14)
     """
+    if not isinstance(cue, CueForce) or np.shape(cue.force) != (3,):
+        raise TypeError(f"cue must be one command's ijoy_jax.cue.CueForce (force_terms), got {type(cue).__name__}")
+    _check_feasible(feasible)
+    command = as_array("command", command)
+    _check_command(command)
+    if not isinstance(config, fx.JoystickForceConfig):
+        raise TypeError(f"config must be an ijoy_jax.haptics.JoystickForceConfig, got {type(config).__name__}")
+    check_numeric("travel", travel)
+    if np.shape(travel) != () or (not is_traced(travel) and not (np.isfinite(float(travel)) and float(travel) > 0)):
+        raise ValueError(f"travel must be a finite scalar > 0 (m of stick deflection at full scale), got {travel!r}")
     config_max = jnp.asarray(config.max_force, jnp.float32)
     max_force = jnp.where(config_max >= 0, config_max, 0.0)
     f3 = cue.force * max_force

@@ -124,7 +124,14 @@ class Operator:
 
 
 def default_operator(**overrides) -> Operator:
-    """A fresh :class:`Operator` with the defaults above (float32 leaves); any field may be overridden."""
+    """A fresh :class:`Operator` with the defaults above (float32 leaves); any field may be overridden.
+
+    Example:
+      >>> from ijoy_jax.cue import study
+      >>> op = study.default_operator(compliance=0.8)
+      >>> round(float(op.compliance), 3), round(float(op.hand_time), 3)
+      (0.8, 0.15)
+    """
     values = dict(speed=0.9, horizon=2.0, turn_gain=1.0, hand_time=0.15, compliance=0.5, correction=0.3,
                   memory=0.5, detour=0.8, persistence=0.8)
     unknown = set(overrides) - set(values)
@@ -420,7 +427,15 @@ def summarize(log: DriveLog, robot: Robot, cfg: StudyConfig | None = None) -> di
 
 
 def mean_ci(x) -> tuple[float, float]:
-    """(mean, half-width of its two-sided 95% Student-t interval) of a sample (NaN half-width below 2)."""
+    """(mean, half-width of its two-sided 95% Student-t interval) of a sample (NaN half-width below 2).
+
+    The t quantile is :func:`ijoy_jax.sweep.results.t_quantile` (no SciPy needed).
+
+    Example:
+      >>> from ijoy_jax.cue import study
+      >>> [round(v, 3) for v in study.mean_ci([1.0, 2.0, 3.0, 4.0])]
+      [2.5, 2.054]
+    """
     x = np.asarray(x, np.float64)
     n = x.size
     if n < 2:
