@@ -14,10 +14,11 @@ Public API:
   select_step, StepChoice, make_targets              the next foothold for a command
   rollout, Trajectory, perfect_walker, Walker        the control loop (Algorithm 1)
   haptics                                            the ALDURO force-feedback joystick
+  cue                                                both joined: a force on the stick where the biped cannot go
   tune                                               tuning by gradient (relaxed selector, optax tuners)
 """
 
-from ijoy_jax import control, footcost, geometry, haptics, plot, robots, select, terrain, tune
+from ijoy_jax import control, cue, footcost, geometry, haptics, plot, robots, select, terrain, tune
 from ijoy_jax.control import Trajectory, Walker, perfect_walker, rollout
 from ijoy_jax.footcost import FootCostTerms, foot_cost, foot_cost_terms
 from ijoy_jax.robots import LEFT, RIGHT, Robot, TerrainMetrics, action_steps
@@ -38,6 +39,7 @@ __all__ = [
     "Walker",
     "action_steps",
     "control",
+    "cue",
     "foot_cost",
     "foot_cost_terms",
     "footcost",

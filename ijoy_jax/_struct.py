@@ -66,7 +66,8 @@ def as_array(name: str, value):
     if not isinstance(value, (list, tuple)):
         return value
     try:
-        return jnp.asarray(value, jnp.float32)
+        with np.errstate(over="ignore"):  # a number beyond float32 becomes inf: the caller's finite check names it
+            return jnp.asarray(value, jnp.float32)
     except (TypeError, ValueError) as e:
         raise ValueError(f"{name} must be an array of numbers, got {value!r}") from e
 

@@ -36,7 +36,7 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import as_array, check_numeric, pytree_dataclass, static_field
+from ijoy_jax._struct import as_array, check_numeric, is_traced, pytree_dataclass, static_field
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
 from ijoy_jax.footcost import validate as validate_foot_cost
 from ijoy_jax.footcost.xla import plane_metrics, sole_tilt
@@ -253,7 +253,7 @@ def foothold(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None
 
 
 def validate(terrain, robot, stance, stance_side, command, *, method="exhaustive", swing_from=None, targets=None,
-             index=None, kernel="xla"):
+             index=None, kernel="xla", foot_costs=None):
     """Check the arguments of :func:`select_step` (raises ValueError / TypeError).
 
     Values of tracers are not checked (their shapes are), so it costs nothing
@@ -269,10 +269,66 @@ def validate(terrain, robot, stance, stance_side, command, *, method="exhaustive
         raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
     if targets is not None and not isinstance(targets, Targets):
         raise TypeError(f"targets must be an ijoy_jax.select.Targets (make_targets), got {type(targets).__name__}")
+    if foot_costs is not None:
+        if method != "exhaustive":
+            raise ValueError(f"foot_costs (every action's FootCost) serve method='exhaustive' only, got {method!r}")
+        check_numeric("foot_costs", foot_costs)
+        if np.shape(foot_costs) != (robot.num_actions,):
+            raise ValueError(f"foot_costs must have shape ({robot.num_actions},) (one FootCost per action), "
+                             f"got {np.shape(foot_costs)}")
+        if not is_traced(foot_costs) and np.any(np.isnan(np.asarray(foot_costs, np.float64))
+                                                | (np.asarray(foot_costs, np.float64) < 0)):
+            raise ValueError("foot_costs must be >= 0 or +inf (FootCost of each action; action_foot_costs), "
+                             "got NaN or a negative value")
 
 
-def _select(terrain, robot, stance, stance_side, command, swing_from, targets, index, method, quantize, chunk,
-            kernel) -> StepChoice:
+def _costs_of(terrain, robot, stance, side, steps, idx, swing_from, index, kernel) -> jax.Array:
+    """FootCost totals of the actions ``idx`` put down at world ``steps``: the one mechanism of every selector."""
+    cost = foot_cost_fused if kernel == "pallas" else foot_cost_terms
+    out = cost(terrain, robot, stance, side, steps, swing_from=swing_from, action_index=idx, index=index)
+    return out if kernel == "pallas" else out.total
+
+
+def action_foot_costs(terrain: Terrain, robot: Robot, stance, stance_side, *, swing_from=None,
+                      index: TerrainIndex | None = None, kernel: str = "xla") -> jax.Array:
+    """(N,) float32 FootCost of every action of S from one stance: the evaluation the exhaustive selector makes.
+
+    Entry ``i`` is the FootCost of action ``i`` (``robot.actions[i]``, mirrored
+    for a right swing foot) put down from ``stance``: action cost plus terrain
+    terms, ``+inf`` where the foothold is invalid (and everywhere when the
+    robot's or terrain's values are unsupported). Pass it to
+    :func:`select_step` (``foot_costs=``) so that a decision and anything else
+    that needs the whole action set (e.g. :func:`ijoy_jax.cue.feasible_commands`)
+    share one evaluation. Traceable: call it inside your jit (called eagerly,
+    FootCost runs through its own module-level jit).
+
+    Args:
+      terrain, robot, stance, stance_side, swing_from, index, kernel: as
+        :func:`select_step` (stance (3,) world pose in m, rad; stance_side +1
+        left, -1 right; kernel "xla" or "pallas", static).
+
+    Returns:
+      (N,) float32 FootCost, ``>= 0`` or ``+inf``.
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> terrain, robot = ij.terrain.flat((100, 100), 0.02), ij.robots.hrp2()
+      >>> fc = ij.select.action_foot_costs(terrain, robot, [1.0, 1.0, 0.0], -1)
+      >>> fc.shape, bool((fc == 0).all())
+      ((496,), True)
+    """
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
+    stance = jnp.asarray(as_array("stance", stance), jnp.float32)
+    swing_from = None if swing_from is None else jnp.asarray(as_array("swing_from", swing_from), jnp.float32)
+    side = side_sign(stance_side)
+    steps = geometry.compose(stance, side_actions(robot, -side))
+    idx = jnp.arange(robot.num_actions, dtype=jnp.int32)
+    return _costs_of(terrain, robot, stance, side, steps, idx, swing_from, index, kernel)
+
+
+def _select(terrain, robot, stance, stance_side, command, swing_from, targets, index, foot_costs, method, quantize,
+            chunk, kernel) -> StepChoice:
     """The body of :func:`select_step` (always run through :data:`_select_jit`)."""
     if index is None:
         index = index_terrain(terrain, robot)
@@ -292,9 +348,7 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     steps = geometry.compose(stance, side_actions(robot, swing))  # (N, 3)
 
     def terms_of(idx):
-        cost = foot_cost_fused if kernel == "pallas" else foot_cost_terms
-        out = cost(terrain, robot, stance, side, steps[idx], swing_from=swing_from, action_index=idx, index=index)
-        return out if kernel == "pallas" else out.total
+        return _costs_of(terrain, robot, stance, side, steps[idx], idx, swing_from, index, kernel)
 
     if method == "naive":
         best = jnp.argmin(dists).astype(jnp.int32)  # lowest dist, then lowest index
@@ -303,7 +357,7 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
         valid = jnp.isfinite(cost)
         evaluated = jnp.int32(1)
     elif method == "exhaustive":
-        fc_all = terms_of(jnp.arange(n, dtype=jnp.int32))
+        fc_all = terms_of(jnp.arange(n, dtype=jnp.int32)) if foot_costs is None else foot_costs.astype(jnp.float32)
         cost_all = fc_all + robot.w * dists
         best = _lexmin(cost_all, dists)
         cost, fc = cost_all[best], fc_all[best]
@@ -387,6 +441,7 @@ def select_step(
     index: TerrainIndex | None = None,
     chunk: int = 32,
     kernel: str = "xla",
+    foot_costs=None,
 ) -> StepChoice:
     """Choose the next swing-foot placement for a joystick command.
 
@@ -415,6 +470,11 @@ def select_step(
         one fused kernel per decision (:mod:`ijoy_jax.footcost.pallas`): the
         same costs to float32 rounding, about 30x faster on a GPU
         (BENCHMARKS.md); on a CPU it is interpreted (slow, for checks).
+      foot_costs: (N,) every action's FootCost from this stance, already
+        evaluated (:func:`action_foot_costs`, or the ``cost`` of
+        :func:`ijoy_jax.cue.feasible_commands`): the exhaustive method decides
+        from them instead of evaluating FootCost again (the same choice).
+        None: evaluated here. Only with ``method="exhaustive"``.
 
     Returns:
       :class:`StepChoice`.
@@ -431,15 +491,16 @@ def select_step(
       >>> robot = ij.robots.hrp2(margin=0.02)
       >>> c = ij.select_step(terrain, robot, [0.8, 1.0, 0.0], -1, [0.25, 0.0, 0.0])
       >>> bool(c.valid), round(float(c.pose[0]), 2)   # as far forward as the wall allows
-      (True, 0.9)
+      (True, 0.95)
     """
     stance, command, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("command", command),
                                                                ("swing_from", swing_from)))
+    foot_costs = as_array("foot_costs", foot_costs)
     validate(terrain, robot, stance, stance_side, command, method=method, swing_from=swing_from, targets=targets,
-             index=index, kernel=kernel)
+             index=index, kernel=kernel, foot_costs=foot_costs)
     targets = make_targets(robot) if targets is None else targets  # outside the jit: one program with or without
-    return _select_jit(terrain, robot, stance, stance_side, command, swing_from, targets, index, method=method,
-                       quantize=quantize, chunk=chunk, kernel=kernel)
+    return _select_jit(terrain, robot, stance, stance_side, command, swing_from, targets, index, foot_costs,
+                       method=method, quantize=quantize, chunk=chunk, kernel=kernel)
 
 
 _select_jit = jax.jit(_select, static_argnames=("method", "quantize", "chunk", "kernel"))

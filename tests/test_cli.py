@@ -27,6 +27,8 @@ CASES = [
     (["sim", "render", "--size", "big"], "invalid literal"),
     (["tune", "forward", "--out", "o", "--set", "bogus=1"], "unknown config field(s) ['bogus']"),
     (["tune", "inverse", "--out", "o", "--config", "no_such.toml"], "No such file or directory"),
+    (["cue", "study", "--out", "o", "--train", "0"], "--train must be at least 1"),
+    (["cue", "field", "--out", "no/such/folder/field.png"], "no folder for"),
 ]
 
 

@@ -112,7 +112,7 @@ def test_matches_numpy_reference_of_the_papers_algorithm(has_height):
             assert int(got.index[q]) == ref_i or abs(float(got.cost[q]) - ref_c) < 1e-4, q
 
 
-def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost():
+def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost_and_of_action_foot_costs():
     terrains = _random_terrains(11, 1, True)
     t = jax.tree_util.tree_map(lambda x: x[0], terrains)
     stance, side, command, swing_from = _random_queries(12, 20)
@@ -125,6 +125,13 @@ def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost():
         rel = np.asarray(ij.geometry.relative(stance[q], steps), np.float64)
         d = np.hypot(*(rel[:, :2] - p_next[:2]).T) + 100 * np.abs((rel[:, 2] - p_next[2] + np.pi) % (2 * np.pi) - np.pi)
         total = fc + d
+        # action_foot_costs is that one evaluation, and select_step decides the same from it.
+        every = select.action_foot_costs(t, ROBOT, stance[q], side[q], swing_from=swing_from[q])
+        np.testing.assert_array_equal(np.asarray(every, np.float64), fc)
+        if q < 6:
+            again = ij.select_step(t, ROBOT, stance[q], side[q], command[q], swing_from=swing_from[q], quantize=False,
+                                   foot_costs=every)
+            assert int(again.index) == int(ch.index) and float(again.cost) == float(ch.cost)
         if np.isinf(total).all():
             assert not bool(ch.valid) and int(ch.index) == -1
             continue

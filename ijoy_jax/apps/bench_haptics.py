@@ -35,7 +35,8 @@ from ijoy_jax.haptics.filter import SpringDamper, discretise, filter_step, init_
 from ijoy_jax.haptics.leg import PAPER_Q, alduro_leg, leg_repulsive_force
 
 
-def _time_calls(fn, args, n):
+def time_calls(fn, args, n) -> list[float]:
+    """Wall seconds of ``n`` calls ``fn(*args)``, each synchronised with ``block_until_ready``."""
     times = []
     for _ in range(n):
         t0 = time.perf_counter()
@@ -50,12 +51,12 @@ def _compile(fn, args):
     return time.perf_counter() - t0
 
 
-def _single(fn, args, n):
-    """Compile time, then wall-time statistics per call and process CPU time per call."""
+def single_call(fn, args, n) -> dict:
+    """Compile time, then wall-time statistics per call and process CPU time per call (a JSON-able dict)."""
     compile_s = _compile(fn, args)
-    _time_calls(fn, args, min(200, n))  # warm-up
+    time_calls(fn, args, min(200, n))  # warm-up
     cpu0 = time.process_time()
-    t = np.array(_time_calls(fn, args, n))
+    t = np.array(time_calls(fn, args, n))
     cpu = (time.process_time() - cpu0) / n
     return {
         "compile_s": compile_s,
@@ -98,13 +99,14 @@ def run(quick: bool = False, calls: int | None = None, sizes: tuple[int, ...] | 
         "quick": quick,
     }
     # Geometry as traced arguments (no recompile when it changes) ...
-    out["leg_force"] = _single(jax.jit(leg_repulsive_force), (leg, q, c1, lam), n_single)
+    out["leg_force"] = single_call(jax.jit(leg_repulsive_force), (leg, q, c1, lam), n_single)
     # ... and as compile-time constants (a fixed robot: XLA folds the geometry).
-    out["leg_force_fixed_geometry"] = _single(jax.jit(lambda x: leg_repulsive_force(leg, x, c1, lam)), (q,), n_single)
+    out["leg_force_fixed_geometry"] = single_call(jax.jit(lambda x: leg_repulsive_force(leg, x, c1, lam)), (q,),
+                                                  n_single)
 
     coeffs = discretise(SpringDamper.create(2 * np.pi * 2.0, 0.7), 1e-3)
     step = jax.jit(filter_step)
-    out["filter_step"] = _single(step, (coeffs, init_state(jnp.zeros(2)), jnp.array([0.1, -0.2])), n_single)
+    out["filter_step"] = single_call(step, (coeffs, init_state(jnp.zeros(2)), jnp.array([0.1, -0.2])), n_single)
 
     batched = jax.jit(jax.vmap(leg_repulsive_force, in_axes=(None, 0, None, None)))
     rng = np.random.default_rng(0)
@@ -115,7 +117,7 @@ def run(quick: bool = False, calls: int | None = None, sizes: tuple[int, ...] | 
         qb = jnp.asarray(rng.uniform(0.02, 0.98, (b, 4)) * stroke, jnp.float32)
         compile_s = _compile(batched, (leg, qb, c1, lam))
         reps = max(3, min(200 if not quick else 50, int((2e5 if not quick else 2e4) // b)))
-        t = statistics.median(_time_calls(batched, (leg, qb, c1, lam), reps))
+        t = statistics.median(time_calls(batched, (leg, qb, c1, lam), reps))
         rows.append({"batch": b, "compile_s": compile_s, "median_s": t, "evals_per_s": b / t})
     out["leg_force_batched"] = rows
     out["loadavg_1min_end"] = _loadavg()
