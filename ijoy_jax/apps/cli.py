@@ -88,7 +88,9 @@ def main(argv: list[str] | None = None) -> int:
     walk.add_argument("--commands", choices=["random", "forward", "both"], default=None,
                       help="a new random command every step, a held forward command, or both (default: both)")
     walk.add_argument("--resolution", type=float, default=None, help="cell size in metres (default: 0.02)")
-    walk.add_argument("--forward", type=float, default=None, help="held forward command in m/s (default: 0.25)")
+    walk.add_argument("--forward", type=float, default=None,
+                      help="held forward command in m/s (default: 0.25; the stairs keep their own 0.375, the 30 cm "
+                           "step that crosses a riser)")
     walk.add_argument("--chunk", type=int, default=None,
                       help="simulated rollouts per jitted call (default: up to 1024 on an accelerator, 32 on a CPU)")
     walk.add_argument("--seed", type=int, default=None, help="maps and random commands (default: 0)")
