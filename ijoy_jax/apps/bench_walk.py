@@ -140,7 +140,7 @@ class WalkFamily:
     forward: float | None = None
 
     def robot(self) -> robots.Robot:
-        """The family's robot; raises TypeError when ``robots.hrp2`` does not take ``reach`` (yet)."""
+        """The family's robot: ``robots.hrp2()``, or ``robots.hrp2(reach=...)`` for a family with its own reach."""
         return robots.hrp2() if self.reach is None else robots.hrp2(reach=self.reach)
 
 
