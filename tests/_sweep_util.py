@@ -1,4 +1,5 @@
-"""The tests' tiny sweep, shared by tests/test_sweep.py and tests/test_sweep_folders.py.
+"""The tests' tiny sweep, shared by tests/test_sweep.py and tests/test_sweep_folders.py, and the killed sweep
+child that tests/test_sweep.py and tests/test_sweep_physics.py resume from.
 
 One static configuration (2D 60 x 50 map at 4 cm, 19 actions at density 0.25, 6 steps, exhaustive search)
 for both, so each module compiles the chunk function once; they differ only in the cells of the grid.
@@ -6,6 +7,11 @@ for both, so each module compiles the chunk function once; they differ only in t
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 _HEAD = """
@@ -50,3 +56,38 @@ def write(tmp_path: Path, text: str, name: str = "s.toml") -> Path:
     p = tmp_path / name
     p.write_text(text)
     return p
+
+
+_SLOW_CHILD = """
+import os, sys, time
+hold_s = float(sys.argv[1])
+_replace = os.replace
+def slow_replace(src, dst):
+    _replace(src, dst)
+    if str(dst).endswith(".parquet"):
+        time.sleep(hold_s)   # hold after each part: the parent kills the child in this window
+os.replace = slow_replace
+from ijoy_jax.apps import cli
+sys.exit(cli.main(sys.argv[2:]))
+"""
+
+
+def kill_after_first_part(sweep_file: Path, out: Path, *, chunk: int, hold_s: float, timeout_s: float,
+                          poll_s: float) -> None:
+    """Run ``ijoy sweep run sweep_file --out out --chunk chunk`` in a child process that sleeps ``hold_s`` after
+    writing each part, and SIGKILL it as soon as the first part exists (polling every ``poll_s``). Fails if the
+    child ends before writing a part, or writes none within ``timeout_s``."""
+    parts = out / "parts"
+    child = subprocess.Popen([sys.executable, "-c", _SLOW_CHILD, str(hold_s), "sweep", "run", str(sweep_file),
+                              "--out", str(out), "--chunk", str(chunk)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + timeout_s
+        while not list(parts.glob("part-*.parquet")) if parts.exists() else True:
+            assert child.poll() is None, "the sweep ended before any chunk was written"
+            assert time.monotonic() < deadline, f"no chunk written in {timeout_s:g} s"
+            time.sleep(poll_s)
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.kill()
+        child.wait()

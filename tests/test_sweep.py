@@ -12,10 +12,8 @@ import dataclasses
 import json
 import math
 import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import jax
@@ -23,7 +21,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.stats
-from _sweep_util import tiny_sweep, write  # tests/ is on sys.path (pytest rootdir import)
+from _sweep_util import kill_after_first_part, tiny_sweep, write  # tests/ is on sys.path (pytest rootdir import)
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -281,35 +279,11 @@ def test_padding_rows_are_dropped(tmp_path, base_file):
     assert df.groupby("chunk").size().tolist() == [5, 5, 2]
 
 
-_SLOW_CHILD = """
-import os, sys, time
-_replace = os.replace
-def slow_replace(src, dst):
-    _replace(src, dst)
-    if str(dst).endswith(".parquet"):
-        time.sleep(0.5)   # widen the window between chunks so the parent kills the child mid-sweep
-os.replace = slow_replace
-from ijoy_jax.apps import cli
-sys.exit(cli.main(sys.argv[1:]))
-"""
-
-
 def test_resume_after_sigkill(reference, base_file, tmp_path):
     ref_out, _ = reference
     out = tmp_path / "killed"
     parts = out / "parts"
-    child = subprocess.Popen([sys.executable, "-c", _SLOW_CHILD, "sweep", "run", str(base_file), "--out", str(out),
-                              "--chunk", str(CHUNK)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        deadline = time.monotonic() + 120
-        while not list(parts.glob("part-*.parquet")) if parts.exists() else True:
-            assert child.poll() is None, "the sweep ended before any chunk was written"
-            assert time.monotonic() < deadline, "no chunk written in 120 s"
-            time.sleep(0.01)
-        os.kill(child.pid, signal.SIGKILL)
-    finally:
-        child.kill()
-        child.wait()
+    kill_after_first_part(base_file, out, chunk=CHUNK, hold_s=0.5, timeout_s=120, poll_s=0.01)
     done = sorted(p.name for p in parts.glob("part-*.parquet"))
     assert 1 <= len(done) < 6, done
     (parts / "part-00005.parquet.tmp").write_bytes(b"half a file")  # a write cut short by a kill

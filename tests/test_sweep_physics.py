@@ -17,10 +17,8 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import jax
@@ -28,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 import pytest
-from _sweep_util import write  # tests/ is on sys.path (pytest rootdir import)
+from _sweep_util import kill_after_first_part, write  # tests/ is on sys.path (pytest rootdir import)
 
 import ijoy_jax as ij
 from ijoy_jax import sweep
@@ -233,35 +231,11 @@ def test_summary_plot_of_a_physics_sweep_draws_collision_and_fall_rates(referenc
     assert {t.get_text() for t in fig.axes[0].get_legend().get_texts()} >= {"friction = 0.05", "friction = 1"}
 
 
-_SLOW_CHILD = """
-import os, sys, time
-_replace = os.replace
-def slow_replace(src, dst):
-    _replace(src, dst)
-    if str(dst).endswith(".parquet"):
-        time.sleep(600)   # hold after the first chunk: the parent kills the child here
-os.replace = slow_replace
-from ijoy_jax.apps import cli
-sys.exit(cli.main(sys.argv[1:]))
-"""
-
-
 def test_a_physics_sweep_killed_mid_run_resumes_with_nothing_lost_or_duplicated(reference, physics_file, tmp_path):
     ref_out, _, _ = reference
     out = tmp_path / "killed"
     parts = out / "parts"
-    child = subprocess.Popen([sys.executable, "-c", _SLOW_CHILD, "sweep", "run", str(physics_file), "--out", str(out),
-                              "--chunk", str(CHUNK)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        deadline = time.monotonic() + 300
-        while not list(parts.glob("part-*.parquet")) if parts.exists() else True:
-            assert child.poll() is None, "the sweep ended before any chunk was written"
-            assert time.monotonic() < deadline, "no chunk written in 300 s"
-            time.sleep(0.05)
-        os.kill(child.pid, signal.SIGKILL)
-    finally:
-        child.kill()
-        child.wait()
+    kill_after_first_part(physics_file, out, chunk=CHUNK, hold_s=600, timeout_s=300, poll_s=0.05)
     assert sorted(p.name for p in parts.glob("part-*.parquet")) == ["part-00000.parquet"]
     (parts / "part-00001.parquet.tmp").write_bytes(b"half a file")  # a write cut short by a kill
     stats = sweep.run(physics_file, out, chunk_size=CHUNK, progress=False)
