@@ -11,9 +11,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import jax
@@ -21,7 +18,12 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.stats
-from _sweep_util import kill_after_first_part, tiny_sweep, write  # tests/ is on sys.path (pytest rootdir import)
+from _sweep_util import (  # tests/ is on sys.path (pytest rootdir import)
+    kill_after_first_part,
+    run_on_four_cpu_devices,
+    tiny_sweep,
+    write,
+)
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -394,11 +396,7 @@ def test_four_cpu_devices_give_the_single_device_result(reference, base_file, tm
     # the last padded to 4. Compared with the in-process single-device reference (chunks of 2).
     ref_out, _ = reference
     out = tmp_path / "four"
-    env = dict(os.environ, JAX_PLATFORMS="cpu",
-               XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=4").strip())
-    r = subprocess.run([sys.executable, "-c", _SHARDED_CHILD, str(base_file), str(out)], env=env,
-                       capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr[-3000:]
+    run_on_four_cpu_devices(_SHARDED_CHILD, str(base_file), str(out), timeout_s=120)
     man = json.loads((out / "manifest.json").read_text())["sessions"][-1]
     assert man["devices"] == 4 and man["device_count"] == 4 and man["chunk_size"] == 4 and man["complete"]
     assert "'scenarios': 4" in man["sharding"] and "P('scenarios'" in man["sharding"], man["sharding"]

@@ -16,9 +16,6 @@ and only the sweep sharded over 4 forced CPU devices compiles its own (a sharded
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import jax
@@ -26,7 +23,11 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 import pytest
-from _sweep_util import kill_after_first_part, write  # tests/ is on sys.path (pytest rootdir import)
+from _sweep_util import (  # tests/ is on sys.path (pytest rootdir import)
+    kill_after_first_part,
+    run_on_four_cpu_devices,
+    write,
+)
 
 import ijoy_jax as ij
 from ijoy_jax import sweep
@@ -262,11 +263,7 @@ def test_four_cpu_devices_give_the_single_device_table_bit_for_bit(reference, ph
     split over devices change no bit."""
     ref_out, _, _ = reference
     out = tmp_path / "four"
-    env = dict(os.environ, JAX_PLATFORMS="cpu",
-               XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=4").strip())
-    r = subprocess.run([sys.executable, "-c", _SHARDED_CHILD, str(physics_file), str(out)], env=env,
-                       capture_output=True, text=True, timeout=900)
-    assert r.returncode == 0, r.stderr[-3000:]
+    run_on_four_cpu_devices(_SHARDED_CHILD, str(physics_file), str(out), timeout_s=900)
     session = json.loads((out / "manifest.json").read_text())["sessions"][-1]
     assert session["devices"] == 4 and "P('scenarios'" in session["sharding"]
     got, want = sweep.load(out), sweep.load(ref_out)
