@@ -55,8 +55,8 @@ class StepReply:
       target: (3,) float32 world pose the choice was scored against.
       command_ok, unsupported: bool, as :class:`ijoy_jax.StepChoice`.
       evaluated: int, actions whose FootCost was computed.
-      terms: name -> float32, :class:`ijoy_jax.FootCostTerms` of ``pose`` (the chosen action; the step in
-        place when not valid): which term refused or cost what.
+      terms: name -> float32 (``action_index``: int), :class:`ijoy_jax.FootCostTerms` of ``pose`` (the
+        chosen action; the step in place when not valid): which term refused or cost what.
       map_name: the map decided on; revision: its revision (bumped by every terrain update).
       compute_s: seconds the server spent on the decision; round_trip_s: seconds from send to reply.
     """
@@ -85,7 +85,8 @@ class StepReply:
         return cls(pose=vec(h["pose"]), foothold=vec(h["foothold"]), valid=bool(h["valid"]), cost=f32(h["cost"]),
                    foot_cost=f32(h["foot_cost"]), index=int(h["index"]), target=vec(h["target"]),
                    command_ok=bool(h["command_ok"]), unsupported=bool(h["unsupported"]),
-                   evaluated=int(h["evaluated"]), terms={k: f32(v) for k, v in h["terms"].items()},
+                   evaluated=int(h["evaluated"]),
+                   terms={k: v if isinstance(v, int) else f32(v) for k, v in h["terms"].items()},
                    map_name=h["map"], revision=int(h["revision"]), compute_s=float(h["compute_us"]) * 1e-6,
                    round_trip_s=round_trip_s)
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import socket
 import threading
 import time
@@ -88,7 +89,7 @@ def listen(host: str, port: int, *, max_frame_bytes: int) -> Listener:
     except zmq.ZMQError as e:
         sock.close(linger=0)
         ctx.term()
-        raise ListenError(f"cannot listen on {host}:{port} ({ip}): {e.strerror}") from None
+        raise ListenError(f"cannot listen on {host}:{port} ({ip}): {os.strerror(e.errno)}") from None
     return Listener(ctx, sock, ip, port)
 
 
@@ -133,7 +134,8 @@ def run(listener: Listener, service: Service, stop: threading.Event, *, verbose:
             if monitor in ready:
                 _on_monitor(monitor, counts, verbose)
             if sock in ready:
-                _serve_pending(sock, service, stop, counts, verbose)
+                _serve_pending(sock, monitor, service, stop, counts, verbose)
+        _on_monitor(monitor, counts, verbose)  # connections not logged yet
     finally:
         sock.disable_monitor()
         monitor.close(linger=0)
@@ -150,11 +152,13 @@ def _on_monitor(monitor, counts: dict, verbose: bool) -> None:
             log.info("connection closed (fd %s)", event["value"])
 
 
-def _serve_pending(sock, service: Service, stop: threading.Event, counts: dict, verbose: bool) -> None:
-    """Answer every request waiting on the socket (up to 256 before looking at the monitor and stop again)."""
+def _serve_pending(sock, monitor, service: Service, stop: threading.Event, counts: dict, verbose: bool) -> None:
+    """Answer every request waiting on the socket (up to 256 before polling again), logging new connections
+    first (while their address can still be read)."""
     for _ in range(256):
         if stop.is_set():
             return
+        _on_monitor(monitor, counts, verbose)
         try:
             frames = sock.recv_multipart(flags=zmq.NOBLOCK, copy=False)
         except zmq.Again:

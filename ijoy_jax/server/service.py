@@ -107,6 +107,12 @@ def compile_count() -> int:
     return _COMPILES["count"]
 
 
+def _term(value):
+    """A cost term or metric as a reply carries it: float32 as :func:`json_float`, the action index as an int."""
+    value = np.asarray(value)
+    return int(value) if value.dtype.kind in "iu" else json_float(value)
+
+
 def _f32(name: str, values) -> np.ndarray:
     """JSON numbers as float32 (what select_step does with them), refusing values float32 cannot hold."""
     a64 = np.asarray(values, np.float64)
@@ -266,11 +272,11 @@ class Service:
 
     def _on_step(self, req):
         h = req.header
-        name = h.get("map", DEFAULT_MAP)
-        m = self._map(name, "step")
         stance, command = _f32("stance", h["stance"]), _f32("command", h["command"])
         swing = h.get("swing_from")
         swing = None if swing is None else _f32("swing_from", swing)
+        name = h.get("map", DEFAULT_MAP)
+        m = self._map(name, "step")
         side = int(h["stance_side"])
         t0 = time.perf_counter()
         choice, terms = jax.device_get(_decide(m.terrain, self.robot, m.prepared, stance, side, command, swing,
@@ -282,7 +288,7 @@ class Service:
                 "foot_cost": json_float(choice.foot_cost), "target": vec(choice.target),
                 "command_ok": bool(choice.command_ok), "unsupported": bool(choice.unsupported),
                 "evaluated": int(choice.evaluated),
-                "terms": {k: json_float(getattr(terms, k)) for k in TERM_NAMES},
+                "terms": {k: _term(getattr(terms, k)) for k in TERM_NAMES},
                 "compute_us": compute_us}, None
 
     def _on_set_robot(self, req):
