@@ -345,13 +345,22 @@ def test_a_client_that_closes_before_reading_leaves_the_server_serving(server):
 
 
 def test_a_killed_client_process_leaves_the_server_serving(server):
-    code = ("import zmq, json, os, signal\n"
+    """The client sends a map and a step, and is SIGKILLed while the server computes."""
+    code = ("import os, signal, time, zmq, numpy as np\n"
+            "from ijoy_jax.server import schema\n"
             f"s = zmq.Context().socket(zmq.DEALER); s.connect('tcp://{server.host}:{server.port}')\n"
-            "s.send(json.dumps({'version': 1, 'type': 'info'}).encode())\n"
-            "import time; time.sleep(0.3); os.kill(os.getpid(), signal.SIGKILL)\n")
-    proc = subprocess.run([sys.executable, "-c", code], timeout=60)
+            f"s.send_multipart(schema.encode({{'version': 1, 'type': 'set_terrain', 'map': 'killed', "
+            f"'resolution': {RES}}}, {{'free': np.ones({SHAPE}, bool), 'height': np.zeros({SHAPE}, np.float32)}}))\n"
+            "s.send_multipart(schema.encode({'version': 1, 'type': 'step', 'map': 'killed', 'stance': [1, 1, 0], "
+            "'stance_side': 1, 'command': [0.2, 0, 0]}))\n"
+            "time.sleep(0.05); os.kill(os.getpid(), signal.SIGKILL)\n")
+    proc = subprocess.run([sys.executable, "-c", code], timeout=120)
     assert proc.returncode == -signal.SIGKILL
     _still_serving(server)
+    with Client(server.host, server.port, timeout=REQUEST_TIMEOUT_S) as c:
+        for name in ("killed", "gone"):
+            if name in c.info()["maps"]:
+                c.drop_terrain(name)
 
 
 def test_raw_tcp_garbage_leaves_the_server_serving(server):
