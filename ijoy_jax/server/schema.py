@@ -36,11 +36,11 @@ REQUEST_TYPES = ("hello", "info", "set_terrain", "update_terrain", "drop_terrain
 DEFAULT_MAP = "default"
 """The map a request names when it names none."""
 
-# Arrays each request type may carry: name -> accepted dtypes (array-interface typestr). Every one is 2D (nx, ny).
 ARRAY_FIELDS: Mapping[str, Mapping[str, tuple[str, ...]]] = {
     "set_terrain": {"free": ("|b1", "|u1"), "height": ("<f4", "<f8")},
     "update_terrain": {"free": ("|b1", "|u1"), "height": ("<f4", "<f8")},
 }
+"""The arrays each request type may carry: name -> accepted dtypes (array-interface typestr); each is 2D (nx, ny)."""
 
 _REPLY_DTYPES = ("|b1", "|u1", "<i4", "<f4", "<f8")  # what a reply's frames may hold (the info reply's actions)
 
