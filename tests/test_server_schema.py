@@ -25,8 +25,8 @@ json_leaf = st.one_of(st.none(), st.booleans(), st.integers(-(2**70), 2**70),
                       st.floats(allow_nan=False, allow_infinity=False), st.text(max_size=20))
 json_value = st.recursive(json_leaf, lambda c: st.lists(c, max_size=4) | st.dictionaries(st.text(max_size=10), c,
                                                                                           max_size=4), max_leaves=20)
-hostile_number = st.one_of(st.floats(), st.integers(-(2**80), 2**80), st.just(1e39), st.just(-1e39), st.text(max_size=5),
-                           st.none(), st.booleans(), st.lists(st.floats(), max_size=3))
+hostile_number = st.one_of(st.floats(), st.integers(-(2**80), 2**80), st.just(1e39), st.just(-1e39),
+                           st.text(max_size=5), st.none(), st.booleans(), st.lists(st.floats(), max_size=3))
 
 STEP = {"version": 1, "type": "step", "stance": [1.0, 1.0, 0.0], "stance_side": -1, "command": [0.2, 0.0, 0.0]}
 
