@@ -164,6 +164,7 @@ def test_window_updates_equal_a_whole_new_map(client):
         hw = rng.normal(0, 0.01, (wx, wy)).astype(np.float32)
         fw = rng.random((wx, wy)) > 0.2
         r = client.update_terrain([ix, iy], free=fw, height=hw, map_name=name)
+        _validator("terrain_reply").validate(r)
         h[ix:ix + wx, iy:iy + wy], free[ix:ix + wx, iy:iy + wy] = hw, fw
         c0, c1 = r["rebuilt_columns"]
         assert c0 <= ix and ix + wx <= c1 and c1 - c0 < SHAPE[0]  # a band of columns, not the whole map
