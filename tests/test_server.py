@@ -283,6 +283,7 @@ BAD = {
     "map above max_cells": ([_hdr(**_TERRAIN, arrays=[{**_SPEC, "shape": [_BIG, _BIG]}]),
                              np.ones((_BIG, _BIG), bool).tobytes()], "too_large"),
     "resolution 0": ([_hdr(**{**_TERRAIN, "resolution": 0}, arrays=[_SPEC]), _F], "invalid_field"),
+    "resolution 1 um": ([_hdr(**{**_TERRAIN, "resolution": 1e-6}, arrays=[_SPEC]), _F], "too_large"),
     "origin far away": ([_hdr(**_TERRAIN, origin=[1e5, 0], arrays=[_SPEC]), _F], "invalid_value"),
     "step on an unknown map": ([_hdr(**_STEP, map="nowhere")], "no_terrain"),
 }

@@ -79,6 +79,10 @@ class Limits:
       max_side: largest nx or ny.
       max_maps: maps held at once.
       max_header_bytes: largest JSON header (bytes).
+      max_window_cells: largest footprint or swing-path window, in cells, that a map's resolution may
+        give the robot (:func:`ijoy_jax.footcost.window_cells`): a finer map makes every FootCost
+        evaluation and the index grow with its square (HRP-2: its swing window is 47 cells at 2 cm;
+        resolutions finer than about 3.5 mm are refused by the default).
 
     ``max_frame_bytes`` (ZeroMQ's per-frame limit; a larger frame makes ZeroMQ drop the connection without a
     reply) is twice a float64 map of ``max_cells`` plus a header, so a map up to twice too large still gets a
@@ -89,9 +93,10 @@ class Limits:
     max_side: int = 8192
     max_maps: int = 4
     max_header_bytes: int = 1 << 16
+    max_window_cells: int = 256
 
     def __post_init__(self):
-        for name in ("max_cells", "max_side", "max_maps", "max_header_bytes"):
+        for name in ("max_cells", "max_side", "max_maps", "max_header_bytes", "max_window_cells"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"Limits.{name} must be a positive integer, got {v!r}")

@@ -29,7 +29,7 @@ import numpy as np
 
 import ijoy_jax
 from ijoy_jax import robots, select
-from ijoy_jax.footcost import FootCostTerms, TerrainIndex, index_terrain
+from ijoy_jax.footcost import FootCostTerms, TerrainIndex, index_terrain, window_cells
 from ijoy_jax.footcost.index import update_columns
 from ijoy_jax.footcost.xla import check_frame
 from ijoy_jax.robots import Robot
@@ -214,9 +214,15 @@ class Service:
                                                  f"{self.limits.max_maps}): drop one or reuse a name "
                                                  f"({sorted(self.maps)})")
         height, free = req.arrays.get("height"), req.arrays.get("free")
+        res = float(h["resolution"])
+        cells = max(window_cells(self.robot.max_radius, res), window_cells(0.5 * self.robot.max_swing, res))
+        if cells > self.limits.max_window_cells:
+            raise ProtocolError("too_large", f"resolution {res!r} m gives the robot's footprint and swing windows "
+                                             f"{cells} cells across, above max_window_cells = "
+                                             f"{self.limits.max_window_cells}: use a coarser map")
         origin = _f32("origin", h.get("origin", [0.0, 0.0]))
         terrain = from_arrays(None if height is None else np.asarray(height, np.float32),
-                              None if free is None else np.asarray(free, bool), float(h["resolution"]), origin)
+                              None if free is None else np.asarray(free, bool), res, origin)
         check_frame(terrain)
         t0 = time.perf_counter()
         index = jax.block_until_ready(_index_jit(terrain, self.robot))
