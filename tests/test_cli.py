@@ -32,6 +32,7 @@ CASES = [
     (["serve", "--port", "99999", "--warm-up", "none"], "port must be in 0..65535"),
     (["serve", "--warm-up", "big"], "a map shape is NXxNY or NXxNY@RES"),
     (["serve", "--margin", "-0.1", "--warm-up", "none"], "margin must be >= 0"),
+    (["serve", "--port", "0", "--warm-up", "20x20@0.001"], "warm-up: too_large: resolution 0.001 m"),
 ]
 
 

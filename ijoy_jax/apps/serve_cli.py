@@ -98,9 +98,9 @@ def main(args) -> int:
         listener = net.listen(args.host, args.port, max_frame_bytes=limits.max_frame_bytes)
     except net.ListenError as e:
         raise ValueError(str(e)) from None
-    service = Service(robot, name="hrp2", options=options, limits=limits)
     stop = threading.Event()
     try:
+        service = Service(robot, name="hrp2", options=options, limits=limits)
         for shape, res in shapes:
             w = service.warm_up(shape, res)
             log.info("warm-up for %dx%d maps at %g m: %d programs in %.1f s", *shape, res, w["programs"],
@@ -112,10 +112,9 @@ def main(args) -> int:
                  robot.num_actions, limits.to_json())
         counts = net.run(listener, service, stop, verbose=args.verbose)
     except KeyboardInterrupt:  # during the warm-up, before the handlers
-        listener.close()
         return 130
-    listener.close()
+    finally:
+        listener.close()
     log.info("stopped: %d requests (%d errors), %d connections, %d replies dropped", counts["requests"],
              service.stats["errors"], counts["connections"], counts["dropped_replies"])
     return 0
-

@@ -363,7 +363,7 @@ class Service:
     def _ok(frames) -> dict:
         header = schema.decode_reply(frames).header
         if not header["ok"]:
-            raise RuntimeError(f"warm-up request failed: {header['code']}: {header['message']}")
+            raise ValueError(f"warm-up: {header['code']}: {header['message']}")
         return header
 
 
