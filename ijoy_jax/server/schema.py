@@ -313,8 +313,10 @@ def decode_request(frames: Sequence, limits: Limits | None = None) -> Request:
     if len(frames) == 0:
         raise ProtocolError("malformed", "empty message (no header frame)")
     header = _parse_header(frames[0], limits)
-    _check_schema("envelope", header)
-    rtype = header["type"]
+    rtype, version = header.get("type"), header.get("version")
+    if not (rtype in REQUEST_TYPES and isinstance(version, int) and not isinstance(version, bool)):
+        _check_schema("envelope", header)  # names what is wrong with version, type, id or arrays (the type's
+        # own schema below checks them too: validating the envelope first only costs time, ~0.1 ms)
     if rtype != "hello" and header["version"] not in SUPPORTED_VERSIONS:
         raise ProtocolError("unsupported_version", f"protocol version {header['version']} is not supported (this "
                                                    f"server speaks {list(SUPPORTED_VERSIONS)})",
