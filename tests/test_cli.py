@@ -29,6 +29,10 @@ CASES = [
     (["tune", "inverse", "--out", "o", "--config", "no_such.toml"], "No such file or directory"),
     (["cue", "study", "--out", "o", "--train", "0"], "--train must be at least 1"),
     (["cue", "field", "--out", "no/such/folder/field.png"], "no folder for"),
+    (["serve", "--port", "99999", "--warm-up", "none"], "port must be in 0..65535"),
+    (["serve", "--warm-up", "big"], "a map shape is NXxNY or NXxNY@RES"),
+    (["serve", "--margin", "-0.1", "--warm-up", "none"], "margin must be >= 0"),
+    (["serve", "--port", "0", "--warm-up", "20x20@0.001"], "warm-up: too_large: resolution 0.001 m"),
 ]
 
 

@@ -41,6 +41,8 @@ def test_build_passes_with_warnings_as_errors(html):
     ("api/haptics.html", 'id="ijoy_jax.haptics.repulsive_force"'),
     ("api/ijoy_jax.html", 'href="select.html#ijoy_jax.select.select_step"'),
     ("api/cli.html", "small sizes, for a smoke test"),  # ijoy bench --help
+    ("api/server.html", 'id="ijoy_jax.server.Client"'),
+    ("server.html", "unsupported_version"),
     ("benchmarks.html", "Headline figures"),
     ("benchmarks_history.html", "lab notebook"),
     ("readme.html", "Set up"),

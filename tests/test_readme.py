@@ -35,3 +35,6 @@ def test_readme_examples_run(tmp_path, monkeypatch):
     assert np.all(np.asarray(ns["b"]) >= 0)
     assert (tmp_path / "walk.gif").stat().st_size > 0 and len(ns["frames"]) > 0
     assert ns["batch"].footsteps.shape[:2] == (2, 3)
+    # The footstep server's reply is the first example's in-process choice.
+    assert ns["reply"].index == int(ns["choice"].index) and ns["reply"].valid
+    np.testing.assert_array_equal(ns["reply"].foothold, np.asarray(ns["choice"].foothold))
