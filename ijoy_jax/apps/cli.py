@@ -65,7 +65,8 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--steps", type=int, default=24, help="number of steps (default: %(default)s)")
     demo.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
     bench = sub.add_parser("bench", help="run a benchmark and print JSON lines (see BENCHMARKS.md)")
-    bench.add_argument("name", choices=["footcost", "select", "check", "tune", "sim", "walk", "haptics", "cue"],
+    bench.add_argument("name", choices=["footcost", "select", "check", "tune", "sim", "walk", "haptics", "cue",
+                                                 "serve"],
                        help="footcost: evaluations/s; select: decisions/s, rollout steps/s and the NumPy baseline; "
                             "check: fixed decisions saved to / compared with --ref (device agreement); "
                             "tune: seconds per forward-tuning step, compile separate; "
@@ -75,7 +76,9 @@ def main(argv: list[str] | None = None) -> int:
                             "contacts, placement and tilt errors; JSON lines, a Markdown table and --plot); "
                             "haptics: the ALDURO leg force and filter per call and batched; "
                             "cue: the haptic cue's tick (jitted force per call, both CPU dispatch modes), the "
-                            "per-step feasible set and reach, and the force batched")
+                            "per-step feasible set and reach, and the force batched; "
+                            "serve: the footstep server's round trip over localhost (p50/p99) beside the "
+                            "in-process select_step, one 2.5D decision on a 200 x 200 map")
     bench.add_argument("--ref", default=None, help="npz of reference decisions for 'check'")
     bench.add_argument("--quick", action="store_true", help="small sizes, for a smoke test")
     bench.add_argument("--json", default=None, help="also write the results to this file")
@@ -138,10 +141,11 @@ def main(argv: list[str] | None = None) -> int:
     rend.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
     rend.add_argument("--seed", type=int, default=0, help="clutter map (default: %(default)s)")
     rend.add_argument("--size", default="480x320", help="WIDTHxHEIGHT in pixels (default: %(default)s)")
-    from ijoy_jax.apps import cue_cli, drive_cli, tune_cli
+    from ijoy_jax.apps import cue_cli, drive_cli, serve_cli, tune_cli
 
     tune_cli.add_parser(sub)
     cue_cli.add_parser(sub)
+    serve_cli.add_parser(sub)
     drive_cli.add_parser(sub)
     args = parser.parse_args(argv)
     try:
@@ -166,6 +170,10 @@ def _run(args) -> int:
         from ijoy_jax.apps import cue_cli
 
         return cue_cli.main(args)
+    if args.command == "serve":
+        from ijoy_jax.apps import serve_cli
+
+        return serve_cli.main(args)
     if args.command == "sweep":
         return _sweep(args)
     if args.command == "sim":
@@ -208,6 +216,11 @@ def _run(args) -> int:
 
             rows = bench_cue.run(quick=args.quick)
             print(bench_cue.format_report(rows))
+        elif args.name == "serve":
+            from ijoy_jax.apps import bench_serve
+
+            rows = bench_serve.run(quick=args.quick)
+            print(bench_serve.format_report(rows))
         else:
             rows = bench_mod.run(args.name, quick=args.quick, path=args.ref)
         if args.json:

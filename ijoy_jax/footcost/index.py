@@ -159,3 +159,52 @@ def column_max_height(index: TerrainIndex, spans: geometry.ColumnSpans, shape) -
     hi = rows_max(index.height_max, ix, j0, j1)
     off_map = (spans.ix < 0) | (spans.ix >= nx) | (spans.j0 < 0) | (spans.j1 >= ny)
     return jnp.max(jnp.where(spans.touched, hi, -jnp.inf)), jnp.any(spans.touched & off_map)
+
+
+def update_columns(index: TerrainIndex, terrain: Terrain, robot: Robot, start, width: int) -> TerrainIndex:
+    """The index of ``terrain`` when only its columns ``start .. start + width - 1`` (along x) changed since
+    ``index`` was built: those columns rebuilt, the others kept. Equal to ``index_terrain(terrain, robot)``
+    bit for bit: every table is computed column by column (prefix counts and span maxima along y, edge
+    padding, window sums per padded column), so a column's entries depend on that column alone (and the
+    padding's copies of the first and last columns are copied again).
+
+    Args:
+      index: the terrain's index before the change (:func:`index_terrain` of the same grid and robot).
+      terrain: the changed terrain (same shape, resolution and ``has_height``).
+      robot: the robot the index was built for (its static ``max_radius`` sizes the padding).
+      start: first changed column (int, may be traced; ``0 <= start <= nx - width``).
+      width: number of columns rebuilt (static: one program per width).
+
+    Returns:
+      :class:`TerrainIndex`.
+    """
+    return _update_columns_jit(index, terrain, robot, start, width=width)
+
+
+def _update_columns(index: TerrainIndex, terrain: Terrain, robot: Robot, start, width: int) -> TerrainIndex:
+    nx = terrain.shape[0]
+    start = jnp.asarray(start, jnp.int32)
+    cols = lambda a: lax.dynamic_slice_in_dim(a, start, width, 0)  # noqa: E731
+    part = index_terrain(terrain.replace(height=cols(terrain.height), free=cols(terrain.free)), robot)
+    p = index.pad
+
+    def put(old, new, at, axis=0):
+        return lax.dynamic_update_slice_in_dim(old, new, at, axis)
+
+    def edges(a):  # the edge padding along x: copies of the first and last map columns
+        left = jnp.broadcast_to(a[p:p + 1], (p,) + a.shape[1:])
+        right = jnp.broadcast_to(a[p + nx - 1:p + nx], (p,) + a.shape[1:])
+        return jnp.concatenate([left, a[p:p + nx], right], 0)
+
+    mid = lambda a: a[p:p + width]  # noqa: E731  the part's padded columns that are map columns
+    return TerrainIndex(
+        obstacles_before=put(index.obstacles_before, part.obstacles_before, start),
+        height_max=put(index.height_max, part.height_max, start, axis=1),
+        height_padded=edges(put(index.height_padded, mid(part.height_padded), start + p)),
+        height_sums=edges(put(index.height_sums, mid(part.height_sums), start + p)),
+        height_block_first=edges(put(index.height_block_first, mid(part.height_block_first), start + p)),
+        pad=p,
+    )
+
+
+_update_columns_jit = jax.jit(_update_columns, static_argnames=("width",))
