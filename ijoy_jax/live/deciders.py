@@ -14,7 +14,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax import select
+from ijoy_jax import robots, select
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
@@ -61,12 +61,25 @@ class LocalDecider:
 
 
 class RemoteDecider:
-    """The footstep server (``ijoy serve``) through :class:`ijoy_jax.server.Client`: the terrain is sent once."""
+    """The footstep server (``ijoy serve``) through :class:`ijoy_jax.server.Client`: the terrain is sent once.
+
+    With ``robot`` given, the server's robot is made the drive's: its action set must be the same (a
+    ValueError says so otherwise: start ``ijoy serve`` with the drive's ``--density``/``--reach``), and its
+    traced scalar leaves (margin, w, ...) are set to the robot's (``Client.set_robot``, no recompile).
+    """
 
     name = "server"
 
-    def __init__(self, client, terrain: Terrain):
+    def __init__(self, client, terrain: Terrain, robot: Robot | None = None):
         self.client = client
+        if robot is not None:
+            info = client.info()
+            theirs, ours = np.asarray(info["actions"], np.float32), np.asarray(robot.actions, np.float32)
+            if theirs.shape != ours.shape or not np.array_equal(theirs, ours):
+                raise ValueError(f"the footstep server's action set ({theirs.shape[0]} actions) is not the drive's "
+                                 f"({ours.shape[0]}); start ijoy serve with the drive robot's --density and --reach")
+            client.set_robot({name: float(np.asarray(robots.get_leaf(robot, name)))
+                              for name in robots.SCALAR_LEAVES})
         self.client.set_terrain(terrain)
 
     def decide(self, stance, stance_side, command, swing_from=None) -> Decision:

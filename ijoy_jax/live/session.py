@@ -169,7 +169,7 @@ def _decider(settings: DriveSettings, terrain, robot, prepared):
         host, _, port = (settings.server or "").rpartition(":")
         if not host or not port.isdigit():
             raise ValueError(f"server must be HOST:PORT, got {settings.server!r}")
-        return RemoteDecider(server.Client(host, int(port)), terrain)
+        return RemoteDecider(server.Client(host, int(port)), terrain, robot)
     raise ValueError(f"decider must be 'local' or 'server', got {settings.decider!r}")
 
 

@@ -182,7 +182,10 @@ class ViewServer:
                     with self._lock:
                         version, text = self._version, self._state
                     if version != sent:
-                        await ws.send_str(text)
+                        try:
+                            await ws.send_str(text)
+                        except (ConnectionError, RuntimeError):  # the page went away
+                            return
                         sent = version
                     await asyncio.sleep(0.04)
 

@@ -114,17 +114,23 @@ function drawStick() {
 }
 
 function drawLatency() {
+  // one bar per decision on a log scale from 1 ms to 2 s; the dashed line is the step time (the deadline)
   const cv = document.getElementById("latency"), g = cv.getContext("2d");
   g.clearRect(0, 0, cv.width, cv.height);
-  if (!state || !state.latency_history || !scene) return;
-  const h = state.latency_history, T = scene.step_time, n = 60, bw = cv.width / n;
-  const top = T * 1.1, y = t => cv.height - 4 - (cv.height - 8) * Math.min(t, top) / top;
+  if (!state || !scene) return;
+  const h = state.latency_history || [], T = scene.step_time, n = 60, left = 38, bw = (cv.width - left) / n;
+  const lo = 1e-3, hi = 2.0, H = cv.height - 6;
+  const y = t => 3 + H - H * Math.log(Math.min(Math.max(t, lo), hi) / lo) / Math.log(hi / lo);
+  g.font = "10px system-ui"; g.fillStyle = "#98a2ad"; g.strokeStyle = "#3a434d";
+  for (const [t, label] of [[1e-3, "1 ms"], [1e-2, "10 ms"], [1e-1, "100 ms"], [1, "1 s"]]) {
+    g.fillText(label, 0, y(t) + 3); g.beginPath(); g.moveTo(left, y(t)); g.lineTo(cv.width, y(t)); g.stroke();
+  }
   h.forEach((t, i) => {
     g.fillStyle = t > T ? "#d9463b" : t > 0.5 * T ? "#f1e05a" : "#2ecc71";
-    const x = (n - h.length + i) * bw;
-    g.fillRect(x + 1, y(t), bw - 2, cv.height - 4 - y(t));
+    const x = left + (n - h.length + i) * bw;
+    g.fillRect(x + 1, y(t), Math.max(1, bw - 2), 3 + H - y(t));
   });
-  g.strokeStyle = "#d9463b"; g.setLineDash([4, 3]); g.beginPath(); g.moveTo(0, y(T)); g.lineTo(cv.width, y(T)); g.stroke();
+  g.strokeStyle = "#d9463b"; g.setLineDash([4, 3]); g.beginPath(); g.moveTo(left, y(T)); g.lineTo(cv.width, y(T)); g.stroke();
   g.setLineDash([]);
 }
 
