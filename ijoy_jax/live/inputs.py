@@ -79,8 +79,8 @@ def axes_to_command(axes, robot: Robot | tuple, deadzone: float = DEFAULT_DEADZO
 
     Per axis, with dead zone ``d``: ``|a| <= d`` reads 0; beyond it ``s = (|a| - d) / (1 - d)`` rises
     linearly to 1 at full deflection (no jump at the dead zone's edge), and the command is ``s * hi``
-    for a positive deflection and ``s * |lo|`` backward (the range is not symmetric: HRP-2 steps
-    0.25 m/s forward, 0.125 back). Axes beyond [-1, 1] are clipped; a NaN or infinite axis reads 0.
+    for a positive deflection and ``s * |lo|`` below the centre (the two ends of each axis's range
+    need not be equal). Axes beyond [-1, 1] are clipped; a NaN or infinite axis reads 0.
 
     Args:
       axes: (3,) forward, left, turn.

@@ -1,11 +1,10 @@
 """A drive from its settings: the terrain (a generator family, an image height map, a sweep scenario), the robot,
-the body, the decider; recording, replay and export of a recorded drive to a sweep.
+the body, the decider; recording, replay and the export of a recording's stick.
 
 :func:`open_terrain` turns a terrain spec (a dict, kept in the recording) into the terrain, the robot and
 the start feet; :func:`run` drives and records; :func:`replay` drives a recording's decisions again and
-compares the footsteps bit for bit; :func:`export_trace` writes a recording's stick as a trace file;
-:func:`export_sweep` turns a recorded drive into a sweep file whose one scenario is that drive
-(commands from a person instead of a distribution).
+compares the footsteps bit for bit; :func:`export_trace` writes a recording's stick as a trace file (a
+person's drive becomes a scripted one, on any terrain or robot).
 """
 
 from __future__ import annotations
@@ -29,8 +28,7 @@ from ijoy_jax.live.inputs import DEFAULT_DEADZONE, Trace
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain, generators
 
-__all__ = ["BODIES", "DriveSettings", "ReplayInput", "build_body", "export_sweep", "export_trace", "open_terrain",
-           "replay", "run"]
+__all__ = ["BODIES", "DriveSettings", "ReplayInput", "build_body", "export_trace", "open_terrain", "replay", "run"]
 
 BODIES = ("perfect", "native")
 """The robots a drive can step: the paper's perfect walker, or the MuJoCo biped on native MuJoCo (CPU)."""
@@ -242,8 +240,11 @@ class ReplayInput:
         pass
 
 
-def replay(path, *, decider: str | None = None, server: str | None = None, on_tick=None, realtime: bool = False):
+def replay(path, *, decider: str = "local", server: str | None = None, on_tick=None, realtime: bool = False):
     """Drive a recording's decisions again (its terrain, robot, body and commands) and compare the footsteps.
+
+    The decisions are made again by ``decider``: "local" (default, this process's selector, whichever decided
+    the recording) or "server" (the footstep server at ``server``, "HOST:PORT").
 
     Returns ``(result, recording, mismatches)``: ``mismatches`` lists the steps whose sent foothold, ``go``
     or feet after the step differ from the recording in any bit (empty: identical footsteps).
@@ -251,8 +252,7 @@ def replay(path, *, decider: str | None = None, server: str | None = None, on_ti
     rec = record.read_recording(path)
     s = rec.config["settings"]
     settings = DriveSettings(**{**s, "start": None if s.get("start") is None else tuple(s["start"]),
-                                **({"decider": decider} if decider else {}),
-                                **({"server": server} if server else {})})
+                                "decider": decider, "server": server})
     result = run(settings, ReplayInput(rec), realtime=realtime, num_steps=len(rec.decisions),
                  terrain=rec.terrain, robot=rec.robot, start=np.asarray(rec.config["start"], np.float32),
                  on_tick=on_tick)
@@ -285,40 +285,3 @@ def export_trace(recording: record.Recording, path) -> int:
     lines.append(f"{float(end)!r},0.0,0.0,0.0")
     Path(path).write_text("\n".join(lines) + "\n")
     return n + 1
-
-
-def export_sweep(recording: record.Recording, path, *, name: str | None = None) -> Path:
-    """Write a sweep file whose one scenario is a recorded drive on a generator family (the person's commands).
-
-    The sweep keeps the drive's family, seed, grid and parameters (its replicate 0 is the drive's terrain),
-    the robot's margin, and ``[command] sequence``: the command of every decision in order (``num_steps`` =
-    the decisions). Add ``[grid]`` entries (e.g. ``"robot.margin" = [0.0, 0.02, 0.05]``) to replay the
-    person's commands across robots. Raises ValueError for a drive whose terrain is not a family's (an image
-    or a sweep's scenario: run that sweep itself).
-    """
-    cfg = recording.config
-    spec = cfg["settings"]["terrain"]
-    if spec.get("kind") != "family":
-        raise ValueError(f"only a drive on a generator family becomes a sweep scenario; this one's terrain is "
-                         f"{spec.get('kind')!r}")
-    if cfg["settings"].get("start") is not None:
-        raise ValueError("the drive started away from the family's start zone (--start); a sweep starts there")
-    if not recording.decisions:
-        raise ValueError("the recording has no decisions")
-    commands = [d["command"] for d in recording.decisions]
-    shape = spec.get("shape", (200, 120))
-    lines = ["# A recorded drive (ijoy drive --record) as a sweep: its terrain and the person's commands.",
-             "[sweep]", f'name = "{name or Path(path).stem}"', f"seed = {int(spec.get('seed', 0))}",
-             "scenarios_per_cell = 1", f"num_steps = {len(commands)}", "",
-             "[robot]", f"margin = {float(cfg['settings']['margin'])!r}", "",
-             "[terrain]", f'family = "{spec["family"]}"', f"shape = [{int(shape[0])}, {int(shape[1])}]",
-             f"resolution = {float(spec.get('resolution', 0.02))!r}",
-             f"has_height = {'true' if spec.get('has_height') else 'false'}"]
-    if spec.get("max_count") is not None:
-        lines.append(f"max_count = {int(spec['max_count'])}")
-    params = spec.get("params", {})
-    if params:
-        lines += ["", "[terrain.params]"] + [f"{k} = {v!r}" for k, v in params.items()]
-    lines += ["", "[command]", "sequence = ["] + [f"  [{c[0]!r}, {c[1]!r}, {c[2]!r}]," for c in commands] + ["]"]
-    Path(path).write_text("\n".join(lines) + "\n")
-    return Path(path)

@@ -236,6 +236,11 @@ class NativeBiped:
         return self.cfg.ticks_per_step
 
     @property
+    def control_dt(self) -> float:
+        """s per control tick (``cfg.control_dt``)."""
+        return float(self.cfg.control_dt)
+
+    @property
     def stepping(self) -> bool:
         """A step is in progress (between :meth:`begin` and :meth:`end`)."""
         return self._step is not None
