@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ijoy_jax as ij
-from ijoy_jax import live, robots, select
+from ijoy_jax import live, robots
 from ijoy_jax.apps import cli
 from ijoy_jax.live import forcefeedback
 from ijoy_jax.server import serve_subprocess

@@ -1,4 +1,4 @@
-"""The live drive: Algorithm 1 in real time, with the decision for the future stance made while the current step executes.
+"""The live drive: Algorithm 1 in real time, the decision for the future stance made while the current step executes.
 
 One *step period* is ``robot.step_time`` seconds of control ticks (``body.control_dt`` each). When step
 ``j`` begins (the robot is sent its foothold, SendRobotCmd), the loop reads the stick
@@ -210,6 +210,8 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
     # Warm-up, before the clock starts: one decision and the cue's programs from the start stance (their first
     # calls compile; the server's too), so the latencies measured are the drive's, not the compiler's.
     t_warm = time.perf_counter()
+    if hasattr(body, "warm_up"):
+        body.warm_up()  # the physics robot's controller programs
     work(0, body.stance(), np.zeros(3), time.perf_counter())
     with outlook.lock:
         outlook.view = {}

@@ -138,7 +138,7 @@ def build_body(kind: str, terrain: Terrain, robot: Robot, start, first_swing=1, 
     if kind == "perfect":
         return PerfectBody(robot, start, first_swing, control_dt)
     if kind == "native":
-        from ijoy_jax.sim import native, walker
+        from ijoy_jax.sim import native
 
         sim = _sim_for(float(terrain.resolution), robot)
         return native.NativeBiped(sim, terrain, robot, start, first_swing)

@@ -324,6 +324,18 @@ class NativeBiped:
                        min_pelvis_height=f32(s["low"]), max_tilt=f32(s["tilt"]),
                        qpos=np.zeros((0, self.m.nq), f32), dynamics_invalid=np.bool_(False))
 
+    def warm_up(self) -> None:
+        """Compile the step planner, the dynamics filter and the tick now (a drive calls it before its clock
+        starts, so the first step is not late by a compile); the robot's state is unchanged."""
+        p, f32 = self.programs, np.float32
+        plan, _ = p.plan(self.phys, self.planned, self.soles(), f32(self.swing), self.anchor, np.zeros(6, f32),
+                         False, True)
+        cs = self.cs._replace(t=jnp.zeros((), jnp.float32))
+        corr = np.asarray(p.filter(plan, cs, self.corr)) if self.cfg.filter_passes else self.corr
+        window = corr[:self.cfg.horizon] if self.cfg.filter_passes else None
+        base = (np.asarray(self.d.qpos[:3], f32), np.asarray(self.d.xmat[self.sim.index.pelvis].reshape(3, 3), f32))
+        p.tick(plan, cs, window, base, np.asarray(ankle_wrench(self.sim, self.d), f32))
+
     def execute(self, foothold, go: bool) -> StepLog:
         """One whole step (:meth:`begin`, every :meth:`tick`, :meth:`end`), as fast as the CPU runs it."""
         self.begin(foothold, go)
