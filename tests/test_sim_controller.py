@@ -6,7 +6,6 @@ than MJX on CPU; the MJX rollout runs the same controller functions).
 """
 
 import dataclasses
-import functools
 
 import jax
 import jax.numpy as jnp
@@ -16,7 +15,7 @@ import pytest
 
 from ijoy_jax import geometry, robots, select
 from ijoy_jax import terrain as T
-from ijoy_jax.sim import controller, dynamics, kinematics, model, swing
+from ijoy_jax.sim import controller, dynamics, kinematics, model, native
 from ijoy_jax.sim import walker as W
 
 ATOL = 1e-6  # float32 arithmetic on metre-sized numbers
@@ -70,125 +69,51 @@ def sim():
     return W.make_sim((200, 200), 0.02, robot=robots.hrp2())  # 4 m x 4 m, centred on the start
 
 
-_FOOTHOLD = jax.jit(select.foothold)  # the selector's foothold of a planar pose (the plane fitted under it)
-
-
-@functools.lru_cache(maxsize=4)
-def _programs(sim):
-    """The jitted control tick and dynamics filter of a Sim, compiled once per Sim for every walk of the file."""
-    params, cfg = sim.params, sim.cfg
-    pg = controller.gains(cfg)
-    tick = jax.jit(lambda plan, cs, window, base, wrench: controller.control_tick(params, cfg, pg, plan, cs, window,
-                                                                                  base, wrench))
-    filt = jax.jit(lambda plan, cs, corr: controller.zmp_correction(
-        sim.mjx_free, params, cfg, pg, plan, cs, cfg.filter_passes, init=controller.carry_correction(cfg, corr)))
-    return tick, filt
-
-
 class _Native:
-    """The walker's step logic on host MuJoCo (one robot), as :func:`W.mjx_walker` does it.
+    """:class:`ijoy_jax.sim.native.NativeBiped` (the library's native-MuJoCo robot) driven by actions of the
+    action set, relative to the measured stance foot, instead of the selector's footholds.
 
-    The plan lives in the controller's frame (``planned``), the dynamics filter
-    is warm-started from the previous step, and each tick's targets are
-    interpolated over its physics steps; the stabiliser gets the measured
-    pelvis and the ankles' damping control the ankle force/torque sensors.
-    ``heights`` (the Sim's grid, m; flat by default) is the ground: soles
-    land parallel to the plane fitted under them, resting on it
-    (:func:`ijoy_jax.select.foothold`, :func:`swing.resting_height`), and swing over
-    the highest terrain under the swept foot.
+    ``heights`` (the Sim's grid, m; flat by default, the grid centred on the start) is the ground. The
+    robot stands its warm-up step at construction. ``min_knee`` keeps the least knee target sent (rad,
+    either leg), ``tilt_error`` the last step's (rad).
     """
 
     def __init__(self, sim, heights=None):
-        self.sim, self.cfg, self.params = sim, sim.cfg, sim.params
         nx, ny = sim.shape
         origin = (-0.5 * nx * sim.resolution, -0.5 * ny * sim.resolution)
         heights = np.zeros(sim.shape) if heights is None else heights
-        terr = T.from_arrays(heights, None, sim.resolution, origin=origin).replace(has_height=True)
-        self.terr = terr
-        self.m = model.build_model(self.params, terr)
-        self.d = mujoco.MjData(self.m)
-        start = jnp.array([[0.0, 0.095, 0.0], [0.0, -0.095, 0.0]], jnp.float32)
-        self.planned = np.stack([np.asarray(self.foothold(p)) for p in start]).astype(np.float32)
-        p = self.planned
-        pelvis_z = p[:, 2].min() + self.cfg.pelvis_height
-        self.d.qpos[:] = np.asarray(model.stand_pose(self.params, start, p[:, 2], pelvis_z, tilt=p[:, 3:5])[0])
-        self.d.ctrl[:] = self.d.qpos[7:]
-        mujoco.mj_forward(self.m, self.d)
-        self.pg = controller.gains(self.cfg)
-        self.tick, self.filter = _programs(sim)
-        self.corr = jnp.zeros((controller.correction_length(self.cfg), 2), jnp.float32)
-        self.sub = sim.substeps
-        self.cs = controller.init_state(self.pg, self.d.subtree_com[sim.index.pelvis][:2])
-        self.swing = 1.0
-        self.min_knee = np.inf  # the least knee target sent (rad, either leg)
-        self.run_step(controller.prepare_plan(jnp.asarray(p[1]), jnp.asarray(p[0]), 1.0))
-        self.anchor = 0.5 * (p[0, :2] + p[1, :2])
+        self.terr = T.from_arrays(heights, None, sim.resolution, origin=origin).replace(has_height=True)
+        self.robot = robots.hrp2()
+        start = np.array([[0.0, 0.095, 0.0], [0.0, -0.095, 0.0]], np.float32)
+        self.biped = native.NativeBiped(sim, self.terr, self.robot, start, first_swing=1.0)
+        self.sim, self.m, self.d = sim, self.biped.m, self.biped.d
+        self.tick = self.biped.programs.tick
+        self.min_knee = np.inf
+        self._run(np.zeros(6, np.float32), False)  # the warm-up: stand one step
 
-    def foothold(self, pose):
-        """(6,) the sole at planar ``pose`` (3,) resting on the ground, parallel to the plane fitted under it."""
-        foot = (self.params.foot_length, self.params.foot_width)
-        f = _FOOTHOLD(self.terr, robots.hrp2(), jnp.asarray(pose, jnp.float32))
-        return f.at[2].set(swing.resting_height(self.terr, f, *foot, points=model.sole_points(self.params)[:, :2]))
+    @property
+    def swing(self):
+        return self.biped.swing
 
     def soles(self):
-        """(2, 6) measured soles x, y, z, roll, pitch, yaw (R = Rz Ry Rx), row 0 left."""
-        idx = self.sim.index
-        pos = self.d.site_xpos[idx.sole_site]
-        mat = self.d.site_xmat[idx.sole_site].reshape(2, 3, 3)
-        rpy = np.stack([np.arctan2(mat[:, 2, 1], mat[:, 2, 2]),
-                        np.arctan2(-mat[:, 2, 0], np.hypot(mat[:, 2, 1], mat[:, 2, 2])),
-                        np.arctan2(mat[:, 1, 0], mat[:, 0, 0])], 1)
-        return np.concatenate([pos, rpy], 1).astype(np.float32)
+        return self.biped.soles()
 
-    def run_step(self, plan):
-        d, n = self.d, self.cfg.horizon
-        self.cs = self.cs._replace(t=jnp.float32(0))
-        if self.cfg.filter_passes:
-            self.corr = self.filter(plan, self.cs, self.corr)
-        # world -> plan frame, as the walker maps the measured pelvis for the stabiliser
-        st = self.soles()[0 if plan.swing_side < 0 else 1]
-        pst = np.asarray(plan.stance)
-        to_plan = np.asarray(kinematics.rot_z(jnp.float32(pst[5] - st[5])))
-        low = np.inf
-        for k in range(self.cfg.ticks_per_step):
-            base = (to_plan @ (d.qpos[:3] - st[:3]) + pst[:3], to_plan @ d.xmat[self.sim.index.pelvis].reshape(3, 3))
-            base = tuple(jnp.asarray(b, jnp.float32) for b in base)
-            wrench = jnp.asarray(W.ankle_wrench(self.sim, d), jnp.float32)
-            q, self.cs, _ = self.tick(plan, self.cs, jax.lax.dynamic_slice_in_dim(self.corr, k, n), base, wrench)
-            q0, q = d.ctrl.copy(), np.asarray(q)
-            for j in range(self.sub):
-                d.ctrl[:] = q0 + (j + 1) / self.sub * (q - q0)
-                mujoco.mj_step(self.m, d)
-            low = min(low, d.qpos[2] - min(float(plan.stance[2]), float(plan.swing_to[2])))
-            self.min_knee = min(self.min_knee, float(d.ctrl[[3, 9]].min()))
-        return low
+    def _run(self, foothold, go):
+        self.biped.begin(foothold, go)
+        while self.biped.tick():
+            self.min_knee = min(self.min_knee, float(self.d.ctrl[[3, 9]].min()))
+        self.min_knee = min(self.min_knee, float(self.d.ctrl[[3, 9]].min()))
+        return self.biped.end()
 
     def step(self, action):
-        """Take one action (dx, dy, dtheta of the left swing foot, mirrored for the right): placement error, fell.
-
-        ``self.tilt_error`` keeps the angle between the landed sole's normal and the target's (rad)."""
-        s = self.soles()
-        row_st, row_sw = (1, 0) if self.swing > 0 else (0, 1)
-        st = s[row_st]
-        rel = jnp.asarray([action[0], action[1] * self.swing, action[2] * self.swing], jnp.float32)
-        pose = np.asarray(geometry.compose(jnp.asarray(st[[0, 1, 5]]), rel))
-        planar = np.asarray(geometry.compose(jnp.asarray(self.planned[row_st, [0, 1, 5]]), rel))
-        foot = (self.params.foot_length, self.params.foot_width)
-        target = np.asarray(self.foothold(pose))
-        drop = [0.5 * foot[0] * abs(np.sin(f[4])) + 0.5 * foot[1] * abs(np.sin(f[3]))
-                for f in (self.planned[row_sw], target)]
-        top = float(swing.corridor_height(self.terr, jnp.asarray(s[row_sw, [0, 1, 5]]), jnp.asarray(pose), *foot))
-        ptarget = jnp.asarray(np.concatenate([planar[:2], target[2:5], planar[2:]]), jnp.float32)
-        plan = controller.plan_step(self.anchor, jnp.asarray(self.planned[row_st]), jnp.asarray(self.planned[row_sw]),
-                                    ptarget, True, self.swing, top + max(drop), self.cfg.clearance)
-        low = self.run_step(plan)
-        landed = self.soles()[row_sw]
-        normal = [np.asarray(kinematics.rpy_to_rot(jnp.asarray(f[3:6])))[:, 2] for f in (landed, target)]
-        self.tilt_error = float(np.arccos(np.clip(normal[0] @ normal[1], -1.0, 1.0)))
-        self.planned[row_sw] = np.asarray(plan.swing_to)
-        self.anchor = self.planned[row_st, :2].copy()
-        self.swing = -self.swing
-        return float(np.hypot(*(landed[:2] - pose[:2]))), low < self.sim.fall_height
+        """Take one action (dx, dy, dtheta of the left swing foot, mirrored for the right): placement error, fell."""
+        info = self.biped.stance()
+        side = self.biped.swing
+        rel = jnp.asarray([action[0], action[1] * side, action[2] * side], jnp.float32)
+        pose = geometry.compose(jnp.asarray(info.stance), rel)
+        log = self._run(np.asarray(select.foothold(self.terr, self.robot, pose)), True)
+        self.tilt_error = float(log.tilt_error)
+        return float(log.placement_error), bool(log.fallen)
 
 
 def test_control_tick_does_not_recompile(sim):

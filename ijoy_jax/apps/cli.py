@@ -141,11 +141,12 @@ def main(argv: list[str] | None = None) -> int:
     rend.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
     rend.add_argument("--seed", type=int, default=0, help="clutter map (default: %(default)s)")
     rend.add_argument("--size", default="480x320", help="WIDTHxHEIGHT in pixels (default: %(default)s)")
-    from ijoy_jax.apps import cue_cli, serve_cli, tune_cli
+    from ijoy_jax.apps import cue_cli, drive_cli, serve_cli, tune_cli
 
     tune_cli.add_parser(sub)
     cue_cli.add_parser(sub)
     serve_cli.add_parser(sub)
+    drive_cli.add_parser(sub)
     args = parser.parse_args(argv)
     try:
         _use_compile_cache(not args.no_compile_cache)
@@ -161,6 +162,10 @@ def _run(args) -> int:
 
     if args.command == "tune":
         return tune_cli.main(args)
+    if args.command == "drive":
+        from ijoy_jax.apps import drive_cli
+
+        return drive_cli.main(args)
     if args.command == "cue":
         from ijoy_jax.apps import cue_cli
 

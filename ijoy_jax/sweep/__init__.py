@@ -9,6 +9,8 @@ Public names::
   MAX_OBJECT_SLOTS                                               static shapes
   run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks sharded over local
                                                                  devices, parquet parts, resume
+  scenario / Scenario                                            one scenario's terrain, robot, start and
+                                                                 command by id (``ijoy drive --scenario``)
   default_chunk_size / auto_chunk_size / scenario_bytes /        chunks sized to device memory (physics:
   balanced_chunk_size                                            balanced, no padded chunk)
   distributed                                                    several processes/hosts (jax.distributed)
@@ -57,10 +59,12 @@ from ijoy_jax.sweep.execute import (
     MAX_AUTO_CHUNK,
     MEMORY_FRACTION,
     RunStats,
+    Scenario,
     auto_chunk_size,
     balanced_chunk_size,
     default_chunk_size,
     run,
+    scenario,
     scenario_bytes,
     trace_count,
 )
@@ -109,6 +113,7 @@ __all__ = [
     "WALKERS",
     "IncompleteSweepError",
     "RunStats",
+    "Scenario",
     "SweepConfig",
     "SweepConfigError",
     "action_counts",
@@ -128,6 +133,7 @@ __all__ = [
     "plot",
     "plot_crossing",
     "run",
+    "scenario",
     "scenario_bytes",
     "scenarios",
     "t_quantile",

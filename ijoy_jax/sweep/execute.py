@@ -131,8 +131,8 @@ from ijoy_jax.sweep.config import (
 from ijoy_jax.sweep.results import PLAN_KEY, IncompleteSweepError, check_plans, describe_plan, plan_hash
 from ijoy_jax.terrain import generators
 
-__all__ = ["DEFAULT_CHUNK", "MAX_AUTO_CHUNK", "MEMORY_FRACTION", "RunStats", "auto_chunk_size", "default_chunk_size",
-           "run", "scenario_bytes", "trace_count"]
+__all__ = ["DEFAULT_CHUNK", "MAX_AUTO_CHUNK", "MEMORY_FRACTION", "RunStats", "Scenario", "auto_chunk_size",
+           "default_chunk_size", "run", "scenario", "scenario_bytes", "trace_count"]
 
 DEFAULT_CHUNK = 32
 """Scenarios per jitted call on CPU (and wherever the device reports no memory figure)."""
@@ -310,6 +310,49 @@ def _base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
     except ValueError as e:
         raise SweepConfigError(f"{cfg.source}: robot.foot_length/robot.foot_width: a {fl} x {fw} m footprint "
                                f"does not fit HRP-2's action set at density {density}: {e}") from None
+
+
+class Scenario(NamedTuple):
+    """One scenario of a sweep, rebuilt on the host (:func:`scenario`).
+
+    terrain: its generated :class:`~ijoy_jax.Terrain`; robot: its :class:`~ijoy_jax.Robot` (the density's
+    action set, the scenario's leaves); start: (2, 3) float32 feet (left, right; m, rad); command: (3,)
+    float32 (m/s, m/s, rad/s); cell, replicate: its cell and replicate (its terrain key is
+    ``fold_in(key(seed), replicate)``).
+    """
+
+    terrain: Any
+    robot: robots.Robot
+    start: np.ndarray
+    command: np.ndarray
+    cell: int
+    replicate: int
+
+
+def scenario(cfg: SweepConfig, scenario_id: int) -> Scenario:
+    """The terrain, robot, start and command of scenario ``scenario_id`` of a sweep, exactly as a run builds them.
+
+    For walking one scenario by hand (``ijoy drive --scenario FILE:ID``) or looking at it. Only the rows up
+    to ``scenario_id`` are expanded (:func:`ijoy_jax.sweep.scenarios` with ``max_scenarios``).
+
+    Raises:
+      SweepConfigError: the id is not a scenario of the sweep.
+    """
+    if isinstance(scenario_id, bool) or not isinstance(scenario_id, (int, np.integer)) or not (
+            0 <= scenario_id < cfg.num_scenarios):
+        raise SweepConfigError(f"{cfg.source}: scenario {scenario_id!r} does not exist (the sweep has "
+                               f"{cfg.num_scenarios} scenarios, ids 0 to {cfg.num_scenarios - 1})")
+    table = scenarios(cfg, max_scenarios=int(scenario_id) + 1)
+    row = table.iloc[[int(scenario_id)]]
+    density = float(row["robot.density"].iloc[0])
+    base = _base_robot(cfg, table, density)
+    robot_cols, terrain_cols, _ = _cols(table)
+    replicate, robot_vals, terrain_vals, commands, _ = _batch(row, 1, robot_cols, terrain_cols)
+    one = lambda d: {k: v[0] for k, v in d.items()}  # noqa: E731
+    _, _, terrain, robot, start = _setup(_static(cfg), base, jax.random.key(cfg.seed), replicate[0], one(robot_vals),
+                                         one(terrain_vals))
+    return Scenario(terrain, robot, np.asarray(start, np.float32), np.asarray(commands[0], np.float32),
+                    int(row["cell"].iloc[0]), int(replicate[0]))
 
 
 def _versions() -> dict:

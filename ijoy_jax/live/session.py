@@ -1,0 +1,287 @@
+"""A drive from its settings: the terrain (a generator family, an image height map, a sweep scenario), the robot,
+the body, the decider; recording, replay and the export of a recording's stick.
+
+:func:`open_terrain` turns a terrain spec (a dict, kept in the recording) into the terrain, the robot and
+the start feet; :func:`run` drives and records; :func:`replay` drives a recording's decisions again and
+compares the footsteps bit for bit; :func:`export_trace` writes a recording's stick as a trace file (a
+person's drive becomes a scripted one, on any terrain or robot).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import platform
+from importlib import metadata
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from ijoy_jax import robots, select
+from ijoy_jax import terrain as terrain_mod
+from ijoy_jax.live import record
+from ijoy_jax.live.bodies import DEFAULT_CONTROL_DT, PerfectBody
+from ijoy_jax.live.deciders import LocalDecider, RemoteDecider
+from ijoy_jax.live.drive import DriveResult, drive
+from ijoy_jax.live.inputs import DEFAULT_DEADZONE, Trace
+from ijoy_jax.robots import Robot
+from ijoy_jax.terrain import Terrain, generators
+
+__all__ = ["BODIES", "DriveSettings", "ReplayInput", "build_body", "export_trace", "open_terrain", "replay", "run"]
+
+BODIES = ("perfect", "native")
+"""The robots a drive can step: the paper's perfect walker, or the MuJoCo biped on native MuJoCo (CPU)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class DriveSettings:
+    """What a drive is (recorded as the ``ijoy.drive`` metadata; every field JSON-ready).
+
+    Fields::
+
+      terrain: the terrain spec (:func:`open_terrain`).
+      body: one of :data:`BODIES`.
+      margin: the robot's safety margin (m; ignored for a sweep scenario, whose robot is the sweep's).
+      start: (x, y, theta) of the feet's midpoint (m, rad), or None: the terrain's start zone.
+      first_swing: +1 left foot first, -1 right.
+      deadzone, decide_at: as :func:`ijoy_jax.live.drive`.
+      control_dt: s per tick of the perfect body (the MuJoCo biped's is its controller's).
+      decider: "local" or "server" (the footstep server at ``server``, "host:port").
+    """
+
+    terrain: dict = dataclasses.field(default_factory=lambda: {"kind": "family", "family": "obstacles", "seed": 0})
+    body: str = "perfect"
+    margin: float = 0.02
+    start: tuple | None = None
+    first_swing: int = 1
+    deadzone: float = DEFAULT_DEADZONE
+    decide_at: float = 0.0
+    control_dt: float = DEFAULT_CONTROL_DT
+    decider: str = "local"
+    server: str | None = None
+
+
+def open_terrain(spec: dict, margin: float = 0.02) -> tuple[Terrain, Robot, np.ndarray]:
+    """The terrain, robot and start feet (2, 3) of a terrain spec. Raises ValueError (one line) for a bad spec.
+
+    Specs::
+
+      {"kind": "family", "family": NAME, "seed": S, "shape": [nx, ny], "resolution": m, "has_height": bool,
+       "params": {field: value}}   a generator family (:data:`ijoy_jax.terrain.generators.FAMILIES`); the
+                                   terrain key is ``fold_in(key(S), 0)``, replicate 0 of a sweep with seed S;
+                                   the start is the family's start zone
+      {"kind": "image", "path": P, "resolution": m, "height_scale": m per unit, "obstacle_above": m or None}
+                                   an image height map (:func:`ijoy_jax.terrain.from_image`); start: 0.5 m
+                                   in from the left edge, half way up
+      {"kind": "scenario", "sweep": FILE, "id": N}
+                                   scenario N of a sweep file (:func:`ijoy_jax.sweep.scenario`): its terrain,
+                                   robot and start
+    """
+    kind = spec.get("kind")
+    robot = robots.hrp2(margin=margin)
+    if kind == "family":
+        name = spec.get("family")
+        if name not in generators.FAMILIES:
+            raise ValueError(f"unknown terrain family {name!r}; known: {', '.join(sorted(generators.FAMILIES))}")
+        fam = generators.FAMILIES[name]
+        try:
+            params = fam.params(**spec.get("params", {}))
+        except TypeError as e:
+            raise ValueError(f"terrain family {name!r}: bad parameter ({e})") from None
+        shape = tuple(int(v) for v in spec.get("shape", (200, 120)))
+        res = float(spec.get("resolution", 0.02))
+        static = dict(shape=shape, resolution=res, has_height=bool(spec.get("has_height", False)))
+        if fam.max_count is not None and spec.get("max_count") is not None:
+            static["max_count"] = int(spec["max_count"])
+        key = jax.random.fold_in(jax.random.key(int(spec.get("seed", 0))), 0)
+        try:
+            terrain = generators.generate(name, key, params, **static)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"terrain family {name!r}: {e}") from None
+        centre = np.asarray(generators.start_point(params, shape=shape, resolution=res))
+        return terrain, robot, np.asarray(robots.start_stance(robot, centre[0], centre[1]), np.float32)
+    if kind == "image":
+        path = Path(spec.get("path", ""))
+        if not path.is_file():
+            raise ValueError(f"height map image {str(path)!r} does not exist")
+        try:
+            terrain = terrain_mod.from_image(path, float(spec.get("resolution", 0.02)),
+                                             float(spec.get("height_scale", 0.5 / 255)),
+                                             obstacle_above=spec.get("obstacle_above"))
+        except (OSError, ValueError) as e:
+            raise ValueError(f"height map image {str(path)!r}: {e}") from None
+        nx, ny = terrain.shape
+        start = robots.start_stance(robot, 0.5, 0.5 * ny * terrain.resolution)
+        return terrain, robot, np.asarray(start, np.float32)
+    if kind == "scenario":
+        from ijoy_jax import sweep
+
+        try:
+            cfg = sweep.load_config(spec["sweep"])
+            sc = sweep.scenario(cfg, int(spec["id"]))
+        except (OSError, KeyError) as e:
+            raise ValueError(f"sweep scenario {spec!r}: {e}") from None
+        return sc.terrain, sc.robot, sc.start
+    raise ValueError(f"terrain spec kind must be 'family', 'image' or 'scenario', got {kind!r}")
+
+
+def _start(settings: DriveSettings, robot: Robot, default) -> np.ndarray:
+    if settings.start is None:
+        return np.asarray(default, np.float32)
+    x, y, theta = (float(v) for v in settings.start)
+    return np.asarray(robots.start_stance(robot, x, y, theta), np.float32)
+
+
+def build_body(kind: str, terrain: Terrain, robot: Robot, start, first_swing=1, control_dt=DEFAULT_CONTROL_DT):
+    """A standing robot of kind ``kind`` (:data:`BODIES`) at ``start`` (2, 3)."""
+    if kind == "perfect":
+        return PerfectBody(robot, start, first_swing, control_dt)
+    if kind == "native":
+        from ijoy_jax.sim import native
+
+        sim = _sim_for(float(terrain.resolution), robot)
+        return native.NativeBiped(sim, terrain, robot, start, first_swing)
+    raise ValueError(f"body must be one of {BODIES}, got {kind!r}")
+
+
+_SIMS: dict = {}
+
+
+def _sim_for(resolution: float, robot: Robot):
+    """One Sim per footprint and step time in this process, so its compiled programs are shared."""
+    from ijoy_jax.sim import walker
+
+    key = (resolution, float(robot.foot_length), float(robot.foot_width), float(robot.step_time))
+    if key not in _SIMS:
+        _SIMS[key] = walker.make_sim((2, 2), resolution, robot=robot)
+    return _SIMS[key]
+
+
+def _decider(settings: DriveSettings, terrain, robot, prepared):
+    if settings.decider == "local":
+        return LocalDecider(terrain, robot, prepared=prepared)
+    if settings.decider == "server":
+        from ijoy_jax import server
+
+        host, _, port = (settings.server or "").rpartition(":")
+        if not host or not port.isdigit():
+            raise ValueError(f"server must be HOST:PORT, got {settings.server!r}")
+        return RemoteDecider(server.Client(host, int(port)), terrain, robot)
+    raise ValueError(f"decider must be 'local' or 'server', got {settings.decider!r}")
+
+
+def _versions() -> dict:
+    out = {"python": platform.python_version()}
+    for pkg in ("ijoy_jax", "jax", "jaxlib", "mujoco", "numpy", "mcap"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+def run(settings: DriveSettings, source, *, realtime: bool = True, num_steps=None, duration=None, record_to=None,
+        on_tick=None, feedback=None, stop=None, terrain=None, robot=None, start=None, on_ready=None) -> DriveResult:
+    """Open the terrain, build the body and decider, and drive (:func:`ijoy_jax.live.drive`), recording to
+    ``record_to`` (an MCAP path) when given. ``terrain``, ``robot``, ``start`` override the spec's (a replay);
+    ``on_ready(terrain, robot, start)`` is called once they exist (the view's scene)."""
+    if terrain is None:
+        terrain, robot_spec, start_spec = open_terrain(settings.terrain, settings.margin)
+        robot = robot_spec if robot is None else robot
+        start = _start(settings, robot, start_spec) if start is None else start
+    if on_ready is not None:
+        on_ready(terrain, robot, start)
+    prepared = select.prepare(terrain, robot)
+    body = build_body(settings.body, terrain, robot, start, settings.first_swing, settings.control_dt)
+    decider = _decider(settings, terrain, robot, prepared)
+    recorder = None
+    if record_to is not None:
+        config = {"settings": dataclasses.asdict(settings), "start": np.asarray(start).tolist(),
+                  "realtime": realtime, "versions": _versions(),
+                  "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+                  "machine": platform.node()}
+        recorder = record.Recorder(record_to, config, terrain, robot)
+    try:
+        result = drive(terrain, robot, body, source, decider, deadzone=settings.deadzone,
+                       decide_at=settings.decide_at, realtime=realtime, num_steps=num_steps, duration=duration,
+                       recorder=recorder, on_tick=on_tick, feedback=feedback, stop=stop, prepared=prepared)
+    finally:
+        decider.close()
+        if recorder is not None:
+            summary = None
+            if "result" in locals():
+                summary = {"t": result.states[-1]["t"] if result.states else 0.0, **result.summary()}
+            recorder.close(summary)
+    return result
+
+
+class ReplayInput:
+    """A recording's stick: its axes at the recorded times and, for each decision, its recorded command."""
+
+    name = "replay"
+
+    def __init__(self, recording: record.Recording):
+        dec = recording.decisions
+        self.commands = [np.asarray(d["command"], np.float64) for d in dec]
+        inputs = recording.inputs
+        if inputs:
+            self.trace = Trace(np.asarray([m["t"] for m in inputs]), np.asarray([m["axes"] for m in inputs]))
+        else:
+            self.trace = Trace(np.zeros(1), np.zeros((1, 3)))
+
+    def axes(self, t: float) -> np.ndarray:
+        return self.trace.at(t)
+
+    def command_at(self, step: int) -> np.ndarray:
+        return self.commands[step]
+
+    def close(self) -> None:
+        pass
+
+
+def replay(path, *, decider: str = "local", server: str | None = None, on_tick=None, realtime: bool = False):
+    """Drive a recording's decisions again (its terrain, robot, body and commands) and compare the footsteps.
+
+    The decisions are made again by ``decider``: "local" (default, this process's selector, whichever decided
+    the recording) or "server" (the footstep server at ``server``, "HOST:PORT").
+
+    Returns ``(result, recording, mismatches)``: ``mismatches`` lists the steps whose sent foothold, ``go``
+    or feet after the step differ from the recording in any bit (empty: identical footsteps).
+    """
+    rec = record.read_recording(path)
+    s = rec.config["settings"]
+    settings = DriveSettings(**{**s, "start": None if s.get("start") is None else tuple(s["start"]),
+                                "decider": decider, "server": server})
+    result = run(settings, ReplayInput(rec), realtime=realtime, num_steps=len(rec.decisions),
+                 terrain=rec.terrain, robot=rec.robot, start=np.asarray(rec.config["start"], np.float32),
+                 on_tick=on_tick)
+    mismatches = []
+    for k, (a, b) in enumerate(zip(rec.states, result.states, strict=False)):
+        same = (np.array_equal(np.asarray(a["sent"], np.float32), np.asarray(b["sent"], np.float32))
+                and bool(a["go"]) == bool(b["go"])
+                and np.array_equal(np.asarray(a["feet"], np.float32), np.asarray(b["feet"], np.float32)))
+        if not same:
+            mismatches.append(k)
+    if len(rec.states) != len(result.states):
+        mismatches.append(min(len(rec.states), len(result.states)))
+    return result, rec, mismatches
+
+
+def export_trace(recording: record.Recording, path) -> int:
+    """Write a recording's stick (its ``/ijoy/input`` axes) as a trace file; returns the samples written.
+
+    Consecutive equal samples are merged, and a last line at the drive's end time closes it.
+    """
+    lines = ["t,forward,left,turn"]
+    last = None
+    n = 0
+    for m in recording.inputs:
+        a = tuple(float(v) for v in m["axes"])
+        if a != last:
+            lines.append(f"{m['t']!r},{a[0]!r},{a[1]!r},{a[2]!r}")
+            last, n = a, n + 1
+    end = recording.states[-1]["t"] if recording.states else 0.0
+    lines.append(f"{float(end)!r},0.0,0.0,0.0")
+    Path(path).write_text("\n".join(lines) + "\n")
+    return n + 1

@@ -1,0 +1,379 @@
+"""ijoy drive (ijoy_jax.live): the stick mapping, trace files, the live loop against independent references, a
+real footstep server process on localhost, recording and bit-exact replay, the native MuJoCo robot, the CLI's
+one-line errors, and force-feedback effects checked against the kernel's own struct layout."""
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import ijoy_jax as ij
+from ijoy_jax import live, robots
+from ijoy_jax.apps import cli
+from ijoy_jax.live import forcefeedback
+from ijoy_jax.server import serve_subprocess
+
+ROBOT = robots.hrp2()
+LO, HI = (np.asarray(v, np.float64) for v in robots.command_range(ROBOT))
+TERRAIN = {"kind": "family", "family": "obstacles", "seed": 1, "shape": [120, 80], "resolution": 0.02}
+TRACE = textwrap.dedent("""\
+    # forward, then forward turning left, then sideways right
+    t,forward,left,turn
+    0.0, 1.0, 0.0, 0.0
+    1.7, 0.7, 0.0, 0.8
+    3.3, 0.0, -1.0, 0.0
+    4.0, 0.0, 0.0, 0.0
+""")
+
+
+# ------------------------------------------------------------------------------------------- the stick mapping
+
+axis = st.floats(-1.0, 1.0, allow_nan=False)
+hostile = st.one_of(axis, st.floats(allow_nan=True, allow_infinity=True))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.tuples(hostile, hostile, hostile), st.floats(0.0, 0.9))
+def test_command_stays_in_the_robot_range(axes, dz):
+    c = live.axes_to_command(axes, ROBOT, dz)
+    assert np.all(np.isfinite(c)) and np.all(c >= LO - 1e-12) and np.all(c <= HI + 1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(axis, axis, st.floats(0.0, 0.9))
+def test_dead_zone_and_monotone_and_continuous(a, b, dz):
+    for k in range(3):
+        va, vb = np.zeros(3), np.zeros(3)
+        va[k], vb[k] = a, b
+        ca, cb = live.axes_to_command(va, ROBOT, dz)[k], live.axes_to_command(vb, ROBOT, dz)[k]
+        if abs(a) <= dz:
+            assert ca == 0.0
+        if a <= b:
+            assert ca <= cb  # monotone in the deflection
+        # Lipschitz: no jump at the dead zone's edge (slope at most range / (1 - dz))
+        assert abs(ca - cb) <= max(HI[k], -LO[k]) / (1 - dz) * abs(a - b) * (1 + 1e-9) + 1e-12
+
+
+def test_full_deflection_is_the_range_ends():
+    np.testing.assert_allclose(live.axes_to_command([1, 1, 1], ROBOT), HI)
+    np.testing.assert_allclose(live.axes_to_command([-1, -1, -1], ROBOT), LO)
+    np.testing.assert_allclose(live.axes_to_command([0.55, 0, 0], ROBOT, 0.1), [0.5 * HI[0], 0, 0])  # half-way
+    with pytest.raises(ValueError, match="deadzone"):
+        live.axes_to_command([0, 0, 0], ROBOT, 1.0)
+
+
+def test_gamepad_axes_mapping():
+    np.testing.assert_array_equal(live.gamepad_axes([0.5, -1.0, 0.0, 0.25]), [1.0, -0.5, -0.25])
+    np.testing.assert_array_equal(live.gamepad_axes([0.0, 0.0]), [0.0, -0.0, 0.0])  # a pad with 2 axes: no turn
+    np.testing.assert_array_equal(live.gamepad_axes([np.nan, 3.0, 0.0, 0.0]), [-1.0, 0.0, 0.0])
+
+
+def test_no_gamepad_is_a_clear_error():
+    with pytest.raises(live.InputError, match="no gamepad found"):
+        live.inputs.Gamepad()
+
+
+def test_terminal_keys_through_a_pty():
+    """Keys typed into a real pseudo-terminal: w then a hold their axes, space stops."""
+    import os
+    import time
+
+    master, slave = os.openpty()
+    kb = live.inputs.TerminalKeyboard(fd=slave, hold=5.0)
+    try:
+        os.write(master, b"wa")
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and not np.array_equal(kb.axes(), [1.0, 1.0, 0.0]):
+            time.sleep(0.01)
+        np.testing.assert_array_equal(kb.axes(), [1.0, 1.0, 0.0])
+        os.write(master, b" ")
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and np.any(kb.axes()):
+            time.sleep(0.01)
+        np.testing.assert_array_equal(kb.axes(), [0.0, 0.0, 0.0])
+    finally:
+        kb.close()
+        os.close(master)
+        os.close(slave)
+
+
+# ------------------------------------------------------------------------------------------- trace files
+
+
+def test_trace_is_sampled_and_held(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text(TRACE)
+    tr = live.read_trace(p)
+    assert tr.duration == 4.0
+    np.testing.assert_array_equal(tr.at(-0.1), [0, 0, 0])
+    np.testing.assert_array_equal(tr.at(0.0), [1, 0, 0])
+    np.testing.assert_array_equal(tr.at(1.69), [1, 0, 0])
+    np.testing.assert_array_equal(tr.at(1.7), [0.7, 0, 0.8])
+
+
+@pytest.mark.parametrize("text, match", [
+    ("0,1,0\n", "expected 4 comma-separated"), ("0,1,x,0\n", "not a number"), ("0,1,0,0\n0,1,0,0\n", "increase"),
+    ("0,2,0,0\n", r"\[-1, 1\]"), ("# nothing\n", "no samples"), ("0,nan,0,0\n", "finite")])
+def test_bad_traces_name_the_line(tmp_path, text, match):
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(live.InputError, match=match):
+        live.read_trace(p)
+
+
+# ------------------------------------------------------------------------------------------- the loop
+
+
+@pytest.fixture(scope="module")
+def trace(tmp_path_factory):
+    p = tmp_path_factory.mktemp("trace") / "drive.csv"
+    p.write_text(TRACE)
+    return p
+
+
+def _rollout_reference(rec):
+    """The scanned Algorithm 1 (ij.rollout, the perfect walker) with the recorded commands, one per decision."""
+    commands = np.asarray([d["command"] for d in rec.decisions], np.float32)
+    traj = ij.rollout(rec.terrain, rec.robot, np.asarray(rec.config["start"], np.float32), commands,
+                      num_steps=len(commands))
+    return traj
+
+
+def test_scripted_drive_through_a_real_server_replays_identically(trace, tmp_path):
+    """The whole stack headless: `ijoy drive --script --headless --record` (its own process) deciding on a real
+    `ijoy serve` process over localhost sockets; the recording replays in-process and through the CLI with
+    identical footsteps, equal to the scanned rollout's and to select_step's decisions."""
+    out = tmp_path / "drive.mcap"
+    with serve_subprocess("--warm-up", "120x80@0.02") as server:
+        proc = subprocess.run(
+            [sys.executable, "-m", "ijoy_jax.apps.cli", "drive", "--script", str(trace), "--headless", "--record",
+             str(out), "--server", f"{server.host}:{server.port}", "--terrain", "obstacles", "--seed", "1",
+             "--shape", "120x80", "--ff", "off", "--json"], capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    rec = live.read_recording(out)
+    n = len(rec.decisions)
+    assert n == 5 == summary["decisions"]  # decisions at 0, 0.8, ..., 3.2 s of a 4 s trace
+    assert {d["decider"] for d in rec.decisions} == {"server"}
+    assert summary["late"] == 0 and 0 < summary["latency_p99_s"] < 0.8
+    # every decision equals select_step on the recorded inputs (an independent call in this process)
+    for d in rec.decisions:
+        c = ij.select_step(rec.terrain, rec.robot, np.asarray(d["stance"], np.float32), int(d["stance_side"]),
+                           np.asarray(d["command"], np.float32), swing_from=np.asarray(d["swing_from"], np.float32))
+        np.testing.assert_array_equal(np.asarray(c.foothold), np.asarray(d["foothold"], np.float32))
+        assert bool(c.valid) == d["valid"] and int(c.index) == d["index"]
+    # the live loop is Algorithm 1: the scanned rollout with the same commands takes the same footholds
+    traj = _rollout_reference(rec)
+    sent = np.asarray([s["sent"] for s in rec.states[1:]], np.float32)
+    np.testing.assert_array_equal(sent, np.asarray(traj.footholds))
+    np.testing.assert_array_equal(np.asarray(rec.states[-1]["feet"], np.float32), np.asarray(traj.feet))
+    # the commands are the trace's axes through the dead zone and the range, read as each step began
+    np.testing.assert_allclose(rec.decisions[2]["axes"], [1.0, 0.0, 0.0])  # at 1.6 s, before the change at 1.7
+    np.testing.assert_allclose(rec.decisions[3]["axes"], [0.7, 0.0, 0.8])
+    np.testing.assert_allclose(rec.decisions[3]["command"], live.axes_to_command([0.7, 0, 0.8], ROBOT))
+    assert rec.decisions[3]["t"] == pytest.approx(2.4)
+    # terms of the chosen footholds: named, finite where valid
+    assert all(d["terms"]["total"] < np.inf for d in rec.decisions if d["valid"])
+    # replay: in-process (the local selector) and through the command line
+    result, _, mismatches = live.replay(out)
+    assert mismatches == [] and len(result.decisions) == n
+    np.testing.assert_array_equal(result.footsteps(), sent)
+    assert cli.main(["drive", "--replay", str(out)]) == 0
+
+
+def test_replay_detects_a_changed_recording(trace, tmp_path):
+    """A recording whose footsteps were tampered with does not replay identically (the check can fail)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    out = tmp_path / "a.mcap"
+    live.run(live.DriveSettings(terrain=TERRAIN), live.ScriptInput(trace), realtime=False, record_to=out,
+             num_steps=3)
+    bad = tmp_path / "b.mcap"
+    with open(out, "rb") as f, open(bad, "wb") as g:
+        reader, writer = make_reader(f), Writer(g)
+        writer.start()
+        for m in reader.iter_metadata():
+            writer.add_metadata(m.name, m.metadata)
+        for a in reader.iter_attachments():
+            writer.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+        ids = {}
+        for schema, channel, message in reader.iter_messages():
+            if channel.topic not in ids:
+                sid = writer.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.topic] = writer.register_channel(channel.topic, channel.message_encoding, sid)
+            data = message.data
+            if channel.topic == "/ijoy/state":
+                msg = json.loads(data)
+                if msg["step"] == 2:
+                    msg["feet"][0][0] += 1e-6  # one foot, one micrometre
+                data = json.dumps(msg).encode()
+            writer.add_message(ids[channel.topic], message.log_time, data, message.publish_time)
+        writer.finish()
+    _, _, mismatches = live.replay(bad)
+    assert mismatches == [2]
+    assert cli.main(["drive", "--replay", str(bad)]) == 1
+
+
+def test_decisions_overlap_the_step_and_wait_when_late(trace):
+    """Real time: a decider slower than a step makes the robot wait (slack < 0, counted), a fast one does not."""
+    import time
+
+    terrain, robot, start = live.open_terrain(TERRAIN)
+
+    class Slow(live.LocalDecider):
+        def decide(self, *a, **k):
+            time.sleep(0.3)
+            return super().decide(*a, **k)
+
+    fast_body = live.PerfectBody(robot, start, control_dt=0.05)
+    # a 0.25 s step (robot.step_time stays 0.8 for the decisions; only the body's clock is shorter)
+    fast_body.ticks_per_step = 5
+    res = live.drive(terrain, robot, fast_body, live.ScriptInput(trace), Slow(terrain, robot), realtime=True,
+                     num_steps=3)
+    assert len(res.latencies) == 3 and np.all(res.latencies >= 0.3)
+    assert np.all(res.slacks < 0) and res.summary()["late"] == 3
+    body = live.PerfectBody(robot, start, control_dt=0.05)
+    res = live.drive(terrain, robot, body, live.ScriptInput(trace), live.LocalDecider(terrain, robot), realtime=True,
+                     num_steps=2)
+    assert res.summary()["late"] == 0 and np.all(res.slacks > 0)
+    assert res.wall_s == pytest.approx(3 * 0.8, abs=0.3)  # the warm-up and two steps, paced to the wall clock
+
+
+def test_no_valid_step_stands_and_decides_again():
+    """Walled in ahead: the robot stands (StopWalking) while the stick pushes forward, and walks again when the
+    person turns the stick sideways (Algorithm 1 live; the scanned rollout would stop for good)."""
+    free = np.ones((100, 100), bool)
+    free[55:, :] = False
+    terrain = ij.terrain.from_arrays(None, free, 0.02)
+    robot = robots.hrp2(margin=0.02)
+    start = robots.start_stance(robot, 1.0, 1.0)
+    trace = live.Trace(np.array([0.0, 2.4, 4.0]), np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 0]]))
+    res = live.drive(terrain, robot, live.PerfectBody(robot, start), live.ScriptInput(trace),
+                     live.LocalDecider(terrain, robot), realtime=False)
+    valid = [d["valid"] for d in res.decisions]
+    assert True in valid and valid[-1]
+    feet = np.asarray(res.states[-1]["feet"])
+    assert feet[:, 0].max() < 1.1 - 0.121  # never onto the wall
+    assert feet[:, 1].mean() > 1.05  # went left along it
+
+
+def test_native_robot_drives_and_replays(trace, tmp_path):
+    """The MuJoCo biped on native MuJoCo, driven by the scripted stick: it walks without falling, lands where
+    it was sent, and its replay is identical (MuJoCo and the compiled controller are deterministic)."""
+    out = tmp_path / "native.mcap"
+    flat = {"kind": "family", "family": "flat", "seed": 0, "shape": [100, 60], "resolution": 0.02}
+    res = live.run(live.DriveSettings(terrain=flat, body="native"), live.ScriptInput(trace), realtime=False,
+                   record_to=out, num_steps=3)
+    logs = [s["log"] for s in res.states[1:]]
+    assert len(logs) == 3 and not any(bool(g["fallen"]) for g in logs)
+    assert max(float(g["placement_error"]) for g in logs) < 0.03
+    feet = np.asarray(res.states[-1]["feet"])
+    assert feet[:, 0].mean() > np.asarray(res.states[0]["feet"])[:, 0].mean() + 0.2  # it walked forward
+    _, _, mismatches = live.replay(out)
+    assert mismatches == []
+
+
+# ------------------------------------------------------------------------------------------- the command line
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--script", "/nonexistent/trace.csv"], "trace file '/nonexistent/trace.csv' does not exist"),
+    (["--script", "TRACE", "--terrain", "mountains"], "unknown terrain family 'mountains'"),
+    (["--script", "BAD"], "bad.csv:2: expected 4 comma-separated values"),
+    (["--replay", "/nonexistent.mcap"], "recording '/nonexistent.mcap' does not exist"),
+    (["--script", "TRACE", "--shape", "12by5"], "--shape must be NXxNY"),
+    (["--script", "TRACE", "--server", "localhost"], "server must be HOST:PORT"),
+])
+def test_bad_input_is_one_line(args, match, trace, tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,forward,left,turn\n0,1,0\n")
+    args = [str(trace) if a == "TRACE" else str(bad) if a == "BAD" else a for a in args]
+    rc = cli.main(["drive", *args, "--headless", "--ff", "off"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err.startswith("ijoy: error: ") and len(err.splitlines()) == 1, err
+    assert match in err
+
+
+# ------------------------------------------------------------------------------------------- force feedback
+
+_C = r"""
+#include <linux/input.h>
+#include <stdio.h>
+#include <string.h>
+static void dump(struct ff_effect *e) { fwrite(e, sizeof *e, 1, stdout); }
+int main(void) {
+  struct ff_effect e;
+  printf("%d %d %d %d %d %zu\n", FF_CONSTANT, FF_SPRING, FF_RUMBLE, EV_FF, FF_GAIN, sizeof(struct ff_effect));
+  memset(&e, 0, sizeof e); e.type = FF_CONSTANT; e.id = -1; e.direction = DIRECTION;
+  e.u.constant.level = LEVEL; dump(&e);
+  memset(&e, 0, sizeof e); e.type = FF_SPRING; e.id = 3;
+  CONDITIONS dump(&e);
+  memset(&e, 0, sizeof e); e.type = FF_RUMBLE; e.id = -1;
+  e.u.rumble.strong_magnitude = STRONG; e.u.rumble.weak_magnitude = WEAK; dump(&e);
+  return 0;
+}
+"""
+
+
+def test_effects_are_the_kernels_structures(tmp_path):
+    """A cue force and ALDURO's centring spring encoded as evdev ff structures are, byte for byte, the
+    struct ff_effect that linux/input.h lays out for the same fields (compiled with the system's C compiler),
+    and evdev's codes are the header's."""
+    import shutil
+
+    from evdev import ecodes
+
+    from ijoy_jax import haptics
+
+    if shutil.which("cc") is None or not __import__("os").path.exists("/usr/include/linux/input.h"):
+        pytest.fail("needs a C compiler and linux/input.h: apt-get install -y gcc linux-libc-dev (.ci/run does)")
+    cfg = haptics.default_joystick_config()
+    force = np.array([-0.6, 0.3, 0.1])  # the cue pushes back and to the left
+    const = forcefeedback.cue_constant(force, cfg)
+    # independently: 5 N max force, projection onto x/y: (-3, 1.5) N, |f| = 3.354 N -> level 0x7FFF * 3.354 / 5
+    f = np.array([-3.0, 1.5])
+    assert const["u"]["constant"]["level"] == int(round(np.hypot(*f) / 5.0 * 0x7FFF))
+    theta = (-np.arctan2(f[1], f[0])) % (2 * np.pi)  # the kernel's direction convention (haptics.linux_constant)
+    assert const["direction"] == int(round(theta / (2 * np.pi) * 0x10000)) % 0x10000
+    spring = haptics.linux_spring(cfg.centring, 5.0, 0.03)
+    rum = forcefeedback.rumble(0.5)
+    conds = " ".join(
+        f"e.u.condition[{i}].right_saturation = {c['right_saturation']}; e.u.condition[{i}].left_saturation = "
+        f"{c['left_saturation']}; e.u.condition[{i}].right_coeff = {c['right_coeff']}; e.u.condition[{i}].left_coeff"
+        f" = {c['left_coeff']}; e.u.condition[{i}].deadband = {c['deadband']}; e.u.condition[{i}].center = "
+        f"{c['center']};" for i, c in enumerate(spring["u"]["condition"]))
+    src = tmp_path / "ff.c"
+    code = _C
+    for name, value in (("DIRECTION", const["direction"]), ("LEVEL", const["u"]["constant"]["level"]),
+                        ("CONDITIONS", conds), ("STRONG", rum["u"]["rumble"]["strong_magnitude"]),
+                        ("WEAK", rum["u"]["rumble"]["weak_magnitude"])):
+        code = code.replace(name, str(value))
+    src.write_text(code)
+    exe = tmp_path / "ff"
+    subprocess.run(["cc", "-o", str(exe), str(src)], check=True)
+    raw = subprocess.run([str(exe)], capture_output=True, check=True).stdout
+    header, _, body = raw.partition(b"\n")
+    codes = [int(v) for v in header.split()]
+    assert codes[:5] == [ecodes.FF_CONSTANT, ecodes.FF_SPRING, ecodes.FF_RUMBLE, ecodes.EV_FF, ecodes.FF_GAIN]
+    size = codes[5]
+    ours = [forcefeedback.effect(const), forcefeedback.effect(spring, effect_id=3), forcefeedback.effect(rum)]
+    assert all(len(bytes(e)) == size for e in ours)
+    kernel = [body[i * size:(i + 1) * size] for i in range(3)]
+    for e, k in zip(ours, kernel, strict=True):
+        assert bytes(e) == k
+    assert spring["u"]["condition"][0]["right_coeff"] > 0  # a restoring spring on both axes
+    assert ours[1].u.ff_condition_effect[1].left_coeff == spring["u"]["condition"][1]["left_coeff"]
+
+
+def test_no_device_falls_back_with_a_message(tmp_path):
+    out = forcefeedback.open_device()
+    assert isinstance(out, forcefeedback.NoFeedback) and out.description.startswith("off (")
+    out.update(np.array([0.5, 0.0, 0.0]))  # plays nothing, raises nothing
+    missing = forcefeedback.open_device(str(tmp_path / "event99"))
+    assert isinstance(missing, forcefeedback.NoFeedback) and "cannot open" in missing.description
