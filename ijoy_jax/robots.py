@@ -47,7 +47,17 @@ class TerrainMetrics:
                  its limit is per action (``Robot.max_step_height``),
       band       largest |deviation| from the plane in the safety band, the
                  cells touched by the footprint grown by the margin but not
-                 by the footprint itself: catches edges and drop-offs (m).
+                 by the footprint itself: catches edges and drop-offs (m),
+      support    how far a rigid sole set on the plane can rock: it rests on
+                 the cell highest above the plane, and each of its four
+                 corner regions (the cells beyond half its half length and
+                 half its half width from the centre) should hold a cell
+                 nearly as high; the largest shortfall (m). A dome under the
+                 foot's middle, or a twisted (saddle) surface that the sole
+                 meets on two diagonal corners, passes roughness and bump
+                 yet leaves a sole that rocks and pivots under load: the
+                 simulated biped fell on such footholds
+                 (:mod:`ijoy_jax.sim`, BENCHMARKS.md).
 
     A metric beyond its limit makes the cost +inf; otherwise its term is
     ``weight * metric``. Weights are cost units per radian or per metre.
@@ -62,6 +72,8 @@ class TerrainMetrics:
     step_weight: jax.Array
     band_weight: jax.Array
     band_limit: jax.Array
+    support_weight: jax.Array
+    support_limit: jax.Array
 
 
 def default_metrics(
@@ -74,6 +86,8 @@ def default_metrics(
     step_weight=1.0,
     band_weight=5.0,
     band_limit=0.03,
+    support_weight=10.0,
+    support_limit=0.005,
 ) -> TerrainMetrics:
     """Default metric weights and limits (float32 scalars); any may be overridden."""
     vals = dict(locals())
@@ -681,6 +695,8 @@ SCALAR_LEAVES: Mapping[str, LeafSpec] = MappingProxyType(
         "metrics.step_weight": LeafSpec("cost/m", False, True),
         "metrics.band_weight": LeafSpec("cost/m", False, True),
         "metrics.band_limit": LeafSpec("m", False, True),
+        "metrics.support_weight": LeafSpec("cost/m", False, True),
+        "metrics.support_limit": LeafSpec("m", False, True),
     }
 )
 """Every scalar Robot leaf a user may sweep or tune, by dotted name (:func:`get_leaf`), in a fixed order."""

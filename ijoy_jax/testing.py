@@ -63,7 +63,8 @@ class NumpyFootCost:
         self.metrics = {k: float(v) for k, v in vars(robot.metrics).items()}
 
     def plane(self, pose):
-        """(height at the centre, slope, roughness, bump, band, (dz/dx, dz/dy)) of the footprint at ``pose``."""
+        """(height at the centre, slope, roughness, bump, band, support, (dz/dx, dz/dy)) of the footprint at
+        ``pose``."""
         args = (self.res, self.origin, self.height.shape)
         fx, fy, _ = _touched(pose[0], pose[1], pose[2], self.L / 2, self.W / 2, *args)
         gx, gy, _ = _touched(pose[0], pose[1], pose[2], self.L / 2 + self.m, self.W / 2 + self.m, *args)
@@ -82,7 +83,8 @@ class NumpyFootCost:
             bv = self.origin[1] + (by + 0.5) * self.res - pose[1]
             band_dev = float(np.abs(self.height[bx, by] - coef[0] - coef[1] * bu - coef[2] * bv).max())
         slope = math.atan(math.hypot(coef[1], coef[2]))
-        return coef[0], slope, float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev, (coef[1], coef[2])
+        support = support_gap(u, v, r, pose[2], self.L, self.W)
+        return coef[0], slope, float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev, support, (coef[1], coef[2])
 
     def cost(self, stance, stance_h, start_h, swing_from, pose, a):
         """FootCost of the swing foot at ``pose`` executing action ``a`` from ``stance`` (+inf if invalid)."""
@@ -95,7 +97,7 @@ class NumpyFootCost:
         if not self.has_height:
             return total if reach <= self.max_distance + LIMIT_TOL else math.inf
         m = self.metrics
-        hgt, slope, rough, bump, band, grad = self.plane(pose)
+        hgt, slope, rough, bump, band, support, grad = self.plane(pose)
         roll, pitch, _ = sole_rpy(*grad, pose[2])
         for val, lim in ((abs(pitch), self.max_pitch), (abs(roll), self.max_roll),
                          (math.hypot(reach, hgt - stance_h), self.max_distance)):
@@ -105,7 +107,8 @@ class NumpyFootCost:
                              (rough, m["roughness_weight"], m["roughness_limit"]),
                              (bump, m["bump_weight"], m["bump_limit"]),
                              (abs(hgt - stance_h), m["step_weight"], self.max_dh[a]),
-                             (band, m["band_weight"], m["band_limit"])):
+                             (band, m["band_weight"], m["band_limit"]),
+                             (support, m["support_weight"], m["support_limit"])):
             if val > lim + LIMIT_TOL:  # the library's one rule for limits (footcost.xla.exceeds)
                 return math.inf
             total += wt * val
@@ -197,10 +200,22 @@ def disc_touches_cells(x, y, r, res, shape, origin=(0.0, 0.0)):
     return dx**2 + dy**2 < r * r
 
 
+def support_gap(u, v, resid, yaw, foot_length, foot_width) -> float:
+    """The ``support`` metric (m) of cells at ``(u, v)`` (world offsets from the foot centre) with plane residuals
+    ``resid``: over the sole's four corner regions (cell centres at least a quarter of the foot's length from its
+    centre along it and a quarter of its width across it, in the sole's own frame), how far the highest residual
+    of the lowest region lies below the highest of all; regions without cells count 0."""
+    along = u * math.cos(yaw) + v * math.sin(yaw)
+    across = v * math.cos(yaw) - u * math.sin(yaw)
+    gaps = [max(resid.max(), 0.0) - resid[m].max() for sa in (1, -1) for sb in (1, -1)
+            if (m := (sa * along >= 0.25 * foot_length) & (sb * across >= 0.25 * foot_width)).any()]
+    return float(max(gaps, default=0.0))
+
+
 def foot_metrics(height, res, origin, pose, foot_length, foot_width, margin):
     """Plane fit and metrics of the footprint at ``pose`` (float64 brute force).
 
-    Returns dict(height, slope, roughness, bump, band, obstacle_cells) where the
+    Returns dict(height, slope, roughness, bump, band, support, grad) where the
     plane is the least-squares fit over the cells the footprint touches.
     """
     shape = height.shape
@@ -224,6 +239,7 @@ def foot_metrics(height, res, origin, pose, foot_length, foot_width, margin):
         roughness=np.mean(np.abs(resid)),
         bump=max(resid.max(), 0.0),
         band=np.abs(bres).max() if bres.size else 0.0,
+        support=support_gap(u, v, resid, pose[2], foot_length, foot_width),
         grad=(coef[1], coef[2]),
     )
 

@@ -274,7 +274,17 @@ def scenarios_25d():
 # Running: one vmapped rollout per (terrain kind, method); results as NumPy per scenario
 # ---------------------------------------------------------------------------------------------
 
-ROBOT = ij.robots.hrp2(margin=0.02)
+def paper_metrics(robot):
+    """The robot scored by the paper's metrics alone (slope, roughness, bump, step height, band): its ``support``
+    term off. The experiments replicate the paper's planner, which lets a sole straddle a low edge; the library's
+    default also refuses a sole that would rock on such an edge (``support``, for the simulated biped:
+    test_the_default_support_refuses_the_straddle_the_papers_metrics_allow). Off is a limit no footprint
+    reaches (1 m: limits must be finite) and no weight."""
+    return robot.replace(metrics=robot.metrics.replace(support_weight=jnp.float32(0.0),
+                                                       support_limit=jnp.float32(1.0)))
+
+
+ROBOT = paper_metrics(ij.robots.hrp2(margin=0.02))
 # Margin and w are the only batched robot leaves; F and L_i depend on the action
 # set and rotation weight alone, so one prebuilt set serves every scenario.
 ROBOT_AXES = jax.tree_util.tree_map(lambda _: None, ROBOT).replace(margin=0, w=0)
@@ -661,6 +671,27 @@ def test_w_trades_terrain_cost_against_following_the_command(method):
     assert 1.0 * L_MAX < cost < 2.0 * L_MAX, cost
 
 
+def test_the_default_support_refuses_the_straddle_the_papers_metrics_allow():
+    """The straddle of test_w_trades_terrain_cost_against_following_the_command (a sole across the 2 cm edge) is
+    valid under the paper's metrics; a rigid sole there rests on its upper half and rocks, and the default
+    robot's support term (the highest cell of each corner region within support_limit of the sole's resting
+    cell) refuses it: its support metric lies beyond that limit and below the edge's height (the plane fitted
+    across the edge tilts, so its corners fall short of the full 2 cm). The step in place on the level ground
+    before the edge stays valid."""
+    sc1 = scenarios_25d()["full-0.02-m0.02-w1.0"]
+    low_w = runs_25d("exhaustive")["full-0.02-m0.02-w1.0"]
+    stance, swing = low_w.feet[1], low_w.feet[0]
+    want = stance + np.array([L_MAX, 0.19, 0.0], np.float32)
+    level = stance + np.array([0.0, 0.19, 0.0], np.float32)  # the step in place, wholly before the edge
+    default = ij.robots.hrp2(margin=0.02)
+    terms = ij.foot_cost_terms(sc1.terrain(), default, stance, -1, np.stack([want, level]), swing_from=swing)
+    paper = ij.foot_cost_terms(sc1.terrain(), ROBOT, stance, -1, want[None], swing_from=swing)
+    assert np.isfinite(float(paper.total[0]))
+    assert float(default.metrics.support_limit) < float(paper.support_m[0]) < 0.02
+    assert np.isinf(float(terms.support[0])) and np.isinf(float(terms.total[0]))
+    assert float(terms.support_m[1]) < 1e-6 and np.isfinite(float(terms.total[1]))
+
+
 # ---------------------------------------------------------------------------------------------
 # 5. Turning: the commanded rotation is kept whenever a step with it is valid
 # ---------------------------------------------------------------------------------------------
@@ -798,7 +829,7 @@ def _stair_rollouts(terrains, robot, targets, command, num_steps):
 @functools.cache
 def _stair_runs(reach, cases):
     """Roll out the perfect robot (hrp2(reach=...), full speed forward) on every (rise, run, first riser) case."""
-    robot = ij.robots.hrp2(margin=0.02, reach=reach)
+    robot = paper_metrics(ij.robots.hrp2(margin=0.02, reach=reach))
     terrains = [_stairs(*c) for c in cases]
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *terrains)
     command = jnp.array([reach / float(robot.step_time), 0.0, 0.0], jnp.float32)  # p_next = the longest step

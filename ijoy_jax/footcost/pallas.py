@@ -44,6 +44,7 @@ from jax.experimental.pallas import triton as pl_triton
 from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max, window_cells
 from ijoy_jax.footcost.xla import (
     SLACK,
+    SUPPORT_CORNER,
     checked_query,
     exceeds,
     metric_term,
@@ -59,7 +60,7 @@ from ijoy_jax.terrain import Terrain
 # Scalars of one decision, packed into one float32 vector (indices into ``par``).
 (_OX, _OY, _GHL, _GHW, _FHL, _FHW, _STANCE_H, _START_H, _SWX, _SWY, _SWING_MAX, _FW, _TOO_BIG,
  _SLOPE_W, _SLOPE_L, _ROUGH_W, _ROUGH_L, _BUMP_W, _BUMP_L, _STEP_W, _BAND_W, _BAND_L,
- _STX, _STY, _PITCH_L, _ROLL_L, _DIST_L) = range(27)
+ _STX, _STY, _PITCH_L, _ROLL_L, _DIST_L, _SUPPORT_W, _SUPPORT_L) = range(29)
 _NUM_PAR = 32
 # Rows of the per-candidate block ``cand``.
 _X, _Y, _T, _COST, _STEP_LIMIT, _CLEARANCE = range(6)
@@ -314,7 +315,11 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
         # the span's start + q, read at a flat address. These row bodies run ~180 times per candidate, so
         # they test one bound each and carry the plane down the column (relative to h_ref: in map heights it
         # would round to the terrain's altitude). The bump is max(largest residual, 0), so masked rows may
-        # count as 0 instead of -inf.
+        # count as 0 instead of -inf. The support's four corner regions (footcost.plane_metrics) are tested in
+        # the sole's own frame, along and across it, from the cell centre's offsets as plane_metrics forms them
+        # (not carried down the column: a centre on a region's edge should fall on the same side on both paths
+        # to within one rounding); their maxima start at -inf (a region without cells gives no gap).
+        a0, b0 = SUPPORT_CORNER * p[_FHL], SUPPORT_CORNER * p[_FHW]
 
         def resid_column(ix, spans, acc):
             u = (ix.astype(jnp.float32) + 0.5) * res - cx
@@ -327,20 +332,29 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
             plane0 = a + b * u + cc * ((g0.astype(jnp.float32) + 0.5) * res - cy)
 
             def row(q, acc):
-                abs_sum, top, band, plane, rel = acc
+                abs_sum, top, band, corners, plane, rel = acc
                 resid = (hp_ref[start + q] - h_ref) - plane
+                v = ((g0 + q).astype(jnp.float32) + 0.5) * res - cy
+                along, across = u * c + v * s, v * c - u * s
                 in_foot = rel.astype(jnp.uint32) < foot_rows  # 0 <= rel < foot rows, one unsigned compare
                 r_foot = jnp.where(in_foot, resid, 0.0)
                 r_band = jnp.where((rel < grown_end) & ~in_foot, resid, 0.0)
+                ahead, behind = along >= a0, -along >= a0
+                left, right = across >= b0, -across >= b0
+                corners = tuple(jnp.maximum(m, jnp.where(in_foot & fa & fb, resid, -jnp.inf))
+                                for m, fa, fb in zip(corners, (ahead, ahead, behind, behind),
+                                                     (left, right, left, right), strict=True))
                 return (abs_sum + jnp.abs(r_foot), jnp.maximum(top, r_foot), jnp.maximum(band, jnp.abs(r_band)),
-                        plane + rise, rel + 1)
+                        corners, plane + rise, rel + 1)
 
-            blocked = acc[3] | hits_obstacle(ix, g0, g1, g_touched)  # obstacles ride along this pass
-            abs_sum, top, band, _, _ = row_loop(rows_of(g0, g1, g_touched), row, (*acc[:3], plane0, g0 - j0))
-            return abs_sum, top, band, blocked
+            blocked = acc[4] | hits_obstacle(ix, g0, g1, g_touched)  # obstacles ride along this pass
+            abs_sum, top, band, corners, *_ = row_loop(rows_of(g0, g1, g_touched), row,
+                                                       (*acc[:4], plane0, g0 - j0))
+            return abs_sum, top, band, corners, blocked
 
-        abs_sum, top, band, blocked = _column_loop(num_cols, ix0, (grown, foot), resid_column,
-                                                    (zero_f, zero_f, zero_f, finite & False))
+        abs_sum, top, band, corners, blocked = _column_loop(
+            num_cols, ix0, (grown, foot), resid_column,
+            (zero_f, zero_f, zero_f, (zero_f - jnp.inf,) * 4, finite & False))
         total = total + jnp.where(blocked, jnp.inf, 0.0)
         ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(cc)
         too_big = too_big | ~ok  # a fit beyond float32's range (plane_metrics' ``fitted``)
@@ -349,6 +363,8 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
         rough = jnp.where(ok, abs_sum / n, 0.0)
         bump = jnp.where(ok, top, 0.0)
         band = jnp.where(ok, band, 0.0)
+        gaps = [jnp.where(corner > -jnp.inf, top - corner, 0.0) for corner in corners]
+        support = jnp.where(ok, jnp.maximum(jnp.maximum(gaps[0], gaps[1]), jnp.maximum(gaps[2], gaps[3])), 0.0)
         dh = height - p[_STANCE_H]
         # The sole on the fitted plane (footcost.xla.sole_tilt) and the reach over the height change.
         pitch, roll = sole_tilt(jnp.where(ok, b, 0.0), jnp.where(ok, cc, 0.0), t)
@@ -357,6 +373,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
                  + metric_term(p[_ROUGH_W], rough, p[_ROUGH_L]) + metric_term(p[_BUMP_W], bump, p[_BUMP_L])
                  + metric_term(p[_STEP_W], jnp.abs(dh), cand_ref[_STEP_LIMIT, :])
                  + metric_term(p[_BAND_W], band, p[_BAND_L])
+                 + metric_term(p[_SUPPORT_W], support, p[_SUPPORT_L])
                  + jnp.where(ankle_bad | out_of_reach(dh), jnp.inf, 0.0))
 
         if has_swing:
@@ -516,7 +533,7 @@ def foot_cost_fused(
            jnp.where(unsupported, 1.0, 0.0),
            m.slope_weight, m.slope_limit, m.roughness_weight, m.roughness_limit, m.bump_weight, m.bump_limit,
            m.step_weight, m.band_weight, m.band_limit, stance[0], stance[1], robot.max_sole_pitch,
-           robot.max_sole_roll, robot.max_sole_distance]
+           robot.max_sole_roll, robot.max_sole_distance, m.support_weight, m.support_limit]
     par = jnp.stack([f32(q) for q in par] + [zero] * (_NUM_PAR - len(par)))
     padded = -(-num // block) * block
     order = None

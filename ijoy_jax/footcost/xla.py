@@ -117,8 +117,8 @@ class FootCostTerms(NamedTuple):
       action: the action's own cost.
       obstacle: 0, or +inf if the grown footprint touches an obstacle or
         leaves the map.
-      slope, roughness, bump, step, band: ``weight * metric``, or +inf beyond
-        the metric's limit (0 on 2D terrains).
+      slope, roughness, bump, step, band, support: ``weight * metric``, or
+        +inf beyond the metric's limit (0 on 2D terrains).
       swing_path: 0, or +inf if the swing corridor is too high (or leaves the
         map) for the action's clearance.
       ankle: 0, or +inf if a sole on the fitted plane would tilt beyond what
@@ -139,7 +139,7 @@ class FootCostTerms(NamedTuple):
     Raw metrics (for plots and tests)::
 
       slope_angle (rad), roughness_m, bump_m, step_height_m (signed, up is
-      positive), band_m, path_height_m (corridor height above the higher
+      positive), band_m, support_m, path_height_m (corridor height above the higher
       foothold; -inf if no check), foot_height_m (plane height at the foot
       centre), sole_pitch_rad and sole_roll_rad (the orientation of a sole on
       the fitted plane with the step's heading, ``R = Rz(yaw) Ry(pitch)
@@ -157,6 +157,7 @@ class FootCostTerms(NamedTuple):
     bump: jax.Array
     step: jax.Array
     band: jax.Array
+    support: jax.Array
     swing_path: jax.Array
     ankle: jax.Array
     reach: jax.Array
@@ -166,6 +167,7 @@ class FootCostTerms(NamedTuple):
     bump_m: jax.Array
     step_height_m: jax.Array
     band_m: jax.Array
+    support_m: jax.Array
     path_height_m: jax.Array
     foot_height_m: jax.Array
     sole_pitch_rad: jax.Array
@@ -187,6 +189,7 @@ class Plane(NamedTuple):
     roughness: jax.Array  # mean |residual| under the foot (m)
     bump: jax.Array  # largest residual under the foot (m)
     band: jax.Array  # largest |residual| in the safety band (m)
+    support: jax.Array  # how far below the sole's resting cell the highest cell of its lowest corner lies (m)
     fitted: jax.Array  # () bool: the fit is finite (False: heights beyond float32's range; metrics then 0)
     grad_x: jax.Array  # dz/dx of the plane along world x (m/m)
     grad_y: jax.Array  # dz/dy of the plane along world y (m/m)
@@ -265,12 +268,18 @@ def _totals(*xs):
     return lax.reduce(xs, (jnp.zeros((), xs[0].dtype),) * len(xs), _add, (0,))
 
 
-@_fused_reduction(lambda a, b, c: (jnp.sum(a), jnp.max(b), jnp.max(c)))
-def _sum_max_max(a, b, c):
-    """(sum(a), max(b), max(c)) of three (K, R) arrays."""
+@_fused_reduction(lambda a, *bs: (jnp.sum(a), *(jnp.max(b) for b in bs)))
+def _sum_and_maxima(a, *bs):
+    """(sum(a), max(b_1), ..., max(b_n)) of (K, R) arrays, one fused reduction."""
     z = jnp.zeros((), a.dtype)
-    return lax.reduce((a, b, c), (z, z - jnp.inf, z - jnp.inf),
-                      lambda x, y: (x[0] + y[0], jnp.maximum(x[1], y[1]), jnp.maximum(x[2], y[2])), (0, 1))
+    return lax.reduce((a, *bs), (z, *(z - jnp.inf for _ in bs)),
+                      lambda x, y: (x[0] + y[0], *(jnp.maximum(p, q) for p, q in zip(x[1:], y[1:], strict=True))),
+                      (0, 1))
+
+
+SUPPORT_CORNER = 0.5
+"""The sole's four corner regions (:func:`plane_metrics`' support) are the cells whose centres lie at least this
+fraction of the half length from its centre along it and of the half width across it, on each side."""
 
 
 def far_frame(terrain: Terrain) -> jax.Array:
@@ -344,10 +353,20 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
     a, b, c = solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
     resid = hrel - (a + b * u[:, None] + c * v[None, :])
     slope = jnp.arctan(jnp.sqrt(b * b + c * c))
-    abs_sum, top, band = _sum_max_max(jnp.where(m_foot, jnp.abs(resid), 0.0), jnp.where(m_foot, resid, -jnp.inf),
-                                      jnp.where(m_band, jnp.abs(resid), 0.0))
+    # The sole's corner regions, in its own frame (along a, across b): a rigid sole set on the plane rests on its
+    # highest cell; where a corner's highest cell lies lower, the sole can rock toward it by that gap.
+    cos, sin = jnp.cos(pose[2]), jnp.sin(pose[2])
+    along = u[:, None] * cos + v[None, :] * sin
+    across = v[None, :] * cos - u[:, None] * sin  # as the fused kernel forms them (footcost.pallas)
+    corners = [m_foot & (sa * along >= SUPPORT_CORNER * hl) & (sb * across >= SUPPORT_CORNER * hw)
+               for sa in (1.0, -1.0) for sb in (1.0, -1.0)]
+    abs_sum, top, band, *corner_top = _sum_and_maxima(
+        jnp.where(m_foot, jnp.abs(resid), 0.0), jnp.where(m_foot, resid, -jnp.inf),
+        jnp.where(m_band, jnp.abs(resid), 0.0), *(jnp.where(c, resid, -jnp.inf) for c in corners))
     roughness = abs_sum / n
     bump = jnp.maximum(top, 0.0)
+    # a corner region without cells (a grid coarser than the sole's quarter) tells nothing: gap 0
+    support = jnp.max(jnp.stack([jnp.where(jnp.isfinite(t), bump - t, 0.0) for t in corner_top]))
     ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(c)
     z = jnp.float32(0.0)
     return Plane(
@@ -356,6 +375,7 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
         roughness=jnp.where(ok, roughness, z),
         bump=jnp.where(ok, bump, z),
         band=jnp.where(ok, band, z),
+        support=jnp.where(ok, support, z),
         fitted=ok,
         grad_x=jnp.where(ok, b, z),
         grad_y=jnp.where(ok, c, z),
@@ -406,12 +426,13 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
         bump = metric_term(metrics.bump_weight, plane.bump, metrics.bump_limit)
         stepc = metric_term(metrics.step_weight, jnp.abs(dh), robot.max_step_height[action_index])
         band = metric_term(metrics.band_weight, plane.band, metrics.band_limit)
-        raw = (plane.slope, plane.roughness, plane.bump, dh, plane.band, plane.height)
+        support = metric_term(metrics.support_weight, plane.support, metrics.support_limit)
+        raw = (plane.slope, plane.roughness, plane.bump, dh, plane.band, plane.height, plane.support)
         too_big = too_big | ~plane.fitted | ~stance_plane.fitted
         pitch, roll = sole_tilt(plane.grad_x, plane.grad_y, step[2])
     else:
-        slope = rough = bump = stepc = band = zero
-        raw = (zero, zero, zero, zero, zero, zero)
+        slope = rough = bump = stepc = band = support = zero
+        raw = (zero, zero, zero, zero, zero, zero, zero)
         pitch = roll = zero
     ankle_bad = exceeds(jnp.abs(pitch), robot.max_sole_pitch) | exceeds(jnp.abs(roll), robot.max_sole_roll)
     distance = sole_distance(step[0] - stance[0], step[1] - stance[1], raw[3])
@@ -437,10 +458,10 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
     unsupported = _inf_if(flagged)
     # +inf where flagged, whatever the other terms hold; a term that an unsupported value (a NaN weight, cost
     # or limit) makes NaN cannot be evaluated, and reads +inf too: no cost term is ever NaN.
-    action, slope, rough, bump, stepc, band = (jnp.where(jnp.isnan(t), jnp.inf, t)
-                                               for t in (action, slope, rough, bump, stepc, band))
+    action, slope, rough, bump, stepc, band, support = (jnp.where(jnp.isnan(t), jnp.inf, t)
+                                                        for t in (action, slope, rough, bump, stepc, band, support))
     total = jnp.where(flagged, jnp.inf,
-                      action + obstacle + slope + rough + bump + stepc + band + swing + ankle + reach)
+                      action + obstacle + slope + rough + bump + stepc + band + support + swing + ankle + reach)
     return FootCostTerms(
         total=total,
         action=action,
@@ -450,6 +471,7 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
         bump=bump,
         step=stepc,
         band=band,
+        support=support,
         swing_path=swing,
         ankle=ankle,
         reach=reach,
@@ -459,6 +481,7 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
         bump_m=raw[2],
         step_height_m=raw[3],
         band_m=raw[4],
+        support_m=raw[6],
         path_height_m=path_height,
         foot_height_m=raw[5],
         sole_pitch_rad=pitch,

@@ -49,7 +49,7 @@ import jax.numpy as jnp
 
 from ijoy_jax import geometry
 from ijoy_jax.footcost import foot_cost_terms, window_cells
-from ijoy_jax.footcost.xla import sole_tilt
+from ijoy_jax.footcost.xla import SUPPORT_CORNER, sole_tilt
 from ijoy_jax.robots import Robot, dist, side_actions, side_p0, side_sign
 from ijoy_jax.select import Targets, make_targets
 from ijoy_jax.terrain import Terrain
@@ -120,8 +120,8 @@ class SoftFootCostTerms(NamedTuple):
     """Relaxed FootCost of N candidate steps: total, named terms and raw metrics (all (N,)).
 
     Cost terms (cost units; finite): total (their sum), action, obstacle
-    (barrier on the soft obstacle mass), slope, roughness, bump, step, band
-    (each ``weight * metric + barrier``; 0 on 2D terrains), swing_path
+    (barrier on the soft obstacle mass), slope, roughness, bump, step, band,
+    support (each ``weight * metric + barrier``; 0 on 2D terrains), swing_path
     (clearance barrier on the swing corridor plus its off-map and length
     barriers; 0 without ``swing_from`` or on 2D terrains), ankle (barriers on
     the size of the sole's pitch and roll on the soft plane against the
@@ -129,7 +129,7 @@ class SoftFootCostTerms(NamedTuple):
     (barrier on the 3D distance of the soles against ``max_sole_distance``).
     Raw: obstacle_mass (cells, soft count of obstacle or off-map cells under
     the grown footprint), slope_angle (rad), roughness_m, bump_m,
-    step_height_m (signed), band_m, foot_height_m (m), path_height_m (m, soft
+    step_height_m (signed), band_m, foot_height_m (m), support_m (m), path_height_m (m, soft
     ``max(0, corridor top - higher foothold)``; 0 when not checked),
     sole_pitch_rad, sole_roll_rad (:func:`ijoy_jax.footcost.xla.sole_tilt` of
     the soft plane), sole_distance_m (m).
@@ -143,6 +143,7 @@ class SoftFootCostTerms(NamedTuple):
     bump: jax.Array
     step: jax.Array
     band: jax.Array
+    support: jax.Array
     obstacle_mass: jax.Array
     slope_angle: jax.Array
     roughness_m: jax.Array
@@ -150,6 +151,7 @@ class SoftFootCostTerms(NamedTuple):
     step_height_m: jax.Array
     band_m: jax.Array
     foot_height_m: jax.Array
+    support_m: jax.Array
     swing_path: jax.Array
     path_height_m: jax.Array
     ankle: jax.Array
@@ -195,6 +197,7 @@ class _SoftPlane(NamedTuple):
     roughness: jax.Array
     bump: jax.Array
     band: jax.Array
+    support: jax.Array  # soft FootCost support (m): the lowest corner region's soft top below the soft top of all
     grad_x: jax.Array  # dz/dx (m/m, world axes)
     grad_y: jax.Array  # dz/dy (m/m)
 
@@ -206,8 +209,9 @@ def _soft_max0(values, weights, temp):
     return temp * jax.nn.logsumexp(a, b=b)
 
 
-def _soft_plane(patch: _Patch, m_foot, m_grown, res: float, temp) -> _SoftPlane:
-    """Membership-weighted least-squares plane and its metrics (coordinates in cells)."""
+def _soft_plane(patch: _Patch, m_foot, m_grown, res: float, temp, corners=None) -> _SoftPlane:
+    """Membership-weighted least-squares plane and its metrics (coordinates in cells); ``corners`` (4, K, K), the
+    soft memberships of the sole's corner regions, gives the support metric (0 without)."""
     u = patch.du / res
     v = patch.dv / res
     k = u.shape[0]
@@ -241,7 +245,20 @@ def _soft_plane(patch: _Patch, m_foot, m_grown, res: float, temp) -> _SoftPlane:
     bump = _soft_max0(m_foot * resid, ones, temp)
     m_band = m_grown * (1.0 - m_foot)
     band = _soft_max0(m_band * _smooth_abs(resid, temp), ones, temp)
-    return _SoftPlane(height, slope, roughness, bump, band, b / res, c / res)
+    support = jnp.zeros_like(bump)
+    if corners is not None:
+        # soft maxima of the residual over the foot and over each corner region (weights as memberships: a
+        # region of under half a cell counts 0, as the exact metric's empty regions do; its weights are then
+        # replaced by the foot's, inside the where too, so that no -inf reaches a gradient)
+        top = temp * jax.nn.logsumexp(resid / temp, b=m_foot)
+        gaps = []
+        for w in corners:
+            filled = jnp.sum(w) > 0.5
+            gap = top - temp * jax.nn.logsumexp(resid / temp, b=jnp.where(filled, w, m_foot))
+            gaps.append(jnp.where(filled, gap, 0.0))
+        gaps = jnp.stack(gaps)
+        support = _soft_max0(gaps, jnp.ones_like(gaps), temp)
+    return _SoftPlane(height, slope, roughness, bump, band, support, b / res, c / res)
 
 
 def _memberships(patch: _Patch, robot: Robot, theta, res: float, sharpness):
@@ -250,6 +267,18 @@ def _memberships(patch: _Patch, robot: Robot, theta, res: float, sharpness):
     m_foot = soft_coverage(du, dv, theta, hl, hw, res, sharpness)
     m_grown = soft_coverage(du, dv, theta, hl + robot.margin, hw + robot.margin, res, sharpness)
     return m_foot, m_grown
+
+
+def _corners(patch: _Patch, robot: Robot, theta, m_foot, res: float, sharpness):
+    """(4, K, K) soft memberships of the sole's four corner regions (:data:`ijoy_jax.footcost.xla.SUPPORT_CORNER`
+    of its half length and half width out from its centre, in its own frame)."""
+    du, dv = patch.du[:, None], patch.dv[None, :]
+    along = du * jnp.cos(theta) + dv * jnp.sin(theta)
+    across = dv * jnp.cos(theta) - du * jnp.sin(theta)
+    k = sharpness / res
+    a0, b0 = SUPPORT_CORNER * 0.5 * robot.foot_length, SUPPORT_CORNER * 0.5 * robot.foot_width
+    return jnp.stack([m_foot * jax.nn.sigmoid(k * (sa * along - a0)) * jax.nn.sigmoid(k * (sb * across - b0))
+                      for sa in (1.0, -1.0) for sb in (1.0, -1.0)])
 
 
 def _barrier(metric, limit, sharpness, barrier_weight):
@@ -371,7 +400,8 @@ def soft_foot_cost_terms(
         zero = jnp.zeros((), dtype)
         action = robot.action_cost[a].astype(dtype)
         if terrain.has_height:
-            pl = _soft_plane(patch, m_foot, m_grown, res, temp)
+            pl = _soft_plane(patch, m_foot, m_grown, res, temp,
+                             _corners(patch, robot, step[2], m_foot, res, sharpness))
             dh = pl.height - stance_plane.height
             adh = _smooth_abs(dh, temp)
 
@@ -383,14 +413,15 @@ def soft_foot_cost_terms(
             bump = term(metrics.bump_weight, pl.bump, metrics.bump_limit)
             stepc = term(metrics.step_weight, adh, robot.max_step_height[a])
             band = term(metrics.band_weight, pl.band, metrics.band_limit)
-            raw = (pl.slope, pl.roughness, pl.bump, dh, pl.band, pl.height)
+            support = term(metrics.support_weight, pl.support, metrics.support_limit)
+            raw = (pl.slope, pl.roughness, pl.bump, dh, pl.band, pl.height, pl.support)
             pitch, roll = sole_tilt(pl.grad_x, pl.grad_y, step[2])
             angle_eps = temp / res  # rad: 1 / sharpness
             ankle = (_barrier(_smooth_abs(pitch, angle_eps), robot.max_sole_pitch, sharpness, barrier_weight)
                      + _barrier(_smooth_abs(roll, angle_eps), robot.max_sole_roll, sharpness, barrier_weight))
         else:
-            slope = rough = bump = stepc = band = ankle = zero
-            raw = (zero,) * 6
+            slope = rough = bump = stepc = band = support = ankle = zero
+            raw = (zero,) * 7
             pitch = roll = zero
         distance = geometry.safe_norm(geometry.safe_norm(step[0] - stance[0], step[1] - stance[1]), raw[3])
         reach = _barrier(distance, robot.max_sole_distance, sharpness, barrier_weight)
@@ -400,10 +431,10 @@ def soft_foot_cost_terms(
             swing, path_height = _swing_path(
                 terrain, robot, on_pad, hp_pad, kp, swing_from, step, h_ref, a, sharpness, barrier_weight, temp
             )
-        total = action + obstacle + slope + rough + bump + stepc + band + swing + ankle + reach
+        total = action + obstacle + slope + rough + bump + stepc + band + support + swing + ankle + reach
         return SoftFootCostTerms(
-            total, action, obstacle, slope, rough, bump, stepc, band, mass, *raw, swing, path_height, ankle, reach,
-            pitch, roll, distance
+            total, action, obstacle, slope, rough, bump, stepc, band, support, mass, *raw, swing, path_height, ankle,
+            reach, pitch, roll, distance
         )
 
     return jax.vmap(one)(steps, action_index)
