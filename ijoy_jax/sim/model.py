@@ -301,6 +301,11 @@ def _add_robot(spec: mujoco.MjSpec, p: BipedParams) -> None:
         for kind in ("force", "torque"):
             spec.add_sensor(name=f"{side}_ankle_{kind}", type=getattr(mujoco.mjtSensor, f"mjSENS_{kind.upper()}"),
                             objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"{side}_ankle")
+    # the whole robot's centre of mass and its velocity (world frame), what the controller's DCM feedback reads
+    spec.add_sensor(name="com", type=mujoco.mjtSensor.mjSENS_SUBTREECOM, objtype=mujoco.mjtObj.mjOBJ_BODY,
+                    objname="pelvis")
+    spec.add_sensor(name="com_vel", type=mujoco.mjtSensor.mjSENS_SUBTREELINVEL, objtype=mujoco.mjtObj.mjOBJ_BODY,
+                    objname="pelvis")
     for side in SIDES:
         lo, hi = p.joint_range(side)
         for k, name in enumerate(JOINTS):
@@ -485,6 +490,8 @@ class ModelIndex(NamedTuple):
       torso_site: () site in the torso.
       ankle_sensor: (2, 2) sensordata addresses of each ankle's force and torque (3 values each, foot frame,
       at the ankle point: what the shank exerts on the foot).
+      com_sensor: (2,) sensordata addresses of the whole robot's centre of mass and of its velocity (3 values
+      each, world frame; m, m/s).
     """
 
     qpos_adr: np.ndarray
@@ -499,6 +506,7 @@ class ModelIndex(NamedTuple):
     imu_site: np.ndarray
     torso_site: np.ndarray
     ankle_sensor: np.ndarray
+    com_sensor: np.ndarray
 
 
 def model_index(mj_model: mujoco.MjModel) -> ModelIndex:
@@ -533,6 +541,7 @@ def model_index(mj_model: mujoco.MjModel) -> ModelIndex:
         torso_site=np.asarray(oid(site, "torso")),
         ankle_sensor=np.array([[mj_model.sensor_adr[oid(mujoco.mjtObj.mjOBJ_SENSOR, f"{s}_ankle_{k}")]
                                 for k in ("force", "torque")] for s in SIDES]),
+        com_sensor=np.array([mj_model.sensor_adr[oid(mujoco.mjtObj.mjOBJ_SENSOR, n)] for n in ("com", "com_vel")]),
     )
 
 

@@ -46,7 +46,7 @@ import numpy as np
 from ijoy_jax import control, geometry, select
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import controller, kinematics, model, swing
-from ijoy_jax.sim.walker import Sim, StepLog, ankle_wrench, check_robot
+from ijoy_jax.sim.walker import Sim, StepLog, ankle_wrench, centre_of_mass, check_robot
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["NativeBiped", "Programs", "programs"]
@@ -98,8 +98,8 @@ class Programs:
         def start(phys, robot, feet):
             return jax.vmap(lambda f: rest(phys, select.foothold(phys, robot, f)))(jnp.asarray(feet, jnp.float32))
 
-        self.tick = jax.jit(lambda p, cs, window, base, wrench: controller.control_tick(
-            params, cfg, pg, p, cs, window, base, wrench))
+        self.tick = jax.jit(lambda p, cs, window, base, wrench, com: controller.control_tick(
+            params, cfg, pg, p, cs, window, base, wrench, com))
         self.filter = jax.jit(lambda p, cs, corr: controller.zmp_correction(
             sim.mjx_free, params, cfg, pg, p, cs, cfg.filter_passes, init=controller.carry_correction(cfg, corr)))
         self.plan = jax.jit(plan)
@@ -281,8 +281,11 @@ class NativeBiped:
                 s["to_plan"] @ d.xmat[idx.pelvis].reshape(3, 3))
         base = tuple(np.asarray(b, np.float32) for b in base)
         wrench = np.asarray(ankle_wrench(self.sim, d), np.float32)
+        c, v = centre_of_mass(self.sim, d)
+        com = (np.asarray((s["to_plan"] @ (c - s["st"][:3]) + s["pst"][:3])[:2], np.float32),
+               np.asarray((s["to_plan"] @ v)[:2], np.float32))
         window = self.corr[s["k"]:s["k"] + n] if self.cfg.filter_passes else None
-        q, self.cs, _ = self.programs.tick(s["plan"], self.cs, window, base, wrench)
+        q, self.cs, _ = self.programs.tick(s["plan"], self.cs, window, base, wrench, com)
         q0, q = d.ctrl.copy(), np.asarray(q)
         sub = self.sim.substeps
         for j in range(sub):
@@ -334,7 +337,9 @@ class NativeBiped:
         corr = np.asarray(p.filter(plan, cs, self.corr)) if self.cfg.filter_passes else self.corr
         window = corr[:self.cfg.horizon] if self.cfg.filter_passes else None
         base = (np.asarray(self.d.qpos[:3], f32), np.asarray(self.d.xmat[self.sim.index.pelvis].reshape(3, 3), f32))
-        p.tick(plan, cs, window, base, np.asarray(ankle_wrench(self.sim, self.d), f32))
+        c, v = centre_of_mass(self.sim, self.d)
+        p.tick(plan, cs, window, base, np.asarray(ankle_wrench(self.sim, self.d), f32),
+               (np.asarray(c[:2], f32), np.asarray(v[:2], f32)))
 
     def execute(self, foothold, go: bool) -> StepLog:
         """One whole step (:meth:`begin`, every :meth:`tick`, :meth:`end`), as fast as the CPU runs it."""

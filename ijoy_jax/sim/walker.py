@@ -208,6 +208,13 @@ def ankle_wrench(sim: Sim, d: mjx.Data) -> jax.Array:
     return d.sensordata[adr].reshape(2, 6)
 
 
+def centre_of_mass(sim: Sim, d: mjx.Data) -> tuple[jax.Array, jax.Array]:
+    """The whole robot's centre of mass (3,) and its velocity (3,) (world frame; m, m/s), from the model's
+    ``com`` and ``com_vel`` sensors (``d.sensordata``)."""
+    adr = np.asarray(sim.index.com_sensor)[:, None] + np.arange(3)
+    return d.sensordata[adr[0]], d.sensordata[adr[1]]
+
+
 def _normal(sole) -> jax.Array:
     """(3,) the unit normal of a sole (6,) x, y, z, roll, pitch, yaw."""
     return kinematics.rpy_to_rot(sole[3:6])[:, 2]
@@ -317,7 +324,10 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
             d, cs, touched, low, tilt, sent = carry
             window = None if cfg.filter_passes == 0 else lax.dynamic_slice_in_dim(corr, k, cfg.horizon)
             base = (to_plan @ (d.qpos[:3] - st[:3]) + pst[:3], to_plan @ kinematics.quat_to_rot(d.qpos[3:7]))
-            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, window, base, ankle_wrench(sim, d))
+            c, v = centre_of_mass(sim, d)
+            com = ((to_plan @ (c - st[:3]) + pst[:3])[:2], (to_plan @ v)[:2])
+            q, cs, _ = controller.control_tick(params, cfg, pgains, plan, cs, window, base, ankle_wrench(sim, d),
+                                               com)
             sent = jnp.concatenate([q[None], sent[:-1]])
             q = sent[delay]  # what the actuators receive now: the targets of `delay` ticks ago
             d = d.replace(qvel=d.qvel.at[:2].add(jnp.where(k == kick[0], kick[1], 0.0)))
