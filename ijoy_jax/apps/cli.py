@@ -298,10 +298,12 @@ def _sweep(args) -> int:
     import pandas as pd
 
     agg = sweep.load_aggregates(args.dir)  # FileNotFoundError, or IncompleteSweepError (a ValueError)
-    show = [c for c in agg.columns if c.startswith(("robot.", "terrain.", "sim.")) or c == "n"]
+    show = [c for c in agg.columns if c.startswith(("robot.", "terrain.", "sim.", "selector.")) or c == "n"]
     table = agg[show].copy()
     physics = ("collided", "fell", "placement_error_mean") if "fell.mean" in agg else ()
-    for m in (*physics, "distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles"):
+    near = ("footholds_near_obstacles",) if "footholds_near_obstacles.mean" in agg else ()
+    for m in (*physics, "distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles",
+              *near):
         unit = sweep.UNITS[m]
         table[f"{m} ({unit})"] = [f"{a:.3g} +- {b:.2g}" for a, b in zip(agg[f"{m}.mean"], agg[f"{m}.ci95"],
                                                                         strict=True)]
