@@ -75,9 +75,11 @@ class Plan(NamedTuple):
       score: () float32 ``V`` of the first action taken: the best score of the sequences it starts (+inf on a
         fallback or when none is valid).
       dead_end: () bool, every valid first step was a dead end: ``first`` is the one-step choice.
-      sequence: (H,) int32 the actions of the best sequence found (-1 beyond a dead end or when none).
+      sequence: (H,) int32 the actions of the best sequence found, the first one ``first`` (all -1 on a fallback
+        or when none): what :mod:`ijoy_jax.refine` keeps valid when it refines the first step.
       expanded: () int32 first actions whose continuations were evaluated.
-      evaluated: () int32 FootCost evaluations beyond the first level's N.
+      evaluated: () int32 FootCost evaluations beyond the first level's N (the exact search's include the
+        re-derivation of its best sequence's continuation: N more for H = 2).
     """
 
     first: jax.Array
@@ -190,6 +192,29 @@ def _value(lv: _Level, level: int, stance, side, swing_from):
     return best, jnp.int32(n) + evals
 
 
+def _continuation(lv: _Level, first, steps1, stance, side):
+    """The rest of the exact search's best sequence after its first action: at each level the exact search of
+    the remaining horizon from where the sequence stands (what the search found, re-derived: one exact search
+    of horizon H - 1 and one of N evaluations per later level). Returns ((H - 1,) actions, evaluations)."""
+    robot, n = lv.robot, lv.robot.num_actions
+    idx = jnp.arange(n, dtype=jnp.int32)
+    here, prev, sd = steps1[first], stance, -side
+    out, evals = [], jnp.int32(0)
+    for level in range(2, lv.horizon + 1):
+        c = lv.cost(level, lv.costs_from(here, sd, prev))
+        evals = evals + jnp.int32(n)
+        acts = side_actions(robot, -sd)
+        if level < lv.horizon:
+            best, _, _, ev = _branch_and_bound(lv, level, c, geometry.compose(here, acts), here, sd, prev)
+            evals = evals + ev
+        else:
+            best = jnp.lexsort((idx, lv.dists[(level - 1) % 2], c))[0].astype(jnp.int32)
+        best = jnp.maximum(best, 0)
+        out.append(best)
+        here, prev, sd = geometry.compose(here, acts[best]), here, -sd
+    return jnp.stack(out).astype(jnp.int32), evals
+
+
 def _beam(lv: _Level, c1, steps1, stance, side, beam: int):
     """The beam search: (first action, score, sequence (H,), FootCost evaluations)."""
     robot, n, h = lv.robot, lv.robot.num_actions, lv.horizon
@@ -264,7 +289,9 @@ def search(c1, steps1, stance, stance_side, swing_from, costs_from: CostsFrom, r
                     first[None], jnp.int32(0), jnp.int32(0))
     if beam is None:
         best, score, expanded, evals = _branch_and_bound(lv, 1, c1, steps1, stance, side, swing_from)
-        sequence = jnp.where(jnp.isfinite(score), none.at[0].set(best), none)
+        rest, more = _continuation(lv, jnp.maximum(best, 0), steps1, stance, side)
+        sequence = jnp.concatenate([best[None], rest])
+        evals = evals + more
     else:
         best, score, sequence, evals = _beam(lv, c1, steps1, stance, side, beam)
         expanded = jnp.int32(beam)

@@ -22,7 +22,11 @@ verified anyway; here every candidate is scored by the exact cost itself):
 * every candidate stays within the action set's box (the range of S's dx, dy and dtheta for that foot),
   within ``span`` lattice spacings of its start on every axis, and off the stance foot
   (:func:`ijoy_jax.robots.overlaps_stance`); its per-action limits (cost, clearance, step height) are those
-  of the lattice action it started from.
+  of the lattice action it started from;
+* after a lookahead (``method="lookahead"``), a candidate must also keep the plan valid: the planned next
+  steps (:attr:`ijoy_jax.lookahead.Plan.sequence`), put down in turn from it, must all stay valid by the exact
+  FootCost. The refined step then never leads into a dead end the lattice step avoided, and its own cost
+  still never exceeds the lattice step's.
 
 The result is the lowest-cost point found over all starts, or the method's lattice step itself: refinement
 never returns a step costlier than that step (measured against ``p_next``), and every refined step is
@@ -153,7 +157,7 @@ class Refined(NamedTuple):
 
 
 def refine_step(terrain: Terrain, robot: Robot, stance, stance_side, target, chosen, p: RefineParams, *,
-                swing_from=None, index: TerrainIndex | None = None) -> Refined:
+                swing_from=None, index: TerrainIndex | None = None, continuation=None) -> Refined:
     """Refine the lattice step ``chosen`` in continuous (dx, dy, dtheta) (see the module docstring).
 
     Args:
@@ -164,6 +168,10 @@ def refine_step(terrain: Terrain, robot: Robot, stance, stance_side, target, cho
       p: :class:`RefineParams`.
       swing_from: (3,) where the swing foot starts (the swing-path check), or None.
       index: the terrain's prebuilt index (:func:`ijoy_jax.select.prepare`), built inside when None.
+      continuation: (K,) int32 lattice actions of the steps planned after this one (the lookahead's best
+        sequence, :attr:`ijoy_jax.lookahead.Plan.sequence` after its first), or None. A candidate is then
+        valid only if those steps, put down in turn from it (feet alternating, each swing foot starting where
+        it stood), all stay valid by the exact FootCost: refinement never turns the plan into a dead end.
 
     Returns:
       :class:`Refined`. Traceable; vmap for batches.
@@ -200,7 +208,24 @@ def refine_step(terrain: Terrain, robot: Robot, stance, stance_side, target, cho
         fc = foot_cost_terms(terrain, robot, stance, side, world, swing_from=swing_from, action_index=a,
                              index=index).total
         fc = jnp.where(overlaps_stance(robot, rel), jnp.inf, fc).astype(jnp.float32)
+        if continuation is not None:
+            fc = jnp.where(_continues(world), fc, jnp.inf)
         return fc, (fc + robot.w * dist(rel, target, robot.rotation_weight)).astype(jnp.float32)
+
+    def _continues(world):
+        """(M,) bool: the planned steps after ``world`` (M, 3) are all valid, put down from it in turn."""
+        here, prev, sd = world, jnp.broadcast_to(stance, world.shape), -side
+        ok = jnp.ones(world.shape[:1], bool)
+        for b in jnp.asarray(continuation, jnp.int32):
+            nxt = geometry.compose(here, side_actions(robot, -sd)[jnp.maximum(b, 0)])
+
+            def one(st, pv, nx, sd=sd, b=b):
+                return foot_cost_terms(terrain, robot, st, sd, nx[None], swing_from=None if swing_from is None else pv,
+                                       action_index=jnp.maximum(b, 0)[None], index=index).total[0]
+
+            ok = ok & ((b < 0) | jnp.isfinite(jax.vmap(one)(here, prev, nxt)))
+            here, prev, sd = nxt, here, -sd
+        return ok
 
     fc0, c0 = costs(x0, idx)
     start_cost = jnp.where(chosen >= 0, c0[0], jnp.inf)
@@ -230,7 +255,8 @@ def refine_step(terrain: Terrain, robot: Robot, stance, stance_side, target, cho
     cost = jnp.where(keep, start_cost, c[w])
     out_fc = jnp.where(keep, jnp.where(chosen >= 0, fc0[0], jnp.inf), fc[w])
     out_idx = jnp.where(keep, jnp.where(chosen >= 0, chosen, -1), idx[w])
-    evaluated = starts * (1 + moves * k)
+    per_candidate = 1 + (0 if continuation is None else int(jnp.shape(continuation)[0]))
+    evaluated = starts * (1 + moves * k) * per_candidate
     return Refined(rel=rel, pose=geometry.compose(stance, rel), cost=cost.astype(jnp.float32),
                    foot_cost=out_fc.astype(jnp.float32), index=out_idx.astype(jnp.int32),
                    start_cost=start_cost.astype(jnp.float32), evaluated=jnp.int32(evaluated))

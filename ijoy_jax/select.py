@@ -431,6 +431,7 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
         return _costs_of(terrain, robot, stance, side, steps[idx], idx, swing_from, index, kernel)
 
     supported = query_supported(terrain, robot)  # FootCost's own rule: every candidate was flagged by it
+    plan_rest = None  # the lookahead's planned steps after this one (refinement keeps them valid)
     if method == "naive":
         best = jnp.argmin(dists).astype(jnp.int32)  # lowest dist, then lowest index
         fc = terms_of(best[None])[0]
@@ -441,16 +442,10 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
         cost_all = fc_all + robot.w * dists
         evaluated = jnp.int32(n)
         if method == "lookahead" and horizon > 1:
-            def costs_from(st, sd, sf):
-                at = geometry.compose(st, side_actions(robot, -sd))
-                return _costs_of(terrain, robot, st, sd, at, jnp.arange(n, dtype=jnp.int32),
-                                 None if swing_from is None else sf, index, kernel)
-
-            dists2, _, _ = action_dists(robot, swing, command, targets, quantize=quantize)
-            plan = lookahead.search(cost_all, steps, stance, side, swing_from, costs_from, robot, (dists, dists2),
-                                    discount, horizon=horizon, beam=beam,
-                                    chunk=lookahead.DEFAULT_CHUNK if chunk is None else chunk)
+            plan = _search(terrain, robot, stance, side, command, swing_from, targets, index, kernel, quantize,
+                           cost_all, dists, steps, discount, horizon, beam, chunk)
             best = jnp.maximum(plan.first, 0)
+            plan_rest = plan.sequence[1:]
             evaluated = evaluated + plan.evaluated
             supported = supported & lookahead.discount_supported(discount)
         else:
@@ -466,7 +461,7 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     if refine is not None:
         p_next = ideal_step(robot, side, command)[0]
         r = refine_mod.refine_step(terrain, robot, stance, side, p_next, jnp.where(valid, best, -1), refine,
-                                   swing_from=swing_from, index=index)
+                                   swing_from=swing_from, index=index, continuation=plan_rest)
         supported = supported & refine_mod.params_supported(refine)
         valid = jnp.isfinite(r.cost) & supported
         pose, cost, fc, best = r.pose, r.cost, r.foot_cost, jnp.maximum(r.index, 0)
@@ -489,6 +484,71 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
         evaluated=evaluated,
         unsupported=~supported,
     )
+
+
+def _search(terrain, robot, stance, side, command, swing_from, targets, index, kernel, quantize, cost_all, dists,
+            steps, discount, horizon, beam, chunk) -> lookahead.Plan:
+    """The lookahead's search from the first level's costs: its FootCost oracle is this module's (either
+    kernel), its second level's dists those of the other foot for the same command."""
+    n = robot.num_actions
+
+    def costs_from(st, sd, sf):
+        at = geometry.compose(st, side_actions(robot, -sd))
+        return _costs_of(terrain, robot, st, sd, at, jnp.arange(n, dtype=jnp.int32),
+                         None if swing_from is None else sf, index, kernel)
+
+    dists2, _, _ = action_dists(robot, -side, command, targets, quantize=quantize)
+    return lookahead.search(cost_all, steps, stance, side, swing_from, costs_from, robot, (dists, dists2), discount,
+                            horizon=horizon, beam=beam, chunk=lookahead.DEFAULT_CHUNK if chunk is None else chunk)
+
+
+def _plan(terrain, robot, stance, stance_side, command, swing_from, targets, index, discount, quantize, chunk, kernel,
+          horizon, beam) -> lookahead.Plan:
+    """The body of :func:`lookahead_plan` (run through :data:`_plan_jit`)."""
+    if index is None:
+        index = index_terrain(terrain, robot)
+    stance = jnp.asarray(stance, jnp.float32)
+    swing_from = None if swing_from is None else jnp.asarray(swing_from, jnp.float32)
+    side = side_sign(stance_side)
+    n = robot.num_actions
+    dists, _, _ = action_dists(robot, side, command, targets, quantize=quantize)
+    steps = geometry.compose(stance, side_actions(robot, -side))
+    fc = _costs_of(terrain, robot, stance, side, steps, jnp.arange(n, dtype=jnp.int32), swing_from, index, kernel)
+    return _search(terrain, robot, stance, side, command, swing_from, targets, index, kernel, quantize,
+                   fc + robot.w * dists, dists, steps, discount, horizon, beam, chunk)
+
+
+_plan_jit = jax.jit(_plan, static_argnames=("quantize", "chunk", "kernel", "horizon", "beam"))
+
+
+def lookahead_plan(terrain: Terrain, robot: Robot, stance, stance_side, command, *, horizon: int = 2,
+                   beam: int | None = None, discount=1.0, swing_from=None, quantize: bool = True,
+                   targets: Targets | None = None, index: TerrainIndex | None = None, chunk: int | None = None,
+                   kernel: str = "xla") -> lookahead.Plan:
+    """The lookahead's whole plan for one decision: its best sequence, score and whether it fell back.
+
+    What :func:`select_step` with ``method="lookahead"`` decides from (its ``index`` is ``plan.first``), for
+    a caller that wants the planned steps or the sequence's score (:class:`ijoy_jax.lookahead.Plan`). Same
+    arguments and checks as :func:`select_step`; ``horizon`` at least 2 (1 has no plan).
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> terrain, robot = ij.terrain.flat((100, 100), 0.02), ij.robots.hrp2()
+      >>> plan = ij.select.lookahead_plan(terrain, robot, [1.0, 1.0, 0.0], -1, [0.25, 0.0, 0.0])
+      >>> [robot.actions[int(a)].tolist() for a in plan.sequence]   # left foot, then right (stored as left)
+      [[0.20000000298023224, 0.1899999976158142, 0.0], [0.20000000298023224, 0.1899999976158142, 0.0]]
+    """
+    stance, command, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("command", command),
+                                                               ("swing_from", swing_from)))
+    validate(terrain, robot, stance, stance_side, command, method="lookahead", swing_from=swing_from,
+             targets=targets, index=index, kernel=kernel, chunk=chunk)
+    opts = search_options("lookahead", robot, horizon=horizon, beam=beam, discount=discount)
+    if opts.horizon < 2:
+        raise ValueError(f"lookahead_plan needs a horizon of at least 2 (1 is the one-step selector), got "
+                         f"{opts.horizon}")
+    targets = make_targets(robot) if targets is None else targets
+    return _plan_jit(terrain, robot, stance, stance_side, command, swing_from, targets, index, opts.discount,
+                     quantize=quantize, chunk=chunk, kernel=kernel, horizon=opts.horizon, beam=opts.beam)
 
 
 def _lexmin(cost, dists):

@@ -42,6 +42,8 @@ from ijoy_jax.terrain import Terrain, flat
 
 __all__ = ["HeadingHold", "OvershootResult", "body_heading", "heading_hold", "overshoot_study"]
 
+_ANGLE_SLACK = 1e-4  # rad: float32 rounding of a heading difference (~1e-7) with room; 0.006 deg
+
 
 def body_heading(left_yaw, right_yaw) -> jax.Array:
     """The robot's heading as an operator sees it: the mean yaw of its two feet (rad; the circular mean of two
@@ -99,7 +101,9 @@ class HeadingHold:
             heading = jnp.where(released & ~state.holding, shown[0], state.heading)
             p0_turn = side_p0(robot, -side_sign(info.stance_side))[2]
             off = geometry.wrap_angle(heading - info.stance[2])
-            off = jnp.where(jnp.abs(off) <= close, 0.0, off)  # on the heading: the swing foot lands parallel
+            # On the heading (within float32 rounding of the tolerance: a foot exactly half a spacing off is as
+            # close as the lattice gets): the swing foot lands parallel.
+            off = jnp.where(jnp.abs(off) <= close + _ANGLE_SLACK, 0.0, off)
             hold = (off - p0_turn) / robot.step_time
             out = jnp.where(released, command.at[2].set(hold), command)
             return _HoldState(released, heading, shown), out
@@ -130,8 +134,10 @@ def heading_hold(deadband: float = 1e-3, tolerance: float = 0.5, *, latency: int
       >>> turn = np.array([[0.0, 0.0, 0.436]] * 2 + [[0.0, 0.0, 0.0]] * 3)   # turn 2 steps, then let go
       >>> rate = ij.rollout(terrain, robot, start, turn, num_steps=5)
       >>> hold = ij.rollout(terrain, robot, start, turn, num_steps=5, command_filter=ij.turning.heading_hold())
+      >>> # Shown when let go: 30 deg (feet at 20 and 40). Rate mode settles at 40; heading hold at the
+      >>> # lattice's rotation nearest 30 (6.7 deg apart), 26.7.
       >>> [round(float(np.degrees(ij.turning.body_heading(*t.feet[:, 2]))), 1) for t in (rate, hold)]
-      [40.0, 30.0]
+      [40.0, 26.7]
     """
     if isinstance(latency, bool) or not isinstance(latency, (int, np.integer)) or latency < 0:
         raise ValueError(f"latency must be an int >= 0 (decisions), got {latency!r}")

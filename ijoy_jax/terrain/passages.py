@@ -121,10 +121,10 @@ def corridor(
 
     Example:
       >>> from ijoy_jax.terrain import generators as gen
-      >>> p = gen.CorridorParams(count=0, width_start=0.6, width_end=0.6, start_x=0.1)
+      >>> p = gen.CorridorParams(count=0, width_start=0.62, width_end=0.62, start_x=0.1)
       >>> t = gen.corridor(0, p, shape=(100, 50), resolution=0.04)
-      >>> int(t.free[50].sum())   # 0.6 m of 4 cm cells across the corridor
-      15
+      >>> int(t.free[50].sum())   # the cells whose centres lie within 0.31 m of the corridor's axis
+      16
     """
     params = check_params(params, CorridorParams)
     grid = make_grid(shape, resolution, origin, has_height)
@@ -159,8 +159,8 @@ class StonePathParams(StartZone):
     ``u = first + k pitch + shift``, of the right row at ``u = first + stagger + k pitch + shift`` (k >= 0),
     each ``shift`` uniform in ``+-min(pitch_jitter, (pitch - size) / 2)`` per stone, so stones of a row never
     touch and every gap between them is ``pitch - size`` plus the two shifts. Stones are ``size`` along u and
-    ``width`` across. The start zone is a pad at the stones' top, cut off ``pad_front`` ahead of the start
-    point so that no foothold straddles the pad and a stone.
+    ``width`` across. The start zone is a pad at the stones' top (default radius 0.23 m: HRP-2's two grown
+    footprints standing side by side at the step-in-place width, and little more).
 
     Fields (metres, radians)::
 
@@ -170,25 +170,24 @@ class StonePathParams(StartZone):
       stagger: the right row's offset along the path, metres.
       row_gap: lateral distance between the rows' centre lines, metres.
       first: u of the left row's first stone centre, metres.
-      pad_front: how far ahead of the start point the start pad reaches, metres.
       direction: the path's heading, radians (0 = +x).
       top, top_jitter: stone top and half-range of its uniform per-stone offset, metres (2.5D).
       gap_height: elevation of the gaps, metres (2.5D).
       start_x, start_y, start_radius: start zone (the pad).
     """
 
-    size: Any = param(0.34, NONNEG)
+    size: Any = param(0.36, NONNEG)
     width: Any = param(0.22, NONNEG)
     pitch: Any = param(0.40, NONNEG)
-    pitch_jitter: Any = param(0.03, NONNEG)
+    pitch_jitter: Any = param(0.02, NONNEG)
     stagger: Any = param(0.2)
     row_gap: Any = param(0.25, NONNEG)
     first: Any = param(0.2)
-    pad_front: Any = param(0.16)
     direction: Any = param(0.0)
     top: Any = param(0.0)
     top_jitter: Any = param(0.0, NONNEG)
     gap_height: Any = param(-0.5)
+    start_radius: Any = param(0.23, NONNEG)
 
 
 def stone_path(
@@ -209,7 +208,7 @@ def stone_path(
 
     Args:
       key: PRNG key or int seed.
-      params: :class:`StonePathParams` (None: 34 x 22 cm stones at 40 cm pitch, +-3 cm jitter, rows 25 cm apart).
+      params: :class:`StonePathParams` (None: 36 x 22 cm stones at 40 cm pitch, +-2 cm jitter, rows 25 cm apart).
       shape: static grid shape (nx, ny); resolution: static cell size, metres.
       has_height: static; 2D: stones and pad free, gaps obstacles; 2.5D: all free, gaps at ``gap_height``.
       origin: (2,) world (x, y) of the map's lower corner, metres.
@@ -255,7 +254,7 @@ def stone_path(
                     all_on &= (jnp.abs(du) <= 0.5 * size + _STONE_EPS) & (jnp.abs(dv) <= 0.5 * width + _STONE_EPS)
             on |= all_on
             top = jnp.where(all_on, table[row, kk, 1] * f32(params.top_jitter), top)
-    pad = grid.in_start_zone(params) & (c * centre[..., 0] + s * centre[..., 1] < f32(params.pad_front))
+    pad = grid.in_start_zone(params)
     height = jnp.where(pad, f32(params.top), jnp.where(on, f32(params.top) + top, f32(params.gap_height)))
     free = jnp.ones(grid.shape, bool) if has_height else on | pad
     return grid.terrain(height=height, free=free)
