@@ -13,6 +13,7 @@ Public names::
   balanced_chunk_size                                            balanced, no padded chunk)
   distributed                                                    several processes/hosts (jax.distributed)
   load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table (union of processes), 95% CIs, plot
+  paired_differences                                             cell minus baseline, replicate by replicate
   PLOT_METRICS / PHYSICS_PLOT_METRICS / SELECTOR_PLOT_METRICS    the plot's default panels
   SELECTOR_DEFAULTS                                              the selector's options a sweep varies
                                                                  (lookahead horizon, refinement, discount)
@@ -82,6 +83,7 @@ from ijoy_jax.sweep.results import (
     b_max,
     load,
     load_aggregates,
+    paired_differences,
     part_plan,
     plan_hash,
     plot,
@@ -128,6 +130,7 @@ __all__ = [
     "load",
     "load_aggregates",
     "load_config",
+    "paired_differences",
     "parse_config",
     "part_plan",
     "plan_hash",

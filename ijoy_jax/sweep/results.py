@@ -33,7 +33,8 @@ from ijoy_jax.terrain import generators
 
 __all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "PHYSICS_METRICS", "PHYSICS_PLOT_METRICS", "PLAN_KEY",
            "PLOT_METRICS", "SELECTOR_PLOT_METRICS", "UNITS", "IncompleteSweepError", "action_counts",
-           "aggregate", "b_max", "check_plans", "describe_plan", "load", "load_aggregates", "part_plan", "plan_hash",
+           "aggregate", "b_max", "check_plans", "describe_plan", "load", "load_aggregates", "paired_differences",
+           "part_plan", "plan_hash",
            "plot", "plot_crossing", "t_quantile"]
 
 METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
@@ -282,6 +283,66 @@ def aggregate(df, by=None):
     return pd.DataFrame(rows)
 
 
+def paired_differences(df, baseline: dict, metrics=None, by=None):
+    """Per cell, the mean difference of each metric from a baseline cell, replicate by replicate, with 95% CIs.
+
+    Replicate r of every cell runs on the same terrain with the same command (:func:`ijoy_jax.sweep.scenarios`),
+    so the difference ``metric(cell, r) - metric(baseline, r)`` removes the variation between terrains: its
+    t interval is the one to read when comparing cells (the marginal intervals of :func:`aggregate` overlap
+    where the paired one does not).
+
+    Args:
+      df: a per-scenario table (:func:`load`).
+      baseline: ``{column: value}`` naming the baseline cell's parameters (e.g. ``{"selector.horizon": 1,
+        "selector.refine": 0}``); every other varying parameter column must match too (compared within it).
+      metrics: the metrics (default: :data:`METRICS` present in ``df``).
+      by: the parameter columns that define the cells (default: every varying ``robot.*``, ``terrain.*``,
+        ``sim.*`` and ``selector.*`` column).
+
+    Returns:
+      pandas.DataFrame, one row per cell: its ``by`` columns, ``n`` (paired replicates) and per metric
+      ``m.diff`` (mean difference) and ``m.ci95`` (half-width of its 95% t interval; NaN for n < 2).
+
+    Example:
+      >>> import pandas as pd
+      >>> df = pd.DataFrame({"cell": [0, 0, 1, 1], "replicate": [0, 1, 0, 1], "selector.horizon": [1, 1, 2, 2],
+      ...                    "distance_along": [1.0, 2.0, 1.5, 2.75]})
+      >>> paired_differences(df, {"selector.horizon": 1}, ["distance_along"])["distance_along.diff"].tolist()
+      [0.0, 0.625]
+    """
+    import pandas as pd
+
+    if by is None:
+        by = [c for c in df.columns if c.startswith(_PARAMS) and df[c].nunique() > 1]
+    if metrics is None:
+        metrics = [m for m in METRICS if m in df.columns]
+    missing = [k for k in baseline if k not in df.columns]
+    if missing:
+        raise ValueError(f"baseline names columns the table does not have: {missing}")
+    others = [c for c in by if c not in baseline]
+    base = df
+    for k, v in baseline.items():
+        base = base[base[k] == v]
+    if base.empty:
+        raise ValueError(f"no scenario matches the baseline {baseline}")
+    keyed = base.set_index([*others, "replicate"])[list(metrics)]
+    rows = []
+    for cell, g in df.groupby("cell", sort=True):
+        key_cols = [*others, "replicate"]
+        mine = g.set_index(key_cols)[list(metrics)]
+        common = mine.index.intersection(keyed.index)
+        d = mine.loc[common].astype(float) - keyed.loc[common].astype(float)
+        n = len(d)
+        row = {"cell": cell, **{c: g[c].iloc[0] for c in by}, "n": n}
+        t = t_quantile(n - 1) if n > 1 else math.nan
+        for m in metrics:
+            x = d[m].to_numpy(np.float64)
+            row[f"{m}.diff"] = float(np.mean(x)) if n else math.nan
+            row[f"{m}.ci95"] = float(t * np.std(x, ddof=1) / math.sqrt(n)) if n > 1 else math.nan
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
 def load_aggregates(path, *, partial: bool = False):
     """The per-cell aggregates of a sweep folder, computed from its parts (see :func:`load` for ``partial``)."""
     return aggregate(load(path, partial=partial), list(_swept(path)))
@@ -404,6 +465,9 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
                 ax.set_xscale("symlog", linthresh=float(pos.min()), linscale=0.5)
                 ax.set_xlim(min(0.0, float(agg[x].min())) - 0.3 * float(pos.min()), 1.5 * float(agg[x].max()))
             ax.set_xlabel(f"{x.partition('.')[2] or x} ({UNITS.get(x, '-')})")
+            ticks = np.unique(xv(agg[x])) if x in agg else np.array([])
+            if 0 < len(ticks) <= 12 and np.allclose(ticks, np.round(ticks)):
+                ax.set_xticks(ticks)  # a count (the lookahead's horizon): no ticks between its values
         ax.set_ylabel(f"mean ({UNITS[m]})")
         ax.set_title(_TITLES.get(m, f"{m.replace('_', ' ')} ({UNITS[m]})"), fontsize=10)
         ax.grid(alpha=0.3)
