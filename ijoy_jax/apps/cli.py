@@ -65,8 +65,11 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--steps", type=int, default=24, help="number of steps (default: %(default)s)")
     demo.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
     bench = sub.add_parser("bench", help="run a benchmark and print JSON lines (see BENCHMARKS.md)")
-    bench.add_argument("name", choices=["footcost", "select", "check", "tune", "sim", "walk", "haptics", "cue"],
+    bench.add_argument("name", choices=["footcost", "select", "lookahead", "check", "tune", "sim", "walk", "haptics",
+                                        "cue"],
                        help="footcost: evaluations/s; select: decisions/s, rollout steps/s and the NumPy baseline; "
+                            "lookahead: decision time of the one-step, lookahead (H = 2 exact, all pairs, H = 3 beam) "
+                            "and refining selectors, then the beam's loss against the exact search; "
                             "check: fixed decisions saved to / compared with --ref (device agreement); "
                             "tune: seconds per forward-tuning step, compile separate; "
                             "sim: MJX biped physics steps/s by batch size next to multi-threaded C MuJoCo, then "
