@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ijoy_jax as ij
-from ijoy_jax import geometry, lookahead, select, testing
+from ijoy_jax import control, geometry, lookahead, select, testing
 
 SMALL = ij.robots.hrp2(margin=0.02, density=0.25)  # 19 actions
 TINY = ij.robots.hrp2(margin=0.02, density=0.1)  # 10 actions
@@ -90,8 +90,8 @@ def test_exact_horizon_two_is_the_numpy_brute_force_over_all_pairs(seed, has_hei
                                swing_from if has_height else None, 2, discount)
 
 
-@pytest.mark.parametrize("seed", [3, 11])
-def test_exact_horizon_three_is_the_numpy_brute_force_over_all_triples(seed):
+def test_exact_horizon_three_is_the_numpy_brute_force_over_all_triples():
+    seed = 3  # one decision: its 1110 NumPy FootCosts on a 2.5D map take a few seconds
     stance, side, command, swing_from = _decision(seed)
     v, c = _check_against_brute_force(_map(seed, True), TINY, stance, side, command, swing_from, 3, 0.8)
     assert np.isfinite(v).any()
@@ -143,8 +143,13 @@ def test_on_the_dead_end_map_one_step_walks_in_and_stops_and_lookahead_does_not(
     ahead = ij.rollout(terrain, HRP2, start, command, num_steps=4, method="lookahead", horizon=2)
     assert not bool(ahead.stopped.any()) and bool(ahead.taken.all())
     assert np.allclose(ahead.footsteps[0], b, atol=1e-5)  # the step whose continuation exists
-    # The dead end is FootCost's verdict: no action of the right foot from A is valid.
+    # The dead end is FootCost's verdict: no action of the right foot from A is valid, and there the lookahead
+    # reports no step as the one-step selector does (index -1, the step-in-place pose, the robot stops).
     assert not np.isfinite(np.asarray(select.action_foot_costs(terrain, HRP2, a, ij.LEFT))).any()
+    stuck = ij.select_step(terrain, HRP2, a, ij.LEFT, command, method="lookahead", swing_from=start[1])
+    assert not bool(stuck.valid) and int(stuck.index) == -1 and math.isinf(float(stuck.cost))
+    in_place = geometry.compose(jnp.asarray(a, jnp.float32), jnp.asarray([0.0, -0.19, 0.0], jnp.float32))
+    np.testing.assert_allclose(np.asarray(stuck.pose), np.asarray(in_place), atol=1e-6)
 
 
 def _table_robot(n: int):
@@ -194,7 +199,7 @@ def test_branch_and_bound_matches_enumeration_with_ties_and_dead_ends(n, data):
         assert int(plan.first) == -1 and not bool(plan.dead_end)
 
 
-def test_discount_is_traced_and_refine_leaves_never_recompile():
+def test_discount_is_traced_and_never_recompiles():
     terrain = _map(5, False)
     stance, side, command, _ = _decision(5)
     targets = ij.make_targets(SMALL)
@@ -204,6 +209,13 @@ def test_discount_is_traced_and_refine_leaves_never_recompile():
     for g in (0.0, 0.3, 2.0):
         ij.select_step(terrain, SMALL, stance, side, command, discount=g, **kw)
     assert select._select_jit._cache_size() == before
+    # Nor in the rollout, which users call in loops.
+    start = ij.robots.start_stance(SMALL, 0.25, 0.5)
+    ij.rollout(terrain, SMALL, start, command, 3, method="lookahead", targets=targets, discount=1.0)
+    before = control._rollout_jit._cache_size()
+    for g in (0.0, 0.7):
+        ij.rollout(terrain, SMALL, start, command, 3, method="lookahead", targets=targets, discount=g)
+    assert control._rollout_jit._cache_size() == before
 
 
 def test_an_invalid_traced_discount_is_flagged_not_silent():

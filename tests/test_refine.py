@@ -27,7 +27,7 @@ RES = 0.02
 COST_TOL = 1e-4
 # m and rad: float32 rounding of a composed pose a few metres from the origin.
 POSE_TOL = 1e-5
-EXAMPLES = settings(max_examples=12, deadline=None)
+EXAMPLES = settings(max_examples=8, deadline=None)
 
 
 def _map(seed: int, has_height: bool):

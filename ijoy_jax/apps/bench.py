@@ -234,6 +234,11 @@ def bench_select(rows, quick: bool, chunk: int):
                      decisions_per_s=1.0 / run, us_per_decision=1e6 * run))
 
 
+_EVALS_AT_ONCE = {"one-step": 496, "lookahead H=2 exact": 8 * 496, "lookahead H=2 all pairs": 496 * 496,
+                  "lookahead H=3 beam 16": 16 * 496, "refine": 4 * 27, "lookahead H=2 exact + refine": 8 * 496}
+# FootCost evaluations one decision of each selector holds in memory at once (an iteration of the exact search, a
+# level of the beam, a move of the refinement): what the benchmark's vmapped chunks are sized by.
+
 LOOKAHEAD_SELECTORS = (
     ("one-step", dict(method="exhaustive")),
     ("lookahead H=2 exact", dict(method="lookahead", horizon=2)),
@@ -308,8 +313,9 @@ def bench_lookahead(rows, quick: bool, chunk: int):
                                        index=index, **kw)
                 return c.index, c.evaluated
 
-            # A lookahead decision evaluates ~10-500x the one-step's FootCosts: smaller vmapped chunks.
-            f = _batched(one, max(1, chunk // (1 if name == "one-step" else 16)))
+            # Vmapped chunks of about the one-step's FootCost evaluations at once (``chunk`` decisions of N):
+            # a lookahead decision evaluates ~10-500x as many.
+            f = _batched(one, max(1, chunk * n // _EVALS_AT_ONCE[name]))
             for b in sizes:
                 stance, command, swing = _queries(b)
                 args = (stance[0], command[0], swing[0]) if b == 1 else (stance, command, swing)
@@ -328,22 +334,23 @@ def bench_lookahead(rows, quick: bool, chunk: int):
         stance, side, swing, command = (jnp.asarray(np.stack([d[j] for d in decisions]), jnp.float32)
                                         for j in (1, 2, 3, 4))
 
-        def plan(t, st, sd, sw, cmd, horizon, beam):
+        def plan(st, t, sd, sw, cmd, horizon, beam):  # stance first: _batched reads the batch size from it
             return select.lookahead_plan(t, robot, st, sd, cmd, horizon=horizon, beam=beam, swing_from=sw,
                                          targets=targets)
 
         exact = {}
         for horizon in (2, 3):
-            f = jax.jit(jax.vmap(lambda *a, h=horizon: plan(*a, h, None)))
+            # Decisions in vmapped chunks (the exact search of H = 3 holds chunk x chunk x N FootCosts per decision).
+            f = _batched(lambda *a, h=horizon: plan(*a, h, None), 128 if horizon == 2 else 16)
             t0 = time.perf_counter()
-            exact[horizon] = jax.block_until_ready(f(maps, stance, side, swing, command))
+            exact[horizon] = jax.block_until_ready(f(stance, maps, side, swing, command))
             _emit(rows, dict(_env(), bench="lookahead-exact", family=label, horizon=horizon,
                              decisions=len(decisions), run_s_with_compile=time.perf_counter() - t0,
                              footcost_evals_mean=float(np.mean(np.asarray(exact[horizon].evaluated))),
                              footcost_evals_max=float(np.max(np.asarray(exact[horizon].evaluated)))))
         for horizon, k in cases:
-            f = jax.jit(jax.vmap(lambda *a, h=horizon, k=k: plan(*a, h, k)))
-            got = f(maps, stance, side, swing, command)
+            f = _batched(lambda *a, h=horizon, k=k: plan(*a, h, k), max(1, (128 if horizon == 2 else 64) * 16 // k))
+            got = f(stance, maps, side, swing, command)
             ref = exact[horizon]
             a, b = np.asarray(got.score, np.float64), np.asarray(ref.score, np.float64)
             both = np.isfinite(a) & np.isfinite(b)
