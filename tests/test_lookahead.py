@@ -91,9 +91,9 @@ def test_exact_horizon_two_is_the_numpy_brute_force_over_all_pairs(seed, has_hei
 
 
 def test_exact_horizon_three_is_the_numpy_brute_force_over_all_triples():
-    seed = 3  # one decision: its 1110 NumPy FootCosts on a 2.5D map take a few seconds
-    stance, side, command, swing_from = _decision(seed)
-    v, c = _check_against_brute_force(_map(seed, True), TINY, stance, side, command, swing_from, 3, 0.8)
+    seed = 3  # one 2D decision (1110 NumPy FootCosts; the pairs' test covers 2.5D and swing paths)
+    stance, side, command, _ = _decision(seed)
+    v, c = _check_against_brute_force(_map(seed, False), TINY, stance, side, command, None, 3, 0.8)
     assert np.isfinite(v).any()
 
 
@@ -143,6 +143,11 @@ def test_on_the_dead_end_map_one_step_walks_in_and_stops_and_lookahead_does_not(
     ahead = ij.rollout(terrain, HRP2, start, command, num_steps=4, method="lookahead", horizon=2)
     assert not bool(ahead.stopped.any()) and bool(ahead.taken.all())
     assert np.allclose(ahead.footsteps[0], b, atol=1e-5)  # the step whose continuation exists
+    # Refined after the lookahead, the steps leave the lattice (towards the commanded turn) but keep the plan's
+    # next step valid, so the robot never stops either; refined alone, it walks into the dead end as before.
+    fine = ij.rollout(terrain, HRP2, start, command, num_steps=4, method="lookahead", refine=True)
+    assert not bool(fine.stopped.any()) and float(fine.footsteps[0, 2]) > 1e-3
+    assert bool(ij.rollout(terrain, HRP2, start, command, num_steps=4, refine=True).stopped[1])
     # The dead end is FootCost's verdict: no action of the right foot from A is valid, and there the lookahead
     # reports no step as the one-step selector does (index -1, the step-in-place pose, the robot stops).
     assert not np.isfinite(np.asarray(select.action_foot_costs(terrain, HRP2, a, ij.LEFT))).any()
