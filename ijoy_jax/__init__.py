@@ -12,13 +12,29 @@ Public API:
   foot_cost, foot_cost_terms                         FootCost of candidate steps
   action_steps                                       world poses of every action
   select_step, StepChoice, make_targets              the next foothold for a command
+  lookahead, refine                                  beyond the paper: H-step lookahead, continuous refinement
   rollout, Trajectory, perfect_walker, Walker        the control loop (Algorithm 1)
+  turning                                            a turning mode that does not overshoot on release
   haptics                                            the ALDURO force-feedback joystick
   cue                                                both joined: a force on the stick where the biped cannot go
   tune                                               tuning by gradient (relaxed selector, optax tuners)
 """
 
-from ijoy_jax import control, cue, footcost, geometry, haptics, plot, robots, select, terrain, tune
+from ijoy_jax import (
+    control,
+    cue,
+    footcost,
+    geometry,
+    haptics,
+    lookahead,
+    plot,
+    refine,
+    robots,
+    select,
+    terrain,
+    tune,
+    turning,
+)
 from ijoy_jax.control import Trajectory, Walker, perfect_walker, rollout
 from ijoy_jax.footcost import FootCostTerms, foot_cost, foot_cost_terms
 from ijoy_jax.robots import LEFT, RIGHT, Robot, TerrainMetrics, action_steps
@@ -45,13 +61,16 @@ __all__ = [
     "footcost",
     "geometry",
     "haptics",
+    "lookahead",
     "make_targets",
     "perfect_walker",
     "plot",
+    "refine",
     "robots",
     "rollout",
     "select",
     "select_step",
     "terrain",
     "tune",
+    "turning",
 ]

@@ -30,9 +30,13 @@ from jax import lax
 
 from ijoy_jax import geometry, select
 from ijoy_jax._struct import as_array, check_numeric, is_traced
-from ijoy_jax.robots import LEFT, Robot, footprints_overlap
+from ijoy_jax.robots import LEFT, Robot, footprints_overlap, side_actions
 from ijoy_jax.select import Targets
 from ijoy_jax.terrain import Terrain
+
+NEAR_OBSTACLE = 0.04
+"""m: a foothold taken with an obstacle cell within this distance of its bare footprint counts as near one
+(``Trajectory.near_obstacle``): how close a selector puts the feet to obstacles, beyond its own margin."""
 
 
 class StanceInfo(NamedTuple):
@@ -121,8 +125,28 @@ class Selector(NamedTuple):
     record: Callable[..., dict]
 
 
+class CommandFilter(NamedTuple):
+    """How the joystick's commands are read before each decision, with a state carried from step to step: the
+    part of the paper's Joystick Control between GetJoystickCommand and ComputeTargetLocation (a tuple of pure
+    functions, like :class:`Walker`; traced inside :func:`loop`).
+
+    Fields::
+
+      init(start (2, 3), first_swing ()) -> state
+      apply(state, info: StanceInfo, command (3,)) -> (state, command (3,))
+          the command the selector is given (and the records measure against).
+
+    :func:`rollout` takes a *spec* instead (``command_filter=``): a pytree whose leaves are traced and whose
+    ``build(robot) -> CommandFilter`` makes the filter inside the trace (e.g.
+    :func:`ijoy_jax.turning.heading_hold`), so its numbers never recompile.
+    """
+
+    init: Callable[[jax.Array, jax.Array], Any]
+    apply: Callable[[Any, StanceInfo, jax.Array], tuple[Any, jax.Array]]
+
+
 def loop(walker: Walker, selector: Selector, start, first_swing, commands, *, keys=None,
-         remat: bool = False) -> tuple[Any, dict]:
+         remat: bool = False, command_filter: CommandFilter | None = None) -> tuple[Any, dict]:
     """Algorithm 1's bookkeeping for any walker and selector, as one ``lax.scan`` (trace it inside jit).
 
     Each iteration: the walker's stance (ComputeStanceLocation), the selector's choice, SendRobotCmd if it is
@@ -137,17 +161,21 @@ def loop(walker: Walker, selector: Selector, start, first_swing, commands, *, ke
       commands: (T, 3) one command per decision.
       keys: (T,) PRNG keys handed to ``selector.choose`` step by step (None: None each step).
       remat: recompute each step on the backward pass (:func:`jax.checkpoint`) instead of storing it.
+      command_filter: reads each command before the selector does (:class:`CommandFilter`); None: as given.
 
     Returns:
       ``(final walker state, records)``: the records of :attr:`Selector.record` with a leading T axis, plus
       ``"log"`` (the walker's :attr:`Walker.log` after every step) when the walker has one.
     """
     state0 = walker.init(start, first_swing)
+    filter0 = None if command_filter is None else command_filter.init(start, first_swing)
 
     def step(carry, xs):
         command, settling, key = xs
-        state, stopped = carry
+        state, stopped, fstate = carry
         info = walker.stance(state)
+        if command_filter is not None:
+            fstate, command = command_filter.apply(fstate, info, command)
         foothold, sendable, choice = selector.choose(info, command, key)
         go = ~stopped & sendable & ~settling
         now_stopped = stopped | (~go & ~settling)
@@ -156,7 +184,7 @@ def loop(walker: Walker, selector: Selector, start, first_swing, commands, *, ke
         record = selector.record(info, command, choice, go, now_stopped, before, walker.feet(new_state))
         if walker.log is not None:
             record["log"] = walker.log(new_state)
-        return (new_state, now_stopped), record
+        return (new_state, now_stopped, fstate), record
 
     warm = int(walker.warmup)
     num_steps = commands.shape[0]
@@ -165,7 +193,7 @@ def loop(walker: Walker, selector: Selector, start, first_swing, commands, *, ke
     if keys is not None and warm:
         keys = jnp.concatenate([keys[:1]] * warm + [keys])
     body = jax.checkpoint(step, prevent_cse=False) if remat else step
-    (state, _), rec = lax.scan(body, (state0, jnp.bool_(False)), (commands, settling, keys))
+    (state, _, _), rec = lax.scan(body, (state0, jnp.bool_(False), filter0), (commands, settling, keys))
     if warm:
         rec = jax.tree_util.tree_map(lambda a: a[warm:], rec)
     return state, rec
@@ -200,6 +228,8 @@ class Trajectory(NamedTuple):
         robot marks time without p0, e.g. feet staggered before a blockage).
       on_obstacle: the foothold taken overlaps an obstacle cell or leaves the
         map (footprint without margin); 0 for the intelligent joystick.
+      near_obstacle: the foothold taken has an obstacle cell (or the map's
+        edge) within :data:`NEAR_OBSTACLE` (4 cm) of its bare footprint.
       along, across: displacement of the feet's midpoint (m) along and across
         the commanded direction (world frame at the decision; 0 for a zero
         command).
@@ -237,12 +267,14 @@ class Trajectory(NamedTuple):
     commanded: jax.Array | None = None
     footholds: jax.Array | None = None
     log: Any = None
+    near_obstacle: jax.Array | None = None
 
     def summary(self) -> dict[str, jax.Array]:
         """Per-rollout totals over the last axis (jit- and vmap-friendly; 0-d arrays for one rollout).
 
         Counts are int32: ``steps_taken``, ``steps_in_place``, ``steps_stationary``,
-        ``footholds_on_obstacles`` and ``invalid_footholds`` (steps taken onto a foothold with
+        ``footholds_on_obstacles``, ``footholds_near_obstacles`` (:attr:`near_obstacle`; only when the
+        trajectory records it) and ``invalid_footholds`` (steps taken onto a foothold with
         FootCost = +inf, e.g. the naive joystick stepping on an obstacle). ``stopped`` is bool.
         Floats: ``distance_along``, ``distance_across`` (m), ``mean_deviation`` from p_next (m)
         and ``mean_foot_cost``, the mean FootCost over every foothold taken: +inf as soon as one
@@ -256,6 +288,7 @@ class Trajectory(NamedTuple):
         taken = self.taken
         count = lambda b: jnp.sum(b, axis=-1, dtype=jnp.int32)  # noqa: E731
         n_taken = count(taken)
+        near = {} if self.near_obstacle is None else {"footholds_near_obstacles": count(self.near_obstacle & taken)}
         return {
             "steps_taken": n_taken,
             "steps_in_place": count(self.in_place & taken),
@@ -269,17 +302,20 @@ class Trajectory(NamedTuple):
             "mean_foot_cost": jnp.sum(jnp.where(taken, self.foot_cost, 0.0), axis=-1) / jnp.maximum(n_taken, 1),
             "commands_not_finite": count(~self.command_ok),
             "unsupported_decisions": count(self.unsupported),
+            **near,
         }
 
 def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive", swing_path: bool = True,
                    quantize: bool = True, targets: Targets | None = None, kernel: str = "xla",
-                   index=None) -> Selector:
+                   index=None, horizon: int | None = None, beam: int | None = None, discount=1.0,
+                   refine=False) -> Selector:
     """The paper's GetNextStep as a :class:`Selector`: :func:`ijoy_jax.select.select_step` (its full foothold
     sent; sendable when valid, always for ``"naive"``), recording the :class:`Trajectory` fields per step.
 
     Options as in :func:`rollout`; ``index`` and ``targets``: the terrain's index and the targets, built by
     :func:`ijoy_jax.select.prepare` once per rollout (call it inside jit).
     """
+    opts = select.search_options(method, robot, horizon=horizon, beam=beam, discount=discount, refine=refine)
     if index is None or targets is None:
         index, targets = select.prepare(terrain, robot, index=index, targets=targets)
 
@@ -287,7 +323,8 @@ def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive"
         choice = select.select_step(
             terrain, robot, info.stance, info.stance_side, command, method=method,
             swing_from=info.swing_from if swing_path else None, quantize=quantize, targets=targets, index=index,
-            kernel=kernel,
+            kernel=kernel, horizon=opts.horizon, beam=opts.beam, discount=opts.discount,
+            refine=False if opts.refine is None else opts.refine,
         )
         return choice.foothold, choice.valid | (method == "naive"), choice
 
@@ -295,6 +332,7 @@ def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive"
         swing_row = jnp.where(info.stance_side > 0, 1, 0)
         landed = after[swing_row]
         on_obs = select.on_obstacle(terrain, robot, landed, index=index)
+        near = select.on_obstacle(terrain, robot, landed, index=index, margin=NEAR_OBSTACLE)
         # Command-following metrics in the stance foot's frame at decision time.
         p_next, _ = select.ideal_step(robot, info.stance_side, command)
         achieved = geometry.relative(info.stance, landed)
@@ -305,6 +343,10 @@ def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive"
         norm = jnp.sqrt(jnp.sum(dir_world**2))
         unit = jnp.where(norm > 0, dir_world / jnp.where(norm > 0, norm, 1.0), 0.0)
         move = jnp.mean(after[:, :2], axis=0) - jnp.mean(before[:, :2], axis=0)
+        # A refined step that left its lattice action is not the step in place, whatever its index.
+        lattice = geometry.compose(info.stance, side_actions(robot, -info.stance_side)[
+            jnp.maximum(choice.index, 0)])
+        off_lattice_ok = jnp.max(jnp.abs(choice.pose - lattice)) < 1e-5
         return dict(
             footsteps=landed,
             sides=-info.stance_side.astype(jnp.int32),
@@ -319,9 +361,10 @@ def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive"
             footholds=choice.foothold,
             command_ok=choice.command_ok,
             in_place=go & (choice.index >= 0) & jnp.all(
-                jnp.abs(robot.actions[jnp.maximum(choice.index, 0)] - robot.p0) < 1e-6),
+                jnp.abs(robot.actions[jnp.maximum(choice.index, 0)] - robot.p0) < 1e-6) & off_lattice_ok,
             stationary=go & (jnp.max(jnp.abs(landed - info.swing_from)) < 1e-5),
             on_obstacle=go & on_obs,
+            near_obstacle=go & near,
             along=jnp.dot(move, unit),
             across=unit[0] * move[1] - unit[1] * move[0],
             deviation=jnp.where(go, jnp.hypot(err[0], err[1]), 0.0),
@@ -333,8 +376,8 @@ def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive"
     return Selector(choose, record)
 
 
-def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, method, walker, swing_path, quantize,
-             kernel) -> Trajectory:
+def _rollout(terrain, robot, start, commands, first_swing, targets, discount, refine, command_filter, num_steps, method,
+             walker, swing_path, quantize, kernel, horizon, beam) -> Trajectory:
     """The body of :func:`rollout`, run through :data:`_rollout_jit` or inlined into a caller's trace."""
     walker = perfect_walker() if walker is None else walker
     index, targets = select.prepare(terrain, robot, targets=targets)
@@ -342,12 +385,15 @@ def _rollout(terrain, robot, start, commands, first_swing, targets, num_steps, m
     if commands.ndim == 1:
         commands = jnp.broadcast_to(commands, (num_steps, 3))
     selector = exact_selector(terrain, robot, method=method, swing_path=swing_path, quantize=quantize,
-                              targets=targets, kernel=kernel, index=index)
+                              targets=targets, kernel=kernel, index=index, horizon=horizon, beam=beam,
+                              discount=discount, refine=False if refine is None else refine)
     state, rec = loop(walker, selector, jnp.asarray(start, jnp.float32), jnp.asarray(first_swing, jnp.float32),
-                      commands[:num_steps])
+                      commands[:num_steps],
+                      command_filter=None if command_filter is None else command_filter.build(robot))
     return Trajectory(feet=walker.feet(state), **rec)
 
-_rollout_jit = jax.jit(_rollout, static_argnames=("num_steps", "method", "walker", "swing_path", "quantize", "kernel"))
+_rollout_jit = jax.jit(_rollout, static_argnames=("num_steps", "method", "walker", "swing_path", "quantize", "kernel",
+                                                 "horizon", "beam"))
 
 def _check_start(robot: Robot, start) -> None:
     """Refuse concrete start feet whose footprints overlap or that stand crossed (left foot on the right)."""
@@ -385,6 +431,11 @@ def rollout(
     quantize: bool = True,
     targets: Targets | None = None,
     kernel: str = "xla",
+    horizon: int | None = None,
+    beam: int | None = None,
+    discount=1.0,
+    refine=False,
+    command_filter=None,
 ) -> Trajectory:
     """Walk the robot with the joystick for ``num_steps`` steps (Algorithm 1), jitted as one scan.
 
@@ -395,8 +446,10 @@ def rollout(
       commands: (3,) one command (xdot m/s, ydot m/s, thetadot rad/s, in the
         stance foot's frame) held throughout, or (num_steps, 3) one per step.
       num_steps: number of decisions (static).
-      method: "exhaustive", "ordered" (same steps) or "naive" (the
-        conventional joystick: always steps to the action nearest p_next).
+      method: "exhaustive", "ordered" (same steps), "naive" (the
+        conventional joystick: always steps to the action nearest p_next) or
+        "lookahead" (the first step of the best ``horizon``-step sequence
+        under the held command, :mod:`ijoy_jax.lookahead`).
       first_swing: +1 if the left foot swings first (default), -1 the right
         (traced: a vmapped batch may mix both).
       walker: the robot executing the steps; default :func:`perfect_walker`.
@@ -408,6 +461,17 @@ def rollout(
         it when calling repeatedly with the same actions and rotation weight.
       kernel: FootCost on the GPU: "xla" (default) or "pallas", the fused
         kernel (:func:`ijoy_jax.select_step`); the same steps.
+      horizon, beam, discount, refine: the lookahead's and the refinement's
+        options, as :func:`ijoy_jax.select_step` (``horizon`` and ``beam``
+        static, ``discount`` and the leaves of a ``refine``
+        :class:`~ijoy_jax.refine.RefineParams` traced). With ``refine``,
+        ``index`` is the lattice action each step started from and
+        ``footsteps`` the refined poses.
+      command_filter: how the joystick's commands are read before each
+        decision: a spec whose ``build(robot)`` makes the
+        :class:`CommandFilter` (a pytree: its leaves traced), e.g.
+        :func:`ijoy_jax.turning.heading_hold` (the turning mode that does not
+        overshoot when the turn axis is let go); None: as given.
 
     Returns:
       :class:`Trajectory`. Once no valid step exists the robot stops and
@@ -416,7 +480,7 @@ def rollout(
     The public entry point and the function to call inside your own jit or
     vmap (a batch of terrains, robots, starts or commands): the checks skip
     traced values (``num_steps``, ``method``, ``walker``, ``swing_path``,
-    ``quantize`` and ``kernel`` are static), and the work runs through one
+    ``quantize``, ``kernel``, ``horizon`` and ``beam`` are static), and the work runs through one
     module-level jit (an eager loop compiles once; inside your jit it is
     inlined), except that a ``walker`` given with traced arguments is traced
     inline (it may close over the caller's traced values).
@@ -432,6 +496,10 @@ def rollout(
     """
     start, commands = as_array("start", start), as_array("commands", commands)
     select.validate(terrain, robot, np.zeros(3), 1, np.zeros(3), method=method, targets=targets, kernel=kernel)
+    opts = select.search_options(method, robot, horizon=horizon, beam=beam, discount=discount, refine=refine)
+    if command_filter is not None and not callable(getattr(command_filter, "build", None)):
+        raise TypeError(f"command_filter must be a filter spec with build(robot) -> CommandFilter (e.g. "
+                        f"ijoy_jax.turning.heading_hold()), got {type(command_filter).__name__}")
     check_numeric("start", start)
     check_numeric("commands", commands)
     if np.shape(start) != (2, 3):
@@ -450,9 +518,9 @@ def rollout(
                                                          or np.asarray(first_swing).dtype.kind not in "iuf"
                                                          or float(first_swing) not in (LEFT, -LEFT)):
         raise ValueError(f"first_swing must be +1 (left) or -1 (right), got {first_swing!r}")
-    args = (terrain, robot, start, commands, first_swing, targets)
+    args = (terrain, robot, start, commands, first_swing, targets, opts.discount, opts.refine, command_filter)
     static = dict(num_steps=int(num_steps), method=method, walker=walker, swing_path=swing_path, quantize=quantize,
-                  kernel=kernel)
+                  kernel=kernel, horizon=opts.horizon, beam=opts.beam)
     # A walker built inside the caller's trace may close over its values (the MJX walker holds the traced
     # terrain): it is traced inline, not made a static key of the module jit's cache.
     inline = walker is not None and is_traced(args)

@@ -190,6 +190,19 @@ def footprints_overlap(actions, foot_length: float, foot_width: float) -> np.nda
     return _overlap(np, np.asarray(actions, np.float64).reshape(-1, 3), foot_length, foot_width, 0.0)
 
 
+def overlaps_stance(robot: Robot, rel) -> jax.Array:
+    """(...,) bool: does a swing footprint at ``rel`` (..., 3) overlap the stance footprint (traceable)?
+
+    ``rel`` is the swing foot's pose in the stance foot's frame (either side: the test is symmetric);
+    overlaps shallower than :data:`OVERLAP_TOL` (float32 rounding of touching feet) do not count. What a step
+    off the action set's lattice (:mod:`ijoy_jax.refine`) must not do; every action of S passes it
+    (:func:`check_robot`).
+    """
+    rel = jnp.asarray(rel, jnp.float32)
+    flat = _overlap(jnp, rel.reshape(-1, 3), robot.foot_length, robot.foot_width, OVERLAP_TOL)
+    return flat.reshape(rel.shape[:-1])
+
+
 def _overlap(xp, a, foot_length, foot_width, tol):
     """:func:`footprints_overlap` in NumPy or jnp: overlap deeper than ``tol`` metres."""
 

@@ -20,6 +20,15 @@ Selectors (same step on the same inputs)::
                 nearest the target, whatever the terrain (``pose`` and
                 ``index`` are that action; ``valid`` says whether its
                 foothold is actually valid).
+  "lookahead":  beyond the paper: the first step of the best sequence of
+                ``horizon`` steps under the held command, feet alternating
+                (:mod:`ijoy_jax.lookahead`: exact for any horizon, or a beam);
+                ``horizon=1`` is "exhaustive".
+
+Any of the terrain-aware methods can be followed by a continuous refinement of
+the chosen step (``refine=True``, :mod:`ijoy_jax.refine`): (dx, dy, dtheta) off
+the lattice, on the exact cost against p_next, never costlier than the lattice
+step; ``index`` stays the lattice action it started from.
 
 Ties break the same way in every method: lowest cost, then lowest dist to the
 target, then lowest action index (L_i is sorted by (dist, index)). Costs that
@@ -35,7 +44,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ijoy_jax import geometry
+from ijoy_jax import geometry, lookahead
+from ijoy_jax import refine as refine_mod
 from ijoy_jax._struct import as_array, check_numeric, is_traced, pytree_dataclass, static_field
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
 from ijoy_jax.footcost import validate as validate_foot_cost
@@ -43,8 +53,9 @@ from ijoy_jax.footcost.xla import plane_metrics, sole_tilt
 from ijoy_jax.robots import Robot, dist, mirror, side_actions, side_p0, side_sign
 from ijoy_jax.terrain import Terrain
 
-METHODS = ("exhaustive", "ordered", "naive")
+METHODS = ("exhaustive", "ordered", "naive", "lookahead")
 KERNELS = ("xla", "pallas")
+_ORDERED_CHUNK = 32  # actions per chunk of the ordered search when select_step's chunk is None
 
 
 @pytree_dataclass
@@ -172,6 +183,30 @@ def ideal_step(robot: Robot, stance_side, command) -> tuple[jax.Array, jax.Array
     return side_p0(robot, swing) + robot.step_time * command, ok
 
 
+def action_dists(robot: Robot, stance_side, command, targets: Targets, *, quantize: bool = True):
+    """Every action's dist to the step's target, as the selectors score it: ``(dists (N,), target (3,), ok ())``.
+
+    The target is the nearest f_i of F to p_next (``quantize``, the paper's; dists then come from the
+    precomputed ``targets.dist``, the same numbers in every method) or p_next itself; it is returned in the
+    stance foot's frame, with ``ok`` False when the command had NaN/inf (treated as zero, see
+    :func:`ideal_step`). Traceable.
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> robot = ij.robots.hrp2()
+      >>> d, target, ok = ij.select.action_dists(robot, -1, [0.25, 0.0, 0.0], ij.make_targets(robot))
+      >>> d.shape, [round(float(v), 2) for v in target], float(d.min())
+      ((496,), [0.2, 0.19, 0.0], 0.0)
+    """
+    side = side_sign(stance_side)
+    swing = -side
+    p_next, ok = ideal_step(robot, side, command)
+    if quantize:
+        fi = targets.nearest(mirror(swing, p_next))  # F is stored for the left foot
+        return targets.dist[fi], mirror(swing, targets.point(fi)), ok
+    return dist(side_actions(robot, swing), p_next, robot.rotation_weight), p_next, ok
+
+
 class Prepared(NamedTuple):
     """What a selector needs of one terrain and one robot, built once for many decisions (:func:`prepare`).
 
@@ -215,16 +250,19 @@ def prepare(terrain: Terrain, robot: Robot, *, targets: Targets | None = None) -
     return Prepared(index_terrain(terrain, robot), make_targets(robot) if targets is None else targets)
 
 
-def on_obstacle(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None = None) -> jax.Array:
+def on_obstacle(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None = None, margin=0.0) -> jax.Array:
     """() bool: the bare footprint (no safety margin) at world ``pose`` (3,) overlaps an obstacle or leaves the map.
 
     How the rollout scores a foothold once taken (``Trajectory.on_obstacle``): a
-    naive joystick steps onto obstacles, the selector never does. ``index``:
-    the terrain's prebuilt index (:func:`prepare`), built inside when None.
+    naive joystick steps onto obstacles, the selector never does. ``margin``
+    (m, default 0): the footprint grown by that much instead, e.g. whether an
+    obstacle lies within 4 cm of the foot (``Trajectory.near_obstacle``); it must
+    fit the robot's static window (``max_margin``). ``index``: the terrain's
+    prebuilt index (:func:`prepare`), built inside when None.
     """
-    bare = robot.replace(margin=jnp.zeros_like(robot.margin))
+    grown = robot.replace(margin=jnp.zeros_like(robot.margin) + jnp.asarray(margin, robot.margin.dtype))
     pose = jnp.asarray(pose, jnp.float32)
-    terms = foot_cost_terms(terrain, bare, pose, 1, pose[None], action_index=jnp.zeros(1, jnp.int32), index=index)
+    terms = foot_cost_terms(terrain, grown, pose, 1, pose[None], action_index=jnp.zeros(1, jnp.int32), index=index)
     return terms.obstacle[0] > 0
 
 
@@ -253,11 +291,12 @@ def foothold(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None
 
 
 def validate(terrain, robot, stance, stance_side, command, *, method="exhaustive", swing_from=None, targets=None,
-             index=None, kernel="xla", foot_costs=None):
+             index=None, kernel="xla", foot_costs=None, chunk=None):
     """Check the arguments of :func:`select_step` (raises ValueError / TypeError).
 
     Values of tracers are not checked (their shapes are), so it costs nothing
-    inside a trace; :func:`ijoy_jax.rollout` runs it on its own arguments.
+    inside a trace; :func:`ijoy_jax.rollout` runs it on its own arguments. The
+    lookahead and refinement options are checked by :func:`search_options`.
     """
     validate_foot_cost(terrain, robot, stance, stance_side, np.zeros((1, 3)), swing_from, index)
     check_numeric("command", command)
@@ -267,11 +306,14 @@ def validate(terrain, robot, stance, stance_side, command, *, method="exhaustive
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
+    if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1):
+        raise ValueError(f"chunk must be an int >= 1 or None (the method's default), got {chunk!r}")
     if targets is not None and not isinstance(targets, Targets):
         raise TypeError(f"targets must be an ijoy_jax.select.Targets (make_targets), got {type(targets).__name__}")
     if foot_costs is not None:
-        if method != "exhaustive":
-            raise ValueError(f"foot_costs (every action's FootCost) serve method='exhaustive' only, got {method!r}")
+        if method not in ("exhaustive", "lookahead"):
+            raise ValueError(f"foot_costs (every action's FootCost) serve method='exhaustive' or 'lookahead' only, "
+                             f"got {method!r}")
         check_numeric("foot_costs", foot_costs)
         if np.shape(foot_costs) != (robot.num_actions,):
             raise ValueError(f"foot_costs must have shape ({robot.num_actions},) (one FootCost per action), "
@@ -280,6 +322,51 @@ def validate(terrain, robot, stance, stance_side, command, *, method="exhaustive
                                                 | (np.asarray(foot_costs, np.float64) < 0)):
             raise ValueError("foot_costs must be >= 0 or +inf (FootCost of each action; action_foot_costs), "
                              "got NaN or a negative value")
+
+
+class SearchOptions(NamedTuple):
+    """The lookahead and refinement options of a decision, checked and normalised (:func:`search_options`).
+
+    horizon: int >= 1 (static; 1 for every method but "lookahead"). beam: None or int (static).
+    discount: () float32 gamma (traced). refine: a :class:`ijoy_jax.refine.RefineParams` (traced leaves) or
+    None (no refinement).
+    """
+
+    horizon: int
+    beam: int | None
+    discount: jax.Array
+    refine: refine_mod.RefineParams | None
+
+
+def search_options(method: str, robot: Robot, *, horizon=None, beam=None, discount=1.0,
+                   refine=False) -> SearchOptions:
+    """Check and normalise :func:`select_step`'s lookahead and refinement options (at the boundary).
+
+    ``horizon`` None is 2 for ``method="lookahead"`` and 1 otherwise; ``refine`` True is
+    :func:`ijoy_jax.refine.params`'s defaults, False/None no refinement, a
+    :class:`~ijoy_jax.refine.RefineParams` is used as given.
+
+    Raises:
+      ValueError / TypeError: a horizon < 1, a beam outside [1, N], lookahead options with another method, a
+        bad discount or refinement option, or ``refine`` with ``method="naive"`` (the naive joystick ignores
+        the terrain; refinement is on the terrain's cost).
+    """
+    if horizon is None:
+        horizon = 2 if method == "lookahead" else 1
+    lookahead.check_options(method, horizon, beam, robot.num_actions, discount)
+    if refine is None or refine is False:
+        params = None
+    elif refine is True:
+        params = refine_mod.params()
+    else:
+        params = refine
+    if params is not None and method == "naive":
+        raise ValueError("refine applies to the terrain-aware methods (exhaustive, ordered, lookahead); "
+                         "method='naive' is the conventional joystick, which ignores the terrain")
+    if params is not None:
+        refine_mod.check_params(params, robot.num_actions)
+    return SearchOptions(int(horizon), None if beam is None else int(beam), jnp.asarray(discount, jnp.float32),
+                         params)
 
 
 def _costs_of(terrain, robot, stance, side, steps, idx, swing_from, index, kernel) -> jax.Array:
@@ -327,8 +414,8 @@ def action_foot_costs(terrain: Terrain, robot: Robot, stance, stance_side, *, sw
     return _costs_of(terrain, robot, stance, side, steps, idx, swing_from, index, kernel)
 
 
-def _select(terrain, robot, stance, stance_side, command, swing_from, targets, index, foot_costs, method, quantize,
-            chunk, kernel) -> StepChoice:
+def _select(terrain, robot, stance, stance_side, command, swing_from, targets, index, foot_costs, discount, refine,
+            method, quantize, chunk, kernel, horizon, beam) -> StepChoice:
     """The body of :func:`select_step` (always run through :data:`_select_jit`)."""
     if index is None:
         index = index_terrain(terrain, robot)
@@ -336,43 +423,55 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     swing_from = None if swing_from is None else jnp.asarray(swing_from, jnp.float32)
     side = side_sign(stance_side)
     swing = -side
-    p_next, ok = ideal_step(robot, side, command)
-    fi = targets.nearest(mirror(swing, p_next))  # F is stored for the left foot
     n = robot.num_actions
-    if quantize or method == "ordered":
-        target_rel = mirror(swing, targets.point(fi))
-        dists = targets.dist[fi]
-    else:
-        target_rel = p_next
-        dists = dist(side_actions(robot, swing), p_next, robot.rotation_weight)
+    dists, target_rel, ok = action_dists(robot, side, command, targets, quantize=quantize or method == "ordered")
     steps = geometry.compose(stance, side_actions(robot, swing))  # (N, 3)
 
     def terms_of(idx):
         return _costs_of(terrain, robot, stance, side, steps[idx], idx, swing_from, index, kernel)
 
+    supported = query_supported(terrain, robot)  # FootCost's own rule: every candidate was flagged by it
+    plan_rest = None  # the lookahead's planned steps after this one (refinement keeps them valid)
     if method == "naive":
         best = jnp.argmin(dists).astype(jnp.int32)  # lowest dist, then lowest index
         fc = terms_of(best[None])[0]
         cost = fc + robot.w * dists[best]
-        valid = jnp.isfinite(cost)
         evaluated = jnp.int32(1)
-    elif method == "exhaustive":
+    elif method in ("exhaustive", "lookahead"):
         fc_all = terms_of(jnp.arange(n, dtype=jnp.int32)) if foot_costs is None else foot_costs.astype(jnp.float32)
         cost_all = fc_all + robot.w * dists
-        best = _lexmin(cost_all, dists)
-        cost, fc = cost_all[best], fc_all[best]
-        valid = jnp.isfinite(cost)
         evaluated = jnp.int32(n)
+        if method == "lookahead" and horizon > 1:
+            plan = _search(terrain, robot, stance, side, command, swing_from, targets, index, kernel, quantize,
+                           cost_all, dists, steps, discount, horizon, beam, chunk)
+            best = jnp.maximum(plan.first, 0)
+            plan_rest = plan.sequence[1:]
+            evaluated = evaluated + plan.evaluated
+            supported = supported & lookahead.discount_supported(discount)
+        else:
+            best = _lexmin(cost_all, dists)
+        cost, fc = cost_all[best], fc_all[best]
     else:
-        best, cost, fc, evaluated = _ordered(terms_of, targets.order[fi], dists, robot.w, n, chunk)
-        valid = jnp.isfinite(cost)
-    supported = query_supported(terrain, robot)  # FootCost's own rule: every candidate was flagged by it
-    valid = valid & supported  # e.g. w < 0: the search's early exit is wrong and its cost negative
+        fi = targets.nearest(mirror(swing, ideal_step(robot, side, command)[0]))
+        best, cost, fc, evaluated = _ordered(terms_of, targets.order[fi], dists, robot.w, n,
+                                             _ORDERED_CHUNK if chunk is None else chunk)
+    valid = jnp.isfinite(cost) & supported  # e.g. w < 0: the search's early exit is wrong and its cost negative
+    target = geometry.compose(stance, target_rel)
+    pose = steps[best]
+    if refine is not None:
+        p_next = ideal_step(robot, side, command)[0]
+        r = refine_mod.refine_step(terrain, robot, stance, side, p_next, jnp.where(valid, best, -1), refine,
+                                   swing_from=swing_from, index=index, continuation=plan_rest)
+        supported = supported & refine_mod.params_supported(refine)
+        valid = jnp.isfinite(r.cost) & supported
+        pose, cost, fc, best = r.pose, r.cost, r.foot_cost, jnp.maximum(r.index, 0)
+        target = geometry.compose(stance, p_next)
+        evaluated = evaluated + r.evaluated
     in_place = geometry.compose(stance, side_p0(robot, swing))
     # The naive joystick steps to its action whatever the terrain; the others
     # report no step (index -1, the step-in-place pose) when none is valid.
     chosen = valid | (method == "naive")
-    pose = jnp.where(chosen, steps[best], in_place)
+    pose = jnp.where(chosen, pose, in_place)
     return StepChoice(
         pose=pose,
         foothold=foothold(terrain, robot, pose, index=index),
@@ -380,11 +479,76 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
         cost=jnp.where(valid, cost, jnp.inf),
         foot_cost=jnp.where(valid, fc, jnp.inf),
         index=jnp.where(chosen, best, -1).astype(jnp.int32),
-        target=geometry.compose(stance, target_rel),
+        target=target,
         command_ok=ok,
         evaluated=evaluated,
         unsupported=~supported,
     )
+
+
+def _search(terrain, robot, stance, side, command, swing_from, targets, index, kernel, quantize, cost_all, dists,
+            steps, discount, horizon, beam, chunk) -> lookahead.Plan:
+    """The lookahead's search from the first level's costs: its FootCost oracle is this module's (either
+    kernel), its second level's dists those of the other foot for the same command."""
+    n = robot.num_actions
+
+    def costs_from(st, sd, sf):
+        at = geometry.compose(st, side_actions(robot, -sd))
+        return _costs_of(terrain, robot, st, sd, at, jnp.arange(n, dtype=jnp.int32),
+                         None if swing_from is None else sf, index, kernel)
+
+    dists2, _, _ = action_dists(robot, -side, command, targets, quantize=quantize)
+    return lookahead.search(cost_all, steps, stance, side, swing_from, costs_from, robot, (dists, dists2), discount,
+                            horizon=horizon, beam=beam, chunk=lookahead.DEFAULT_CHUNK if chunk is None else chunk)
+
+
+def _plan(terrain, robot, stance, stance_side, command, swing_from, targets, index, discount, quantize, chunk, kernel,
+          horizon, beam) -> lookahead.Plan:
+    """The body of :func:`lookahead_plan` (run through :data:`_plan_jit`)."""
+    if index is None:
+        index = index_terrain(terrain, robot)
+    stance = jnp.asarray(stance, jnp.float32)
+    swing_from = None if swing_from is None else jnp.asarray(swing_from, jnp.float32)
+    side = side_sign(stance_side)
+    n = robot.num_actions
+    dists, _, _ = action_dists(robot, side, command, targets, quantize=quantize)
+    steps = geometry.compose(stance, side_actions(robot, -side))
+    fc = _costs_of(terrain, robot, stance, side, steps, jnp.arange(n, dtype=jnp.int32), swing_from, index, kernel)
+    return _search(terrain, robot, stance, side, command, swing_from, targets, index, kernel, quantize,
+                   fc + robot.w * dists, dists, steps, discount, horizon, beam, chunk)
+
+
+_plan_jit = jax.jit(_plan, static_argnames=("quantize", "chunk", "kernel", "horizon", "beam"))
+
+
+def lookahead_plan(terrain: Terrain, robot: Robot, stance, stance_side, command, *, horizon: int = 2,
+                   beam: int | None = None, discount=1.0, swing_from=None, quantize: bool = True,
+                   targets: Targets | None = None, index: TerrainIndex | None = None, chunk: int | None = None,
+                   kernel: str = "xla") -> lookahead.Plan:
+    """The lookahead's whole plan for one decision: its best sequence, score and whether it fell back.
+
+    What :func:`select_step` with ``method="lookahead"`` decides from (its ``index`` is ``plan.first``), for
+    a caller that wants the planned steps or the sequence's score (:class:`ijoy_jax.lookahead.Plan`). Same
+    arguments and checks as :func:`select_step`; ``horizon`` at least 2 (1 has no plan).
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> terrain, robot = ij.terrain.flat((100, 100), 0.02), ij.robots.hrp2()
+      >>> plan = ij.select.lookahead_plan(terrain, robot, [1.0, 1.0, 0.0], -1, [0.25, 0.0, 0.0])
+      >>> [robot.actions[int(a)].tolist() for a in plan.sequence]   # left foot, then right (stored as left)
+      [[0.20000000298023224, 0.1899999976158142, 0.0], [0.20000000298023224, 0.1899999976158142, 0.0]]
+    """
+    stance, command, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("command", command),
+                                                               ("swing_from", swing_from)))
+    validate(terrain, robot, stance, stance_side, command, method="lookahead", swing_from=swing_from,
+             targets=targets, index=index, kernel=kernel, chunk=chunk)
+    opts = search_options("lookahead", robot, horizon=horizon, beam=beam, discount=discount)
+    if opts.horizon < 2:
+        raise ValueError(f"lookahead_plan needs a horizon of at least 2 (1 is the one-step selector), got "
+                         f"{opts.horizon}")
+    targets = make_targets(robot) if targets is None else targets
+    return _plan_jit(terrain, robot, stance, stance_side, command, swing_from, targets, index, opts.discount,
+                     quantize=quantize, chunk=chunk, kernel=kernel, horizon=opts.horizon, beam=opts.beam)
 
 
 def _lexmin(cost, dists):
@@ -439,9 +603,13 @@ def select_step(
     quantize: bool = True,
     targets: Targets | None = None,
     index: TerrainIndex | None = None,
-    chunk: int = 32,
+    chunk: int | None = None,
     kernel: str = "xla",
     foot_costs=None,
+    horizon: int | None = None,
+    beam: int | None = None,
+    discount=1.0,
+    refine=False,
 ) -> StepChoice:
     """Choose the next swing-foot placement for a joystick command.
 
@@ -456,7 +624,9 @@ def select_step(
         swings), -1 if it is the right one.
       command: (3,) joystick command (xdot m/s, ydot m/s, thetadot rad/s) in
         the stance foot's frame. NaN/inf: treated as zero and flagged.
-      method: "exhaustive", "ordered" (the paper's search) or "naive".
+      method: "exhaustive", "ordered" (the paper's search), "naive" or
+        "lookahead" (the first step of the best ``horizon``-step sequence,
+        :mod:`ijoy_jax.lookahead`).
       swing_from: (3,) current world pose of the swing foot, for the swing-path
         check on 2.5D terrains (None: no check).
       quantize: score against the nearest f_i of F (default, as the paper);
@@ -465,7 +635,9 @@ def select_step(
       index: the terrain's prebuilt :class:`~ijoy_jax.footcost.TerrainIndex`;
         built if None. For many decisions on one terrain build both once
         with :func:`prepare`.
-      chunk: actions per chunk of the ordered search (static).
+      chunk: actions per chunk of the ordered search (static; None: 32), or
+        first actions expanded per iteration of the exact lookahead (None:
+        :data:`ijoy_jax.lookahead.DEFAULT_CHUNK`; more on a GPU).
       kernel: how FootCost is computed (static): "xla" (default) or "pallas",
         one fused kernel per decision (:mod:`ijoy_jax.footcost.pallas`): the
         same costs to float32 rounding, about 30x faster on a GPU
@@ -474,14 +646,29 @@ def select_step(
         evaluated (:func:`action_foot_costs`, or the ``cost`` of
         :func:`ijoy_jax.cue.feasible_commands`): the exhaustive method decides
         from them instead of evaluating FootCost again (the same choice).
-        None: evaluated here. Only with ``method="exhaustive"``.
+        None: evaluated here. Only with ``method="exhaustive"`` or
+        ``"lookahead"`` (its first level).
+      horizon: steps scored per decision by ``method="lookahead"`` (static;
+        None: 2). 1 is the exhaustive selector exactly.
+      beam: None: the exact lookahead (branch and bound; for ``horizon >= 3``
+        its worst case is N^horizon FootCost evaluations); K: a beam of K
+        sequences per level (static, 1 <= K <= N).
+      discount: gamma >= 0, the weight of each later step relative to the
+        one before (traced: changing it never recompiles).
+      refine: True (:func:`ijoy_jax.refine.params`' defaults) or a
+        :class:`~ijoy_jax.refine.RefineParams` refines the chosen step in
+        continuous (dx, dy, dtheta) on the exact cost against p_next
+        (:mod:`ijoy_jax.refine`): ``pose`` is the refined step, ``index`` the
+        lattice action it started from, ``cost`` and ``target`` are against
+        p_next. Not with ``method="naive"``.
 
     Returns:
       :class:`StepChoice`.
 
     The public entry point and the function to call inside your own jit or
-    vmap: the checks skip traced values (``method``, ``quantize``, ``chunk``
-    and ``kernel`` are static), and the work runs through one module-level
+    vmap: the checks skip traced values (``method``, ``quantize``, ``chunk``,
+    ``kernel``, ``horizon``, ``beam`` and ``refine``'s static fields are
+    static; ``discount`` and ``refine``'s leaves traced), and the work runs through one module-level
     jit (an eager loop compiles once; inside your jit it is inlined).
 
     Example:
@@ -497,10 +684,12 @@ def select_step(
                                                                ("swing_from", swing_from)))
     foot_costs = as_array("foot_costs", foot_costs)
     validate(terrain, robot, stance, stance_side, command, method=method, swing_from=swing_from, targets=targets,
-             index=index, kernel=kernel, foot_costs=foot_costs)
+             index=index, kernel=kernel, foot_costs=foot_costs, chunk=chunk)
+    opts = search_options(method, robot, horizon=horizon, beam=beam, discount=discount, refine=refine)
     targets = make_targets(robot) if targets is None else targets  # outside the jit: one program with or without
     return _select_jit(terrain, robot, stance, stance_side, command, swing_from, targets, index, foot_costs,
-                       method=method, quantize=quantize, chunk=chunk, kernel=kernel)
+                       opts.discount, opts.refine, method=method, quantize=quantize, chunk=chunk, kernel=kernel,
+                       horizon=opts.horizon, beam=opts.beam)
 
 
-_select_jit = jax.jit(_select, static_argnames=("method", "quantize", "chunk", "kernel"))
+_select_jit = jax.jit(_select, static_argnames=("method", "quantize", "chunk", "kernel", "horizon", "beam"))

@@ -164,6 +164,71 @@ def ordered_select(fc: NumpyFootCost, targets, stance, stance_side, command, swi
     return best, best_cost, n
 
 
+def _level_dists(fc: NumpyFootCost, targets, stance_side, command):
+    """(N,) dist of every action to the quantised target f_i of a step from a stance on ``stance_side``."""
+    swing = -1.0 if stance_side > 0 else 1.0
+    mirror = np.array([1.0, swing, swing])
+    command = np.asarray(command, np.float64)
+    if not np.all(np.isfinite(command)):
+        command = np.zeros(3)
+    left = (fc.p0 * mirror + fc.dt * command) * mirror
+    idx = [int(np.clip(np.round((left[k] - targets.lo[k]) / targets.step[k]), 0, targets.counts[k] - 1))
+           for k in range(3)]
+    return np.asarray(targets.dist[(idx[0] * targets.counts[1] + idx[1]) * targets.counts[2] + idx[2]], np.float64)
+
+
+def lookahead_values(fc: NumpyFootCost, targets, stance, stance_side, command, swing_from=None, horizon=2,
+                     discount=1.0):
+    """Brute force over all N^horizon sequences: ``(V (N,), c1 (N,), d1 (N,))`` for each first action.
+
+    ``V[a] = c_1(a) + discount * min over the rest`` (+inf when step 1 is invalid or no valid continuation
+    exists), each step's cost ``FootCost + w * dist`` to its quantised target f_i, feet alternating, each
+    level's swing foot starting where it stood (:mod:`ijoy_jax.lookahead`'s definition, evaluated by
+    enumeration in float64: every sequence's FootCosts are computed, nothing is pruned).
+    """
+    dists = {s: _level_dists(fc, targets, s, command) for s in (1.0, -1.0)}
+    path = swing_from is not None
+
+    def height(pose):
+        return fc.plane(pose)[0] if fc.has_height else 0.0
+
+    def costs(stance, side, start):
+        mirror = np.array([1.0, -side, -side])
+        sh, st = height(stance), (height(start) if path else 0.0)
+        out = np.empty(len(fc.actions))
+        poses = []
+        for a, act in enumerate(fc.actions):
+            pose = _compose(stance, act * mirror)
+            poses.append(pose)
+            out[a] = fc.cost(stance, sh, st, start if path else None, pose, a) + fc.w * dists[side][a]
+        return out, poses
+
+    def value(level, stance, side, start):
+        c, poses = costs(stance, side, start)
+        if level == horizon:
+            return float(c.min())
+        best = math.inf
+        for a in np.flatnonzero(np.isfinite(c)):
+            tail = value(level + 1, poses[a], -side, stance)
+            if math.isfinite(tail):
+                best = min(best, c[a] + discount * tail)
+        return best
+
+    side = 1.0 if stance_side > 0 else -1.0
+    stance = np.asarray(stance, np.float64)
+    start = None if swing_from is None else np.asarray(swing_from, np.float64)
+    c1, poses = costs(stance, side, start)
+    v = np.full(len(c1), math.inf)
+    if horizon == 1:
+        v = c1.copy()
+    else:
+        for a in np.flatnonzero(np.isfinite(c1)):
+            tail = value(2, poses[a], -side, stance)
+            if math.isfinite(tail):
+                v[a] = c1[a] + discount * tail
+    return v, c1, dists[side]
+
+
 def rect_corners(cx, cy, theta, hl, hw):
     c, s = np.cos(theta), np.sin(theta)
     lx = np.array([1, -1, -1, 1]) * hl

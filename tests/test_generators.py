@@ -45,6 +45,9 @@ BUSY = {
     ),
     "slope": gen.SlopeParams(angle=0.2, direction=0.5),
     "rough": gen.RoughParams(amplitude=0.03, correlation_length=0.15, obstacle_above=0.05),
+    "corridor": gen.CorridorParams(length=1.2, width_start=0.6, width_end=0.4, count=2, pocket_width=0.2,
+                                   pocket_depth=0.15, pocket_from=0.2, start_radius=0.2),
+    "stone_path": gen.StonePathParams(size=0.3, pitch=0.36, pitch_jitter=0.03, top=0.1, top_jitter=0.02),
 }
 RANDOM_FAMILIES = [f for f in gen.FAMILIES if f not in ("flat", "slope")]
 
@@ -120,6 +123,7 @@ def _start(params):
 def test_registry_and_defaults():
     assert set(gen.FAMILIES) == {
         "flat", "walls", "obstacles", "bars", "platforms", "stairs", "stepping_stones", "slope", "rough",
+        "corridor", "stone_path",
     }  # fmt: skip
     for name, fam in gen.FAMILIES.items():
         p = fam.params()
@@ -258,7 +262,7 @@ def test_start_zone_is_free_ground(name, has_height):
         assert inside.sum() > 10
         assert free[inside].all(), (name, trial)
         if has_height and name != "slope":
-            ground = p.elevation if name == "flat" else p.top if name == "stepping_stones" else 0.0
+            ground = p.elevation if name == "flat" else p.top if name in ("stepping_stones", "stone_path") else 0.0
             np.testing.assert_allclose(h[inside], ground, atol=1e-6)
         if name in ("walls", "obstacles", "platforms") and not has_height:
             assert not free.all()  # the crowded maps do have objects

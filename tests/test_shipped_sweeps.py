@@ -40,7 +40,16 @@ EXPECTED = {
         shape=(200, 100), resolution=0.02, scenarios_per_cell=128, num_steps=16, method="ordered",
         num_scenarios=9 * 4 * 128, extra_metrics=(), walker="mjx"),
 }
-PERFECT = sorted(n for n, e in EXPECTED.items() if e.get("walker", "perfect") == "perfect")
+_SELECTORS = {"selector.horizon": (1, 2, 3), "selector.refine": (False, True)}
+for _fam, _family in (("stones", "stone_path"), ("corridor", "corridor"), ("clutter", "obstacles"),
+                      ("walls", "walls")):
+    # The lookahead comparisons (issue #25): only the stones' slice is run below (each is one more compile of a
+    # 200 x 100 map; the four differ only in the terrain family).
+    EXPECTED[f"lookahead_{_fam}.toml"] = dict(
+        grid=_SELECTORS, family=_family, has_height=False, shape=(200, 100), resolution=0.02,
+        scenarios_per_cell=64, num_steps=16, method="lookahead", num_scenarios=6 * 64, extra_metrics=(),
+        run=_fam == "stones")
+PERFECT = sorted(n for n, e in EXPECTED.items() if e.get("walker", "perfect") == "perfect" and e.get("run", True))
 PHYSICS = sorted(n for n, e in EXPECTED.items() if e.get("walker") == "mjx")
 
 
@@ -64,6 +73,8 @@ def test_shipped_sweep_validates_with_its_documented_grid(name):
         assert getattr(cfg, field) == want[field], field
     assert cfg.walker == want.get("walker", "perfect")
     assert cfg.kernel == "xla"  # runs on a CPU as shipped (the README says to add pallas on a GPU)
+    if cfg.method == "lookahead":
+        assert cfg.beam == 16 and cfg.discount == 1.0  # the three-step beam of docs/lookahead.md
 
 
 def test_action_set_sizes_span_fifty_to_thousands_around_the_papers_496():

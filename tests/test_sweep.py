@@ -92,6 +92,20 @@ BAD = [
      "changes array shapes"),
     ('[sweep]\nrandom_samples = 2\n[random]\n"robot.w" = [4, 1]\n', "random.robot.w", "impossible range"),
     ('[random]\n"robot.w" = [1, 4]\n', "sweep.random_samples", "must be >= 1"),
+    ('[grid]\n"selector.horizon" = [1, 2]\n', "grid.selector.horizon", 'needs [sweep] method = "lookahead"'),
+    ('[sweep]\nmethod = "lookahead"\n[grid]\n"selector.horizon" = [0, 2]\n', "grid.selector.horizon[0]",
+     "must be >= 1"),
+    ('[sweep]\nmethod = "lookahead"\nhorizon = 2\n[grid]\n"selector.horizon" = [1, 2]\n', "grid.selector.horizon",
+     "also set as a fixed value in [sweep]"),
+    ("[sweep]\nbeam = 4\n", "sweep.beam", 'an option of method = "lookahead"'),
+    ('[sweep]\nmethod = "lookahead"\nbeam = 5000\n', "sweep.beam", "at most the action set's size"),
+    ('[sweep]\nmethod = "naive"\nrefine = true\n', "sweep.refine", "refinement applies to the terrain-aware"),
+    ('[sweep]\nmethod = "lookahead"\nrandom_samples = 2\n[random]\n"selector.horizon" = [1, 3]\n',
+     "random.selector.horizon", "static"),
+    ('[grid]\n"selector.refine" = [1, 0]\n', "grid.selector.refine[0]", "must be true or false"),
+    ("[sweep]\ndiscount = -1\n", "sweep.discount", "must be >= 0"),
+    ('[grid]\n"selector.beam" = [1, 2]\n', "grid.selector.beam", "unknown parameter"),
+    ('[sweep]\nwalker = "mjx"\nmethod = "lookahead"\n', "sweep.method", 'walker = "mjx" runs the one-step'),
     ("[sweep\n", "<toml>", ""),
 ]
 
@@ -248,6 +262,37 @@ def test_density_compiles_once_per_size(tmp_path):
     assert s.chunks == 8 and len(df) == 16
     assert s.compiles <= 2 and set(s.first_chunk_s) == {0.25, 0.5}  # 0.25 may be cached already
     assert sweep.run(write(tmp_path, text), tmp_path / "o2", chunk_size=CHUNK, progress=False).compiles == 0
+
+
+def test_selector_options_sweep_match_direct_rollouts_and_compile_once_per_horizon(tmp_path):
+    """``selector.horizon`` is static (one compile per value), ``selector.discount`` traced (none per value);
+    each scenario equals ``ij.rollout`` with its options (refinement's are tests/test_refine.py's)."""
+    text = (BASE.replace('method = "exhaustive"', 'method = "lookahead"')
+            .replace('"robot.w" = [0.5, 2.0]\n"robot.margin" = [0.0, 0.05]',
+                     '"selector.horizon" = [1, 2]\n"selector.discount" = [0.5, 1.0]'))
+    s = sweep.run(write(tmp_path, text), tmp_path / "o", chunk_size=3, progress=False)
+    df = sweep.load(tmp_path / "o")
+    assert len(df) == 12 and s.compiles <= 2 and len(s.first_chunk_s) == 2
+    assert {"selector.horizon", "selector.refine", "selector.discount"} <= set(df.columns)
+    assert set(df["selector.refine"]) == {0} and "footholds_near_obstacles" in df
+    cfg = sweep.load_config(tmp_path / "s.toml")
+    for i in (10,):  # horizon 2, discount 1.0
+        row = df.iloc[i]
+        params = generators.ObstacleParams(count=int(row["terrain.count"]))
+        key = jax.random.fold_in(jax.random.key(cfg.seed), int(row["replicate"]))
+        terrain = generators.generate("obstacles", key, params, shape=(60, 50), resolution=0.04, max_count=8)
+        robot = ij.robots.hrp2(margin=0.02, density=0.25)
+        c = np.asarray(generators.start_point(params, shape=(60, 50), resolution=0.04))
+        start = np.array([[c[0], c[1] + 0.095, 0.0], [c[0], c[1] - 0.095, 0.0]])
+        command = row[["command.vx", "command.vy", "command.wz"]].to_numpy(np.float64)
+        want = ij.rollout(terrain, robot, start, command, num_steps=6, method="lookahead",
+                          horizon=int(row["selector.horizon"]), discount=float(row["selector.discount"])).summary()
+        for k, v in want.items():
+            assert row[k] == pytest.approx(float(v), abs=FLOAT_TOL), k
+    diffs = sweep.paired_differences(df, {"selector.horizon": 1, "selector.discount": 0.5})
+    assert len(diffs) == 4 and np.all(diffs["n"] == 3)
+    base = diffs[(diffs["selector.horizon"] == 1) & (diffs["selector.discount"] == 0.5)]
+    assert float(base["distance_along.diff"].iloc[0]) == 0.0
 
 
 def test_rotation_weight_and_metrics_sweep_match_direct_rollout(tmp_path):

@@ -7,6 +7,10 @@ default JAX device, so the same command measures the CPU here and a GPU on
 the lent machine.
 
   footcost  candidate foothold evaluations per second (HRP-2, 2 cm grid, 2D and 2.5D)
+  lookahead decision time of the selectors beyond the paper (#25): one-step exhaustive, the exact two-step
+            lookahead, all 246 k pairs of HRP-2 (a beam of the whole action set), the three-step beam, and
+            continuous refinement alone and after the lookahead, on 2D and 2.5D maps; then the beam's loss
+            against the exact search on decisions met by one-step walks on the constrained families.
   select    full decisions per second (exhaustive and ordered, 2.5D with swing path; ordered also with
             windows sized for the 2 cm margin; on a GPU both again with the fused Pallas FootCost kernel, and
             exhaustive with it on a map of posts taller than the clearance, where its corridor broad phase fails),
@@ -230,6 +234,162 @@ def bench_select(rows, quick: bool, chunk: int):
                      decisions_per_s=1.0 / run, us_per_decision=1e6 * run))
 
 
+_EVALS_AT_ONCE = {"one-step": 496, "lookahead H=2 exact": 8 * 496, "lookahead H=2 all pairs": 496 * 496,
+                  "lookahead H=3 beam 16": 16 * 496, "refine": 4 * 27, "lookahead H=2 exact + refine": 8 * 496}
+# FootCost evaluations one decision of each selector holds in memory at once (an iteration of the exact search, a
+# level of the beam, a move of the refinement): what the benchmark's vmapped chunks are sized by.
+
+LOOKAHEAD_SELECTORS = (
+    ("one-step", dict(method="exhaustive")),
+    ("lookahead H=2 exact", dict(method="lookahead", horizon=2)),
+    ("lookahead H=2 all pairs", dict(method="lookahead", horizon=2, beam=-1)),  # beam -1: the whole action set
+    ("lookahead H=3 beam 16", dict(method="lookahead", horizon=3, beam=16)),
+    ("refine", dict(method="exhaustive", refine=True)),
+    ("lookahead H=2 exact + refine", dict(method="lookahead", horizon=2, refine=True)),
+)
+"""The selectors ``ijoy bench lookahead`` times: name and :func:`ijoy_jax.select_step` options."""
+
+
+def _constrained_decisions(robot, per_family: int, steps: int, seed: int = 0):
+    """Decisions a one-step walker meets on the sweeps' constrained families (stone path at 0.15-0.25 m/s,
+    corridor with pockets, dense clutter with turning): per family (name, terrains (B, ...), and per decision
+    (B * steps) the terrain row, stance, stance side, swing foot and command)."""
+    from ijoy_jax.terrain import generators as gen
+
+    shape = (200, 100)
+    fams = {
+        "stone_path": ("stone_path", gen.StonePathParams(start_x=0.1, size=0.36, pitch=0.4, first=0.2,
+                                                         pitch_jitter=0.02), None, ((0.15, 0.25), (0, 0), (0, 0))),
+        "corridor": ("corridor", gen.CorridorParams(start_x=0.1, length=2.5, width_end=0.42, count=3), None,
+                     ((0.25, 0.25), (-0.1, 0.1), (0, 0))),
+        "clutter": ("obstacles", gen.ObstacleParams(count=30), 32, ((0.1, 0.25), (-0.05, 0.05), (-0.3, 0.3))),
+    }
+    targets = ij.make_targets(robot)
+    out = []
+    for i, (label, (family, params, slots, ranges)) in enumerate(fams.items()):
+        keys = jax.random.split(jax.random.key(seed + i), per_family)
+        extra = {} if slots is None else {"max_count": slots}
+        terrains = gen.batch(family, keys, params, shape=shape, **extra)
+        c = gen.start_point(params, shape=shape)
+        start = ij.robots.start_stance(robot, c[0], c[1])
+        rng = np.random.default_rng(seed + i)
+        cmds = np.stack([rng.uniform(lo, hi, per_family) for lo, hi in ranges], -1).astype(np.float32)
+        walk = jax.jit(jax.vmap(lambda t, cmd, start=start: ij.rollout(t, robot, start, cmd, steps, targets=targets)))
+        traj = walk(terrains, jnp.asarray(cmds))
+        # The feet before each decision: the start, then each step's landing replaces its side's foot.
+        feet = np.broadcast_to(np.asarray(start), (per_family, 2, 3)).copy()
+        rows = []
+        for k in range(steps):
+            sides = np.asarray(traj.sides[:, k])
+            for b in range(per_family):
+                swing_row = 0 if sides[b] > 0 else 1
+                rows.append((b, feet[b, 1 - swing_row].copy(), -float(sides[b]), feet[b, swing_row].copy(), cmds[b]))
+            feet[np.arange(per_family), np.where(sides > 0, 0, 1)] = np.asarray(traj.footsteps[:, k])
+        out.append((label, terrains, rows))
+    return out
+
+
+def bench_lookahead(rows, quick: bool, chunk: int):
+    """Decision time of each of :data:`LOOKAHEAD_SELECTORS` (2D and 2.5D, batched), then the beam's loss."""
+    robot = ij.robots.hrp2(margin=0.02)
+    n = robot.num_actions
+    targets = ij.make_targets(robot)
+    cpu = _cpu()
+    for has_height in (False, True):
+        terrain = _terrain(has_height)
+        index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
+        for name, kw in LOOKAHEAD_SELECTORS:
+            kw = dict(kw, beam=n) if kw.get("beam") == -1 else kw
+            every_pair = kw.get("beam") == n
+            if quick:
+                sizes = [1, 4]
+            elif every_pair:
+                sizes = [1, 4] if cpu else [1, 64]
+            else:
+                sizes = [1, 16] if cpu else [1, 256, 4096]
+
+            def one(stance, command, swing, kw=kw, terrain=terrain, index=index):
+                c = select.select_step(terrain, robot, stance, -1, command, swing_from=swing, targets=targets,
+                                       index=index, **kw)
+                return c.index, c.evaluated
+
+            # Vmapped chunks of about the one-step's FootCost evaluations at once (``chunk`` decisions of N):
+            # a lookahead decision evaluates ~10-500x as many.
+            f = _batched(one, max(1, chunk * n // _EVALS_AT_ONCE[name]))
+            for b in sizes:
+                stance, command, swing = _queries(b)
+                args = (stance[0], command[0], swing[0]) if b == 1 else (stance, command, swing)
+                fn = jax.jit(one) if b == 1 else f
+                comp, run, _, _ = _time(fn, *args, repeats=5, min_seconds=0.3, max_seconds=20.0)
+                evaluated = float(np.mean(np.asarray(fn(*args)[1])))
+                _emit(rows, dict(_env(), bench="lookahead", selector=name, terrain="2.5D" if has_height else "2D",
+                                 batch=b, compile_s=round(comp, 3), run_s=run, decisions_per_s=b / run,
+                                 us_per_decision=1e6 * run / b, footcost_evals_per_decision=evaluated))
+    # The beam's loss against the exact search, on decisions from one-step walks of the constrained families.
+    per_family, steps = (2, 4) if quick else ((8, 12) if cpu else (64, 16))
+    cases = [(2, k) for k in (1, 4, 16, 64)] + [(3, k) for k in (4, 16, 64)]
+    for label, terrains, decisions in _constrained_decisions(robot, per_family, steps):
+        idx = np.asarray([d[0] for d in decisions])
+        maps = jax.tree_util.tree_map(lambda a, idx=idx: a[idx], terrains)  # each decision's terrain
+        stance, side, swing, command = (jnp.asarray(np.stack([d[j] for d in decisions]), jnp.float32)
+                                        for j in (1, 2, 3, 4))
+
+        def plan(st, t, sd, sw, cmd, horizon, beam):  # stance first: _batched reads the batch size from it
+            return select.lookahead_plan(t, robot, st, sd, cmd, horizon=horizon, beam=beam, swing_from=sw,
+                                         targets=targets)
+
+        exact = {}
+        for horizon in (2, 3):
+            # Decisions in vmapped chunks (the exact search of H = 3 holds chunk x chunk x N FootCosts per decision).
+            f = _batched(lambda *a, h=horizon: plan(*a, h, None), 128 if horizon == 2 else 16)
+            t0 = time.perf_counter()
+            exact[horizon] = jax.block_until_ready(f(stance, maps, side, swing, command))
+            _emit(rows, dict(_env(), bench="lookahead-exact", family=label, horizon=horizon,
+                             decisions=len(decisions), run_s_with_compile=time.perf_counter() - t0,
+                             footcost_evals_mean=float(np.mean(np.asarray(exact[horizon].evaluated))),
+                             footcost_evals_max=float(np.max(np.asarray(exact[horizon].evaluated)))))
+        for horizon, k in cases:
+            f = _batched(lambda *a, h=horizon, k=k: plan(*a, h, k), max(1, (128 if horizon == 2 else 64) * 16 // k))
+            got = f(stance, maps, side, swing, command)
+            ref = exact[horizon]
+            a, b = np.asarray(got.score, np.float64), np.asarray(ref.score, np.float64)
+            both = np.isfinite(a) & np.isfinite(b)
+            loss = a[both] - b[both]
+            _emit(rows, dict(_env(), bench="lookahead-beam", family=label, horizon=horizon, beam=k,
+                             decisions=len(decisions), same_first_step=float(np.mean(
+                                 np.asarray(got.first) == np.asarray(ref.first))),
+                             score_loss_mean=float(loss.mean()) if loss.size else 0.0,
+                             score_loss_p95=float(np.quantile(loss, 0.95)) if loss.size else 0.0,
+                             worse_rate=float(np.mean(loss > 1e-4)) if loss.size else 0.0,
+                             beam_found_none=int(np.sum(~np.isfinite(a) & np.isfinite(b)))))
+    turning_overshoot(rows, quick)
+
+
+def turning_overshoot(rows, quick: bool):
+    """The turn-axis overshoot before (the paper's rate mode) and after (heading hold), with a simulated operator
+    (:func:`ijoy_jax.turning.overshoot_study`): turning on the spot and while walking, without and with the
+    paper's one decision of latency, on the lattice and refined. Degrees; 95% t intervals of the mean."""
+    from ijoy_jax import turning
+    from ijoy_jax.sweep.results import t_quantile
+
+    robot = ij.robots.hrp2(margin=0.02)
+    num = 16 if quick else 256
+    for forward in (0.0, 0.15):
+        for latency in (0, 1):
+            for mode in ("rate", "heading"):
+                for refine in (False, True):
+                    r = turning.overshoot_study(robot, num=num, latency=latency, mode=mode, forward=forward,
+                                                refine=refine)
+                    ci = lambda x: float(t_quantile(len(x) - 1) * np.std(x, ddof=1) / np.sqrt(len(x)))  # noqa: E731
+                    _emit(rows, dict(_env(), bench="turning-overshoot", forward_m_s=forward, latency=latency,
+                                     mode=mode, refine=refine, scenarios=num,
+                                     overshoot_deg_mean=float(np.mean(r.overshoot)),
+                                     overshoot_deg_ci95=ci(r.overshoot),
+                                     overshoot_deg_max_abs=float(np.max(np.abs(r.overshoot))),
+                                     error_to_goal_deg_mean=float(np.mean(r.error)),
+                                     error_to_goal_deg_ci95=ci(r.error)))
+
+
 def check(rows, quick: bool, chunk: int, path: str | None = None):
     """Decisions on a fixed set of queries (2D and 2.5D, both methods), for comparing devices.
 
@@ -256,11 +416,25 @@ def check(rows, quick: bool, chunk: int, path: str | None = None):
                 i, c = _batched(one, chunk)(stance, command, swing)
                 key = f"{'25d' if has_height else '2d'}_{method}" + ("" if kernel == "xla" else "_pallas")
                 out[key + "_index"], out[key + "_cost"] = np.asarray(i), np.asarray(c)
+        # Beyond the paper (#25), XLA FootCost: the two-step lookahead and the refinement, on fewer queries.
+        few = 64 if quick else 256
+        for name, kw in (("lookahead2", dict(method="lookahead", horizon=2)), ("refine", dict(refine=True))):
+            def one(st, cmd, sw, kw=kw, terrain=terrain, index=index):
+                c = select.select_step(terrain, robot, st, -1, cmd, swing_from=sw, targets=targets, index=index,
+                                       **kw)
+                return c.index, c.cost
+
+            i, c = _batched(one, max(1, chunk // 16))(stance[:few], command[:few], swing[:few])
+            key = f"{'25d' if has_height else '2d'}_{name}"
+            out[key + "_index"], out[key + "_cost"] = np.asarray(i), np.asarray(c)
     if path and os.path.exists(path):
         ref = np.load(path)
         for k in sorted(out):
             if k.endswith("_index"):
                 rk = k.replace("_pallas", "")
+                if rk not in ref:
+                    _emit(rows, dict(_env(), bench="check", case=k[:-6], missing_from_ref=path))
+                    continue
                 c, rc = out[k.replace("index", "cost")], ref[rk.replace("index", "cost")]
                 fin = np.isfinite(rc)
                 _emit(rows, dict(_env(), bench="check", case=k[:-6], decisions=len(out[k]),
@@ -273,10 +447,10 @@ def check(rows, quick: bool, chunk: int, path: str | None = None):
 
 
 def run(name: str, quick: bool = False, chunk: int = 1024, path: str | None = None) -> list:
-    """Run benchmark ``name`` ("footcost", "select" or "check"); print and return JSON rows."""
+    """Run benchmark ``name`` ("footcost", "select", "lookahead" or "check"); print and return JSON rows."""
     rows: list = []
     if name == "check":
         check(rows, quick, chunk, path)
     else:
-        {"footcost": bench_footcost, "select": bench_select}[name](rows, quick, chunk)
+        {"footcost": bench_footcost, "select": bench_select, "lookahead": bench_lookahead}[name](rows, quick, chunk)
     return rows

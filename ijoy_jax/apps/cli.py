@@ -65,9 +65,11 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--steps", type=int, default=24, help="number of steps (default: %(default)s)")
     demo.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
     bench = sub.add_parser("bench", help="run a benchmark and print JSON lines (see BENCHMARKS.md)")
-    bench.add_argument("name", choices=["footcost", "select", "check", "tune", "sim", "walk", "haptics", "cue",
-                                                 "serve"],
+    bench.add_argument("name", choices=["footcost", "select", "lookahead", "check", "tune", "sim", "walk", "haptics",
+                                        "cue", "serve"],
                        help="footcost: evaluations/s; select: decisions/s, rollout steps/s and the NumPy baseline; "
+                            "lookahead: decision time of the one-step, lookahead (H = 2 exact, all pairs, H = 3 beam) "
+                            "and refining selectors, then the beam's loss against the exact search; "
                             "check: fixed decisions saved to / compared with --ref (device agreement); "
                             "tune: seconds per forward-tuning step, compile separate; "
                             "sim: MJX biped physics steps/s by batch size next to multi-threaded C MuJoCo, then "
@@ -316,10 +318,12 @@ def _sweep(args) -> int:
     import pandas as pd
 
     agg = sweep.load_aggregates(args.dir)  # FileNotFoundError, or IncompleteSweepError (a ValueError)
-    show = [c for c in agg.columns if c.startswith(("robot.", "terrain.", "sim.")) or c == "n"]
+    show = [c for c in agg.columns if c.startswith(("robot.", "terrain.", "sim.", "selector.")) or c == "n"]
     table = agg[show].copy()
     physics = ("collided", "fell", "placement_error_mean") if "fell.mean" in agg else ()
-    for m in (*physics, "distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles"):
+    near = ("footholds_near_obstacles",) if "footholds_near_obstacles.mean" in agg else ()
+    for m in (*physics, "distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles",
+              *near):
         unit = sweep.UNITS[m]
         table[f"{m} ({unit})"] = [f"{a:.3g} +- {b:.2g}" for a, b in zip(agg[f"{m}.mean"], agg[f"{m}.ci95"],
                                                                         strict=True)]

@@ -15,7 +15,10 @@ Public names::
   balanced_chunk_size                                            balanced, no padded chunk)
   distributed                                                    several processes/hosts (jax.distributed)
   load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table (union of processes), 95% CIs, plot
-  PLOT_METRICS / PHYSICS_PLOT_METRICS                            the plot's default panels
+  paired_differences                                             cell minus baseline, replicate by replicate
+  PLOT_METRICS / PHYSICS_PLOT_METRICS / SELECTOR_PLOT_METRICS    the plot's default panels
+  SELECTOR_DEFAULTS                                              the selector's options a sweep varies
+                                                                 (lookahead horizon, refinement, discount)
   WALKERS / PHYSICS_METRICS / SIM_MIN_RESOLUTION                 walker = "mjx": the MJX biped, its metrics
                                                                  (falls, collisions, placement errors)
   IncompleteSweepError / action_counts / PAPER_ACTIONS           missing chunks, parts of another plan;
@@ -44,6 +47,7 @@ from ijoy_jax.sweep.config import (
     MAX_SCENARIOS,
     MIN_RESOLUTION,
     ROBOT_DEFAULTS,
+    SELECTOR_DEFAULTS,
     SIM_MIN_RESOLUTION,
     WALKERS,
     SweepConfig,
@@ -75,6 +79,7 @@ from ijoy_jax.sweep.results import (
     PHYSICS_METRICS,
     PHYSICS_PLOT_METRICS,
     PLOT_METRICS,
+    SELECTOR_PLOT_METRICS,
     UNITS,
     IncompleteSweepError,
     action_counts,
@@ -82,6 +87,7 @@ from ijoy_jax.sweep.results import (
     b_max,
     load,
     load_aggregates,
+    paired_differences,
     part_plan,
     plan_hash,
     plot,
@@ -108,6 +114,8 @@ __all__ = [
     "PHYSICS_PLOT_METRICS",
     "PLOT_METRICS",
     "ROBOT_DEFAULTS",
+    "SELECTOR_DEFAULTS",
+    "SELECTOR_PLOT_METRICS",
     "SIM_MIN_RESOLUTION",
     "UNITS",
     "WALKERS",
@@ -127,6 +135,7 @@ __all__ = [
     "load",
     "load_aggregates",
     "load_config",
+    "paired_differences",
     "parse_config",
     "part_plan",
     "plan_hash",

@@ -14,6 +14,10 @@ A sweep file has these tables (every key optional unless noted; units in bracket
     kernel = "xla"                # FootCost: "xla" or "pallas" (the fused kernel: GPU; interpreted elsewhere)
     random_samples = 0            # cells drawn from [random] (crossed with the grid)
     walker = "perfect"            # "perfect" (every step lands as sent) or "mjx" (the MuJoCo XLA biped)
+    horizon = 1                   # method = "lookahead": steps scored per decision (1: the one-step selector)
+    beam = 16                     # method = "lookahead", horizons >= 3: sequences kept per level (omit: exact)
+    refine = false                # refine each step in continuous (dx, dy, dtheta) (ijoy_jax.refine)
+    discount = 1.0                # the lookahead's discount gamma
 
     [robot]                       # fixed robot values (HRP-2's defaults otherwise)
     margin = 0.02                 # [m]
@@ -36,7 +40,9 @@ A sweep file has these tables (every key optional unless noted; units in bracket
 
     [grid]                        # cartesian product of value lists
     "robot.w" = [0.0, 0.5, 1, 2, 4]
-    "robot.density" = [0.5, 1.0]  # the one shape-changing axis: one compile per value
+    "robot.density" = [0.5, 1.0]  # a shape-changing axis: one compile per value
+    "selector.horizon" = [1, 2, 3]  # static too: one compile per value (method = "lookahead")
+    "selector.refine" = [false, true]
 
     [random]                      # uniform [lo, hi] per random cell (not density)
     "robot.margin" = [0.0, 0.1]
@@ -49,7 +55,12 @@ Parameter names are ``robot.<name>`` (``w``, ``rotation_weight``, ``margin``,
 ``step_time``, ``foot_length``, ``foot_width``, ``max_sole_pitch``,
 ``max_sole_roll``, ``max_sole_distance``, ``density``,
 ``metrics.<TerrainMetrics field>``), ``terrain.<field of the family's
-parameter class>`` and, with ``walker = "mjx"``, ``sim.<field>`` (the fields of
+parameter class>``, ``selector.<name>`` (the selector's options:
+``selector.horizon`` and ``selector.refine`` in ``[grid]`` only, they are
+static; ``selector.discount`` in either; their fixed values are the
+``[sweep]`` keys ``horizon``, ``refine`` and ``discount``; the beam applies to
+horizons of 3 or more, horizon 2 is searched exactly) and, with
+``walker = "mjx"``, ``sim.<field>`` (the fields of
 :class:`ijoy_jax.sim.physics.Dynamics`: ``friction``, ``mass_scale``, ``kp_scale``,
 ``latency`` [s], ``stance_noise`` [m], ``push`` [N s]; bounds in
 :data:`ijoy_jax.sim.physics.BOUNDS`). In ``[grid]`` and
@@ -114,6 +125,7 @@ from ijoy_jax.terrain.family import Family, ParamError
 
 __all__ = [
     "COMMAND_KEYS",
+    "SELECTOR_DEFAULTS",
     "SIM_MIN_RESOLUTION",
     "WALKERS",
     "HOST_MEMORY_FRACTION",
@@ -183,7 +195,12 @@ _PROGRESS_EVERY = 1 << 22  # replicates between progress lines while drawing com
 
 _SECTIONS = ("sweep", "robot", "terrain", "command", "grid", "random", "sim")
 _SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps", "method", "kernel",
-               "random_samples", "walker")
+               "random_samples", "walker", "horizon", "beam", "refine", "discount")
+
+SELECTOR_DEFAULTS: Mapping[str, float] = MappingProxyType({"horizon": 1, "refine": False, "discount": 1.0})
+"""The selector options a sweep may vary (``selector.<name>``; fixed values: the ``[sweep]`` keys of the same
+name) and their defaults: the lookahead's horizon (static, int >= 1), refinement (static, bool) and discount."""
+_SELECTOR_STATIC = ("horizon", "refine")  # shape or program changing: [grid] only, one compile per value
 _TERRAIN_KEYS = ("family", "shape", "resolution", "has_height", "max_count", "params")
 
 
@@ -207,13 +224,15 @@ class SweepConfig:
         kernel (the same decisions; several times faster on a GPU, slow interpreted on a CPU).
       random_samples: random cells drawn from ``random`` (0: none).
       walker: who executes the steps, one of :data:`WALKERS` (static).
+      horizon, refine, discount: the selector's options (:data:`SELECTOR_DEFAULTS`), unless swept as
+        ``selector.<name>``; beam: the lookahead's beam for horizons >= 3 (None: exact).
       family: terrain family name; shape (nx, ny) cells; resolution (m);
         has_height; max_count (static object slots, None: the family's default).
       robot: fixed robot values, ``{name: float}`` (names as in :data:`ROBOT_DEFAULTS`).
       terrain_params: fixed terrain parameters, ``{field: number}``.
       command: ``{component: (lo, hi)}``, lo == hi for a fixed value (m/s, rad/s).
-      grid: ``{"robot.x" | "terrain.x" | "sim.x": (values...)}``.
-      random: ``{"robot.x" | "terrain.x" | "sim.x": (lo, hi)}``.
+      grid: ``{"robot.x" | "terrain.x" | "sim.x" | "selector.x": (values...)}``.
+      random: ``{"robot.x" | "terrain.x" | "sim.x" | "selector.discount": (lo, hi)}``.
       sim: ``{key: (lo, hi)}`` of the ``[sim]`` table, lo == hi for a fixed value (``walker = "mjx"``).
       source: the file it came from; text: the file's text (saved with the results).
     """
@@ -227,6 +246,10 @@ class SweepConfig:
     kernel: str = "xla"
     random_samples: int = 0
     walker: str = "perfect"
+    horizon: int = 1
+    beam: int | None = None
+    refine: bool = False
+    discount: float = 1.0
     family: str = "obstacles"
     shape: tuple[int, int] = (150, 100)
     resolution: float = 0.02
@@ -436,6 +459,14 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         kw["kernel"] = chk.string("sweep.kernel", sweep["kernel"], KERNELS)
     if "walker" in sweep:
         kw["walker"] = chk.string("sweep.walker", sweep["walker"], WALKERS)
+    if "horizon" in sweep:
+        kw["horizon"] = chk.integer("sweep.horizon", sweep["horizon"], lo=1, hi=_MAX_HORIZON)
+    if "beam" in sweep:
+        kw["beam"] = chk.integer("sweep.beam", sweep["beam"], lo=1)
+    if "refine" in sweep:
+        kw["refine"] = _bool(chk, "sweep.refine", sweep["refine"])
+    if "discount" in sweep:
+        kw["discount"] = _discount(chk, "sweep.discount", sweep["discount"])
     mjx = kw.get("walker") == "mjx"
     sim_fields = _sim_fields() if mjx else ()
 
@@ -498,11 +529,13 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
                      if isinstance(v, list) else (_sim_value(chk, f"sim.{k}", k, v),) * 2) for k, v in sim.items()}
 
     def param(dotted: str, key: str, value):
-        """Validate one swept value of the parameter ``dotted`` ("robot.x", "terrain.x" or "sim.x"), reported as
-        ``key``."""
+        """Validate one swept value of the parameter ``dotted`` ("robot.x", "terrain.x", "sim.x" or
+        "selector.x"), reported as ``key``."""
         head, _, name = dotted.partition(".")
         if head == "robot":
             return _robot_value(chk, key, name, value)
+        if head == "selector":
+            return _selector_value(chk, key, name, value)
         if head == "sim":
             return _sim_value(chk, key, name, value)
         return _terrain_value(chk, key, fam, name, value, max_count)
@@ -512,9 +545,15 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         if head == "sim" and not mjx:
             chk.fail(f"{section}.{key}", 'physics needs [sweep] walker = "mjx" (the perfect robot has none)')
         known = (tuple(f"robot.{k}" for k in ROBOT_DEFAULTS) + tuple(f"terrain.{k}" for k in fields)
-                 + tuple(f"sim.{k}" for k in sim_fields))
+                 + tuple(f"sim.{k}" for k in sim_fields) + tuple(f"selector.{k}" for k in SELECTOR_DEFAULTS))
         if key not in known:
             chk.fail(f"{section}.{key}", f"unknown parameter; known: {', '.join(known)}")
+        if head == "selector":
+            if name in sweep:
+                chk.fail(f"{section}.{key}", f"also set as a fixed value in [sweep] ({name}); set it in one place")
+            if section == "random" and name in _SELECTOR_STATIC:
+                chk.fail(f"random.{key}", f"{name} is static (one compile per value): sweep it in [grid]")
+            return
         fixed = {"robot": kw["robot"], "terrain": kw["terrain_params"], "sim": kw["sim"]}[head]
         if name in fixed:
             chk.fail(f"{section}.{key}", f"also set as a fixed value in [{head}]; set it in one place")
@@ -554,6 +593,7 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         chk.fail("sweep.random_samples", "is set but [random] is empty")
 
     cfg = SweepConfig(**kw)
+    _check_selector(chk, cfg)
     _check_size(chk, cfg)  # before cells() or scenarios() allocate anything
     if mjx:
         _check_walker(chk, cfg)
@@ -628,6 +668,65 @@ def _blame(fam: Family, field: str, kw: dict) -> str:
     return f"terrain.params.{field}"
 
 
+_MAX_HORIZON = 8
+"""Longest lookahead a sweep accepts: a beam search costs (horizon - 1) x beam x N FootCost evaluations per step."""
+
+
+def _bool(chk: _Checker, key: str, value) -> bool:
+    if not isinstance(value, bool):
+        chk.fail(key, f"must be true or false, got {type(value).__name__} {value!r}")
+    return value
+
+
+def _discount(chk: _Checker, key: str, value) -> float:
+    v = chk.number(key, value)
+    if v < 0:
+        chk.fail(key, f"must be >= 0 (the weight of each later step), got {v}")
+    return v
+
+
+def _selector_value(chk: _Checker, key: str, name: str, value):
+    """Check one value of a selector option (``name`` in :data:`SELECTOR_DEFAULTS`)."""
+    if name == "horizon":
+        return chk.integer(key, value, lo=1, hi=_MAX_HORIZON)
+    if name == "refine":
+        return _bool(chk, key, value)
+    return _discount(chk, key, value)
+
+
+def _selector_values(cfg: SweepConfig, name: str) -> tuple:
+    """Every value the selector option ``name`` takes in the sweep (its grid values, or its fixed value)."""
+    key = f"selector.{name}"
+    if key in cfg.grid:
+        return cfg.grid[key]
+    if key in cfg.random:
+        return cfg.random[key]
+    return (getattr(cfg, name),)
+
+
+def _check_selector(chk: _Checker, cfg: SweepConfig) -> None:
+    """The selector options fit the method and the walker (before compute)."""
+    horizons = _selector_values(cfg, "horizon")
+    where = "grid.selector.horizon" if "selector.horizon" in cfg.grid else "sweep.horizon"
+    if cfg.method != "lookahead" and max(horizons) > 1:
+        chk.fail(where, f'a horizon above 1 needs [sweep] method = "lookahead", got method = {cfg.method!r}')
+    if cfg.beam is not None and cfg.method != "lookahead":
+        chk.fail("sweep.beam", f'the beam is an option of method = "lookahead", got method = {cfg.method!r}')
+    if cfg.beam is not None and cfg.beam > robots.hrp2(density=max(_density_values(cfg))).num_actions:
+        chk.fail("sweep.beam", f"must be at most the action set's size, got {cfg.beam}")
+    refines = _selector_values(cfg, "refine")
+    if any(refines) and cfg.method == "naive":
+        chk.fail("grid.selector.refine" if "selector.refine" in cfg.grid else "sweep.refine",
+                 "refinement applies to the terrain-aware methods; method = \"naive\" ignores the terrain")
+    if cfg.walker == "mjx" and (cfg.method == "lookahead" or any(refines)):
+        chk.fail("sweep.method" if cfg.method == "lookahead" else "sweep.refine",
+                 'walker = "mjx" runs the one-step selectors (exhaustive, ordered, naive) without refinement')
+
+
+def _density_values(cfg: SweepConfig) -> tuple:
+    return cfg.grid.get("robot.density", (cfg.robot.get("density", ROBOT_DEFAULTS["density"]),))
+
+
 def _host_memory() -> int | None:
     """This host's physical memory in bytes (None where the OS does not say)."""
     try:
@@ -648,7 +747,8 @@ def table_bytes(cfg: SweepConfig, num_scenarios: int | None = None) -> int:
     from ijoy_jax.sweep.results import METRICS, PHYSICS_METRICS
 
     fam = generators.FAMILIES[cfg.family]
-    columns = 4 + len(ROBOT_DEFAULTS) + len(fam.rules) + len(COMMAND_KEYS) + len(METRICS) + len(fam.metric_names)
+    columns = (4 + len(ROBOT_DEFAULTS) + len(fam.rules) + len(COMMAND_KEYS) + len(SELECTOR_DEFAULTS) + len(METRICS)
+               + len(fam.metric_names))
     if cfg.walker == "mjx":
         columns += len(_sim_fields()) + len(PHYSICS_METRICS)
     n = cfg.num_scenarios if num_scenarios is None else num_scenarios
@@ -771,6 +871,7 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     Columns: ``scenario``, ``cell``, ``replicate``, ``robot.<name>`` (all of
     :data:`ROBOT_DEFAULTS`), ``terrain.<field>`` (all of the family's
     parameters), ``command.vx`` (m/s), ``command.vy`` (m/s), ``command.wz`` (rad/s),
+    ``selector.horizon``, ``selector.refine`` (int64, 0 or 1), ``selector.discount``,
     and for ``walker = "mjx"`` ``sim.<field>`` (every :class:`ijoy_jax.sim.physics.Dynamics`
     field: the grid's, random cell's, ``[sim]``'s or the nominal value).
 
@@ -804,8 +905,9 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     sim_fields = _sim_fields() if cfg.walker == "mjx" else ()
     names = ["scenario", "cell", "replicate", *(f"robot.{n}" for n in ROBOT_DEFAULTS),
              *(f"terrain.{n}" for n in fields), *(f"command.{k}" for k in COMMAND_KEYS),
-             *(f"sim.{k}" for k in sim_fields)]
-    ints = {"scenario", "cell", "replicate", *(f"terrain.{n}" for n in fields if rules[n].integer)}
+             *(f"selector.{k}" for k in SELECTOR_DEFAULTS), *(f"sim.{k}" for k in sim_fields)]
+    ints = {"scenario", "cell", "replicate", *(f"terrain.{n}" for n in fields if rules[n].integer),
+            *(f"selector.{k}" for k in _SELECTOR_STATIC)}
     floats = [n for n in names if n not in ints]
     block = np.empty((len(floats), total))
     cols: dict[str, np.ndarray] = {n: block[i] for i, n in enumerate(floats)}
@@ -829,7 +931,8 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     per_replicate(cols["replicate"], np.arange(reps, dtype=np.int64))
     defaults = cfg.params_class()
     fixed = {**{f"robot.{n}": cfg.robot.get(n, d) for n, d in ROBOT_DEFAULTS.items()},
-             **{f"terrain.{n}": cfg.terrain_params.get(n, getattr(defaults, n)) for n in fields}}
+             **{f"terrain.{n}": cfg.terrain_params.get(n, getattr(defaults, n)) for n in fields},
+             **{f"selector.{n}": getattr(cfg, n) for n in SELECTOR_DEFAULTS}}
     for key, value in fixed.items():
         out = cols[key]
         if key in c:

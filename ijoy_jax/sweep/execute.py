@@ -36,8 +36,10 @@ is the one any caller of those shapes uses), and a vmap of
 same as for the perfect robot.
 
 Compiles (measured by :func:`trace_count`, tested): parameter values never
-recompile (physics values neither: they are traced leaves); each density value compiles once (its
-action-set size is a shape; no padding of action sets). Static too: the terrain family, grid shape,
+recompile (physics values and the lookahead's discount neither: they are traced leaves); each density
+value compiles once (its action-set size is a shape; no padding of action sets), and so does each value of
+the selector's static options (``selector.horizon``, ``selector.refine``): chunks are grouped by density,
+horizon and refinement. Static too: the terrain family, grid shape,
 resolution, 2D/2.5D flag, ``num_steps``, ``method``, ``kernel``, ``walker`` and the chunk shape
 ``min(chunk_size, scenarios of that density)`` rounded up to a multiple of
 the device count. When ``robot.rotation_weight`` is not swept, the targets F
@@ -155,6 +157,9 @@ class _Static(NamedTuple):
     method: str
     kernel: str
     walker: str
+    horizon: int = 1
+    beam: int | None = None
+    refine: bool = False
 
 
 def _setup(static: _Static, base: robots.Robot, key, seed, robot_vals, terrain_vals):
@@ -181,8 +186,10 @@ def _family_metrics(static: _Static, tkey, params, feet, robot) -> dict:
 def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_vals, terrain_vals, command):
     """One scenario of the perfect robot: terrain, robot, start and rollout; the trajectory's summary (scalars)."""
     tkey, params, terrain, robot, start = _setup(static, base, key, seed, robot_vals, terrain_vals)
+    lookahead = dict(horizon=static.horizon, beam=static.beam if static.horizon >= 3 else None,
+                     discount=robot_vals["discount"]) if static.method == "lookahead" else {}
     traj = rollout(terrain, robot, start, command, static.num_steps, method=static.method, targets=targets,
-                   kernel=static.kernel)
+                   kernel=static.kernel, refine=static.refine, **lookahead)
     return {**traj.summary(), **_family_metrics(static, tkey, params, traj.feet, robot)}
 
 
@@ -275,7 +282,8 @@ class RunStats:
       compiles: traces of the chunk function during this call.
       devices: devices the scenario batch is sharded over; chunk_size: the
         plan's chunk size (the requested one rounded up to a multiple of devices).
-      first_chunk_s: per density, wall time of its first chunk (includes compile).
+      first_chunk_s: per density (and selector horizon and refinement, when the sweep varies them: see
+        the group's label), wall time of its first chunk (includes compile).
       run_s: total wall time of this call.
       rate: scenarios/s over the chunks after each density's first (0 when there were none).
       physics_steps: physics steps per scenario (``walker = "mjx"``: the steps and the robot's one standing
@@ -475,15 +483,34 @@ def _write_part(df, path: Path, plan_record: dict) -> None:
     pq.write_table(table.replace_schema_metadata(meta), path)
 
 
-def _plan(cfg: SweepConfig, table, chunk_size: int) -> list[tuple[int, float, np.ndarray]]:
-    """Chunks as (chunk id, density, scenario ids), by density in order of first appearance."""
+def _groups(table) -> np.ndarray:
+    """Each scenario's compile group: (density, selector horizon, selector refine) as a structured array."""
+    out = np.empty(len(table), [("density", "f8"), ("horizon", "i8"), ("refine", "i8")])
+    out["density"] = table["robot.density"].to_numpy()
+    out["horizon"] = table["selector.horizon"].to_numpy()
+    out["refine"] = table["selector.refine"].to_numpy()
+    return out
+
+
+def _plan(cfg: SweepConfig, table, chunk_size: int) -> list[tuple[int, tuple, np.ndarray]]:
+    """Chunks as (chunk id, group, scenario ids), by group (what changes the compiled program: density, the
+    selector's horizon and refinement) in order of first appearance."""
     plan = []
-    dens = table["robot.density"].to_numpy()
-    for d in dict.fromkeys(dens.tolist()):
-        ids = table["scenario"].to_numpy()[dens == d]
+    groups = _groups(table)
+    for g in dict.fromkeys(groups.tolist()):
+        ids = table["scenario"].to_numpy()[groups == np.array(g, groups.dtype)]
         for i in range(0, len(ids), chunk_size):
-            plan.append((len(plan), float(d), ids[i : i + chunk_size]))
+            plan.append((len(plan), (float(g[0]), int(g[1]), bool(g[2])), ids[i : i + chunk_size]))
     return plan
+
+
+def _group_label(cfg: SweepConfig, group: tuple):
+    """How a group is named in :attr:`RunStats.first_chunk_s`: its density when the selector is not swept,
+    else ``"<density> horizon=<h> refine=<r>"``."""
+    density, horizon, refine = group
+    if "selector.horizon" not in cfg.grid and "selector.refine" not in cfg.grid:
+        return density
+    return f"{density:g} horizon={horizon} refine={str(refine).lower()}"
 
 
 def _local_devices(devices) -> list:
@@ -547,7 +574,8 @@ def _shared(table, base):
 
 
 def _cols(table):
-    robot_cols = [f"robot.{k}" for k in ROBOT_DEFAULTS if k != "density"]
+    # The lookahead's discount travels with the robot values (traced per scenario, like them).
+    robot_cols = [f"robot.{k}" for k in ROBOT_DEFAULTS if k != "density"] + ["selector.discount"]
     return (robot_cols, [c for c in table.columns if c.startswith("terrain.")],
             [c for c in table.columns if c.startswith("sim.")])
 
@@ -566,7 +594,7 @@ def _device_bytes(device) -> int | None:
 
 def _static(cfg: SweepConfig) -> _Static:
     return _Static(cfg.family, cfg.shape, cfg.resolution, cfg.has_height, cfg.static_max_count,
-                   cfg.num_steps, cfg.method, cfg.kernel, cfg.walker)
+                   cfg.num_steps, cfg.method, cfg.kernel, cfg.walker, cfg.horizon, cfg.beam, cfg.refine)
 
 
 def _make_sim(cfg: SweepConfig, table):
@@ -606,7 +634,9 @@ def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot, sim=None) -> tup
     sim = _make_sim(cfg, table) if sim is None else sim
     batch = _batch(table.iloc[:1], 1, robot_cols, terrain_cols, sim_cols)
     runner = _run_chunk if cfg.walker == "perfect" else jax.jit(_physics_chunk, static_argnames=("static",))
-    compiled = runner.lower(_static(cfg), base, targets, key, sim, *batch).compile()
+    heaviest = _static(cfg)._replace(horizon=int(table["selector.horizon"].max()),
+                                     refine=bool(table["selector.refine"].max()))  # the most memory per scenario
+    compiled = runner.lower(heaviest, base, targets, key, sim, *batch).compile()
     mem = compiled.memory_analysis()
     if mem is None:
         raise RuntimeError("the backend reports no memory analysis")
@@ -821,8 +851,10 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     run_chunk = _chunk_runner(static)
     key = jax.random.key(cfg.seed)
     robot_cols, terrain_cols, sim_cols = _cols(table)
-    # Scenarios per density, counted once (per chunk, a pass over the whole table cost ~20 ms at 2e7 rows).
-    per_density = {d: int(n) for d, n in table["robot.density"].value_counts(sort=False).items()}
+    # Scenarios per group, counted once (per chunk, a pass over the whole table cost ~20 ms at 2e7 rows).
+    per_group = {}
+    for _, group, ids in plan:
+        per_group[group] = per_group.get(group, 0) + len(ids)
     todo = [p for p in mine_plan if not (parts / _PART.format(p[0])).exists()]
     stats.skipped = len(mine_plan) - len(todo)
     total = int(sum(len(p[2]) for p in mine_plan))
@@ -833,7 +865,10 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     shared_of: dict[float, Any] = {}  # per density: (base robot, targets, key), placed
     computed = steady_n = 0
     steady_s = 0.0
-    for chunk_id, density, ids in todo:
+    for chunk_id, group, ids in todo:
+        density = group[0]
+        static_g = static._replace(horizon=group[1], refine=group[2])
+        label = _group_label(cfg, group)
         t0 = time.perf_counter()
         if density not in shared_of:
             # Shared by every scenario: replicated on every device of the mesh.
@@ -842,12 +877,12 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
         base_d, targets, key_d, sim_d = shared_of[density]
         rows = by_id.loc[ids]
         n = len(rows)
-        size = min(chunk_size, per_density[density])
+        size = min(chunk_size, per_group[group])
         size = -(-size // ndev) * ndev  # every device gets the same number of rows
         batch = _batch(rows, size, robot_cols, terrain_cols, sim_cols)
         # Per-scenario inputs: split along the scenario axis over the mesh (one device: default device).
         batch = jax.tree.map(jnp.asarray, batch) if batched is None else jax.device_put(batch, batched)
-        summary = run_chunk(static, base_d, targets, key_d, sim_d, *batch)
+        summary = run_chunk(static_g, base_d, targets, key_d, sim_d, *batch)
         summary = jax.device_get(jax.block_until_ready(summary))
         result = rows.reset_index(drop=True).copy()
         for k, v in summary.items():
@@ -858,8 +893,8 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
         _write_part(result, tmp, plan_record)
         os.replace(tmp, path)
         dt = time.perf_counter() - t0
-        if density not in stats.first_chunk_s:
-            stats.first_chunk_s[density] = dt  # includes the compile
+        if label not in stats.first_chunk_s:
+            stats.first_chunk_s[label] = dt  # includes the compile
         else:
             steady_n, steady_s = steady_n + n, steady_s + dt
         computed += n

@@ -32,14 +32,17 @@ import numpy as np
 from ijoy_jax.terrain import generators
 
 __all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "PHYSICS_METRICS", "PHYSICS_PLOT_METRICS", "PLAN_KEY",
-           "PLOT_METRICS", "UNITS", "IncompleteSweepError", "action_counts",
-           "aggregate", "b_max", "check_plans", "describe_plan", "load", "load_aggregates", "part_plan", "plan_hash",
+           "PLOT_METRICS", "SELECTOR_PLOT_METRICS", "UNITS", "IncompleteSweepError", "action_counts",
+           "aggregate", "b_max", "check_plans", "describe_plan", "load", "load_aggregates", "paired_differences",
+           "part_plan", "plan_hash",
            "plot", "plot_crossing", "t_quantile"]
 
 METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
-           "invalid_footholds", "distance_along", "distance_across", "mean_deviation", "mean_foot_cost",
-           "commands_not_finite", "unsupported_decisions")
-"""Rollout metrics (:meth:`ijoy_jax.Trajectory.summary`) in every results table."""
+           "footholds_near_obstacles", "invalid_footholds", "distance_along", "distance_across", "mean_deviation",
+           "mean_foot_cost", "commands_not_finite", "unsupported_decisions")
+"""Rollout metrics (:meth:`ijoy_jax.Trajectory.summary`) in every results table (``footholds_near_obstacles``:
+footholds taken with an obstacle within :data:`ijoy_jax.control.NEAR_OBSTACLE` of the foot; absent from
+results written before it existed, which aggregate without it)."""
 
 PHYSICS_METRICS = ("fell", "collided", "obstacle_contacts", "placement_error_mean", "placement_error_p95",
                    "yaw_error_mean", "tilt_error_p95", "dynamics_invalid")
@@ -54,7 +57,8 @@ aggregated when present; bars: ``bars_crossed`` bars passed by both feet, ``cros
 
 UNITS = {
     "steps_taken": "steps", "steps_in_place": "steps", "steps_stationary": "steps", "stopped": "fraction",
-    "footholds_on_obstacles": "footholds", "invalid_footholds": "footholds", "distance_along": "m",
+    "footholds_on_obstacles": "footholds", "footholds_near_obstacles": "footholds", "invalid_footholds": "footholds",
+    "distance_along": "m",
     "distance_across": "m",
     "mean_deviation": "m", "mean_foot_cost": "cost units", "commands_not_finite": "decisions",
     "unsupported_decisions": "decisions", "robot.w": "cost units per m",
@@ -67,8 +71,11 @@ UNITS = {
     "placement_error_p95": "m", "yaw_error_mean": "rad", "tilt_error_p95": "rad", "dynamics_invalid": "fraction",
     "sim.friction": "coefficient", "sim.mass_scale": "x nominal", "sim.kp_scale": "x nominal", "sim.latency": "s",
     "sim.stance_noise": "m", "sim.push": "N s",
+    "selector.horizon": "steps scored", "selector.refine": "0 or 1", "selector.discount": "1",
 }
 """Units of metrics and parameters, for tables and axis labels."""
+
+_PARAMS = ("robot.", "terrain.", "sim.", "selector.")  # the prefixes of the parameter columns
 
 _NORMAL_975 = 1.959963984540054
 
@@ -253,7 +260,7 @@ def aggregate(df, by=None):
     Args:
       df: a per-scenario table (:func:`load`).
       by: parameter columns to keep alongside ``cell`` (default: every
-        ``robot.*``/``terrain.*``/``sim.*`` column that varies).
+        ``robot.*``/``terrain.*``/``sim.*``/``selector.*`` column that varies).
 
     Returns:
       pandas.DataFrame, one row per cell: ``cell``, the ``by`` columns, and
@@ -262,16 +269,76 @@ def aggregate(df, by=None):
     import pandas as pd
 
     if by is None:
-        by = [c for c in df.columns if c.startswith(("robot.", "terrain.", "sim.")) and df[c].nunique() > 1]
+        by = [c for c in df.columns if c.startswith(_PARAMS) and df[c].nunique() > 1]
     rows = []
     for cell, g in df.groupby("cell", sort=True):
         row = {"cell": cell, **{c: g[c].iloc[0] for c in by}, "n": len(g)}
         t = t_quantile(len(g) - 1)
-        for m in METRICS + tuple(e for e in EXTRA_METRICS + PHYSICS_METRICS if e in df.columns):
+        for m in tuple(e for e in METRICS + EXTRA_METRICS + PHYSICS_METRICS if e in df.columns):
             x = g[m].to_numpy(np.float64)
             std = float(np.std(x, ddof=1)) if len(x) > 1 else math.nan
             sem = std / math.sqrt(len(x))
             row.update({f"{m}.mean": float(np.mean(x)), f"{m}.std": std, f"{m}.sem": sem, f"{m}.ci95": t * sem})
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def paired_differences(df, baseline: dict, metrics=None, by=None):
+    """Per cell, the mean difference of each metric from a baseline cell, replicate by replicate, with 95% CIs.
+
+    Replicate r of every cell runs on the same terrain with the same command (:func:`ijoy_jax.sweep.scenarios`),
+    so the difference ``metric(cell, r) - metric(baseline, r)`` removes the variation between terrains: its
+    t interval is the one to read when comparing cells (the marginal intervals of :func:`aggregate` overlap
+    where the paired one does not).
+
+    Args:
+      df: a per-scenario table (:func:`load`).
+      baseline: ``{column: value}`` naming the baseline cell's parameters (e.g. ``{"selector.horizon": 1,
+        "selector.refine": 0}``); every other varying parameter column must match too (compared within it).
+      metrics: the metrics (default: :data:`METRICS` present in ``df``).
+      by: the parameter columns that define the cells (default: every varying ``robot.*``, ``terrain.*``,
+        ``sim.*`` and ``selector.*`` column).
+
+    Returns:
+      pandas.DataFrame, one row per cell: its ``by`` columns, ``n`` (paired replicates) and per metric
+      ``m.diff`` (mean difference) and ``m.ci95`` (half-width of its 95% t interval; NaN for n < 2).
+
+    Example:
+      >>> import pandas as pd
+      >>> df = pd.DataFrame({"cell": [0, 0, 1, 1], "replicate": [0, 1, 0, 1], "selector.horizon": [1, 1, 2, 2],
+      ...                    "distance_along": [1.0, 2.0, 1.5, 2.75]})
+      >>> paired_differences(df, {"selector.horizon": 1}, ["distance_along"])["distance_along.diff"].tolist()
+      [0.0, 0.625]
+    """
+    import pandas as pd
+
+    if by is None:
+        by = [c for c in df.columns if c.startswith(_PARAMS) and df[c].nunique() > 1]
+    if metrics is None:
+        metrics = [m for m in METRICS if m in df.columns]
+    missing = [k for k in baseline if k not in df.columns]
+    if missing:
+        raise ValueError(f"baseline names columns the table does not have: {missing}")
+    others = [c for c in by if c not in baseline]
+    base = df
+    for k, v in baseline.items():
+        base = base[base[k] == v]
+    if base.empty:
+        raise ValueError(f"no scenario matches the baseline {baseline}")
+    keyed = base.set_index([*others, "replicate"])[list(metrics)]
+    rows = []
+    for cell, g in df.groupby("cell", sort=True):
+        key_cols = [*others, "replicate"]
+        mine = g.set_index(key_cols)[list(metrics)]
+        common = mine.index.intersection(keyed.index)
+        d = mine.loc[common].astype(float) - keyed.loc[common].astype(float)
+        n = len(d)
+        row = {"cell": cell, **{c: g[c].iloc[0] for c in by}, "n": n}
+        t = t_quantile(n - 1) if n > 1 else math.nan
+        for m in metrics:
+            x = d[m].to_numpy(np.float64)
+            row[f"{m}.diff"] = float(np.mean(x)) if n else math.nan
+            row[f"{m}.ci95"] = float(t * np.std(x, ddof=1) / math.sqrt(n)) if n > 1 else math.nan
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -303,6 +370,11 @@ PLOT_METRICS = ("distance_along", "mean_deviation", "mean_foot_cost", "steps_in_
                 "footholds_on_obstacles")
 """The panels :func:`plot` draws by default for a perfect-robot sweep."""
 
+SELECTOR_PLOT_METRICS = ("distance_along", "steps_in_place", "steps_stationary", "stopped", "footholds_near_obstacles",
+                         "mean_deviation")
+"""The panels :func:`plot` draws by default for a sweep over the selector's options (``selector.*``): progress,
+marking time, stops, and how close the feet come to obstacles."""
+
 PHYSICS_PLOT_METRICS = ("collided", "fell", "obstacle_contacts", "placement_error_mean", "distance_along",
                         "footholds_on_obstacles")
 """The panels :func:`plot` draws by default for a ``walker = "mjx"`` sweep: collision and fall rates first."""
@@ -319,7 +391,7 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
       out: PNG path.
       x: the parameter on the x axis (default: the swept column with most values).
       metrics: the metrics to plot (one panel each; default :data:`PHYSICS_PLOT_METRICS` for a physics sweep,
-        else :data:`PLOT_METRICS`).
+        :data:`SELECTOR_PLOT_METRICS` for one over the selector's options, else :data:`PLOT_METRICS`).
       title: figure title.
 
     Other swept columns become one line each (legend). A robot parameter's
@@ -340,7 +412,9 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
     if "crossed.mean" in agg and "terrain.width" in agg and x in (None, "terrain.width") and metrics is None:
         return plot_crossing(agg, out, title=title)
     if metrics is None:
-        metrics = PHYSICS_PLOT_METRICS if "fell.mean" in agg else PLOT_METRICS
+        selector = any(c.startswith("selector.") for c in agg.columns) and "footholds_near_obstacles.mean" in agg
+        metrics = (PHYSICS_PLOT_METRICS if "fell.mean" in agg else SELECTOR_PLOT_METRICS if selector
+                   else PLOT_METRICS)
     import matplotlib
 
     from ijoy_jax.sweep.config import ROBOT_DEFAULTS
@@ -348,7 +422,7 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    params = [c for c in agg.columns if c.startswith(("robot.", "terrain.", "sim."))]
+    params = [c for c in agg.columns if c.startswith(_PARAMS)]
     if x is None:
         x = max(params, key=lambda c: agg[c].nunique()) if params else "cell"
     others = [c for c in params if c != x]
@@ -391,6 +465,9 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
                 ax.set_xscale("symlog", linthresh=float(pos.min()), linscale=0.5)
                 ax.set_xlim(min(0.0, float(agg[x].min())) - 0.3 * float(pos.min()), 1.5 * float(agg[x].max()))
             ax.set_xlabel(f"{x.partition('.')[2] or x} ({UNITS.get(x, '-')})")
+            ticks = np.unique(xv(agg[x])) if x in agg else np.array([])
+            if 0 < len(ticks) <= 12 and np.allclose(ticks, np.round(ticks)):
+                ax.set_xticks(ticks)  # a count (the lookahead's horizon): no ticks between its values
         ax.set_ylabel(f"mean ({UNITS[m]})")
         ax.set_title(_TITLES.get(m, f"{m.replace('_', ' ')} ({UNITS[m]})"), fontsize=10)
         ax.grid(alpha=0.3)

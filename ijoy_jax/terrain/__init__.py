@@ -5,7 +5,8 @@ and its constructors; :mod:`~ijoy_jax.terrain.scene` rasterises posed boxes and 
 :mod:`~ijoy_jax.terrain.generators` makes thousands of procedural terrains of named families in one jitted
 call. Each family's registry record (:mod:`~ijoy_jax.terrain.family`) carries its generator, parameters,
 validation and extra metrics; the families live in :mod:`~ijoy_jax.terrain.objects` (walls, obstacles, bars,
-platforms) and :mod:`~ijoy_jax.terrain.surfaces` (flat, stairs, stepping stones, slope, rough).
+platforms), :mod:`~ijoy_jax.terrain.surfaces` (flat, stairs, stepping stones, slope, rough) and
+:mod:`~ijoy_jax.terrain.passages` (a corridor with pockets, a path of staggered stones).
 """
 
 from ijoy_jax.terrain import generators as generators

@@ -1,6 +1,6 @@
 """Procedural terrain generators: thousands of random terrains from one jitted call.
 
-Nine families, each a pure function ``family(key, params, *, shape, resolution,
+Eleven families, each a pure function ``family(key, params, *, shape, resolution,
 has_height, origin[, max_count]) -> Terrain`` with its own parameter pytree:
 
   * ``flat`` (:class:`FlatParams`): a level floor.
@@ -12,6 +12,8 @@ has_height, origin[, max_count]) -> Terrain`` with its own parameter pytree:
   * ``stepping_stones`` (:class:`SteppingStoneParams`): stones on a jittered lattice among gaps.
   * ``slope`` (:class:`SlopeParams`): an inclined plane of given angle and direction.
   * ``rough`` (:class:`RoughParams`): a smoothed random height field of given RMS and correlation length.
+  * ``corridor`` (:class:`CorridorParams`): a narrowing corridor with dead-end pockets and a closed or open end.
+  * ``stone_path`` (:class:`StonePathParams`): two staggered rows of stepping stones, jittered spacing.
 
 What is static and what is traced. Every number in a parameter pytree is a
 leaf (a scalar per terrain; metres, radians, counts), so changing it never
@@ -32,7 +34,8 @@ metrics (:meth:`~ijoy_jax.terrain.family.Family.metrics`; bars: whether the
 robot got past them; all columns in :data:`METRIC_NAMES`). The families live
 in :mod:`ijoy_jax.terrain.objects` (walls, obstacles, bars, platforms) and
 :mod:`ijoy_jax.terrain.surfaces` (flat, stairs, stepping stones, slope,
-rough); this module names them and re-exports their public names.
+rough) and :mod:`ijoy_jax.terrain.passages` (corridor, stone path); this module names them and re-exports
+their public names.
 
 Conventions.
   * The robot walks along world +x; bars run across it (along y), stairs and
@@ -92,6 +95,11 @@ from ijoy_jax.terrain.objects import bars as bars
 from ijoy_jax.terrain.objects import obstacles as obstacles
 from ijoy_jax.terrain.objects import platforms as platforms
 from ijoy_jax.terrain.objects import walls as walls
+from ijoy_jax.terrain.passages import CORRIDOR, STONE_PATH
+from ijoy_jax.terrain.passages import CorridorParams as CorridorParams
+from ijoy_jax.terrain.passages import StonePathParams as StonePathParams
+from ijoy_jax.terrain.passages import corridor as corridor
+from ijoy_jax.terrain.passages import stone_path as stone_path
 from ijoy_jax.terrain.surfaces import FLAT, ROUGH, SLOPE, STAIRS, STEPPING_STONES
 from ijoy_jax.terrain.surfaces import FlatParams as FlatParams
 from ijoy_jax.terrain.surfaces import RoughParams as RoughParams
@@ -108,6 +116,7 @@ __all__ = [
     "FAMILIES",
     "METRIC_NAMES",
     "BarParams",
+    "CorridorParams",
     "Family",
     "FlatParams",
     "ObstacleParams",
@@ -117,9 +126,11 @@ __all__ = [
     "SlopeParams",
     "StairParams",
     "SteppingStoneParams",
+    "StonePathParams",
     "WallParams",
     "bars",
     "batch",
+    "corridor",
     "flat",
     "generate",
     "objects",
@@ -130,6 +141,7 @@ __all__ = [
     "stairs",
     "start_point",
     "stepping_stones",
+    "stone_path",
     "walls",
 ]
 
@@ -137,7 +149,8 @@ __all__ = [
 # --------------------------------------------------------------------------- registry
 
 FAMILIES: Mapping[str, Family] = MappingProxyType(
-    {fam.name: fam for fam in (FLAT, WALLS, OBSTACLES, BARS, PLATFORMS, STAIRS, STEPPING_STONES, SLOPE, ROUGH)}
+    {fam.name: fam for fam in (FLAT, WALLS, OBSTACLES, BARS, PLATFORMS, STAIRS, STEPPING_STONES, SLOPE, ROUGH,
+                               CORRIDOR, STONE_PATH)}
 )
 """Every family by name (see :class:`~ijoy_jax.terrain.family.Family`); read-only."""
 
