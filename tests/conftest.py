@@ -54,6 +54,7 @@ def pytest_sessionfinish(session):
     gc.collect()
 
 
+@pytest.hookimpl(optionalhook=True)  # xdist's hook: without xdist (-p no:xdist) it is never called
 def pytest_xdist_make_scheduler(config, log):
     """``--dist loadfile`` (pyproject's addopts), with the files of :data:`ONE_WORKER` one unit of work."""
     if config.getvalue("dist") != "loadfile":

@@ -298,7 +298,8 @@ def test_no_valid_step_stands_and_decides_again():
 
 def test_native_robot_drives_and_replays(trace, tmp_path):
     """The MuJoCo biped on native MuJoCo, driven by the scripted stick: it walks without falling, lands where
-    it was sent, and its replay is identical (MuJoCo and the compiled controller are deterministic)."""
+    it was sent, and its replay is identical (MuJoCo and the compiled controller are deterministic); exported as
+    a sweep, it is one for the MJX biped (walker = "mjx"; the file read back, nothing run)."""
     out = tmp_path / "native.mcap"
     flat = {"kind": "family", "family": "flat", "seed": 0, "shape": list(SHAPE), "resolution": RES}
     res = live.run(live.DriveSettings(terrain=flat, body="native"), live.ScriptInput(trace), realtime=False,
@@ -310,6 +311,10 @@ def test_native_robot_drives_and_replays(trace, tmp_path):
     assert feet[:, 0].mean() > np.asarray(res.states[0]["feet"])[:, 0].mean() + 0.2  # it walked forward
     _, _, mismatches = live.replay(out)
     assert mismatches == []
+    info = live.session.export_sweep(live.read_recording(out), tmp_path / "native.toml", out, terrain="family")
+    assert info["walker"] == "mjx" and info["decisions"] == 3 and info["terrain"] == "family"
+    cfg = sweep.load_config(tmp_path / "native.toml")
+    assert cfg.walker == "mjx" and cfg.family == "flat" and cfg.num_steps == 3
 
 
 # ------------------------------------------------------------------------------------------- a drive as a sweep

@@ -29,10 +29,18 @@ A sweep file has these tables (every key optional unless noted; units in bracket
     [terrain.params]              # fixed values of the family's parameter pytree
     count = 12
 
+    # or, instead of family, shape, resolution, has_height, max_count and params:
+    # recording = "drive.mcap"    # a drive recording's map and start feet (ijoy_jax.sweep.recorded)
+
     [command]                     # joystick command per scenario: a number or [lo, hi] uniform
     vx = 0.25                     # [m/s] forward, in the stance foot's frame
     vy = [-0.05, 0.05]            # [m/s] left
     wz = 0.0                      # [rad/s] counter-clockwise
+    # or, instead of vx, vy and wz, a person's commands, one per step (the same for every scenario):
+    # file = "drive.mcap"         # a drive recording (ijoy drive --record), or a trace file "drive.csv"
+    # first_swing = 1             # +1 the left foot first (default: the recording's; +1 for a trace)
+    # deadzone = 0.1              # trace files only: the stick's dead zone
+    # decide_at = 0.0             # trace files only: the fraction of a step at which the stick is read
 
     [grid]                        # cartesian product of value lists
     "robot.w" = [0.0, 0.5, 1, 2, 4]
@@ -64,6 +72,13 @@ is the controller's (``robot.step_time`` 0.8 s, not swept), the footprint is the
 physical foot's (``robot.foot_length``/``foot_width`` fixed in ``[robot]``, not
 swept), the map's cells are at least :data:`SIM_MIN_RESOLUTION` wide, and the robot
 standing at the start zone's centre stands on the map.
+
+Commands and terrain from files (:mod:`ijoy_jax.sweep.recorded`, paths relative to the sweep
+file): ``[command] file`` replays a recorded drive's commands (or a trace file's) step by step,
+``sweep.num_steps`` defaulting to their number; ``[terrain] recording`` walks every scenario on a
+recording's map from its start feet (no ``terrain.*`` parameters then; with the perfect robot every
+replicate is the same walk, so ``scenarios_per_cell = 1``). ``ijoy drive --replay REC --export-sweep
+OUT.toml`` writes such a file for a recorded drive.
 
 A *cell* is one combination of grid values (times one random sample); each cell
 runs ``scenarios_per_cell`` scenarios, replicate ``r`` of every cell on the same

@@ -15,10 +15,14 @@ that changes an array shape) and each group is cut into chunks of
 ``chunk_size`` scenarios; a group's last chunk is padded (the padding rows are
 computed and dropped) so every chunk of a group has one shape. One chunk is
 one call of a jitted ``vmap`` over scenarios of: generate the terrain (its
-family's parameters are traced per scenario), ``robot.replace`` with the
+family's parameters are traced per scenario; or the recorded terrain of
+``[terrain] recording``, shared), ``robot.replace`` with the
 scenario's traced leaves (w, rotation weight, margin, step time, footprint,
-metric weights), the start stance from the terrain's start zone, and
-:func:`ijoy_jax.control.rollout` with the scenario's command, returning
+metric weights), the start stance from the terrain's start zone (or the
+recorded start feet), and :func:`ijoy_jax.control.rollout` with the
+scenario's commands, one per step: its held command repeated, or the
+``[command] file``'s sequence (:mod:`ijoy_jax.sweep.recorded`), the same
+program either way, returning
 :meth:`ijoy_jax.Trajectory.summary` plus the family's extra metrics
 (:meth:`ijoy_jax.terrain.family.Family.metrics`; bars: whether the robot got past them).
 
