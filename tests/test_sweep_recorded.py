@@ -16,6 +16,8 @@ import re
 import numpy as np
 import pytest
 from _sweep_util import write  # tests/ is on sys.path (pytest rootdir import)
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import live, sweep
@@ -53,6 +55,8 @@ def files(tmp_path):
     _recording(tmp_path / "gaps.mcap", steps=[1, 3, 4])
     _recording(tmp_path / "edge.mcap", start=(0.05, 0.4))  # the feet hang over the map's edge
     (tmp_path / "garbage.mcap").write_bytes(b"\x89MCAP0\r\n this is not one")
+    (tmp_path / "short.mcap").write_bytes(b"x")  # shorter than MCAP's magic
+    (tmp_path / "torn.mcap").write_bytes((tmp_path / "drive.mcap").read_bytes()[:300])  # a recording cut short
     (tmp_path / "trace.csv").write_text(TRACE)
     (tmp_path / "bad.csv").write_text("t,forward,left,turn\n0,1,0\n")
     (tmp_path / "instant.csv").write_text("0.0, 1.0, 0.0, 0.0\n")  # ends at 0 s: no decision
@@ -62,6 +66,8 @@ def files(tmp_path):
 BAD = [
     ('[command]\nfile = "missing.mcap"\n', "command.file", "missing.mcap' does not exist"),
     ('[command]\nfile = "garbage.mcap"\n', "command.file", "is not a readable ijoy drive recording (MCAP)"),
+    ('[command]\nfile = "short.mcap"\n', "command.file", "is not a readable ijoy drive recording (MCAP)"),
+    ('[terrain]\nrecording = "torn.mcap"\n', "terrain.recording", "is not a readable ijoy drive recording (MCAP)"),
     ('[command]\nfile = "empty.mcap"\n', "command.file", "the recording has no decisions"),
     ('[command]\nfile = "gaps.mcap"\n', "command.file", "not steps 1 to 3 in order"),
     ('[command]\nfile = "bad.csv"\n', "command.file", "bad.csv:2: expected 4 comma-separated values"),
@@ -97,6 +103,31 @@ def test_bad_files_and_keys_name_file_key_and_reason(files, text, key, reason):
     msg = str(e.value)
     assert msg.startswith(f"{path}: {key}: ") and len(msg.splitlines()) == 1, msg
     assert reason in msg
+
+
+@settings(max_examples=60, deadline=None)
+@given(data=st.binary(max_size=300), suffix=st.sampled_from([".mcap", ".csv"]))
+def test_any_bytes_are_read_or_refused_in_one_line(tmp_path_factory, data, suffix):
+    """Hostile files: whatever the bytes, reading them as a command file gives commands or one ValueError line."""
+    path = tmp_path_factory.mktemp("hostile") / f"f{suffix}"
+    path.write_bytes(data)
+    try:
+        seq = sweep.recorded.read_commands(path, ROBOT)
+    except ValueError as e:
+        assert len(str(e).splitlines()) == 1 and str(e)
+    else:  # a trace that parses: finite float32 commands within the robot's range
+        lo, hi = ij.robots.command_range(ROBOT)
+        assert seq.kind == "trace" and np.all(seq.commands >= lo - 1e-6) and np.all(seq.commands <= hi + 1e-6)
+
+
+def test_a_recording_cut_anywhere_is_refused_in_one_line(files):
+    data = (files / "drive.mcap").read_bytes()
+    for n in np.linspace(0, len(data) - 1, 40).astype(int):
+        (files / "cut.mcap").write_bytes(data[:n])
+        with pytest.raises(ValueError) as e:
+            sweep.recorded.read_commands(files / "cut.mcap")
+        assert len(str(e.value).splitlines()) == 1
+    assert len(sweep.recorded.read_commands(files / "drive.mcap").commands) == 3  # the whole file reads
 
 
 def test_the_command_line_says_it_in_one_line(files, capsys):
