@@ -69,8 +69,8 @@ def test_view_loads_draws_and_keys_drive_the_loop(drive_with_view, tmp_path):
         page.keyboard.down("w")
         page.keyboard.down("q")
         deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and not view.state()["command"][0] > 0:
-            time.sleep(0.05)
+        while time.monotonic() < deadline and not (view.state()["command"][0] > 0 and view.state()["command"][2] > 0):
+            time.sleep(0.05)  # both key-downs, each its own event
         cmd = view.state()["command"]
         assert cmd[0] == pytest.approx(0.25) and cmd[2] > 0.4, cmd  # full forward and full left turn (HRP-2 range)
         assert view.axes.source == "keyboard"
