@@ -1,8 +1,10 @@
 import gc
 import os
+from pathlib import Path
 
 import hypothesis
 import jax
+import pytest
 
 import ijoy_jax.sim  # noqa: F401  headless: selects MUJOCO_GL=egl before any test module imports mujoco
 
@@ -12,6 +14,14 @@ hypothesis.settings.load_profile("ci")
 
 # Programs that took at least this long to compile (s) are cached; below, an entry costs about what a hit saves.
 _CACHE_MIN_COMPILE_S = "0.2"
+
+# The test files of the footstep server and of live drives run on one xdist worker, one after the other (in
+# collection order): they start real processes (ijoy serve, ijoy drive, Chromium) and compile the same programs
+# for the same small map (tests/_server_util.py: MAP), so on one worker they share one ijoy serve process
+# (footstep_server below) and every compiled program in memory, and they do not compete for the CI's 2 cores.
+# Every other file is its own unit, as with --dist loadfile.
+ONE_WORKER = frozenset({"test_live.py", "test_live_view.py", "test_server.py", "test_server_schema.py"})
+ONE_WORKER_SCOPE = "footstep server and live drives"
 
 
 def pytest_configure(config):
@@ -42,3 +52,32 @@ def pytest_sessionfinish(session):
     """
     jax.clear_caches()
     gc.collect()
+
+
+@pytest.hookimpl(optionalhook=True)  # xdist's hook: without xdist (-p no:xdist) it is never called
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadfile`` (pyproject's addopts), with the files of :data:`ONE_WORKER` one unit of work."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class Scheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            file = super()._split_scope(nodeid)
+            return ONE_WORKER_SCOPE if Path(file).name in ONE_WORKER else file
+
+    return Scheduling(config, log)
+
+
+@pytest.fixture(scope="session")
+def footstep_server():
+    """One real ``ijoy serve`` process on 127.0.0.1 (a free port) for the session, warmed up for MAP's shape and
+    resolution, with small limits (tests/_server_util.py): tests/test_server.py's module and tests/test_live.py's
+    end-to-end drive share it (on one xdist worker, ONE_WORKER)."""
+    from _server_util import MAX_CELLS, MAX_MAPS, WARM_UP  # tests/ is on sys.path (pytest rootdir import)
+
+    from ijoy_jax.server import serve_subprocess
+
+    with serve_subprocess("--warm-up", WARM_UP, "--max-cells", str(MAX_CELLS), "--max-maps", str(MAX_MAPS)) as srv:
+        yield srv
+        assert srv.process.poll() is None, "the server died during the tests:\n" + "\n".join(srv.output)

@@ -42,6 +42,11 @@ def test_build_passes_with_warnings_as_errors(html):
     ("api/ijoy_jax.html", 'href="select.html#ijoy_jax.select.select_step"'),
     ("api/cli.html", "small sizes, for a smoke test"),  # ijoy bench --help
     ("api/server.html", 'id="ijoy_jax.server.Client"'),
+    ("api/live.html", 'id="ijoy_jax.live.drive"'),  # the function; its module is ijoy_jax.live.loop
+    ("api/live.html", 'id="ijoy_jax.live.loop.scripted_commands"'),
+    ("api/sweep.html", 'id="ijoy_jax.sweep.recorded.read_commands"'),
+    ("drive.html", "A recorded drive as a sweep"),
+    ("sweeps.html", "plan.inputs"),  # the section on a person's commands (sweeps/README.md)
     ("server.html", "unsupported_version"),
     ("benchmarks.html", "Headline figures"),
     ("benchmarks_history.html", "lab notebook"),

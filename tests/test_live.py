@@ -1,7 +1,16 @@
 """ijoy drive (ijoy_jax.live): the stick mapping, trace files, the live loop against independent references, a
-real footstep server process on localhost, recording and bit-exact replay, the native MuJoCo robot, the CLI's
-one-line errors, and force-feedback effects checked against the kernel's own struct layout."""
+real footstep server process on localhost, recording and bit-exact replay, a recorded drive as a sweep, the
+native MuJoCo robot, the CLI's one-line errors, and force-feedback effects checked against the kernel's own
+struct layout.
 
+Every drive walks the small map of the server tests (tests/_server_util.py), so each program compiles once for
+the module and the files that share its xdist worker (tests/conftest.py: ONE_WORKER); one in-process recorded
+drive (``recorded``) serves every test that needs one. Exactly one test runs the whole stack as processes: an
+``ijoy drive`` process deciding on the session's ``ijoy serve`` process.
+"""
+
+import contextlib
+import io
 import json
 import subprocess
 import sys
@@ -9,18 +18,22 @@ import textwrap
 
 import numpy as np
 import pytest
+from _server_util import RES, SHAPE  # tests/ is on sys.path (pytest rootdir import)
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ijoy_jax as ij
-from ijoy_jax import live, robots
+from ijoy_jax import live, robots, sweep
 from ijoy_jax.apps import cli
 from ijoy_jax.live import forcefeedback
-from ijoy_jax.server import serve_subprocess
+from ijoy_jax.server import Client
 
 ROBOT = robots.hrp2()
 LO, HI = (np.asarray(v, np.float64) for v in robots.command_range(ROBOT))
-TERRAIN = {"kind": "family", "family": "obstacles", "seed": 1, "shape": [120, 80], "resolution": 0.02}
+TERRAIN = {"kind": "family", "family": "obstacles", "seed": 1, "shape": list(SHAPE), "resolution": RES}
+# Float metrics of the sweep engine's vmapped chunk vs a single jitted rollout: the same ops, possibly fused
+# differently (m); and a float64 sum of the recorded float32 feet vs the rollout's float32 sum (m, 5 steps).
+FLOAT_TOL = 1e-5
 TRACE = textwrap.dedent("""\
     # forward, then forward turning left, then sideways right
     t,forward,left,turn
@@ -136,6 +149,17 @@ def trace(tmp_path_factory):
     return p
 
 
+@pytest.fixture(scope="module")
+def recorded(trace, tmp_path_factory):
+    """A headless scripted drive on TERRAIN in this process (the local selector), recorded: (path, DriveResult).
+    Its programs (selector, cue, cost terms) serve every drive of the module, and reach the ijoy drive process of
+    the end-to-end test through the persistent compilation cache."""
+    out = tmp_path_factory.mktemp("recorded") / "drive.mcap"
+    result = live.run(live.DriveSettings(terrain=TERRAIN), live.ScriptInput(trace), realtime=False, record_to=out)
+    assert len(result.decisions) == 5 and all(d["valid"] for d in result.decisions)  # the tests' premise
+    return out, result
+
+
 def _rollout_reference(rec):
     """The scanned Algorithm 1 (ij.rollout, the perfect walker) with the recorded commands, one per decision."""
     commands = np.asarray([d["command"] for d in rec.decisions], np.float32)
@@ -144,17 +168,24 @@ def _rollout_reference(rec):
     return traj
 
 
-def test_scripted_drive_through_a_real_server_replays_identically(trace, tmp_path):
+def test_scripted_drive_through_a_real_server_replays_identically(trace, recorded, footstep_server, tmp_path):
     """The whole stack headless: `ijoy drive --script --headless --record` (its own process) deciding on a real
     `ijoy serve` process over localhost sockets; the recording replays in-process and through the CLI with
-    identical footsteps, equal to the scanned rollout's and to select_step's decisions."""
+    identical footsteps, equal to the scanned rollout's, to select_step's decisions and to the same drive
+    decided in this process."""
     out = tmp_path / "drive.mcap"
-    with serve_subprocess("--warm-up", "120x80@0.02") as server:
+    server = footstep_server
+    try:
         proc = subprocess.run(
             [sys.executable, "-m", "ijoy_jax.apps.cli", "drive", "--script", str(trace), "--headless", "--record",
              str(out), "--server", f"{server.host}:{server.port}", "--terrain", "obstacles", "--seed", "1",
-             "--shape", "120x80", "--ff", "off", "--json"], capture_output=True, text=True, timeout=300)
-        assert proc.returncode == 0, proc.stderr[-2000:]
+             "--shape", f"{SHAPE[0]}x{SHAPE[1]}", "--resolution", str(RES), "--ff", "off", "--json"],
+            capture_output=True, text=True, timeout=300)
+    finally:  # the shared server as the other tests expect it: no "default" map (tests/test_server.py)
+        with Client(server.host, server.port) as c:
+            if "default" in c.info()["maps"]:
+                c.drop_terrain("default")
+    assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
     rec = live.read_recording(out)
     n = len(rec.decisions)
@@ -162,9 +193,11 @@ def test_scripted_drive_through_a_real_server_replays_identically(trace, tmp_pat
     assert {d["decider"] for d in rec.decisions} == {"server"}
     assert summary["late"] == 0 and 0 < summary["latency_p99_s"] < 0.8
     # every decision equals select_step on the recorded inputs (an independent call in this process)
+    targets = ij.make_targets(rec.robot)  # what select_step builds when given none
     for d in rec.decisions:
         c = ij.select_step(rec.terrain, rec.robot, np.asarray(d["stance"], np.float32), int(d["stance_side"]),
-                           np.asarray(d["command"], np.float32), swing_from=np.asarray(d["swing_from"], np.float32))
+                           np.asarray(d["command"], np.float32), swing_from=np.asarray(d["swing_from"], np.float32),
+                           targets=targets)
         np.testing.assert_array_equal(np.asarray(c.foothold), np.asarray(d["foothold"], np.float32))
         assert bool(c.valid) == d["valid"] and int(c.index) == d["index"]
     # the live loop is Algorithm 1: the scanned rollout with the same commands takes the same footholds
@@ -172,6 +205,8 @@ def test_scripted_drive_through_a_real_server_replays_identically(trace, tmp_pat
     sent = np.asarray([s["sent"] for s in rec.states[1:]], np.float32)
     np.testing.assert_array_equal(sent, np.asarray(traj.footholds))
     np.testing.assert_array_equal(np.asarray(rec.states[-1]["feet"], np.float32), np.asarray(traj.feet))
+    # the server decided as this process's selector did: the in-process recorded drive's footsteps, bit for bit
+    np.testing.assert_array_equal(sent, recorded[1].footsteps())
     # the commands are the trace's axes through the dead zone and the range, read as each step began
     np.testing.assert_allclose(rec.decisions[2]["axes"], [1.0, 0.0, 0.0])  # at 1.6 s, before the change at 1.7
     np.testing.assert_allclose(rec.decisions[3]["axes"], [0.7, 0.0, 0.8])
@@ -186,14 +221,12 @@ def test_scripted_drive_through_a_real_server_replays_identically(trace, tmp_pat
     assert cli.main(["drive", "--replay", str(out)]) == 0
 
 
-def test_replay_detects_a_changed_recording(trace, tmp_path):
+def test_replay_detects_a_changed_recording(recorded, tmp_path):
     """A recording whose footsteps were tampered with does not replay identically (the check can fail)."""
     from mcap.reader import make_reader
     from mcap.writer import Writer
 
-    out = tmp_path / "a.mcap"
-    live.run(live.DriveSettings(terrain=TERRAIN), live.ScriptInput(trace), realtime=False, record_to=out,
-             num_steps=3)
+    out = recorded[0]
     bad = tmp_path / "b.mcap"
     with open(out, "rb") as f, open(bad, "wb") as g:
         reader, writer = make_reader(f), Writer(g)
@@ -248,11 +281,11 @@ def test_decisions_overlap_the_step_and_wait_when_late(trace):
 def test_no_valid_step_stands_and_decides_again():
     """Walled in ahead: the robot stands (StopWalking) while the stick pushes forward, and walks again when the
     person turns the stick sideways (Algorithm 1 live; the scanned rollout would stop for good)."""
-    free = np.ones((100, 100), bool)
-    free[55:, :] = False
-    terrain = ij.terrain.from_arrays(None, free, 0.02)
+    free = np.ones(SHAPE, bool)
+    free[int(round(1.1 / RES)):, :] = False  # a wall from x = 1.1 m
+    terrain = ij.terrain.from_arrays(None, free, RES)
     robot = robots.hrp2(margin=0.02)
-    start = robots.start_stance(robot, 1.0, 1.0)
+    start = robots.start_stance(robot, 1.0, 0.8)
     trace = live.Trace(np.array([0.0, 2.4, 4.0]), np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 0]]))
     res = live.drive(terrain, robot, live.PerfectBody(robot, start), live.ScriptInput(trace),
                      live.LocalDecider(terrain, robot), realtime=False)
@@ -260,14 +293,15 @@ def test_no_valid_step_stands_and_decides_again():
     assert True in valid and valid[-1]
     feet = np.asarray(res.states[-1]["feet"])
     assert feet[:, 0].max() < 1.1 - 0.121  # never onto the wall
-    assert feet[:, 1].mean() > 1.05  # went left along it
+    assert feet[:, 1].mean() > 0.85  # went left along it
 
 
 def test_native_robot_drives_and_replays(trace, tmp_path):
     """The MuJoCo biped on native MuJoCo, driven by the scripted stick: it walks without falling, lands where
-    it was sent, and its replay is identical (MuJoCo and the compiled controller are deterministic)."""
+    it was sent, and its replay is identical (MuJoCo and the compiled controller are deterministic); exported as
+    a sweep, it is one for the MJX biped (walker = "mjx"; the file read back, nothing run)."""
     out = tmp_path / "native.mcap"
-    flat = {"kind": "family", "family": "flat", "seed": 0, "shape": [100, 60], "resolution": 0.02}
+    flat = {"kind": "family", "family": "flat", "seed": 0, "shape": list(SHAPE), "resolution": RES}
     res = live.run(live.DriveSettings(terrain=flat, body="native"), live.ScriptInput(trace), realtime=False,
                    record_to=out, num_steps=3)
     logs = [s["log"] for s in res.states[1:]]
@@ -277,6 +311,121 @@ def test_native_robot_drives_and_replays(trace, tmp_path):
     assert feet[:, 0].mean() > np.asarray(res.states[0]["feet"])[:, 0].mean() + 0.2  # it walked forward
     _, _, mismatches = live.replay(out)
     assert mismatches == []
+    info = live.session.export_sweep(live.read_recording(out), tmp_path / "native.toml", out, terrain="family")
+    assert info["walker"] == "mjx" and info["decisions"] == 3 and info["terrain"] == "family"
+    cfg = sweep.load_config(tmp_path / "native.toml")
+    assert cfg.walker == "mjx" and cfg.family == "flat" and cfg.num_steps == 3
+
+
+# ------------------------------------------------------------------------------------------- a drive as a sweep
+
+MARGINS = (0.02, 0.08)  # the drive's margin (scenario 0 is the drive) and another: one chunk of 2 scenarios
+
+
+def _exported_run(recorded, folder, terrain):
+    """``ijoy drive --replay --export-sweep`` (the command line, in this process), a [grid] of MARGINS added, run
+    by the sweep engine: (the command's JSON line, config, table)."""
+    path, _ = recorded
+    out = folder / "sweeps" / "drive.toml"
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = cli.main(["drive", "--replay", str(path), "--export-sweep", str(out), "--sweep-terrain", terrain])
+    assert code == 0
+    out.write_text(out.read_text() + f'\n[grid]\n"robot.margin" = {list(MARGINS)}\n')
+    cfg = sweep.load_config(out)
+    stats = sweep.run(cfg, folder / "results", chunk_size=len(MARGINS), progress=False)
+    assert stats.computed == len(MARGINS)
+    return json.loads(printed.getvalue().strip().splitlines()[-1]), cfg, sweep.load(folder / "results")
+
+
+@pytest.fixture(scope="module")
+def exports(recorded, tmp_path_factory):
+    """The recorded drive exported to a sweep with each terrain (its recorded map, its family) and run:
+    {terrain: (JSON line, config, table)}."""
+    return {t: _exported_run(recorded, tmp_path_factory.mktemp(f"export-{t}"), t) for t in live.session.SWEEP_TERRAINS}
+
+
+def _along_across(result):
+    """Independently of the rollout: the feet's midpoint's displacement along and across each decision's commanded
+    direction (world frame, the stance foot's yaw), summed over the drive's steps, from the recorded feet (m)."""
+    along = across = 0.0
+    for d, before, after in zip(result.decisions, result.states[:-1], result.states[1:], strict=True):
+        yaw = float(d["stance"][2])
+        c = np.asarray(d["command"], np.float64)
+        direction = np.array([np.cos(yaw) * c[0] - np.sin(yaw) * c[1], np.sin(yaw) * c[0] + np.cos(yaw) * c[1]])
+        if np.hypot(*direction) == 0:
+            continue
+        unit = direction / np.hypot(*direction)
+        move = np.mean(np.asarray(after["feet"])[:, :2], 0) - np.mean(np.asarray(before["feet"])[:, :2], 0)
+        along += float(unit @ move)
+        across += float(unit[0] * move[1] - unit[1] * move[0])
+    return along, across
+
+
+@pytest.mark.parametrize("terrain", live.session.SWEEP_TERRAINS)
+def test_a_recorded_drive_exported_to_a_sweep_takes_its_footsteps(exports, recorded, terrain):
+    """`ijoy drive --replay --export-sweep`: the sweep's scenario 0 is the drive (its map, robot, start and
+    commands), the rollout of it takes the drive's footholds bit for bit, and the engine's table of it is that
+    rollout's summary and the drive's own progress recomputed from its recorded feet."""
+    info, cfg, table = exports[terrain]
+    path, result = recorded
+    assert info == {"sweep": info["sweep"], "recording": str(path), "decisions": 5, "terrain": terrain,
+                    "walker": "perfect", "invalid_decisions": []}
+    assert cfg.command_file.kind == "recording" and cfg.num_steps == 5 and cfg.walker == "perfect"
+    assert cfg.first_swing == 1 and cfg.method == "exhaustive"
+    assert (cfg.terrain_recording is not None) == (terrain == "recording")
+    assert cfg.family == (None if terrain == "recording" else "obstacles") and cfg.shape == SHAPE
+    assert "command.vx" not in table.columns and len(table) == len(MARGINS)
+    sc = sweep.scenario(cfg, 0)
+    np.testing.assert_array_equal(sc.command, np.asarray([d["command"] for d in result.decisions], np.float32))
+    traj = ij.rollout(sc.terrain, sc.robot, sc.start, sc.command, cfg.num_steps, first_swing=sc.first_swing)
+    np.testing.assert_array_equal(np.asarray(traj.footholds), result.footsteps())
+    np.testing.assert_array_equal(np.asarray(traj.feet), np.asarray(result.states[-1]["feet"], np.float32))
+    row = table[table["robot.margin"] == MARGINS[0]].iloc[0]
+    for k, v in traj.summary().items():
+        if np.issubdtype(np.asarray(v).dtype, np.floating):
+            assert row[k] == pytest.approx(float(v), abs=FLOAT_TOL), k
+        else:
+            assert row[k] == v, k
+    along, across = _along_across(result)
+    assert row["steps_taken"] == sum(s["go"] for s in result.states) == 5 and not row["stopped"]
+    assert row["distance_along"] == pytest.approx(along, abs=FLOAT_TOL) and along > 0.5
+    assert row["distance_across"] == pytest.approx(across, abs=FLOAT_TOL)
+    other = table[table["robot.margin"] == MARGINS[1]].iloc[0]
+    assert other["steps_taken"] > 0  # the same commands, another robot
+
+
+def test_the_drives_trace_file_as_a_sweeps_commands_is_the_same_sweep(exports, recorded, trace, tmp_path):
+    """The drive's own trace file as the sweep's command file gives the recorded commands bit for bit
+    (ijoy_jax.live.loop.scripted_commands: the loop's schedule, not a drive), so the same table: a scripted stick
+    is the drive it scripts."""
+    _, _, table = exports["recording"]
+    path, result = recorded
+    commands = np.asarray([d["command"] for d in result.decisions], np.float64)
+    scripted = live.loop.scripted_commands(live.read_trace(trace), ROBOT)
+    assert scripted.dtype == np.float64
+    np.testing.assert_array_equal(scripted, commands)
+    text = textwrap.dedent(f"""\
+        [sweep]
+        num_steps = 5
+        method = "exhaustive"
+        scenarios_per_cell = 1
+        [terrain]
+        recording = {json.dumps(str(path))}
+        [command]
+        file = {json.dumps(str(trace))}
+        [grid]
+        "robot.margin" = {list(MARGINS)}
+        """)
+    (tmp_path / "trace.toml").write_text(text)
+    by_trace = sweep.load_config(tmp_path / "trace.toml")
+    assert by_trace.command_file.kind == "trace" and by_trace.num_steps == 5 and by_trace.first_swing == 1
+    np.testing.assert_array_equal(by_trace.command_steps, commands.astype(np.float32))
+    sweep.run(by_trace, tmp_path / "results", chunk_size=len(MARGINS), progress=False)
+    got = sweep.load(tmp_path / "results")
+    assert list(got.columns) == list(table.columns)
+    for column in table.columns:
+        np.testing.assert_array_equal(got[column].to_numpy(), table[column].to_numpy(), err_msg=column)
 
 
 # ------------------------------------------------------------------------------------------- the command line
@@ -289,6 +438,8 @@ def test_native_robot_drives_and_replays(trace, tmp_path):
     (["--replay", "/nonexistent.mcap"], "recording '/nonexistent.mcap' does not exist"),
     (["--script", "TRACE", "--shape", "12by5"], "--shape must be NXxNY"),
     (["--script", "TRACE", "--server", "localhost"], "server must be HOST:PORT"),
+    (["--script", "TRACE", "--export-sweep", "out.toml"], "--export-sweep needs --replay FILE"),
+    (["--replay", "/nonexistent.mcap", "--export-sweep", "out.toml"], "recording '/nonexistent.mcap' does not exist"),
 ])
 def test_bad_input_is_one_line(args, match, trace, tmp_path, capsys):
     bad = tmp_path / "bad.csv"

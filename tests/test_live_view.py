@@ -1,6 +1,7 @@
 """The live view in a real browser: Debian's Chromium (headless) driven by Playwright against the view's real
 aiohttp server and a real-time drive. The page loads, draws the scene, and a key held in the page changes the
-command the drive loop sees."""
+command the drive loop sees. The map is the small one of every server and live test (tests/_server_util.py), so
+the drive's programs are those tests/test_live.py compiled on the same xdist worker (tests/conftest.py)."""
 
 import shutil
 import threading
@@ -8,6 +9,7 @@ import time
 
 import numpy as np
 import pytest
+from _server_util import RES, SHAPE  # tests/ is on sys.path (pytest rootdir import)
 
 from ijoy_jax import live
 from ijoy_jax.live.view import ViewServer
@@ -27,8 +29,8 @@ def _browser():
 @pytest.fixture(scope="module")
 def drive_with_view():
     """A real-time drive of the perfect robot on a clutter map, its stick the view's, and the view's server."""
-    settings = live.DriveSettings(terrain={"kind": "family", "family": "obstacles", "seed": 3, "shape": [150, 100],
-                                           "resolution": 0.02})
+    settings = live.DriveSettings(terrain={"kind": "family", "family": "obstacles", "seed": 3, "shape": list(SHAPE),
+                                           "resolution": RES})
     terrain, robot, start = live.open_terrain(settings.terrain)
     view = ViewServer(port=0).start()
     view.set_scene(terrain, robot, start)
@@ -67,8 +69,8 @@ def test_view_loads_draws_and_keys_drive_the_loop(drive_with_view, tmp_path):
         page.keyboard.down("w")
         page.keyboard.down("q")
         deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and not view.state()["command"][0] > 0:
-            time.sleep(0.05)
+        while time.monotonic() < deadline and not (view.state()["command"][0] > 0 and view.state()["command"][2] > 0):
+            time.sleep(0.05)  # both key-downs, each its own event
         cmd = view.state()["command"]
         assert cmd[0] == pytest.approx(0.25) and cmd[2] > 0.4, cmd  # full forward and full left turn (HRP-2 range)
         assert view.axes.source == "keyboard"
@@ -81,7 +83,7 @@ def test_view_loads_draws_and_keys_drive_the_loop(drive_with_view, tmp_path):
         page.keyboard.up("w")
         page.keyboard.up("q")
         deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and view.state()["command"][0] != 0:
+        while time.monotonic() < deadline and any(view.state()["command"]):  # both key-ups, each its own event
             time.sleep(0.05)
         assert view.state()["command"] == [0.0, 0.0, 0.0]  # released: the loop sees the stick centred
         browser.close()

@@ -38,3 +38,5 @@ def test_readme_examples_run(tmp_path, monkeypatch):
     # The footstep server's reply is the first example's in-process choice.
     assert ns["reply"].index == int(ns["choice"].index) and ns["reply"].valid
     np.testing.assert_array_equal(ns["reply"].foothold, np.asarray(ns["choice"].foothold))
+    # The live drive: three decisions of the scripted stick (at 0, 0.8 and 1.6 s of its 2.4 s), each a step taken.
+    assert ns["result"].footsteps().shape == (3, 6) and ns["result"].summary()["steps_taken"] == 3

@@ -1,11 +1,13 @@
-"""The footstep server as a user runs it: one real ``ijoy serve`` subprocess on 127.0.0.1 (a free port) for the
-module, real ZeroMQ and TCP sockets.
+"""The footstep server as a user runs it: one real ``ijoy serve`` subprocess on 127.0.0.1 (a free port; the
+session's, tests/conftest.py's footstep_server, shared with tests/test_live.py), real ZeroMQ and TCP sockets.
 
 Replies equal in-process :func:`ijoy_jax.select_step` bit for bit (2D and 2.5D, both sides, with and without
 swing_from, after window updates, after set_robot); every kind of bad input gets an error reply with its code
 and the server answers afterwards; a client that vanishes mid-request, raw TCP garbage and a client that
 never reads leave it serving; a bounded load test from several clients at once loses no reply. Maps are small
-(40 x 32 cells at 5 cm) except where a property needs size.
+(tests/_server_util.py: 40 x 32 cells at 5 cm, the shape every server and live test uses, so each program
+compiles once for all of them) except where a property needs size. The command line's start-up errors run
+in-process (``cli.main``: the same code and output); its signals and connection log in real processes.
 """
 
 import json
@@ -21,13 +23,13 @@ import jax
 import numpy as np
 import pytest
 import zmq
+from _server_util import MAX_CELLS, MAX_MAPS, RES, SHAPE  # tests/ is on sys.path (pytest rootdir import)
 from jsonschema import Draft202012Validator
 
 import ijoy_jax as ij
-from ijoy_jax.server import Client, ServerError, schema, serve_subprocess
+from ijoy_jax.apps import cli
+from ijoy_jax.server import Client, ServerError, schema
 
-SHAPE, RES = (40, 32), 0.05  # 2 m x 1.6 m
-MAX_CELLS, MAX_MAPS = 4096, 4
 REQUEST_TIMEOUT_S = 120.0  # a reply; generous for a loaded 2-core CI machine (a new map shape compiles)
 ROBOT = ij.robots.hrp2(margin=0.02)
 TOTAL_RTOL = 4 * float(np.finfo(np.float32).eps)  # FootCost of one pose vs. of it in a batch of 496: XLA vectorises
@@ -35,11 +37,9 @@ TOTAL_RTOL = 4 * float(np.finfo(np.float32).eps)  # FootCost of one pose vs. of 
 
 
 @pytest.fixture(scope="module")
-def server():
-    with serve_subprocess("--warm-up", f"{SHAPE[0]}x{SHAPE[1]}@{RES}", "--max-cells", str(MAX_CELLS),
-                          "--max-maps", str(MAX_MAPS)) as srv:
-        yield srv
-        assert srv.process.poll() is None, "the server died during the tests:\n" + "\n".join(srv.output)
+def server(footstep_server):
+    """The session's ijoy serve process (it asserts at the end of the session that the server never died)."""
+    return footstep_server
 
 
 @pytest.fixture
@@ -115,7 +115,7 @@ def assert_reply_equals_select_step(reply, terrain, robot, stance, side, command
 
 def test_a_step_before_any_map_is_an_error(client):
     with pytest.raises(ServerError) as e:
-        client.step([1.0, 1.0, 0.0], -1, [0.2, 0.0, 0.0])  # no map set yet: this module never sets "default"
+        client.step([1.0, 1.0, 0.0], -1, [0.2, 0.0, 0.0])  # no test leaves "default" set (test_live drops it)
     assert e.value.code == "no_terrain" and "set_terrain first" in e.value.message
 
 
@@ -455,18 +455,56 @@ def _serve(*args, **kw):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
 
 
-def test_cli_refuses_a_port_in_use_and_a_bad_host_in_one_line(server):
-    proc = _serve("--port", str(server.port))
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 2 and err.strip().splitlines() == [
+def _serve_in_process(capsys, *args):
+    """``ijoy serve --warm-up none ARGS`` through the command line's own entry point, in this process: its exit
+    status and stderr (start-up errors end it before anything is served)."""
+    capsys.readouterr()
+    rc = cli.main(["serve", "--warm-up", "none", *args])
+    return rc, capsys.readouterr().err
+
+
+def test_cli_refuses_a_port_in_use_and_a_bad_host_in_one_line(server, capsys):
+    rc, err = _serve_in_process(capsys, "--port", str(server.port))
+    assert rc == 2 and err.strip().splitlines() == [
         f"ijoy: error: cannot listen on 127.0.0.1:{server.port} (127.0.0.1): Address already in use"], err
-    proc = _serve("--host", "no-such-host.invalid", "--port", "0")
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 2 and len(err.strip().splitlines()) == 1
+    rc, err = _serve_in_process(capsys, "--host", "no-such-host.invalid", "--port", "0")
+    assert rc == 2 and len(err.strip().splitlines()) == 1
     assert err.startswith("ijoy: error: cannot listen on 'no-such-host.invalid': the host does not resolve"), err
-    proc = _serve("--port", "0", "--set", "w=abc")
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 2 and "--set 'w=abc'" in err and len(err.strip().splitlines()) == 1
+    rc, err = _serve_in_process(capsys, "--port", "0", "--set", "w=abc")
+    assert rc == 2 and "--set 'w=abc'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_connection_accepted_before_the_loop_starts_is_logged(caplog):
+    """ijoy serve binds, warms up, then serves: a client may connect in between (the SIGINT test below lost one
+    such connection's log line under load, when the monitor was attached by the loop). The listener watches its
+    socket from before it is bound, so the loop logs and counts a connection it did not see accepted."""
+    from ijoy_jax.server import Service
+    from ijoy_jax.server import server as net
+
+    listener = net.listen("127.0.0.1", 0, max_frame_bytes=1 << 20)
+    client = zmq.Context.instance().socket(zmq.DEALER)
+    client.setsockopt(zmq.LINGER, 0)
+    stop, out = threading.Event(), {}
+    try:
+        client.connect(f"tcp://127.0.0.1:{listener.port}")
+        client.send_multipart(schema.encode({"version": 1, "type": "info", "id": 1}))
+        deadline = time.monotonic() + 30  # until the connection is accepted, before any loop runs
+        while time.monotonic() < deadline and not listener.monitor.poll(0):
+            time.sleep(0.01)
+        assert listener.monitor.poll(0), "the listener never saw the connection"
+        with caplog.at_level("INFO", logger="ijoy_jax.server"):
+            thread = threading.Thread(target=lambda: out.update(net.run(listener, Service(ROBOT), stop)))
+            thread.start()
+            assert client.poll(60000), "no reply"
+            assert json.loads(client.recv_multipart()[0])["id"] == 1
+            stop.set()
+            thread.join(30)
+    finally:
+        stop.set()
+        client.close()
+        listener.close()
+    assert out["connections"] == 1 and out["requests"] == 1
+    assert sum("connection from 127.0.0.1:" in r.getMessage() for r in caplog.records) == 1
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])

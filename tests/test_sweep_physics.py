@@ -11,6 +11,11 @@ and only the sweep sharded over 4 forced CPU devices compiles its own (a sharded
   in the same batch; new values never recompile.
 * A physics sweep: its sim.* columns and physics metrics, aggregates, plot, validation before compute (file:
   key: reason), resume after SIGKILL, and the same table bit for bit on 1 and 4 CPU devices.
+* Commands from a file (``[command] file``, a person's drive or a trace): the same program, a held stick is the
+  held command bit for bit, and a changing one reaches the physics step by step.
+
+The sweep hands rollout_batch each scenario's commands per step, (B, steps, 3), whether held or from a file, so
+the direct rollouts below do as well: one program for all.
 """
 
 from __future__ import annotations
@@ -96,7 +101,7 @@ def _rollouts(sim, **changes):
     base = _base()
     robots = jax.tree_util.tree_map(lambda a: jnp.stack([a] * B), base.replace(margin=jnp.float32(0.02)))
     starts = jnp.stack([ij.robots.start_stance(base, 0.45, 1.0)] * B)
-    commands = jnp.tile(jnp.array([[0.25, 0.0, 0.0]], jnp.float32), (B, 1))
+    commands = jnp.tile(jnp.array([[[0.25, 0.0, 0.0]]], jnp.float32), (B, STEPS, 1))  # per step, as the sweep
     dyn = None if not changes else physics.Dynamics(**{
         k: jnp.array([getattr(physics.NOMINAL, k) if v is None else v for v in vals], jnp.float32)
         for k, vals in changes.items()})
@@ -177,6 +182,40 @@ def reference(runs, physics_file, tmp_path_factory):
     before = W.compiled_programs()
     stats = sweep.run(physics_file, out, chunk_size=CHUNK, progress=False)
     return out, stats, W.compiled_programs() - before
+
+
+def test_commands_from_a_trace_file_run_through_the_same_program(reference, physics_file, tmp_path):
+    """A trace file (``[command] file``) as a physics sweep's commands: a held stick gives the table of the held
+    command it maps to, bit for bit (the same program, no compile); a stick that turns after the first step
+    changes where the robots go, from that step on."""
+    from ijoy_jax import live
+
+    robot = ij.robots.hrp2(density=DENSITY)
+    held = live.axes_to_command([0.8, 0.0, 0.0], robot)  # float64, exact in the TOML below (repr)
+    text = physics_file.read_text().replace('"sim.friction" = [0.05, 1.0]', '"sim.friction" = [1.0, 0.05]')
+    base, rest = text.split("[command]")[0] + "[command]\n", "[sim]" + text.split("[sim]")[1]  # the first 4: 1.0
+    (tmp_path / "held.csv").write_text("t,forward,left,turn\n0.0, 0.8, 0.0, 0.0\n10.0, 0.0, 0.0, 0.0\n")
+    (tmp_path / "turn.csv").write_text("t,forward,left,turn\n0.0, 0.8, 0.0, 0.0\n0.8, 0.8, 0.0, 1.0\n10, 0, 0, 0\n")
+    texts = {"command": base + f"vx = {float(held[0])!r}\nvy = 0.0\nwz = 0.0\n" + rest,
+             "held": base + 'file = "held.csv"\n' + rest, "turn": base + 'file = "turn.csv"\n' + rest}
+    programs, traces = W.compiled_programs(), sweep.trace_count()
+    tables = {}
+    for name, text in texts.items():
+        cfg = sweep.load_config(write(tmp_path, text, f"{name}.toml"))
+        sweep.run(cfg, tmp_path / name, chunk_size=CHUNK, max_scenarios=CHUNK, progress=False)
+        tables[name] = sweep.load(tmp_path / name, partial=True)
+    assert W.compiled_programs() == programs and sweep.trace_count() == traces  # the reference's programs
+    assert cfg.command_file.kind == "trace" and cfg.num_steps == STEPS  # the trace holds 13 steps; 4 are run
+    np.testing.assert_array_equal(cfg.command_steps[0], np.float32(held))
+    assert cfg.command_steps[1:, 2].min() > 0.4  # turning left from the second step
+    command, held_t, turn = tables["command"], tables["held"], tables["turn"]
+    assert "command.vx" not in held_t.columns
+    for column in held_t.columns:
+        np.testing.assert_array_equal(held_t[column].to_numpy(), command[column].to_numpy(), err_msg=column)
+    assert not turn["fell"].any() and (turn["steps_taken"] == STEPS).all()
+    moved = {m: np.abs(turn[m].to_numpy() - held_t[m].to_numpy()) for m in ("distance_across", "mean_deviation")}
+    assert np.all(np.maximum(*moved.values()) > 0.01), moved  # every robot went elsewhere
+    assert (turn["distance_across"] < -0.05).sum() >= 3  # turning left: the feet leave the held line rightwards
 
 
 def test_the_sweep_runs_through_rollout_batchs_program(reference):

@@ -67,6 +67,12 @@ def add_parser(sub) -> None:
     loop.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     exp = d.add_argument_group("exports of a recording (with --replay FILE, instead of replaying)")
     exp.add_argument("--export-trace", metavar="TRACE", help="write the recorded stick as a trace file")
+    exp.add_argument("--export-sweep", metavar="OUT.toml",
+                     help="write a sweep file whose scenario is the recorded drive (its commands step by step; ijoy "
+                          "sweep run OUT.toml)")
+    exp.add_argument("--sweep-terrain", choices=["recording", "family"], default="recording",
+                     help="the exported sweep's terrain: the recorded map (default) or the generator family it was "
+                          "drawn from (replicate 0 is the recorded map)")
 
 
 def _family_params(items) -> dict:
@@ -118,10 +124,13 @@ def main(args) -> int:
 
     if args.replay:
         return _replay(args)
-    if args.export_trace:
-        raise ValueError("--export-trace needs --replay FILE (the recording to export)")
+    for flag in ("export_trace", "export_sweep"):
+        if getattr(args, flag):
+            raise ValueError(f"--{flag.replace('_', '-')} needs --replay FILE (the recording to export)")
     if args.script and args.input:
         raise ValueError("give --script or --input, not both")
+    if args.server is not None:
+        live.session.server_address(args.server)  # a malformed --server: one line, before the terrain is built
     source = None
     if args.script:
         source = live.ScriptInput(args.script)  # a missing or malformed trace fails here, before any compile
@@ -211,10 +220,14 @@ def _report(summary: dict, args, extra=None) -> None:
 def _replay(args) -> int:
     from ijoy_jax import live
 
-    if args.export_trace:
+    if args.export_trace or args.export_sweep:
         rec = live.read_recording(args.replay)
-        n = live.session.export_trace(rec, args.export_trace)
-        print(json.dumps({"trace": args.export_trace, "samples": n}))
+        if args.export_trace:
+            n = live.session.export_trace(rec, args.export_trace)
+            print(json.dumps({"trace": args.export_trace, "samples": n}))
+        if args.export_sweep:
+            print(json.dumps(live.session.export_sweep(rec, args.export_sweep, args.replay,
+                                                       terrain=args.sweep_terrain)))
         return 0
     if not Path(args.replay).is_file():
         raise ValueError(f"recording {args.replay!r} does not exist")

@@ -79,16 +79,27 @@ def build_robot(args):
 
 def main(args) -> int:
     """Run ``ijoy serve`` (bad options raise ValueError, printed by the ``ijoy`` command in one line)."""
-    from ijoy_jax.server import Limits, Service
-    from ijoy_jax.server import server as net
-    from ijoy_jax.server.service import parse_shape
-
     log = logging.getLogger("ijoy_jax.server")  # its own handler: JAX's and other libraries' INFO lines stay out
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("ijoy serve: %(message)s"))
     log.addHandler(handler)
+    level, propagate = log.level, log.propagate
     log.setLevel(logging.INFO)
     log.propagate = False
+    try:
+        return _serve(args, log)
+    finally:  # the logger as it was (ijoy serve run in a caller's process, e.g. a test, leaves nothing behind)
+        log.removeHandler(handler)
+        log.setLevel(level)
+        log.propagate = propagate
+
+
+def _serve(args, log) -> int:
+    """:func:`main` once its log handler is in place."""
+    from ijoy_jax.server import Limits, Service
+    from ijoy_jax.server import server as net
+    from ijoy_jax.server.service import parse_shape
+
     warm = args.warm_up or [DEFAULT_WARM_UP]
     shapes = [] if [w.lower() for w in warm] == ["none"] else [parse_shape(w) for w in warm]
     limit_kw = {k: v for k, v in (("max_cells", args.max_cells), ("max_maps", args.max_maps)) if v is not None}

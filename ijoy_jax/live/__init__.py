@@ -5,7 +5,7 @@ file, the terminal's keys, a gamepad through SDL, or the browser view's keyboard
 mapped through a dead zone onto the robot's command range; a footstep decider (:mod:`.deciders`: the
 selector in this process, or the footstep server ``ijoy serve`` over the network); a robot that
 executes the steps tick by tick (:mod:`.bodies`: the perfect walker; :mod:`ijoy_jax.sim.native`: the
-MuJoCo biped on native MuJoCo); the loop (:mod:`.drive`) that makes the decision for the future
+MuJoCo biped on native MuJoCo); the loop (:mod:`.loop`) that makes the decision for the future
 stance while the current step executes and measures its latency; a recording in MCAP
 (:mod:`.record`) that :func:`replay` reproduces bit for bit; the live view in a browser
 (:mod:`.view`); force feedback on a Linux device (:mod:`.forcefeedback`).
@@ -15,17 +15,14 @@ Command line: ``ijoy drive`` (docs/drive.md).
 
 from ijoy_jax.live import bodies as bodies
 from ijoy_jax.live import deciders as deciders
-from ijoy_jax.live import drive as drive_module
 from ijoy_jax.live import inputs as inputs
+from ijoy_jax.live import loop as loop
 from ijoy_jax.live import record as record
 from ijoy_jax.live import session as session
 from ijoy_jax.live.bodies import PerfectBody as PerfectBody
 from ijoy_jax.live.deciders import Decision as Decision
 from ijoy_jax.live.deciders import LocalDecider as LocalDecider
 from ijoy_jax.live.deciders import RemoteDecider as RemoteDecider
-from ijoy_jax.live.drive import DriveResult as DriveResult
-from ijoy_jax.live.drive import drive as drive
-from ijoy_jax.live.drive import latency_stats as latency_stats
 from ijoy_jax.live.inputs import InputError as InputError
 from ijoy_jax.live.inputs import ScriptInput as ScriptInput
 from ijoy_jax.live.inputs import SharedAxes as SharedAxes
@@ -33,6 +30,9 @@ from ijoy_jax.live.inputs import Trace as Trace
 from ijoy_jax.live.inputs import axes_to_command as axes_to_command
 from ijoy_jax.live.inputs import gamepad_axes as gamepad_axes
 from ijoy_jax.live.inputs import read_trace as read_trace
+from ijoy_jax.live.loop import DriveResult as DriveResult
+from ijoy_jax.live.loop import drive as drive
+from ijoy_jax.live.loop import latency_stats as latency_stats
 from ijoy_jax.live.record import Recorder as Recorder
 from ijoy_jax.live.record import Recording as Recording
 from ijoy_jax.live.record import read_recording as read_recording
@@ -58,10 +58,10 @@ __all__ = [
     "bodies",
     "deciders",
     "drive",
-    "drive_module",
     "gamepad_axes",
     "inputs",
     "latency_stats",
+    "loop",
     "open_terrain",
     "read_recording",
     "read_trace",

@@ -66,8 +66,9 @@ and its initial delay, ~250-500 ms, would make a held key flicker; releasing sto
 TRACE_HEADER = ("t", "forward", "left", "turn")
 """The trace file's columns (and its optional header line)."""
 GAMEPAD_AXES = ((1, -1.0), (0, -1.0), (3, -1.0))
-"""SDL joystick axes (index, sign) read as forward, left, turn: the left stick's y (up is -1 in SDL) and x
-(right is +1), the right stick's x (axis 3 on the Linux evdev layout of most pads; pass ``axes=`` otherwise)."""
+"""The SDL joystick axes read as forward, left and turn, each an (axis number, sign) pair: the left stick's y (up
+is -1 in SDL) and x (right is +1), the right stick's x (axis 3 on the Linux evdev layout of most pads; pass
+``axes=`` otherwise)."""
 
 
 class InputError(ValueError):

@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import io
 import json
+import struct
 import time
 from pathlib import Path
 from typing import NamedTuple
@@ -219,7 +220,7 @@ def read_recording(path) -> Recording:
                     robot = robot_from_npz(att.data)
             for _, channel, message in reader.iter_messages(topics=list(CHANNELS)):
                 topics[channel.topic].append(json.loads(message.data))
-    except (McapError, OSError, EOFError, KeyError, json.JSONDecodeError, ValueError) as e:
+    except (McapError, OSError, EOFError, KeyError, ValueError, struct.error) as e:  # a short or torn file: struct
         raise ValueError(f"{str(path)!r} is not a readable ijoy drive recording (MCAP): {e}") from None
     if config is None or terrain is None or robot is None:
         raise ValueError(f"{str(path)!r} is an MCAP file without an ijoy drive (no 'ijoy.drive' metadata, "

@@ -39,12 +39,15 @@ class ListenError(OSError):
 
 @dataclasses.dataclass
 class Listener:
-    """A bound ROUTER socket: ``host`` and ``port`` are where it listens (``port`` resolved when 0 was asked)."""
+    """A bound ROUTER socket: ``host`` and ``port`` are where it listens (``port`` resolved when 0 was asked);
+    ``monitor`` receives its connection events from before it was bound, so :func:`run` logs every connection,
+    also one accepted while the server was still warming up."""
 
     context: zmq.Context
     socket: zmq.Socket
     host: str
     port: int
+    monitor: zmq.Socket | None = None
 
     @property
     def address(self) -> str:
@@ -53,6 +56,10 @@ class Listener:
 
     def close(self) -> None:
         """Close the socket and its context at once (pending replies are dropped)."""
+        if self.monitor is not None:
+            self.socket.disable_monitor()
+            self.monitor.close(linger=0)
+            self.monitor = None
         self.socket.close(linger=0)
         self.context.term()
 
@@ -80,17 +87,20 @@ def listen(host: str, port: int, *, max_frame_bytes: int) -> Listener:
     sock.setsockopt(zmq.SNDTIMEO, 0)
     if family == socket.AF_INET6:
         sock.setsockopt(zmq.IPV6, 1)
+    # Watched before it is bound: a client may connect the moment the port is open (ijoy serve warms up, then
+    # prints its listening line; a monitor attached later would never hear of a connection accepted before).
+    listener = Listener(ctx, sock, ip, port, sock.get_monitor_socket(zmq.EVENT_ACCEPTED | zmq.EVENT_DISCONNECTED))
     where = f"[{ip}]" if family == socket.AF_INET6 else ip
     try:
         if port == 0:
-            port = sock.bind_to_random_port(f"tcp://{where}", min_port=49152, max_port=65536, max_tries=200)
+            listener.port = sock.bind_to_random_port(f"tcp://{where}", min_port=49152, max_port=65536,
+                                                     max_tries=200)
         else:
             sock.bind(f"tcp://{where}:{port}")
     except zmq.ZMQError as e:
-        sock.close(linger=0)
-        ctx.term()
+        listener.close()
         raise ListenError(f"cannot listen on {host}:{port} ({ip}): {os.strerror(e.errno)}") from None
-    return Listener(ctx, sock, ip, port)
+    return listener
 
 
 def _peer(fd: int) -> str:
@@ -118,7 +128,9 @@ def run(listener: Listener, service: Service, stop: threading.Event, *, verbose:
       ``{"requests", "dropped_replies", "connections"}`` counted by this loop.
     """
     sock = listener.socket
-    monitor = sock.get_monitor_socket(zmq.EVENT_ACCEPTED | zmq.EVENT_DISCONNECTED)
+    if listener.monitor is None:  # a Listener made by hand: from now on
+        listener.monitor = sock.get_monitor_socket(zmq.EVENT_ACCEPTED | zmq.EVENT_DISCONNECTED)
+    monitor = listener.monitor
     poller = zmq.Poller()
     poller.register(sock, zmq.POLLIN)
     poller.register(monitor, zmq.POLLIN)
@@ -137,8 +149,7 @@ def run(listener: Listener, service: Service, stop: threading.Event, *, verbose:
                 _serve_pending(sock, monitor, service, stop, counts, verbose)
         _on_monitor(monitor, counts, verbose)  # connections not logged yet
     finally:
-        sock.disable_monitor()
-        monitor.close(linger=0)
+        poller.unregister(monitor)
     return counts
 
 

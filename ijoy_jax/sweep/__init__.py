@@ -11,6 +11,9 @@ Public names::
                                                                  devices, parquet parts, resume
   scenario / Scenario                                            one scenario's terrain, robot, start and
                                                                  command by id (``ijoy drive --scenario``)
+  recorded                                                       commands from a recorded drive or a trace
+                                                                 file, a recorded terrain ([command] file,
+                                                                 [terrain] recording)
   default_chunk_size / auto_chunk_size / scenario_bytes /        chunks sized to device memory (physics:
   balanced_chunk_size                                            balanced, no padded chunk)
   distributed                                                    several processes/hosts (jax.distributed)
@@ -36,7 +39,7 @@ Example:
 Command line: ``ijoy sweep run FILE`` and ``ijoy sweep summarize DIR``.
 """
 
-from ijoy_jax.sweep import distributed
+from ijoy_jax.sweep import distributed, recorded
 from ijoy_jax.sweep.config import (
     COMMAND_KEYS,
     HOST_MEMORY_FRACTION,
@@ -132,6 +135,7 @@ __all__ = [
     "cells",
     "default_chunk_size",
     "distributed",
+    "recorded",
     "load",
     "load_aggregates",
     "load_config",

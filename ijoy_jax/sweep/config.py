@@ -33,10 +33,18 @@ A sweep file has these tables (every key optional unless noted; units in bracket
     [terrain.params]              # fixed values of the family's parameter pytree
     count = 12
 
+    # or, instead of family, shape, resolution, has_height, max_count and params:
+    # recording = "drive.mcap"    # a drive recording's map and start feet (ijoy_jax.sweep.recorded)
+
     [command]                     # joystick command per scenario: a number or [lo, hi] uniform
     vx = 0.25                     # [m/s] forward, in the stance foot's frame
     vy = [-0.05, 0.05]            # [m/s] left
     wz = 0.0                      # [rad/s] counter-clockwise
+    # or, instead of vx, vy and wz, a person's commands, one per step (the same for every scenario):
+    # file = "drive.mcap"         # a drive recording (ijoy drive --record), or a trace file "drive.csv"
+    # first_swing = 1             # +1 the left foot first (default: the recording's; +1 for a trace)
+    # deadzone = 0.1              # trace files only: the stick's dead zone
+    # decide_at = 0.0             # trace files only: the fraction of a step at which the stick is read
 
     [grid]                        # cartesian product of value lists
     "robot.w" = [0.0, 0.5, 1, 2, 4]
@@ -75,6 +83,13 @@ is the controller's (``robot.step_time`` 0.8 s, not swept), the footprint is the
 physical foot's (``robot.foot_length``/``foot_width`` fixed in ``[robot]``, not
 swept), the map's cells are at least :data:`SIM_MIN_RESOLUTION` wide, and the robot
 standing at the start zone's centre stands on the map.
+
+Commands and terrain from files (:mod:`ijoy_jax.sweep.recorded`, paths relative to the sweep
+file): ``[command] file`` replays a recorded drive's commands (or a trace file's) step by step,
+``sweep.num_steps`` defaulting to their number; ``[terrain] recording`` walks every scenario on a
+recording's map from its start feet (no ``terrain.*`` parameters then; with the perfect robot every
+replicate is the same walk, so ``scenarios_per_cell = 1``). ``ijoy drive --replay REC --export-sweep
+OUT.toml`` writes such a file for a recorded drive.
 
 A *cell* is one combination of grid values (times one random sample); each cell
 runs ``scenarios_per_cell`` scenarios, replicate ``r`` of every cell on the same
@@ -119,7 +134,7 @@ import numpy as np
 from ijoy_jax import robots
 from ijoy_jax.footcost import MAX_COORDINATE
 from ijoy_jax.select import KERNELS, METHODS
-from ijoy_jax.sweep import seeding
+from ijoy_jax.sweep import recorded, seeding
 from ijoy_jax.terrain import generators
 from ijoy_jax.terrain.family import Family, ParamError
 
@@ -202,6 +217,7 @@ SELECTOR_DEFAULTS: Mapping[str, float] = MappingProxyType({"horizon": 1, "refine
 name) and their defaults: the lookahead's horizon (static, int >= 1), refinement (static, bool) and discount."""
 _SELECTOR_STATIC = ("horizon", "refine")  # shape or program changing: [grid] only, one compile per value
 _TERRAIN_KEYS = ("family", "shape", "resolution", "has_height", "max_count", "params")
+_RECORDING_KEY = "recording"  # [terrain] recording: a drive recording's terrain, instead of the _TERRAIN_KEYS
 
 
 class SweepConfigError(ValueError):
@@ -226,11 +242,16 @@ class SweepConfig:
       walker: who executes the steps, one of :data:`WALKERS` (static).
       horizon, refine, discount: the selector's options (:data:`SELECTOR_DEFAULTS`), unless swept as
         ``selector.<name>``; beam: the lookahead's beam for horizons >= 3 (None: exact).
-      family: terrain family name; shape (nx, ny) cells; resolution (m);
-        has_height; max_count (static object slots, None: the family's default).
+      family: terrain family name (None: the terrain of ``terrain_recording``); shape (nx, ny) cells;
+        resolution (m); has_height; max_count (static object slots, None: the family's default).
       robot: fixed robot values, ``{name: float}`` (names as in :data:`ROBOT_DEFAULTS`).
       terrain_params: fixed terrain parameters, ``{field: number}``.
-      command: ``{component: (lo, hi)}``, lo == hi for a fixed value (m/s, rad/s).
+      command: ``{component: (lo, hi)}``, lo == hi for a fixed value (m/s, rad/s); {} when the commands
+        come from ``command_file``.
+      command_file: the :class:`~ijoy_jax.sweep.recorded.CommandSequence` of ``[command] file`` (step ``k``
+        of every rollout gets its ``k``-th command), or None: the ``[command]`` distribution.
+      terrain_recording: the :class:`~ijoy_jax.sweep.recorded.RecordedTerrain` of ``[terrain] recording``
+        (every scenario walks that terrain from its start feet), or None: the family generates them.
       grid: ``{"robot.x" | "terrain.x" | "sim.x" | "selector.x": (values...)}``.
       random: ``{"robot.x" | "terrain.x" | "sim.x" | "selector.discount": (lo, hi)}``.
       sim: ``{key: (lo, hi)}`` of the ``[sim]`` table, lo == hi for a fixed value (``walker = "mjx"``).
@@ -262,21 +283,51 @@ class SweepConfig:
     grid: Mapping[str, tuple] = dataclasses.field(default_factory=dict)
     random: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
     sim: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
+    command_file: recorded.CommandSequence | None = dataclasses.field(default=None, compare=False)
+    terrain_recording: recorded.RecordedTerrain | None = dataclasses.field(default=None, compare=False)
     source: str = "<string>"
     text: str = ""
 
     @property
-    def params_class(self) -> type:
-        """The terrain family's parameter pytree class."""
-        return generators.FAMILIES[self.family].params
+    def params_class(self) -> type | None:
+        """The terrain family's parameter pytree class (None for a recorded terrain)."""
+        return None if self.family is None else generators.FAMILIES[self.family].params
+
+    @property
+    def terrain_fields(self) -> tuple[str, ...]:
+        """The terrain parameters of the family (``terrain.<field>`` columns); () for a recorded terrain."""
+        cls = self.params_class
+        return () if cls is None else tuple(f.name for f in dataclasses.fields(cls))
 
     @property
     def static_max_count(self) -> int | None:
-        """Object slots passed to the generator (None for families without them)."""
+        """Object slots passed to the generator (None for families without them, and for a recorded terrain)."""
+        if self.family is None:
+            return None
         fam = generators.FAMILIES[self.family]
         if fam.max_count is None:
             return None
         return fam.max_count if self.max_count is None else self.max_count
+
+    @property
+    def first_swing(self) -> int:
+        """+1 if every rollout's left foot swings first (the command file's choice; +1 without one)."""
+        return 1 if self.command_file is None else self.command_file.first_swing
+
+    @property
+    def command_steps(self) -> np.ndarray | None:
+        """(num_steps, 3) float32 the command of every step, the same for every scenario (``[command] file``), or
+        None: each scenario holds its own command (``command.vx``, ``command.vy``, ``command.wz`` columns)."""
+        if self.command_file is None:
+            return None
+        return self.command_file.commands[: self.num_steps]
+
+    @property
+    def inputs(self) -> dict:
+        """The SHA-256 of each file the sweep reads besides its own text, ``{key: hex digest}`` ({} for none):
+        part of its plan, so the results of a changed file are never mixed with the old ones on resume."""
+        files = (("command.file", self.command_file), ("terrain.recording", self.terrain_recording))
+        return {key: f.sha256 for key, f in files if f is not None}
 
     @property
     def swept(self) -> tuple[str, ...]:
@@ -410,6 +461,132 @@ def _terrain_value(chk: _Checker, key: str, fam: Family, name: str, value, max_c
     return v
 
 
+def _generated_terrain(chk: _Checker, terrain: dict, kw: dict):
+    """A generated terrain's ``[terrain]`` table into ``kw``; returns (the family, its parameter fields, its
+    object slots)."""
+    family = chk.string("terrain.family", terrain.get("family", "obstacles"), tuple(generators.FAMILIES))
+    kw["family"] = family
+    if "shape" in terrain:
+        s = terrain["shape"]
+        if not isinstance(s, list) or len(s) != 2:
+            chk.fail("terrain.shape", f"must be [nx, ny], got {s!r}")
+        kw["shape"] = (chk.integer("terrain.shape[0]", s[0], lo=8), chk.integer("terrain.shape[1]", s[1], lo=8))
+        if math.prod(kw["shape"]) > MAX_MAP_CELLS:
+            chk.fail("terrain.shape", f"{kw['shape'][0]} x {kw['shape'][1]} cells exceed the limit of "
+                                      f"{MAX_MAP_CELLS} (sweep.config.MAX_MAP_CELLS)")
+    if "resolution" in terrain:
+        r = chk.number("terrain.resolution", terrain["resolution"])
+        if r <= 0:
+            chk.fail("terrain.resolution", f"must be > 0 m, got {r}")
+        if r < MIN_RESOLUTION:
+            chk.fail("terrain.resolution", f"must be >= {MIN_RESOLUTION} m (sweep.config.MIN_RESOLUTION), got {r}")
+        kw["resolution"] = r
+    extent = max(kw.get("shape", SweepConfig.shape)) * kw.get("resolution", SweepConfig.resolution)
+    if extent > MAX_COORDINATE:
+        chk.fail("terrain.resolution" if "resolution" in terrain else "terrain.shape",
+                 f"the map reaches {extent:.6g} m, beyond the {MAX_COORDINATE:g} m where float32 holds millimetres "
+                 "(ijoy_jax.footcost.MAX_COORDINATE)")
+    if "has_height" in terrain:
+        if not isinstance(terrain["has_height"], bool):
+            chk.fail("terrain.has_height", f"must be true or false, got {terrain['has_height']!r}")
+        kw["has_height"] = terrain["has_height"]
+    fam = generators.FAMILIES[family]
+    if "max_count" in terrain:
+        if fam.max_count is None:
+            chk.fail("terrain.max_count", f"family {family!r} has no object slots")
+        kw["max_count"] = chk.integer("terrain.max_count", terrain["max_count"], lo=0, hi=MAX_OBJECT_SLOTS)
+    max_count = kw.get("max_count", fam.max_count)
+    fields = tuple(f.name for f in dataclasses.fields(fam.params))
+    tparams = chk.table("terrain.params", terrain.get("params", {}))
+    chk.unknown("terrain.params.", tparams, fields)
+    kw["terrain_params"] = {k: _terrain_value(chk, f"terrain.params.{k}", fam, k, v, max_count)
+                            for k, v in tparams.items()}
+    return fam, fields, max_count
+
+
+def _file_path(chk: _Checker, key: str, value, folder: Path) -> Path:
+    """A file named in the sweep file (a string; relative to the sweep file's folder)."""
+    if not isinstance(value, str) or not value:
+        chk.fail(key, f"must be a file name (a string), got {value!r}")
+    path = Path(value)
+    return path if path.is_absolute() else folder / path
+
+
+def _recorded_terrain(chk: _Checker, terrain: dict, kw: dict, folder: Path) -> None:
+    """``[terrain] recording``: a drive recording's terrain (and start), its sizes within the sweep's bounds, into
+    ``kw`` (``family`` None)."""
+    key = f"terrain.{_RECORDING_KEY}"
+    for k in _TERRAIN_KEYS:
+        if k in terrain:
+            chk.fail(f"terrain.{k}", f"the terrain comes from {key} (the recorded map): give a recording or a "
+                                     "generated terrain, not both")
+    try:
+        rec = recorded.read_terrain(_file_path(chk, key, terrain[_RECORDING_KEY], folder))
+    except ValueError as e:
+        chk.fail(key, str(e))
+    t = rec.terrain
+    shape, res = tuple(int(v) for v in t.shape), float(t.resolution)
+    if min(shape) < 8 or math.prod(shape) > MAX_MAP_CELLS:
+        chk.fail(key, f"the recorded map of {shape[0]} x {shape[1]} cells is outside the sweep's sizes (at least "
+                      f"8 cells a side, at most {MAX_MAP_CELLS} cells: sweep.config.MAX_MAP_CELLS)")
+    if not res >= MIN_RESOLUTION:
+        chk.fail(key, f"the recorded map's resolution {res} m is finer than {MIN_RESOLUTION} m "
+                      "(sweep.config.MIN_RESOLUTION)")
+    reach = float(np.max(np.abs(np.asarray(t.origin, np.float64)))) + max(shape) * res
+    if reach > MAX_COORDINATE:
+        chk.fail(key, f"the recorded map reaches {reach:.6g} m, beyond the {MAX_COORDINATE:g} m where float32 holds "
+                      "millimetres (ijoy_jax.footcost.MAX_COORDINATE)")
+    kw.update(family=None, shape=shape, resolution=res, has_height=bool(t.has_height), terrain_recording=rec,
+              terrain_params={})
+
+
+def _command_file(chk: _Checker, command: dict, kw: dict, folder: Path, swept: tuple[str, ...]) -> None:
+    """``[command] file``: the command sequence (:func:`ijoy_jax.sweep.recorded.read_commands`) into ``kw``,
+    and ``sweep.num_steps`` checked against it (its default: every command)."""
+    path = _file_path(chk, "command.file", command["file"], folder)
+    options = {}
+    for k in ("deadzone", "decide_at"):
+        if k in command:
+            if recorded.is_recording(path):
+                chk.fail(f"command.{k}", "is for trace files: a recording's commands are recorded (the stick "
+                                         "already went through its dead zone, read when the drive read it)")
+            options[k] = chk.number(f"command.{k}", command[k])
+            if not 0.0 <= options[k] < 1.0:
+                chk.fail(f"command.{k}", f"must be in [0, 1), got {options[k]}")
+    if "first_swing" in command:
+        v = command["first_swing"]
+        if isinstance(v, bool) or v not in (1, -1):
+            chk.fail("command.first_swing", f"must be 1 (left foot first) or -1 (right), got {v!r}")
+        options["first_swing"] = int(v)
+    robot = None
+    if not recorded.is_recording(path):
+        # A trace's commands are the stick through the robot's command range, read once per step time.
+        for k in ("robot.step_time", "robot.density"):
+            if k in swept:
+                where = "grid" if k in kw["grid"] else "random"
+                chk.fail(f"{where}.{k}", "a trace file's commands depend on the robot's step time and action set "
+                                         "(its command range and decision times): fix it in [robot]")
+        try:
+            robot = robots.hrp2(density=kw["robot"].get("density", ROBOT_DEFAULTS["density"]),
+                                step_time=kw["robot"].get("step_time", ROBOT_DEFAULTS["step_time"]))
+        except ValueError as e:
+            chk.fail("robot", f"the trace's robot cannot be built: {e}")
+    try:
+        seq = recorded.read_commands(path, robot, max_steps=MAX_NUM_STEPS + 1, **options)
+    except ValueError as e:
+        chk.fail("command.file", str(e))
+    n = len(seq.commands)
+    if n > MAX_NUM_STEPS:
+        chk.fail("command.file", f"more than {MAX_NUM_STEPS} commands (sweep.config.MAX_NUM_STEPS)")
+    if "num_steps" not in kw:
+        kw["num_steps"] = n
+    elif kw["num_steps"] > n:
+        chk.fail("sweep.num_steps", f"{kw['num_steps']} steps, but command.file holds {n} commands (one per step; "
+                                    f"at most {n}, the default)")
+    kw["command_file"] = seq
+    kw["command"] = {}
+
+
 def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     """Parse and validate a sweep from TOML text (see the module docstring).
 
@@ -471,55 +648,33 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     sim_fields = _sim_fields() if mjx else ()
 
     terrain = chk.table("terrain", raw.get("terrain", {}))
-    chk.unknown("terrain.", terrain, _TERRAIN_KEYS)
-    family = chk.string("terrain.family", terrain.get("family", "obstacles"), tuple(generators.FAMILIES))
-    kw["family"] = family
-    if "shape" in terrain:
-        s = terrain["shape"]
-        if not isinstance(s, list) or len(s) != 2:
-            chk.fail("terrain.shape", f"must be [nx, ny], got {s!r}")
-        kw["shape"] = (chk.integer("terrain.shape[0]", s[0], lo=8), chk.integer("terrain.shape[1]", s[1], lo=8))
-        if math.prod(kw["shape"]) > MAX_MAP_CELLS:
-            chk.fail("terrain.shape", f"{kw['shape'][0]} x {kw['shape'][1]} cells exceed the limit of "
-                                      f"{MAX_MAP_CELLS} (sweep.config.MAX_MAP_CELLS)")
-    if "resolution" in terrain:
-        r = chk.number("terrain.resolution", terrain["resolution"])
-        if r <= 0:
-            chk.fail("terrain.resolution", f"must be > 0 m, got {r}")
-        if r < MIN_RESOLUTION:
-            chk.fail("terrain.resolution", f"must be >= {MIN_RESOLUTION} m (sweep.config.MIN_RESOLUTION), got {r}")
-        kw["resolution"] = r
-    extent = max(kw.get("shape", SweepConfig.shape)) * kw.get("resolution", SweepConfig.resolution)
-    if extent > MAX_COORDINATE:
-        chk.fail("terrain.resolution" if "resolution" in terrain else "terrain.shape",
-                 f"the map reaches {extent:.6g} m, beyond the {MAX_COORDINATE:g} m where float32 holds millimetres "
-                 "(ijoy_jax.footcost.MAX_COORDINATE)")
-    if "has_height" in terrain:
-        if not isinstance(terrain["has_height"], bool):
-            chk.fail("terrain.has_height", f"must be true or false, got {terrain['has_height']!r}")
-        kw["has_height"] = terrain["has_height"]
-    fam = generators.FAMILIES[family]
-    if "max_count" in terrain:
-        if fam.max_count is None:
-            chk.fail("terrain.max_count", f"family {family!r} has no object slots")
-        kw["max_count"] = chk.integer("terrain.max_count", terrain["max_count"], lo=0, hi=MAX_OBJECT_SLOTS)
-    max_count = kw.get("max_count", fam.max_count)
-    fields = tuple(f.name for f in dataclasses.fields(fam.params))
-    tparams = chk.table("terrain.params", terrain.get("params", {}))
-    chk.unknown("terrain.params.", tparams, fields)
-    kw["terrain_params"] = {k: _terrain_value(chk, f"terrain.params.{k}", fam, k, v, max_count)
-                            for k, v in tparams.items()}
+    chk.unknown("terrain.", terrain, (*_TERRAIN_KEYS, _RECORDING_KEY))
+    folder = Path(source).parent if source != "<string>" else Path(".")
+    if _RECORDING_KEY in terrain:
+        fam, fields, max_count = None, (), None
+        _recorded_terrain(chk, terrain, kw, folder)
+    else:
+        fam, fields, max_count = _generated_terrain(chk, terrain, kw)
 
     robot = _flatten(chk.table("robot", raw.get("robot", {})))
     chk.unknown("robot.", robot, tuple(ROBOT_DEFAULTS))
     kw["robot"] = {k: _robot_value(chk, f"robot.{k}", k, v) for k, v in robot.items()}
 
     command = chk.table("command", raw.get("command", {}))
-    chk.unknown("command.", command, COMMAND_KEYS)
-    cmd = {"vx": (0.25, 0.25), "vy": (0.0, 0.0), "wz": (0.0, 0.0)}
-    for k, v in command.items():
-        cmd[k] = chk.range(f"command.{k}", v) if isinstance(v, list) else (chk.number(f"command.{k}", v),) * 2
-    kw["command"] = cmd
+    chk.unknown("command.", command, (*COMMAND_KEYS, *recorded.COMMAND_FILE_KEYS))
+    if "file" in command:  # read once the grid is known (a trace's robot must not be swept)
+        for k in COMMAND_KEYS:
+            if k in command:
+                chk.fail(f"command.{k}", "the commands come from command.file: give a file or a distribution, "
+                                         "not both")
+    else:
+        for k in recorded.COMMAND_FILE_KEYS:
+            if k in command:
+                chk.fail(f"command.{k}", "only with command.file (commands from a recorded drive or a trace file)")
+        cmd = {"vx": (0.25, 0.25), "vy": (0.0, 0.0), "wz": (0.0, 0.0)}
+        for k, v in command.items():
+            cmd[k] = chk.range(f"command.{k}", v) if isinstance(v, list) else (chk.number(f"command.{k}", v),) * 2
+        kw["command"] = cmd
 
     sim = chk.table("sim", raw.get("sim", {}))
     if sim and not mjx:
@@ -544,6 +699,9 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         head, _, name = key.partition(".")
         if head == "sim" and not mjx:
             chk.fail(f"{section}.{key}", 'physics needs [sweep] walker = "mjx" (the perfect robot has none)')
+        if head == "terrain" and fam is None:
+            chk.fail(f"{section}.{key}", "terrain parameters need a generated terrain ([terrain] family), not "
+                                         "[terrain] recording")
         known = (tuple(f"robot.{k}" for k in ROBOT_DEFAULTS) + tuple(f"terrain.{k}" for k in fields)
                  + tuple(f"sim.{k}" for k in sim_fields) + tuple(f"selector.{k}" for k in SELECTOR_DEFAULTS))
         if key not in known:
@@ -592,6 +750,8 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     if not out_rand and kw.get("random_samples", 0) > 0:
         chk.fail("sweep.random_samples", "is set but [random] is empty")
 
+    if "file" in command:
+        _command_file(chk, command, kw, folder, (*out_grid, *out_rand))
     cfg = SweepConfig(**kw)
     _check_selector(chk, cfg)
     _check_size(chk, cfg)  # before cells() or scenarios() allocate anything
@@ -601,6 +761,10 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     # The start zone must leave room for the terrain on the sweep's map (family.Family.validate).
     # Only the terrain values matter: each distinct combination is checked once, in cell order (the first
     # failing cell's combination fails first), not every cell (2e5 cells took 35 s).
+    if fam is None:  # a recorded terrain: no family rules; the recorded start must fit the simulated robot
+        if mjx:
+            _check_recorded_start_fits(chk, cfg)
+        return cfg
     swept_terrain = [k for k in (*kw["grid"], *kw["random"]) if k.startswith("terrain.")]
     combos = cells(cfg)[swept_terrain].drop_duplicates() if swept_terrain else None
     for row in ([{}] if combos is None else combos.to_dict("records")):  # records keep each column's type
@@ -651,6 +815,25 @@ def _check_start_fits(chk: _Checker, cfg: SweepConfig, start_x: float, start_y: 
                                   f"[{x - half_x:.3g}, {x + half_x:.3g}] x [{y - half_y:.3g}, {y + half_y:.3g}] m "
                                   f"of ground, beyond the {ext_x:.3g} x {ext_y:.3g} m map (its height field ends "
                                   f"there): a larger map or another start_x/start_y")
+
+
+def _check_recorded_start_fits(chk: _Checker, cfg: SweepConfig) -> None:
+    """The simulated robot standing on a recording's start feet must stand on its map (every sole corner)."""
+    rec = cfg.terrain_recording
+    length = cfg.robot.get("foot_length", ROBOT_DEFAULTS["foot_length"])
+    width = cfg.robot.get("foot_width", ROBOT_DEFAULTS["foot_width"])
+    lo = np.asarray(rec.terrain.origin, np.float64)
+    hi = lo + np.asarray(cfg.shape) * cfg.resolution
+    for x, y, yaw in np.asarray(rec.start, np.float64):
+        c, s = math.cos(yaw), math.sin(yaw)
+        for dx, dy in ((length / 2, width / 2), (length / 2, -width / 2), (-length / 2, width / 2),
+                       (-length / 2, -width / 2)):
+            px, py = x + c * dx - s * dy, y + s * dx + c * dy
+            if not (lo[0] <= px <= hi[0] and lo[1] <= py <= hi[1]):
+                chk.fail("terrain.recording", f"the simulated robot standing on the recorded start feet needs "
+                                              f"ground at ({px:.3g}, {py:.3g}) m, beyond the map "
+                                              f"[{lo[0]:.3g}, {hi[0]:.3g}] x [{lo[1]:.3g}, {hi[1]:.3g}] m (its "
+                                              "height field ends there)")
 
 
 def _blame(fam: Family, field: str, kw: dict) -> str:
@@ -746,9 +929,10 @@ def table_bytes(cfg: SweepConfig, num_scenarios: int | None = None) -> int:
     """
     from ijoy_jax.sweep.results import METRICS, PHYSICS_METRICS
 
-    fam = generators.FAMILIES[cfg.family]
-    columns = (4 + len(ROBOT_DEFAULTS) + len(fam.rules) + len(COMMAND_KEYS) + len(SELECTOR_DEFAULTS) + len(METRICS)
-               + len(fam.metric_names))
+    fam = None if cfg.family is None else generators.FAMILIES[cfg.family]
+    terrain_columns = 0 if fam is None else len(fam.rules) + len(fam.metric_names)
+    command_columns = 0 if cfg.command_file is not None else len(COMMAND_KEYS)
+    columns = 4 + len(ROBOT_DEFAULTS) + terrain_columns + command_columns + len(SELECTOR_DEFAULTS) + len(METRICS)
     if cfg.walker == "mjx":
         columns += len(_sim_fields()) + len(PHYSICS_METRICS)
     n = cfg.num_scenarios if num_scenarios is None else num_scenarios
@@ -870,10 +1054,11 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
 
     Columns: ``scenario``, ``cell``, ``replicate``, ``robot.<name>`` (all of
     :data:`ROBOT_DEFAULTS`), ``terrain.<field>`` (all of the family's
-    parameters), ``command.vx`` (m/s), ``command.vy`` (m/s), ``command.wz`` (rad/s),
-    ``selector.horizon``, ``selector.refine`` (int64, 0 or 1), ``selector.discount``,
-    and for ``walker = "mjx"`` ``sim.<field>`` (every :class:`ijoy_jax.sim.physics.Dynamics`
-    field: the grid's, random cell's, ``[sim]``'s or the nominal value).
+    parameters; none for a recorded terrain), ``command.vx`` (m/s), ``command.vy`` (m/s),
+    ``command.wz`` (rad/s) (none when the commands come from ``[command] file``: every scenario
+    takes :attr:`SweepConfig.command_steps`), ``selector.horizon``, ``selector.refine`` (int64, 0 or 1),
+    ``selector.discount``, and for ``walker = "mjx"`` ``sim.<field>`` (every
+    :class:`ijoy_jax.sim.physics.Dynamics` field: the grid's, random cell's, ``[sim]``'s or the nominal value).
 
     Args:
       cfg: the sweep.
@@ -890,7 +1075,9 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     n_rep = cfg.scenarios_per_cell
     total = len(c) * n_rep if max_scenarios is None else min(len(c) * n_rep, int(max_scenarios))
     reps = min(n_rep, total)  # only the replicates of the rows asked for
-    if all(lo == hi for lo, hi in cfg.command.values()):
+    if cfg.command_file is not None:
+        cmd = np.zeros((reps, 0))  # no command columns: the file's sequence, the same for every scenario
+    elif all(lo == hi for lo, hi in cfg.command.values()):
         # Fixed commands: what every replicate's draw gives (lo + (hi - lo) * u), without drawing.
         cmd = np.zeros((reps, 3))
         cmd[:] = [lo + (hi - lo) * 0.0 for lo, hi in (cfg.command[k] for k in COMMAND_KEYS)]
@@ -900,11 +1087,12 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     # final place, by broadcasting a value per cell or per replicate: the float64 ones into one 2D block that
     # becomes the DataFrame's without a copy, the int64 ones inserted beside it (at 2e7 rows, np.full and
     # fancy indexing per column, then pandas stacking the columns into a block, took ~22 s of 28).
-    rules = generators.FAMILIES[cfg.family].rules
-    fields = [f.name for f in dataclasses.fields(cfg.params_class)]
+    rules = {} if cfg.family is None else generators.FAMILIES[cfg.family].rules
+    fields = list(cfg.terrain_fields)
     sim_fields = _sim_fields() if cfg.walker == "mjx" else ()
+    command_keys = () if cfg.command_file is not None else COMMAND_KEYS
     names = ["scenario", "cell", "replicate", *(f"robot.{n}" for n in ROBOT_DEFAULTS),
-             *(f"terrain.{n}" for n in fields), *(f"command.{k}" for k in COMMAND_KEYS),
+             *(f"terrain.{n}" for n in fields), *(f"command.{k}" for k in command_keys),
              *(f"selector.{k}" for k in SELECTOR_DEFAULTS), *(f"sim.{k}" for k in sim_fields)]
     ints = {"scenario", "cell", "replicate", *(f"terrain.{n}" for n in fields if rules[n].integer),
             *(f"selector.{k}" for k in _SELECTOR_STATIC)}
@@ -929,7 +1117,7 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     cols["scenario"][:] = np.arange(total, dtype=np.int64)
     per_cell(cols["cell"], c["cell"].to_numpy())  # cells() numbers its rows 0, 1, ...
     per_replicate(cols["replicate"], np.arange(reps, dtype=np.int64))
-    defaults = cfg.params_class()
+    defaults = None if cfg.params_class is None else cfg.params_class()
     fixed = {**{f"robot.{n}": cfg.robot.get(n, d) for n, d in ROBOT_DEFAULTS.items()},
              **{f"terrain.{n}": cfg.terrain_params.get(n, getattr(defaults, n)) for n in fields},
              **{f"selector.{n}": getattr(cfg, n) for n in SELECTOR_DEFAULTS}}
@@ -939,7 +1127,7 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
             per_cell(out, c[key].to_numpy().astype(out.dtype))
         else:
             out[:] = np.asarray(value).astype(out.dtype)
-    for j, k in enumerate(COMMAND_KEYS):
+    for j, k in enumerate(command_keys):
         per_replicate(cols[f"command.{k}"], cmd[:, j])
     if sim_fields:
         from ijoy_jax.sim import physics

@@ -15,10 +15,14 @@ that changes an array shape) and each group is cut into chunks of
 ``chunk_size`` scenarios; a group's last chunk is padded (the padding rows are
 computed and dropped) so every chunk of a group has one shape. One chunk is
 one call of a jitted ``vmap`` over scenarios of: generate the terrain (its
-family's parameters are traced per scenario), ``robot.replace`` with the
+family's parameters are traced per scenario; or the recorded terrain of
+``[terrain] recording``, shared), ``robot.replace`` with the
 scenario's traced leaves (w, rotation weight, margin, step time, footprint,
-metric weights), the start stance from the terrain's start zone, and
-:func:`ijoy_jax.control.rollout` with the scenario's command, returning
+metric weights), the start stance from the terrain's start zone (or the
+recorded start feet), and :func:`ijoy_jax.control.rollout` with the
+scenario's commands, one per step: its held command repeated, or the
+``[command] file``'s sequence (:mod:`ijoy_jax.sweep.recorded`), the same
+program either way, returning
 :meth:`ijoy_jax.Trajectory.summary` plus the family's extra metrics
 (:meth:`ijoy_jax.terrain.family.Family.metrics`; bars: whether the robot got past them).
 
@@ -148,7 +152,7 @@ _PROC = "process-{:05d}.json"
 class _Static(NamedTuple):
     """Everything about a chunk that is static under jit (hashable)."""
 
-    family: str
+    family: str | None  # None: the recorded terrain of the shared _Scene
     shape: tuple[int, int]
     resolution: float
     has_height: bool
@@ -162,34 +166,58 @@ class _Static(NamedTuple):
     refine: bool = False
 
 
-def _setup(static: _Static, base: robots.Robot, key, seed, robot_vals, terrain_vals):
-    """One scenario's terrain key, terrain parameters, terrain, robot and start stance."""
+class _Scene(NamedTuple):
+    """What every scenario of a run shares besides the robot (replicated over devices like the targets)."""
+
+    first_swing: jax.Array  # () float32: +1 the left foot swings first
+    terrain: Any = None  # the recorded Terrain ([terrain] recording), or None: the family generates one each
+    start: jax.Array | None = None  # (2, 3) float32 the recorded start feet (left, right), or None
+
+
+def _scene(cfg: SweepConfig) -> _Scene:
+    """The run's shared :class:`_Scene` (host arrays to the device)."""
+    rec = cfg.terrain_recording
+    first = jnp.float32(cfg.first_swing)
+    if rec is None:
+        return _Scene(first)
+    return _Scene(first, rec.terrain, jnp.asarray(rec.start, jnp.float32))
+
+
+def _setup(static: _Static, base: robots.Robot, key, scene: _Scene, seed, robot_vals, terrain_vals):
+    """One scenario's terrain key, terrain parameters (None for a recorded terrain), terrain, robot and start
+    stance."""
+    tkey = jax.random.fold_in(key, seed)
+    robot = robots.set_leaves(base, {k: robot_vals[k] for k in robots.SCALAR_LEAVES})
+    if static.family is None:  # the recorded terrain and start feet: the same for every scenario
+        return tkey, None, scene.terrain, robot, scene.start
     fam = generators.FAMILIES[static.family]
     params = fam.params(**terrain_vals)
     kw = {} if static.max_count is None else {"max_count": static.max_count}
-    tkey = jax.random.fold_in(key, seed)
     terrain = fam.generator(tkey, params, shape=static.shape, resolution=static.resolution,
                             has_height=static.has_height, **kw)
-    robot = robots.set_leaves(base, {k: robot_vals[k] for k in robots.SCALAR_LEAVES})
     centre = generators.start_point(params, shape=static.shape, resolution=static.resolution)
     start = robots.start_stance(base, centre[0], centre[1])  # side by side at the step-in-place width, facing +x
     return tkey, params, terrain, robot, start
 
 
 def _family_metrics(static: _Static, tkey, params, feet, robot) -> dict:
-    """The family's extra metrics (bars: whether the robot got past them), from the terrain it generated."""
+    """The family's extra metrics (bars: whether the robot got past them), from the terrain it generated ({} for a
+    recorded terrain)."""
+    if static.family is None:
+        return {}
     fam = generators.FAMILIES[static.family]
     return fam.metrics(tkey, params, feet, robot.foot_length, robot.foot_width, shape=static.shape,
                        resolution=static.resolution, max_count=static.max_count)
 
 
-def _scenario(static: _Static, base: robots.Robot, targets, key, seed, robot_vals, terrain_vals, command):
-    """One scenario of the perfect robot: terrain, robot, start and rollout; the trajectory's summary (scalars)."""
-    tkey, params, terrain, robot, start = _setup(static, base, key, seed, robot_vals, terrain_vals)
+def _scenario(static: _Static, base: robots.Robot, targets, key, scene, seed, robot_vals, terrain_vals, commands):
+    """One scenario of the perfect robot: terrain, robot, start and rollout of its (num_steps, 3) commands; the
+    trajectory's summary (scalars)."""
+    tkey, params, terrain, robot, start = _setup(static, base, key, scene, seed, robot_vals, terrain_vals)
     lookahead = dict(horizon=static.horizon, beam=static.beam if static.horizon >= 3 else None,
                      discount=robot_vals["discount"]) if static.method == "lookahead" else {}
-    traj = rollout(terrain, robot, start, command, static.num_steps, method=static.method, targets=targets,
-                   kernel=static.kernel, refine=static.refine, **lookahead)
+    traj = rollout(terrain, robot, start, commands, static.num_steps, method=static.method, targets=targets,
+                   kernel=static.kernel, first_swing=scene.first_swing, refine=static.refine, **lookahead)
     return {**traj.summary(), **_family_metrics(static, tkey, params, traj.feet, robot)}
 
 
@@ -207,9 +235,9 @@ def _counting_traces(fn):
     return counted, lambda: traces
 
 
-def _chunk(static: _Static, base, targets, key, sim, seeds, robot_vals, terrain_vals, commands, sim_vals):
+def _chunk(static: _Static, base, targets, key, sim, scene, seeds, robot_vals, terrain_vals, commands, sim_vals):
     """A chunk of the perfect robot: one vmapped program (``sim`` and ``sim_vals`` are None and {})."""
-    fn = lambda s, r, t, c: _scenario(static, base, targets, key, s, r, t, c)  # noqa: E731
+    fn = lambda s, r, t, c: _scenario(static, base, targets, key, scene, s, r, t, c)  # noqa: E731
     return jax.vmap(fn)(seeds, robot_vals, terrain_vals, commands)
 
 
@@ -217,23 +245,23 @@ _counted_chunk, _chunk_traces = _counting_traces(_chunk)
 _run_chunk = jax.jit(_counted_chunk, static_argnames=("static",))
 
 
-def _prepare(static: _Static, base, key, seeds, robot_vals, terrain_vals):
+def _prepare(static: _Static, base, key, scene, seeds, robot_vals, terrain_vals):
     """A physics chunk's inputs of :func:`ijoy_jax.sim.walker.rollout_batch`: per scenario the terrain, robot,
     start and the key of its stance noise and pushes (``fold_in(terrain key, 1)``: replicate r's in every cell)."""
 
     def one(seed, r, t):
-        tkey, _, terrain, robot, start = _setup(static, base, key, seed, r, t)
+        tkey, _, terrain, robot, start = _setup(static, base, key, scene, seed, r, t)
         return terrain, robot, start, jax.random.fold_in(tkey, 1)
 
     return jax.vmap(one)(seeds, robot_vals, terrain_vals)
 
 
-def _finish(static: _Static, base, key, seeds, robot_vals, terrain_vals, traj) -> dict:
+def _finish(static: _Static, base, key, scene, seeds, robot_vals, terrain_vals, traj) -> dict:
     """A physics chunk's per-scenario summary (:func:`ijoy_jax.sim.walker.summary`) and family metrics."""
     from ijoy_jax.sim import walker
 
     def one(seed, r, t, tr):
-        tkey, params, _, robot, _ = _setup(static, base, key, seed, r, t)  # the terrain itself is not used
+        tkey, params, _, robot, _ = _setup(static, base, key, scene, seed, r, t)  # the terrain itself is not used
         return {**walker.summary(tr), **_family_metrics(static, tkey, params, tr.feet, robot)}
 
     return jax.vmap(one)(seeds, robot_vals, terrain_vals, traj)
@@ -244,18 +272,19 @@ _run_prepare = jax.jit(_counted_prepare, static_argnames=("static",))
 _run_finish = jax.jit(_finish, static_argnames=("static",))
 
 
-def _physics_chunk(static: _Static, base, targets, key, sim, seeds, robot_vals, terrain_vals, commands, sim_vals):
+def _physics_chunk(static: _Static, base, targets, key, sim, scene, seeds, robot_vals, terrain_vals, commands,
+                   sim_vals):
     """A chunk of the MJX biped: the scenarios' terrains, robots and starts (one small program), their rollouts
     through :func:`ijoy_jax.sim.walker.rollout_batch` (its own program, shared with any other caller of the
     same shapes) with the scenarios' :class:`ijoy_jax.sim.physics.Dynamics`, then the summaries (another small
     program). Traced under one jit (:func:`scenario_bytes`) the three are one program."""
     from ijoy_jax.sim import physics, walker
 
-    terrains, robots_, starts, keys = _run_prepare(static, base, key, seeds, robot_vals, terrain_vals)
+    terrains, robots_, starts, keys = _run_prepare(static, base, key, scene, seeds, robot_vals, terrain_vals)
     traj = walker.rollout_batch(sim, terrains, robots_, starts, commands, num_steps=static.num_steps,
-                                method=static.method, targets=targets, kernel=static.kernel,
-                                dynamics=physics.Dynamics(**sim_vals), key=keys)
-    return _run_finish(static, base, key, seeds, robot_vals, terrain_vals, traj)
+                                method=static.method, first_swing=scene.first_swing, targets=targets,
+                                kernel=static.kernel, dynamics=physics.Dynamics(**sim_vals), key=keys)
+    return _run_finish(static, base, key, scene, seeds, robot_vals, terrain_vals, traj)
 
 
 def _chunk_runner(static: _Static):
@@ -323,10 +352,13 @@ def _base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
 class Scenario(NamedTuple):
     """One scenario of a sweep, rebuilt on the host (:func:`scenario`).
 
-    terrain: its generated :class:`~ijoy_jax.Terrain`; robot: its :class:`~ijoy_jax.Robot` (the density's
-    action set, the scenario's leaves); start: (2, 3) float32 feet (left, right; m, rad); command: (3,)
-    float32 (m/s, m/s, rad/s); cell, replicate: its cell and replicate (its terrain key is
-    ``fold_in(key(seed), replicate)``).
+    terrain: its generated :class:`~ijoy_jax.Terrain` (or the recorded one); robot: its :class:`~ijoy_jax.Robot`
+    (the density's action set, the scenario's leaves); start: (2, 3) float32 feet (left, right; m, rad);
+    command: (3,) float32 its held command (m/s, m/s, rad/s), or (num_steps, 3) one per step when the commands
+    come from ``[command] file``; cell, replicate: its cell and replicate (its terrain key is
+    ``fold_in(key(seed), replicate)``); first_swing: +1 if the left foot swings first. So
+    ``ijoy_jax.rollout(s.terrain, s.robot, s.start, s.command, num_steps, first_swing=s.first_swing)`` walks it
+    as the sweep does (the perfect robot).
     """
 
     terrain: Any
@@ -335,6 +367,7 @@ class Scenario(NamedTuple):
     command: np.ndarray
     cell: int
     replicate: int
+    first_swing: int = 1
 
 
 def scenario(cfg: SweepConfig, scenario_id: int) -> Scenario:
@@ -355,12 +388,13 @@ def scenario(cfg: SweepConfig, scenario_id: int) -> Scenario:
     density = float(row["robot.density"].iloc[0])
     base = _base_robot(cfg, table, density)
     robot_cols, terrain_cols, _ = _cols(table)
-    replicate, robot_vals, terrain_vals, commands, _ = _batch(row, 1, robot_cols, terrain_cols)
+    replicate, robot_vals, terrain_vals, commands, _ = _batch(row, 1, robot_cols, terrain_cols, cfg=cfg)
     one = lambda d: {k: v[0] for k, v in d.items()}  # noqa: E731
-    _, _, terrain, robot, start = _setup(_static(cfg), base, jax.random.key(cfg.seed), replicate[0], one(robot_vals),
-                                         one(terrain_vals))
-    return Scenario(terrain, robot, np.asarray(start, np.float32), np.asarray(commands[0], np.float32),
-                    int(row["cell"].iloc[0]), int(replicate[0]))
+    _, _, terrain, robot, start = _setup(_static(cfg), base, jax.random.key(cfg.seed), _scene(cfg), replicate[0],
+                                         one(robot_vals), one(terrain_vals))
+    command = commands[0] if cfg.command_file is not None else commands[0, 0]  # (num_steps, 3) or held (3,)
+    return Scenario(terrain, robot, np.asarray(start, np.float32), np.asarray(command, np.float32),
+                    int(row["cell"].iloc[0]), int(replicate[0]), cfg.first_swing)
 
 
 def _versions() -> dict:
@@ -549,9 +583,11 @@ def _process_layout(process_id, num_processes) -> tuple[int, int]:
     return process_id, num_processes
 
 
-def _batch(rows, size: int, robot_cols, terrain_cols, sim_cols=()):
+def _batch(rows, size: int, robot_cols, terrain_cols, sim_cols=(), *, cfg: SweepConfig):
     """Per-scenario inputs of a chunk: ``rows`` padded to ``size`` by repeating the last one (NumPy): the
-    replicates, robot values, terrain values, commands and physics values ({} for the perfect robot)."""
+    replicates, robot values, terrain values, commands (size, num_steps, 3) (each scenario's held command at
+    every step, or the ``[command] file``'s sequence, the same program either way) and physics values ({} for
+    the perfect robot)."""
     n = len(rows)
     pad = np.concatenate([np.arange(n), np.full(size - n, n - 1)])
 
@@ -561,7 +597,12 @@ def _batch(rows, size: int, robot_cols, terrain_cols, sim_cols=()):
     robot_vals = {c.partition(".")[2]: col(c, np.float32) for c in robot_cols}
     terrain_vals = {c.partition(".")[2]: col(c, np.int32 if rows[c].dtype.kind == "i" else np.float32)
                     for c in terrain_cols}
-    commands = np.stack([col(f"command.{k}", np.float32) for k in COMMAND_KEYS], axis=-1)
+    steps = cfg.command_steps
+    if steps is None:
+        held = np.stack([col(f"command.{k}", np.float32) for k in COMMAND_KEYS], axis=-1)
+        commands = np.repeat(held[:, None, :], cfg.num_steps, axis=1)
+    else:
+        commands = np.repeat(np.asarray(steps, np.float32)[None], size, axis=0)
     sim_vals = {c.partition(".")[2]: col(c, np.float32) for c in sim_cols}
     return col("replicate", np.int32), robot_vals, terrain_vals, commands, sim_vals
 
@@ -593,6 +634,7 @@ def _device_bytes(device) -> int | None:
 
 
 def _static(cfg: SweepConfig) -> _Static:
+    """The chunk's static configuration (``family`` None for a recorded terrain)."""
     return _Static(cfg.family, cfg.shape, cfg.resolution, cfg.has_height, cfg.static_max_count,
                    cfg.num_steps, cfg.method, cfg.kernel, cfg.walker, cfg.horizon, cfg.beam, cfg.refine)
 
@@ -632,11 +674,11 @@ def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot, sim=None) -> tup
     base, targets = _shared(table, base)
     key = jax.random.key(cfg.seed)
     sim = _make_sim(cfg, table) if sim is None else sim
-    batch = _batch(table.iloc[:1], 1, robot_cols, terrain_cols, sim_cols)
+    batch = _batch(table.iloc[:1], 1, robot_cols, terrain_cols, sim_cols, cfg=cfg)
     runner = _run_chunk if cfg.walker == "perfect" else jax.jit(_physics_chunk, static_argnames=("static",))
     heaviest = _static(cfg)._replace(horizon=int(table["selector.horizon"].max()),
                                      refine=bool(table["selector.refine"].max()))  # the most memory per scenario
-    compiled = runner.lower(heaviest, base, targets, key, sim, *batch).compile()
+    compiled = runner.lower(heaviest, base, targets, key, sim, _scene(cfg), *batch).compile()
     mem = compiled.memory_analysis()
     if mem is None:
         raise RuntimeError("the backend reports no memory analysis")
@@ -805,6 +847,8 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     plan = _plan(cfg, table, chunk_size)
     plan_key = {"chunk_size": chunk_size, "max_scenarios": max_scenarios, "scenarios": len(table),
                 "chunks": len(plan)}
+    if cfg.inputs:  # the files it reads (their hashes): a changed recording is another plan
+        plan_key["inputs"] = cfg.inputs
     for prev in (old, mine):
         if prev is not None and (prev.get("sweep_text") != cfg.text or prev.get("plan") != plan_key):
             raise ValueError(f"{out} holds results of a different sweep or chunk plan "
@@ -862,7 +906,7 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     who = f" {pid}/{nproc}" if nproc > 1 else ""
     by_id = table.set_index("scenario", drop=False)
     traces0 = trace_count()
-    shared_of: dict[float, Any] = {}  # per density: (base robot, targets, key), placed
+    shared_of: dict[float, Any] = {}  # per density: (base robot, targets, key, sim, scene), placed
     computed = steady_n = 0
     steady_s = 0.0
     for chunk_id, group, ids in todo:
@@ -872,17 +916,17 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
         t0 = time.perf_counter()
         if density not in shared_of:
             # Shared by every scenario: replicated on every device of the mesh.
-            shared = (*_shared(table, bases[density]), key, sim)
+            shared = (*_shared(table, bases[density]), key, sim, _scene(cfg))
             shared_of[density] = shared if replicated is None else jax.device_put(shared, replicated)
-        base_d, targets, key_d, sim_d = shared_of[density]
+        base_d, targets, key_d, sim_d, scene_d = shared_of[density]
         rows = by_id.loc[ids]
         n = len(rows)
         size = min(chunk_size, per_group[group])
         size = -(-size // ndev) * ndev  # every device gets the same number of rows
-        batch = _batch(rows, size, robot_cols, terrain_cols, sim_cols)
+        batch = _batch(rows, size, robot_cols, terrain_cols, sim_cols, cfg=cfg)
         # Per-scenario inputs: split along the scenario axis over the mesh (one device: default device).
         batch = jax.tree.map(jnp.asarray, batch) if batched is None else jax.device_put(batch, batched)
-        summary = run_chunk(static_g, base_d, targets, key_d, sim_d, *batch)
+        summary = run_chunk(static_g, base_d, targets, key_d, sim_d, scene_d, *batch)
         summary = jax.device_get(jax.block_until_ready(summary))
         result = rows.reset_index(drop=True).copy()
         for k, v in summary.items():

@@ -39,12 +39,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax import cue, footcost, robots, select
+from ijoy_jax.live.bodies import DEFAULT_CONTROL_DT
 from ijoy_jax.live.deciders import Decision
-from ijoy_jax.live.inputs import DEFAULT_DEADZONE, axes_to_command
+from ijoy_jax.live.inputs import DEFAULT_DEADZONE, Trace, axes_to_command
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
-__all__ = ["DEFAULT_REACH_DIRECTIONS", "TERM_NAMES", "DriveResult", "drive", "latency_stats"]
+__all__ = ["DEFAULT_REACH_DIRECTIONS", "TERM_NAMES", "DriveResult", "drive", "latency_stats", "scripted_commands"]
 
 DEFAULT_REACH_DIRECTIONS = 32
 """Directions of the cue's reach polygon shown in the live view."""
@@ -97,6 +98,50 @@ def latency_stats(latencies) -> dict:
         return {"latency_p50_s": float("nan"), "latency_p99_s": float("nan"), "latency_max_s": float("nan")}
     return {"latency_p50_s": float(np.percentile(lat, 50)), "latency_p99_s": float(np.percentile(lat, 99)),
             "latency_max_s": float(lat.max())}
+
+
+def scripted_commands(trace: Trace, robot: Robot, *, deadzone: float = DEFAULT_DEADZONE, decide_at: float = 0.0,
+                      control_dt: float = DEFAULT_CONTROL_DT, num_steps: int | None = None) -> np.ndarray:
+    """(n, 3) float64: the command (m/s, m/s, rad/s) of each decision :func:`drive` makes with the scripted stick
+    ``trace`` (host only, nothing is decided).
+
+    The loop's schedule: with ``ticks = round(step_time / control_dt)`` control ticks per step and
+    ``d = floor(decide_at * ticks)``, decision ``j`` (0-based; it chooses step ``j + 1``) reads the stick at
+    ``t_j = (j * ticks + d) * control_dt`` s, ``trace.at(t_j)`` through :func:`~ijoy_jax.live.axes_to_command`
+    with the robot's command range and ``deadzone``; there is no decision at or after the trace's end
+    (``trace.duration``), nor beyond ``num_steps``. The same float64 values as the ``command`` of each recorded
+    decision of a drive of that stick (the perfect body, or the MuJoCo biped: both tick at ``control_dt``), so
+    a trace file becomes a command sequence for a sweep (``[command] file``, :mod:`ijoy_jax.sweep.recorded`).
+
+    Example:
+      >>> import numpy as np, ijoy_jax as ij
+      >>> from ijoy_jax import live
+      >>> trace = live.Trace(np.array([0.0, 1.0, 2.0]), np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 0]]))
+      >>> live.loop.scripted_commands(trace, ij.robots.hrp2()).round(4).tolist()   # at 0 and 0.8 s, 1.6 s
+      [[0.25, 0.0, 0.0], [0.25, 0.0, 0.0], [0.0, 0.175, 0.0]]
+    """
+    if not 0.0 <= decide_at < 1.0:
+        raise ValueError(f"decide_at must be in [0, 1) (a fraction of the step), got {decide_at!r}")
+    if num_steps is not None and (isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 0):
+        raise ValueError(f"num_steps must be a whole number >= 0, got {num_steps!r}")
+    dt = float(control_dt)
+    ticks = float(robot.step_time) / dt
+    if dt <= 0 or abs(ticks - round(ticks)) > 1e-4:  # as the bodies require (float32 step times: 0.80000001)
+        raise ValueError(f"step_time {float(robot.step_time)} s must be a whole number of control_dt {dt} s ticks")
+    ticks = int(round(ticks))
+    d = int(math.floor(decide_at * ticks))
+    duration = trace.duration
+    upper = int(duration / (ticks * dt)) + 2  # past the last decision: the loop's test below decides
+    if num_steps is not None:
+        upper = min(upper, int(num_steps))
+    lo, hi = robots.command_range(robot)
+    out = []
+    for j in range(upper):
+        # drive()'s own expressions: t_start + d * dt against the end, then the tick's time tick_count * dt
+        if not (j * ticks) * dt + d * dt < duration - 1e-9:
+            break
+        out.append(axes_to_command(trace.at((j * ticks + d) * dt), (lo, hi), deadzone))
+    return np.asarray(out, np.float64).reshape(-1, 3)
 
 
 class _Outlook:
