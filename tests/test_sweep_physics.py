@@ -118,7 +118,7 @@ def runs(sim):
     out = {"plain": _rollouts(sim)}
     before = W.compiled_programs()
     out["model"] = _rollouts(sim, friction=[None, 0.05, None, None], kp_scale=[None, None, 0.1, None],
-                             mass_scale=[None, None, None, 3.0])
+                             mass_scale=[None, None, None, 10.0])
     out["walker"] = _rollouts(sim, latency=[0.08, None, None, None], stance_noise=[None, 0.05, None, None],
                               push=[None, None, 40.0, None])
     new = W.compiled_programs() - before
@@ -143,17 +143,21 @@ def test_no_dynamics_is_the_nominal_robot_bit_for_bit(runs):
 def test_the_nominal_robot_walks(runs):
     plain = runs[0]["plain"][0]
     assert not plain["fell"].any() and (plain["steps_taken"] == STEPS).all()
-    assert plain["placement_error_mean"].max() < 0.005  # m: a few mm (BENCHMARKS.md)
+    # m: issue #20's goal is a p95 under 1 cm; measured 6.1 mm mean here (the DCM feedback's CoP shift costs a few mm
+    # of placement for balance on uneven ground; 2-3 mm without it)
+    assert plain["placement_error_mean"].max() < 0.01
 
 
 def test_a_slippery_floor_and_a_heavier_robot_fall(runs):
     model = runs[0]["model"][0]
-    assert model["fell"].tolist() == [False, True, False, True]  # friction 0.05; mass x3 with the same gains
+    # friction 0.05; mass x10 with the same gains (measured: x6 walks, sagging 7 mm, x8 falls; with the DCM
+    # feedback x3 walks)
+    assert model["fell"].tolist() == [False, True, False, True]
 
 
 def test_soft_actuators_sag_and_miss(runs):
     (plain, tp), (model, tm) = runs[0]["plain"], runs[0]["model"]
-    assert model["placement_error_mean"][2] > 3 * plain["placement_error_mean"][2]  # kp x 0.1
+    assert model["placement_error_mean"][2] > 2 * plain["placement_error_mean"][2]  # kp x 0.1 (measured 3.3x)
     assert tm.log.min_pelvis_height[2].min() < tp.log.min_pelvis_height[2].min() - 0.003  # m lower
 
 
@@ -163,7 +167,7 @@ def test_delay_noise_and_pushes_act_in_the_walker(runs):
     assert walker["placement_error_mean"][0] > 3 * nominal  # 80 ms control delay
     # stance noise of 5 cm: each step is taken relative to a stance believed off by N(0, 0.05^2) per axis, so it
     # lands about that far from the chosen foothold (the mean of a 2D normal's length is 1.25 sigma)
-    assert 0.0125 < walker["placement_error_mean"][1] < 0.15 and walker["placement_error_mean"][1] > 10 * nominal
+    assert 0.0125 < walker["placement_error_mean"][1] < 0.15 and walker["placement_error_mean"][1] > 5 * nominal
     assert walker["fell"][2] and not walker["fell"][[0, 1, 3]].any()  # a 40 N s push every step
 
 
