@@ -54,6 +54,47 @@ def pytest_sessionfinish(session):
     gc.collect()
 
 
+def _mapped_regions() -> int | None:
+    """How many memory mappings this process holds (Linux: lines of /proc/self/maps), or None elsewhere."""
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return sum(1 for _ in f)
+    except OSError:
+        return None
+
+
+def _mapping_limit() -> int:
+    try:
+        return int(Path("/proc/sys/vm/max_map_count").read_text())
+    except (OSError, ValueError):
+        return 65530  # Linux's default
+
+
+# Free JAX's compiled programs between two test files once this process holds this fraction of the kernel's
+# mappings limit (vm.max_map_count, 65530 by default).
+MAPPINGS_FRACTION = 1 / 3
+
+
+def pytest_runtest_teardown(item, nextitem):
+    """Free JAX's compiled programs at the end of a test file when this process holds many memory mappings.
+
+    Every program XLA compiles for the CPU keeps its code and constants in mappings of their own (about 2000
+    for tests/test_family.py alone), and JAX keeps every compiled program while its function lives. An xdist
+    worker that runs half the suite (~30 files) passes the kernel's limit of 65530 mappings: the next mmap
+    fails inside LLVM, which crashed the worker with a segfault while compiling (tests/test_tune_haptic.py,
+    the last file of a worker, reproduced in one process: 2026-11-26). Clearing
+    JAX's caches (and collecting the garbage) frees them (4171 -> 1292 after tests/test_generators.py); a
+    later file that needs a freed program compiles it again or loads it from the persistent cache. Below
+    the threshold nothing is freed, so files that share programs keep sharing them.
+    """
+    if nextitem is not None and nextitem.path == item.path:
+        return
+    n = _mapped_regions()
+    if n is not None and n > MAPPINGS_FRACTION * _mapping_limit():
+        jax.clear_caches()
+        gc.collect()
+
+
 @pytest.hookimpl(optionalhook=True)  # xdist's hook: without xdist (-p no:xdist) it is never called
 def pytest_xdist_make_scheduler(config, log):
     """``--dist loadfile`` (pyproject's addopts), with the files of :data:`ONE_WORKER` one unit of work."""

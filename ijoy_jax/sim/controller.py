@@ -366,8 +366,9 @@ def comply(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, zref, wrench)
     """The ankles' damping control (Kajita et al. 2010): the soles yield to the ground about the ankle.
 
     Each foot's wanted centre of pressure is the point ``zref`` (2,) (the ZMP
-    reference, moved by the DCM feedback in :func:`control_tick`) brought into the sole (its frame, kept ``cop_edge`` inside the edges); the
-    ankle pitch and roll offsets move at ``(measured - wanted) ground moment /
+    reference, moved by the DCM feedback in :func:`control_tick`) brought into
+    the sole (its frame, kept ``cop_edge`` inside the edges); the ankle pitch
+    and roll offsets move at ``(measured - wanted) ground moment /
     ankle_damping`` while the foot carries load (fading in between half and the
     whole ``contact_force``) and leak back with ``ankle_leak``. So a sole that
     lands on one edge (a tilt the plan did not expect, an early or uneven
