@@ -257,3 +257,20 @@ def test_gif_and_filmstrip(tmp_path):
     assert not strip[12:, 16:].any()
     with pytest.raises(ValueError, match="uint8"):
         render.write_gif(tmp_path / "b.gif", frames.astype(np.float32))
+
+
+def test_refine_reaches_the_simulated_walker(sim):
+    """``refine=True`` puts the continuous refinement (:mod:`ijoy_jax.refine`, tested with the perfect robot in
+    tests/test_refine.py) into the MJX rollout's decisions: traced, not compiled (a compile costs ~75 s here),
+    the program gains the refinement's search and keeps the same outputs; a non-bool is refused at the boundary."""
+    sc = scenario(np.ones(SHAPE_2D, bool), start=_start(), command=FORWARD_CMDS)
+    args = (sim, sc.terrain(), ij.robots.hrp2(margin=sc.margin), jnp.asarray(sc.start), jnp.asarray(sc.commands[:2]))
+
+    def traced(refine):
+        return jax.make_jaxpr(lambda *a: W.rollout(sim, *a, num_steps=2, method="ordered", refine=refine))(*args[1:])
+
+    plain, refined = traced(False), traced(True)
+    assert len(str(refined)) > len(str(plain)) + 1000  # the refinement's local search is in the program
+    assert jax.tree_util.tree_structure(refined.out_avals) == jax.tree_util.tree_structure(plain.out_avals)
+    with pytest.raises(ValueError, match="refine must be True or False"):
+        W.rollout(*args, num_steps=2, refine="yes")

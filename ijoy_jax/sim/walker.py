@@ -435,7 +435,7 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
     return control.Walker(init, stance, execute, feet, lambda s: s.last, warmup=1)
 
 
-_OPTIONS = ("num_steps", "method", "swing_path", "quantize", "frames_per_step", "kernel")
+_OPTIONS = ("num_steps", "method", "swing_path", "quantize", "frames_per_step", "kernel", "refine")
 
 
 def nominal_dynamics(sim: Sim) -> physics.Dynamics:
@@ -447,24 +447,25 @@ def nominal_dynamics(sim: Sim) -> physics.Dynamics:
 @functools.partial(jax.jit, static_argnames=_OPTIONS)
 def _rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, first_swing, targets, dynamics, key, *,
              num_steps: int, method: str, swing_path: bool, quantize: bool, frames_per_step: int,
-             kernel: str) -> control.Trajectory:
+             kernel: str, refine: bool = False) -> control.Trajectory:
     """The loop of :func:`rollout`, jitted (the Sim's models are traced arguments), its inputs checked by the
     caller; inside a caller's trace it is inlined."""
     walker = mjx_walker(sim, terrain, frames_per_step=frames_per_step, robot=robot, dynamics=dynamics, key=key)
     return control.rollout(terrain, robot, start, commands, num_steps, method=method, first_swing=first_swing,
-                           walker=walker, swing_path=swing_path, quantize=quantize, targets=targets, kernel=kernel)
+                           walker=walker, swing_path=swing_path, quantize=quantize, targets=targets, kernel=kernel,
+                           refine=refine)
 
 
 @functools.partial(jax.jit, static_argnames=_OPTIONS)
 def _rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, first_swing, targets, dynamics,
                    keys, *, num_steps: int, method: str, swing_path: bool, quantize: bool, frames_per_step: int,
-                   kernel: str) -> control.Trajectory:
+                   kernel: str, refine: bool = False) -> control.Trajectory:
     """:func:`_rollout` vmapped over terrains, robots, starts, commands, first swings, dynamics and keys, as one
     jitted program (the Sim's models shared)."""
 
     def one(t, r, s, c, f, d, k):
         return _rollout(sim, t, r, s, c, f, targets, d, k, num_steps=num_steps, method=method, swing_path=swing_path,
-                        quantize=quantize, frames_per_step=frames_per_step, kernel=kernel)
+                        quantize=quantize, frames_per_step=frames_per_step, kernel=kernel, refine=refine)
 
     return jax.vmap(one)(terrains, robots, starts, commands, first_swing, dynamics, keys)
 
@@ -536,7 +537,7 @@ def _keys(key, batch: int | None) -> jax.Array:
 def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_steps: int, method: str = "exhaustive",
             first_swing: int = LEFT, targets: Targets | None = None, swing_path: bool = True,
             quantize: bool = True, frames_per_step: int = 0, dynamics: physics.Dynamics | None = None, key=None,
-            kernel: str = "xla") -> control.Trajectory:
+            kernel: str = "xla", refine: bool = False) -> control.Trajectory:
     """Walk the simulated biped with the joystick for ``num_steps`` steps (jitted as one scan).
 
     Same arguments and result as :func:`ijoy_jax.rollout`, with the physics in
@@ -559,7 +560,8 @@ def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_st
       start: (2, 3) world foot poses, row 0 left, row 1 right (m, rad; :func:`ijoy_jax.robots.start_stance`).
       commands: (3,) or (num_steps, 3) joystick commands (m/s, m/s, rad/s).
       num_steps: steps (static).
-      method, first_swing, targets, swing_path, quantize, kernel: as in :func:`ijoy_jax.rollout`.
+      method, first_swing, targets, swing_path, quantize, kernel, refine: as in :func:`ijoy_jax.rollout`
+        (``refine``: each chosen step refined in continuous (dx, dy, dtheta), :mod:`ijoy_jax.refine`; static).
       frames_per_step: states kept per step in ``log.qpos`` (static; at most the control ticks per step).
       dynamics: the robot's :class:`~ijoy_jax.sim.physics.Dynamics` (scalar leaves; traced: new values never
         recompile); None: :func:`nominal_dynamics`.
@@ -574,13 +576,14 @@ def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_st
                                  nominal_dynamics(sim) if dynamics is None else dynamics)
     return _rollout(sim, terrain, robot, start, commands, first_swing, targets, dyn, _keys(key, None),
                     num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
-                    frames_per_step=int(frames_per_step), kernel=kernel)
+                    frames_per_step=int(frames_per_step), kernel=kernel, refine=_refine(refine))
 
 
 def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, *, num_steps: int,
                   method: str = "exhaustive", first_swing=LEFT, targets: Targets | None = None,
                   swing_path: bool = True, quantize: bool = True, frames_per_step: int = 0,
-                  dynamics: physics.Dynamics | None = None, key=None, kernel: str = "xla") -> control.Trajectory:
+                  dynamics: physics.Dynamics | None = None, key=None, kernel: str = "xla",
+                  refine: bool = False) -> control.Trajectory:
     """:func:`rollout` for B robots at once: one jitted ``vmap`` of the simulated joystick loop.
 
     Args:
@@ -596,7 +599,7 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, 
         :func:`nominal_dynamics` for all.
       key: PRNG key or int seed, split into B keys, or (B,) keys: each robot's stance noise and pushes
         (default 0).
-      method, targets, swing_path, quantize, frames_per_step, kernel: as in :func:`rollout`.
+      method, targets, swing_path, quantize, frames_per_step, kernel, refine: as in :func:`rollout`.
 
     Returns:
       A :class:`ijoy_jax.control.Trajectory` with a leading axis B on every leaf.
@@ -621,7 +624,15 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, 
                                  nominal_dynamics(sim) if dynamics is None else dynamics)
     return _rollout_batch(sim, terrains, robots, starts, commands, first, targets, dyn, _keys(key, b),
                           num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
-                          frames_per_step=int(frames_per_step), kernel=kernel)
+                          frames_per_step=int(frames_per_step), kernel=kernel, refine=_refine(refine))
+
+
+def _refine(refine) -> bool:
+    """``refine`` is a static option here: True or False (:func:`ijoy_jax.rollout` also takes a
+    :class:`~ijoy_jax.refine.RefineParams`; its method check applies, in ``select.search_options``)."""
+    if not isinstance(refine, (bool, np.bool_)):
+        raise ValueError(f"refine must be True or False, got {refine!r}")
+    return bool(refine)
 
 
 def summary(traj: control.Trajectory) -> dict[str, jax.Array]:
