@@ -80,9 +80,10 @@ def pytest_runtest_teardown(item, nextitem):
 
     Every program XLA compiles for the CPU keeps its code and constants in mappings of their own (about 2000
     for tests/test_family.py alone), and JAX keeps every compiled program while its function lives. An xdist
-    worker that runs half the suite (~30 files) passes the kernel's limit of 65530 mappings: the next mmap
-    fails inside LLVM, which crashed the worker with a segfault while compiling (tests/test_tune_haptic.py,
-    the last file of a worker, reproduced in one process: 2026-11-26). Clearing
+    worker that runs half the suite (~30 files) heads for the kernel's limit of 65530 mappings (21 k after 8
+    of them), where an mmap fails inside LLVM: such a worker crashed with a segfault while compiling in its
+    last file, tests/test_tune_haptic.py (CI and here, also with its 27 files run in one process; not with
+    this hook: 2026-11-26). Clearing
     JAX's caches (and collecting the garbage) frees them (4171 -> 1292 after tests/test_generators.py); a
     later file that needs a freed program compiles it again or loads it from the persistent cache. Below
     the threshold nothing is freed, so files that share programs keep sharing them.
