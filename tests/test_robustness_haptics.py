@@ -146,6 +146,20 @@ def test_repulsion_geometry(jac, travels):
     assert _finite(W.limiting_planes(jac, tm, tp))
 
 
+def test_a_subnormal_travel_is_outside_its_stroke_in_every_process():
+    """The boundary compares in NumPy: +1e-45 (the smallest float32 subnormal) is > 0, though XLA's CPU
+    backend flushes subnormals to zero (a check through jnp let it pass: test_repulsion_geometry failed in
+    the runs whose hypothesis examples held an all-F32_MAX Jacobian and 1e-45 travels, 2026-11-26)."""
+    jac = jnp.full((3, 4), F32_MAX, jnp.float32)
+    tiny = np.full(4, 1e-45, np.float32)
+    assert tiny[0] > 0  # a subnormal, not zero
+    force_decay_jit(CUBE[0], -jnp.ones(3), jnp.ones(3), _f32(1.0), _f32(0.05)).block_until_ready()  # XLA ran
+    assert W.check_travel(tiny, tiny).all()  # travel_minus > 0
+    for tm, tp in ((tiny, tiny), (jnp.asarray(tiny), jnp.asarray(tiny))):
+        with pytest.raises(ValueError, match="outside their stroke"):
+            W.repulsive_force_decay(jac, tm, tp, 1.0, 0.05)
+
+
 @pytest.mark.parametrize(
     "args",
     [

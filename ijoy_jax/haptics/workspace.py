@@ -365,9 +365,15 @@ def limiting_planes(jacobian, travel_minus, travel_plus) -> Planes:
 
 
 def check_travel(travel_minus, travel_plus) -> jax.Array:
-    """(k,) bool: True where a travel has the wrong sign or is not finite (q outside its stroke)."""
-    tm, tp = jnp.asarray(travel_minus), jnp.asarray(travel_plus)
-    return ~(jnp.isfinite(tm) & jnp.isfinite(tp) & (tm <= 0) & (tp >= 0))
+    """(k,) bool: True where a travel has the wrong sign or is not finite (q outside its stroke).
+
+    Two NumPy arrays are checked in NumPy (exact IEEE comparisons: a subnormal travel_minus of 1e-45 m is
+    outside its stroke), as the boundary checks do; anything else in JAX, where XLA's CPU backend flushes
+    subnormals to zero, so such a travel reads as 0.
+    """
+    xp = np if isinstance(travel_minus, np.ndarray) and isinstance(travel_plus, np.ndarray) else jnp
+    tm, tp = xp.asarray(travel_minus), xp.asarray(travel_plus)
+    return ~(xp.isfinite(tm) & xp.isfinite(tp) & (tm <= 0) & (tp >= 0))
 
 
 def _is_concrete(*xs) -> bool:
@@ -386,7 +392,8 @@ def _validate(jacobian, travel_minus, travel_plus):
     if _is_concrete(jacobian, travel_minus, travel_plus):
         if not np.all(np.isfinite(np.asarray(jac))):
             raise ValueError("jacobian has non-finite entries")
-        bad = np.flatnonzero(np.asarray(check_travel(tm, tp)))
+        # in NumPy: through XLA a subnormal travel of the wrong sign reads as 0 and passed the boundary
+        bad = np.flatnonzero(check_travel(np.asarray(travel_minus), np.asarray(travel_plus)))
         if bad.size:
             raise ValueError(
                 f"cylinders {bad.tolist()} are outside their stroke: need travel_minus <= 0 <= travel_plus "
