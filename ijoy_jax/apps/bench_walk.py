@@ -57,6 +57,7 @@ import numpy as np
 
 from ijoy_jax import control, robots, select
 from ijoy_jax import terrain as terrain_mod
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.sim import model
 from ijoy_jax.sim import walker as W
@@ -736,7 +737,7 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
 def compiled_perfect_programs() -> int:
     """How many programs :func:`perfect_rollouts` holds compiled in this process (one per robot action-set size,
     batch and ``num_steps``; new maps, commands and robot values reuse them)."""
-    return _perfect_jit._cache_size()
+    return compiled_count(_perfect_jit)
 
 
 # --------------------------------------------------------------------------------------------- table and plot

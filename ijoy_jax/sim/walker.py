@@ -33,6 +33,7 @@ from mujoco import mjx
 
 from ijoy_jax import control, geometry, select
 from ijoy_jax import terrain as terrain_mod
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import METHODS, Targets
@@ -479,7 +480,7 @@ def compiled_programs() -> int:
     commands, dynamics or keys reuse the program, and so does a Sim built again
     with the same settings.
     """
-    return _rollout._cache_size() + _rollout_batch._cache_size()
+    return compiled_count(_rollout) + compiled_count(_rollout_batch)
 
 
 def _is_traced(x) -> bool:
