@@ -50,6 +50,11 @@ def pytest_sessionfinish(session):
     KeyboardInterrupt" at the end of a clean run. Doing the expensive part here, before the worker reports,
     leaves the late collection nothing to do.
     """
+    _free_compiled_programs()
+
+
+def _free_compiled_programs():
+    """Drop every program JAX holds compiled in this process and collect the garbage that frees them."""
     jax.clear_caches()
     gc.collect()
 
@@ -92,8 +97,7 @@ def pytest_runtest_teardown(item, nextitem):
         return
     n = _mapped_regions()
     if n is not None and n > MAPPINGS_FRACTION * _mapping_limit():
-        jax.clear_caches()
-        gc.collect()
+        _free_compiled_programs()
 
 
 @pytest.hookimpl(optionalhook=True)  # xdist's hook: without xdist (-p no:xdist) it is never called
