@@ -228,6 +228,31 @@ def test_the_sweep_runs_through_rollout_batchs_program(reference):
     assert stats.chunks == N // CHUNK and stats.computed == N and stats.physics_steps == (STEPS + 1) * 80 * 5
 
 
+def test_a_refined_physics_sweep_passes_refine_to_the_walker(physics_file, tmp_path, monkeypatch):
+    """``refine = true`` with ``walker = "mjx"``: the sweep hands it to :func:`ijoy_jax.sim.walker.rollout_batch`
+    (whose refined rollout tests/test_sim_rollouts.py traces; compiling it here would cost ~100 s), and
+    ``method = "lookahead"`` stays refused for the simulated walker."""
+    text = physics_file.read_text().replace('walker = "mjx"', 'walker = "mjx"\nrefine = true')
+    cfg = sweep.load_config(write(tmp_path, text, "refined.toml"))
+    assert cfg.refine is True and cfg.walker == "mjx"
+    seen = []
+
+    class Reached(Exception):
+        pass
+
+    def rollout_batch(*args, **kwargs):
+        seen.append((kwargs["refine"], kwargs["method"]))
+        raise Reached
+
+    monkeypatch.setattr(W, "rollout_batch", rollout_batch)
+    with pytest.raises(Reached):
+        sweep.run(cfg, tmp_path / "refined", chunk_size=CHUNK, max_scenarios=CHUNK, progress=False)
+    assert seen == [(True, "exhaustive")]
+    text = physics_file.read_text().replace('method = "exhaustive"', 'method = "lookahead"')
+    with pytest.raises(sweep.SweepConfigError, match='sweep.method: walker = "mjx" runs the one-step selectors'):
+        sweep.load_config(write(tmp_path, text, "lookahead.toml"))
+
+
 def test_physics_columns_and_aggregates(reference, physics_file):
     out, _, _ = reference
     df = sweep.load(out)

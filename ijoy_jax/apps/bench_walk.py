@@ -561,21 +561,22 @@ def _stack_robot(robot: robots.Robot, batch: int) -> robots.Robot:
 
 
 def perfect_rollouts(terrains: Terrain, robot: robots.Robot, starts, commands, *, num_steps: int,
-                     targets=None) -> control.Trajectory:
+                     targets=None, refine: bool = False) -> control.Trajectory:
     """The perfect robot on B maps: one jitted ``vmap`` of :func:`ijoy_jax.control.rollout` (``method="ordered"``).
 
     ``terrains``, ``starts`` (B, 2, 3) and ``commands`` (B, num_steps, 3) are batched; the robot and its
     targets (:func:`ijoy_jax.make_targets`, built when None) are shared, and traced: new maps, commands or
-    robot values reuse the compiled program.
+    robot values reuse the compiled program. ``refine``: each lattice choice refined to a continuous foothold
+    (:mod:`ijoy_jax.refine`; one more program).
     """
     targets = select.make_targets(robot) if targets is None else targets
-    return _perfect_jit(terrains, robot, starts, commands, targets, num_steps=int(num_steps))
+    return _perfect_jit(terrains, robot, starts, commands, targets, num_steps=int(num_steps), refine=bool(refine))
 
 
-@functools.partial(jax.jit, static_argnames=("num_steps",))
-def _perfect_jit(terrains, robot, starts, commands, targets, *, num_steps: int):
+@functools.partial(jax.jit, static_argnames=("num_steps", "refine"))
+def _perfect_jit(terrains, robot, starts, commands, targets, *, num_steps: int, refine: bool = False):
     def one(t, s, c):
-        return control.rollout(t, robot, s, c, num_steps, method="ordered", targets=targets)
+        return control.rollout(t, robot, s, c, num_steps, method="ordered", targets=targets, refine=refine)
 
     return jax.vmap(one)(terrains, starts, commands)
 
@@ -590,7 +591,7 @@ def _timed(fn, *args, **kwargs):
 
 
 def simulated_rollouts(sim: W.Sim, terrains: Terrain, robot: robots.Robot, starts, commands, *, num_steps: int,
-                       chunk: int, targets=None):
+                       chunk: int, targets=None, refine: bool = False):
     """The MJX biped on B maps, ``chunk`` rollouts per :func:`ijoy_jax.sim.walker.rollout_batch` call.
 
     Every call has ``chunk`` rollouts (the last chunk wraps round to the first maps, its extra rollouts
@@ -605,7 +606,7 @@ def simulated_rollouts(sim: W.Sim, terrains: Terrain, robot: robots.Robot, start
         idx = np.arange(lo, lo + chunk) % total
         part, c, r = _timed(W.rollout_batch, sim, jax.tree_util.tree_map(lambda x, idx=idx: x[idx], terrains),
                             stacked, starts[idx], commands[idx], num_steps=num_steps, method="ordered",
-                            targets=targets)
+                            targets=targets, refine=refine)
         parts.append(jax.tree_util.tree_map(lambda a, n=min(chunk, total - lo): a[:n], part))
         comp, run_s = comp + c, run_s + r
     return jax.tree_util.tree_map(lambda *a: np.concatenate(a), *parts), comp, run_s
@@ -641,7 +642,7 @@ def check_options(families: Sequence[str] | None, *, batch: int, steps: int, com
 
 def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int = 30,
         commands: Sequence[str] = COMMANDS, resolution: float = RESOLUTION, seed: int = 0, chunk: int | None = None,
-        walkers: Sequence[str] = WALKERS, forward: float = FORWARD,
+        walkers: Sequence[str] = WALKERS, forward: float = FORWARD, refine: bool = False,
         emit: Callable[[dict], None] | None = None) -> list[dict[str, Any]]:
     """Walk ``batch`` robots per family and command kind with each walker; one record per row (and skips).
 
@@ -656,6 +657,8 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
         steps/s of 512), 32 on a CPU.
       walkers: some of :data:`WALKERS`.
       forward: the held forward command (m/s) of families without their own (:attr:`WalkFamily.forward`).
+      refine: both walkers refine each lattice choice to a continuous foothold (:mod:`ijoy_jax.refine`,
+        ``refine=True`` of :func:`ijoy_jax.control.rollout` and :func:`ijoy_jax.sim.walker.rollout_batch`).
       emit: called with each record as soon as it exists (e.g. to print JSON lines).
 
     Returns:
@@ -669,6 +672,9 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
     """
     names = check_options(families, batch=batch, steps=steps, commands=commands, resolution=resolution,
                           chunk=chunk, walkers=walkers, forward=forward)
+    if not isinstance(refine, (bool, np.bool_)):
+        raise ValueError(f"refine must be True or False, got {refine!r}")
+    refine = bool(refine)
     shape = grid_shape(resolution)
     if chunk is None:
         chunk = min(batch, 32 if jax.default_backend() == "cpu" else 1024)
@@ -688,7 +694,7 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
     programs0, t_all = W.compiled_programs(), time.perf_counter()
     perfect_compile = 0.0
     setup = dict(batch=batch, steps=steps, resolution=resolution, shape=list(shape), chunk=chunk, seed=seed,
-                 forward_m_s=forward, **info)
+                 forward_m_s=forward, refine=refine, **info)
     key = jax.random.key(seed)
     for i, name in enumerate(names):
         fam = FAMILIES[name]
@@ -715,14 +721,14 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
                           maps_s=round(maps_s, 3), **dict(setup, forward_m_s=speed))
             if "perfect" in walkers:
                 traj, comp, run_s = _timed(perfect_rollouts, maps, robot, starts, cmd, num_steps=steps,
-                                           targets=targets)
+                                           targets=targets, refine=refine)
                 perfect_compile += comp
                 record(dict(common, walker="perfect", **aggregate(traj, starts), compile_s=round(comp, 3),
                             run_s=round(run_s, 4), decisions_per_s=batch * steps / max(run_s, 1e-9)))
             if sim is not None:
                 before = W.compiled_programs()
                 traj, comp, run_s = simulated_rollouts(sim, maps, robot, starts, cmd, num_steps=steps, chunk=chunk,
-                                                       targets=targets)
+                                                       targets=targets, refine=refine)
                 physics = batch * (steps + 1) * sim.substeps * sim.cfg.ticks_per_step
                 record(dict(common, walker="mjx", **aggregate(traj, starts), compile_s=round(comp, 3),
                             run_s=round(run_s, 4), physics_steps_per_s=physics / max(run_s, 1e-9),

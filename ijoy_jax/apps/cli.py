@@ -99,6 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     walk.add_argument("--chunk", type=int, default=None,
                       help="simulated rollouts per jitted call (default: up to 1024 on an accelerator, 32 on a CPU)")
     walk.add_argument("--seed", type=int, default=None, help="maps and random commands (default: 0)")
+    walk.add_argument("--refine", action="store_const", const=True, default=None,
+                      help="refine each lattice choice to a continuous foothold (both walkers)")
     walk.add_argument("--plot", default=None, help="write the bar plot (PNG) here")
     sweep = sub.add_parser("sweep", help="run a sweep declared in TOML, or summarise a finished one",
                            description="Sweeps over robot/selector parameters, terrains and commands "
@@ -232,7 +234,7 @@ def _run(args) -> int:
     return 2
 
 
-_WALK_OPTIONS = ("families", "batch", "steps", "commands", "resolution", "forward", "chunk", "seed", "plot")
+_WALK_OPTIONS = ("families", "batch", "steps", "commands", "resolution", "forward", "chunk", "seed", "refine", "plot")
 
 
 def _bench_walk(args) -> list[dict]:
@@ -248,7 +250,7 @@ def _bench_walk(args) -> list[dict]:
                           steps=given(args.steps, 6 if args.quick else 30), commands=kinds,
                           resolution=given(args.resolution, bench_walk.RESOLUTION), seed=given(args.seed, 0),
                           chunk=args.chunk, forward=given(args.forward, bench_walk.FORWARD),
-                          emit=lambda row: print(json.dumps(row), flush=True))
+                          refine=given(args.refine, False), emit=lambda row: print(json.dumps(row), flush=True))
     print(bench_walk.markdown_table(rows))
     if args.plot:
         bench_walk.plot(rows, args.plot)

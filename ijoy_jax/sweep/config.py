@@ -78,6 +78,8 @@ horizons of 3 or more, horizon 2 is searched exactly) and, with
 The simulated walker (``walker = "mjx"``) walks the MJX biped
 (:func:`ijoy_jax.sim.walker.rollout_batch`) in place of the perfect robot: the same
 scenarios plus the per-scenario physics metrics (:data:`ijoy_jax.sweep.PHYSICS_METRICS`).
+It runs the one-step selectors (``exhaustive``, ``ordered``, ``naive``), refined or not
+(``refine``), not the lookahead.
 Its body is static, so the sweep must fit it, checked before compute: the step time
 is the controller's (``robot.step_time`` 0.8 s, not swept), the footprint is the
 physical foot's (``robot.foot_length``/``foot_width`` fixed in ``[robot]``, not
@@ -901,9 +903,9 @@ def _check_selector(chk: _Checker, cfg: SweepConfig) -> None:
     if any(refines) and cfg.method == "naive":
         chk.fail("grid.selector.refine" if "selector.refine" in cfg.grid else "sweep.refine",
                  "refinement applies to the terrain-aware methods; method = \"naive\" ignores the terrain")
-    if cfg.walker == "mjx" and (cfg.method == "lookahead" or any(refines)):
-        chk.fail("sweep.method" if cfg.method == "lookahead" else "sweep.refine",
-                 'walker = "mjx" runs the one-step selectors (exhaustive, ordered, naive) without refinement')
+    if cfg.walker == "mjx" and cfg.method == "lookahead":
+        chk.fail("sweep.method", 'walker = "mjx" runs the one-step selectors (exhaustive, ordered, naive), '
+                 'with or without refinement')
 
 
 def _density_values(cfg: SweepConfig) -> tuple:

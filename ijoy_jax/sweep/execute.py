@@ -283,7 +283,8 @@ def _physics_chunk(static: _Static, base, targets, key, sim, scene, seeds, robot
     terrains, robots_, starts, keys = _run_prepare(static, base, key, scene, seeds, robot_vals, terrain_vals)
     traj = walker.rollout_batch(sim, terrains, robots_, starts, commands, num_steps=static.num_steps,
                                 method=static.method, first_swing=scene.first_swing, targets=targets,
-                                kernel=static.kernel, dynamics=physics.Dynamics(**sim_vals), key=keys)
+                                kernel=static.kernel, dynamics=physics.Dynamics(**sim_vals), key=keys,
+                                refine=static.refine)
     return _run_finish(static, base, key, scene, seeds, robot_vals, terrain_vals, traj)
 
 
