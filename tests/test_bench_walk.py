@@ -401,6 +401,7 @@ def test_touchdown_feet_of_the_perfect_robot_are_its_final_feet():
     (dict(walkers=("real",)), "walkers must be some of"),
     (dict(resolution=0.03), "whole cells"),
     (dict(forward=float("nan")), "forward speed"),
+    (dict(refine="yes"), "refine must be True or False"),
 ])
 def test_run_refuses_bad_options_before_any_compute(kwargs, message):
     with pytest.raises(ValueError, match=message):

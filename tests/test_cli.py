@@ -22,6 +22,7 @@ CASES = [
     (["bench", "walk", "--families", "flat,lava"], "unknown terrain families ['lava']"),
     (["bench", "walk", "--plot", "no/such/folder/walk.png"], "no folder for"),
     (["bench", "sim", "--batch", "4"], "--batch: options of 'ijoy bench walk' only"),
+    (["bench", "select", "--refine"], "--refine: options of 'ijoy bench walk' only"),
     (["sweep", "run", "no_such_sweep.toml"], "cannot read"),
     (["sweep", "summarize", "no_such_results"], "no result parts"),
     (["sim", "render", "--size", "big"], "invalid literal"),
