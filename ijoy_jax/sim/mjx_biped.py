@@ -20,18 +20,25 @@ once and called from the host:
 * ``end()``: :func:`~ijoy_jax.sim.walker.end_step`, the robot after the step and
   its :class:`~ijoy_jax.sim.walker.StepLog`.
 
-So a drive of this robot and :func:`ijoy_jax.sim.walker.rollout` simulate the same
-steps for the same footholds (tests/test_sim_rollouts.py), with the same
-:class:`~ijoy_jax.sim.physics.Dynamics` (friction, mass, stiffness, control
-delay, stance noise, pushes). The programs are compiled once per Sim setting
-and terrain kind (2D or 2.5D) in this process and shared by every robot
-(:func:`compiled_programs`); :meth:`MjxBiped.warm_up` compiles them before a drive's clock
-starts.
+So this robot and :func:`ijoy_jax.sim.walker.rollout` simulate the same steps for
+the same footholds, with the same :class:`~ijoy_jax.sim.physics.Dynamics`
+(friction, mass, stiffness, control delay, stance noise, pushes), to float32
+rounding: the rollout compiles the same operations into one program, which XLA
+fuses and rounds differently, and the contacts amplify that (feet within 1 mm
+and 0.01 rad after three steps, tests/test_sim_mjx_biped.py). One robot is
+deterministic: the same footholds give the same state, bit for bit, so a
+recorded drive replays identically. The programs are compiled once per Sim
+setting and terrain kind (2D or 2.5D) in this process and shared by every robot
+(:func:`compiled_programs`); :meth:`MjxBiped.warm_up` compiles them before a
+drive's clock starts.
 
-Where it runs: on ``device`` (default: JAX's default device, the GPU when JAX has
-one). On a CPU it is correct but slower than real time (MJX is about 100x slower
-than native MuJoCo there for one robot): use :class:`ijoy_jax.sim.native.NativeBiped`
-(``ijoy drive --robot native``) to drive a biped live on a CPU.
+Where it runs: on ``device`` (default: JAX's default device, the GPU when JAX
+has one). On a CPU it is correct but not made for real time: each tick is a
+call from the host into XLA, and on this project's 2-core CPU the drive's
+decision thread competes with it for the cores, so a drive may fall behind the
+wall clock; the loop measures by how much (``tick_lag_max_s`` in the summary;
+docs/drive.md has the figures). :class:`ijoy_jax.sim.native.NativeBiped`
+(``ijoy drive --robot native``) is the biped for real time on a CPU.
 
 Units: metres, radians, seconds. Soles are (x, y, z, roll, pitch, yaw),
 ``R = Rz(yaw) Ry(pitch) Rx(roll)``; feet are planar poses (x, y, yaw), row 0
@@ -45,6 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax import control
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import physics, walker
@@ -67,13 +75,13 @@ _PROGRAMS = (_world, _init, _begin, _tick, _end, _stance, _soles)
 
 
 def compiled_programs() -> int:
-    """How many programs the :class:`MjxBiped` robots of this process hold compiled.
+    """How many programs the :class:`MjxBiped` robots of this process hold compiled (an int).
 
-    A new Sim setting (grid, ``params``, ``cfg``) or terrain kind (2D, 2.5D) compiles each function once; new
-    terrains of that grid, robots, starts, footholds and dynamics reuse them (read it before and after to
-    count compiles).
+    A new Sim setting (grid, ``params``, ``cfg``) or terrain kind (2D, 2.5D) compiles each of its seven
+    functions once; new terrains of that grid and kind, robots, starts, footholds, dynamics and keys reuse
+    them (read it before and after to count compiles; :func:`ijoy_jax.jit_cache.compiled_count`).
     """
-    return sum(f._cache_size() for f in _PROGRAMS)
+    return sum(compiled_count(f) for f in _PROGRAMS)
 
 
 class MjxBiped:
@@ -81,38 +89,63 @@ class MjxBiped:
 
     Args:
       sim: the :class:`~ijoy_jax.sim.walker.Sim` of the terrain's grid (:func:`~ijoy_jax.sim.walker.make_sim`).
-      terrain: the ground: a :class:`~ijoy_jax.terrain.Terrain` of ``sim.shape`` cells at ``sim.resolution``
-        m (2D obstacles are raised to ``sim.params.obstacle_height``).
+      terrain: the ground: one :class:`~ijoy_jax.terrain.Terrain` of ``sim.shape`` cells at ``sim.resolution``
+        m (2D obstacles are raised to ``sim.params.obstacle_height``; heights are clipped to the height
+        field's range).
       robot: the selector's robot (its footprint fits the plane under each start sole; its step time must be
-        the controller's).
-      start: (2, 3) feet (x, y, yaw), row 0 left (:func:`ijoy_jax.robots.start_stance`).
-      first_swing: +1 if the left foot swings first.
+        the controller's, ``sim.cfg.step_time`` s).
+      start: (2, 3) feet (x, y, yaw; m, rad), row 0 left (:func:`ijoy_jax.robots.start_stance`).
+      first_swing: +1 if the left foot swings first, -1 the right.
       dynamics: the robot's :class:`~ijoy_jax.sim.physics.Dynamics` (scalar leaves); None:
         :func:`~ijoy_jax.sim.walker.nominal_dynamics`.
       key: PRNG key or int seed of the stance noise and pushes (default 0), as in
         :func:`~ijoy_jax.sim.walker.rollout`.
       device: the ``jax.Device`` it runs on (default: JAX's default device, the GPU when there is one).
 
+    Raises:
+      TypeError: ``sim`` is not a Sim or ``terrain`` not a Terrain.
+      ValueError: a batch of terrains, a terrain of another grid, a robot of another step time, a start
+        that is not finite (2, 3) feet, ``first_swing`` not +1 or -1, a Dynamics value out of bounds, more
+        than one key. All before anything is compiled.
+
     Attributes:
       state: the :class:`~ijoy_jax.sim.walker.SimState` between steps (device arrays; ``state.data.qpos``).
-      swing: +1 if the left foot swings next.
+      world: the :class:`~ijoy_jax.sim.walker.World` it steps in (device arrays).
+      swing: +1.0 if the left foot swings next.
       fallen: the robot has fallen (the pelvis below ``sim.fall_height`` above its ground, the torso tilted
         beyond ``sim.fall_tilt``, or a diverged state); a fallen robot stands for good.
       time: simulated seconds.
 
-    Example:
-      >>> import ijoy_jax as ij
-      >>> from ijoy_jax.sim import mjx_biped, walker
-      >>> robot = ij.robots.hrp2()
-      >>> field = ij.terrain.flat((60, 40), 0.04, has_height=True)
-      >>> sim = walker.make_sim(field.shape, field.resolution, robot=robot)
-      >>> # biped = mjx_biped.MjxBiped(sim, field, robot, ij.robots.start_stance(robot, 0.6, 0.8))
-      >>> # biped.execute(ij.select_step(field, robot, *biped.stance()[:2], [0.2, 0, 0]).foothold, True)
+    Example (the first robot of a Sim compiles its programs: about a minute on a 2-core CPU)::
+
+      import numpy as np
+      import ijoy_jax as ij
+      from ijoy_jax.sim import mjx_biped, walker
+
+      robot = ij.robots.hrp2()
+      field = ij.terrain.flat((40, 32), 0.05, has_height=True)
+      sim = walker.make_sim(field.shape, field.resolution, robot=robot)
+      biped = mjx_biped.MjxBiped(sim, field, robot, ij.robots.start_stance(robot, 0.5, 0.8))
+      biped.execute(np.zeros(6), False)            # the first step stands (the walker's warm-up)
+      info = biped.stance()
+      choice = ij.select_step(field, robot, info.stance, int(info.stance_side), [0.25, 0, 0],
+                              swing_from=info.swing_from)
+      biped.begin(choice.foothold, True)
+      while biped.tick():                          # one 10 ms control period per call
+          pass
+      log = biped.end()                            # StepLog: log.landed, log.placement_error, log.fallen
     """
 
     def __init__(self, sim: Sim, terrain: Terrain, robot: Robot, start, first_swing=LEFT, *,
                  dynamics: physics.Dynamics | None = None, key=None, device: jax.Device | None = None):
+        if not isinstance(sim, Sim):
+            raise TypeError(f"sim must be an ijoy_jax.sim.walker.Sim (walker.make_sim), got {type(sim).__name__}")
+        if not isinstance(terrain, Terrain):
+            raise TypeError(f"terrain must be an ijoy_jax.terrain.Terrain, got {type(terrain).__name__}")
         grid = tuple(np.shape(terrain.free))
+        if len(grid) != 2:
+            raise ValueError(f"MjxBiped steps one robot on one terrain: terrain.free must be (nx, ny), got shape "
+                             f"{grid} (a batch of terrains is walker.rollout_batch's)")
         if grid != sim.shape or float(terrain.resolution) != sim.resolution:
             raise ValueError(f"terrain grid {grid} at {float(terrain.resolution)} m does not match the Sim's "
                              f"{sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid")
@@ -120,7 +153,11 @@ class MjxBiped:
         start = np.asarray(start, np.float32)
         if start.shape != (2, 3) or not np.all(np.isfinite(start)):
             raise ValueError(f"start must be finite (2, 3) feet (left, right), got shape {start.shape}")
-        if float(first_swing) not in (1.0, -1.0):
+        try:
+            side = float(first_swing)
+        except (TypeError, ValueError):
+            side = None
+        if side not in (1.0, -1.0):
             raise ValueError(f"first_swing must be +1 (left) or -1 (right), got {first_swing!r}")
         if dynamics is not None:
             physics.check(dynamics)
@@ -134,8 +171,8 @@ class MjxBiped:
         self.sim, self.cfg, self.robot = put(sim), sim.cfg, robot
         self.terrain = terrain
         self.world = _world(self.sim, put(terrain), dynamics=put(dyn))
-        self.state = _init(self.sim, self.world, put(robot), put(start), put(np.float32(first_swing)), put(k))
-        self.swing = float(first_swing)
+        self.state = _init(self.sim, self.world, put(robot), put(start), put(np.float32(side)), put(k))
+        self.swing = side
         self.fresh = True
         self.fallen = False
         self.time = 0.0
@@ -144,13 +181,14 @@ class MjxBiped:
     # -- the Walker's view --------------------------------------------------------------------------------------
 
     def soles(self) -> np.ndarray:
-        """(2, 6) float32 the measured soles x, y, z, roll, pitch, yaw (row 0 left), now (also during a step)."""
+        """(2, 6) float32 the measured soles x, y, z, roll, pitch, yaw (m, rad; row 0 left), now (also during
+        a step)."""
         if self._step is None:
             return np.asarray(self.state.soles)
         return np.asarray(_soles(self.sim, self._step[1].data))
 
     def feet(self) -> np.ndarray:
-        """(2, 3) float32 the measured feet (x, y, yaw), row 0 left, now (a swinging foot where it is)."""
+        """(2, 3) float32 the measured feet (x, y, yaw; m, rad), row 0 left, now (a swinging foot where it is)."""
         return self.soles()[:, _PLANAR]
 
     def qpos(self) -> np.ndarray:
@@ -160,8 +198,8 @@ class MjxBiped:
 
     def stance(self) -> control.StanceInfo:
         """The next decision's stance as the scanned walker gives it (:func:`ijoy_jax.sim.walker.stance_info`):
-        the stance and swing feet measured when the last step ended (as the robot believes them, with its
-        stance noise), and the stance side."""
+        the stance and swing feet (3,) measured when the last step ended (as the robot believes them, with its
+        stance noise), and the stance side (host arrays)."""
         info = jax.device_get(_stance(self.state))
         return control.StanceInfo(np.asarray(info.stance, np.float32), np.float32(info.stance_side),
                                   np.asarray(info.swing_from, np.float32))
@@ -199,7 +237,8 @@ class MjxBiped:
         return self._step is not None
 
     def begin(self, foothold, go: bool) -> None:
-        """Start a step to ``foothold`` (6,) (:attr:`ijoy_jax.select.StepChoice.foothold`), or stand if not ``go``.
+        """Start a step to ``foothold`` (6,) (:attr:`ijoy_jax.select.StepChoice.foothold`: x, y, z, roll,
+        pitch, yaw; m, rad), or stand if not ``go``.
 
         The first step after construction stands whatever ``go`` (the warm-up), and so does a fallen robot
         and one sent a non-finite foothold.
@@ -223,6 +262,8 @@ class MjxBiped:
         s = self._step
         if s is None:
             raise RuntimeError("no step in progress: call begin() first")
+        if s[2] >= self.cfg.ticks_per_step:
+            raise RuntimeError("the step has run all its ticks: call end()")
         s[1] = _tick(self.sim, self.world, s[0], s[1], np.int32(s[2]))
         s[1].low.block_until_ready()
         s[2] += 1
@@ -230,7 +271,8 @@ class MjxBiped:
         return s[2] < self.cfg.ticks_per_step
 
     def end(self) -> StepLog:
-        """Finish the step (after its last tick): the robot's new state and what the step did (host arrays)."""
+        """Finish the step (after its last tick): the robot's new state and what the step did (a
+        :class:`~ijoy_jax.sim.walker.StepLog` of host arrays)."""
         s = self._step
         if s is None or s[2] < self.cfg.ticks_per_step:
             raise RuntimeError("the step has not run all its ticks: tick() until it returns False")

@@ -16,6 +16,12 @@ physics and dynamics filter are traced and compiled once, not twice).
 selector code) with this walker, jitted as one scan (and usable inside your
 own jit or vmap); :func:`rollout_batch` runs B of them in one jitted vmap
 (terrains, robots, starts, commands).
+
+The walker's functions are public in parts, so a robot stepped from the host
+tick by tick (:class:`ijoy_jax.sim.mjx_biped.MjxBiped`, a live drive's) runs the
+same code: :func:`make_world` (the robot's models on a terrain, its dynamics),
+:func:`init_state`, :func:`stance_info`, and a step as :func:`begin_step`, one
+:func:`tick` per control period, :func:`end_step`.
 """
 
 from __future__ import annotations
