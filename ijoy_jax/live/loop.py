@@ -178,8 +178,11 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
 
     Args:
       terrain, robot: the ground and the robot model the decisions are made for.
-      body: the robot that executes the steps (:class:`ijoy_jax.live.PerfectBody` or
-        :class:`ijoy_jax.sim.native.NativeBiped`), standing at its start.
+      body: the robot that executes the steps (:class:`ijoy_jax.live.PerfectBody`,
+        :class:`ijoy_jax.sim.native.NativeBiped` or :class:`ijoy_jax.sim.mjx_biped.MjxBiped`), standing at its
+        start. A body slower than real time sets the pace: its ticks run behind the wall clock (the schedule
+        stays ``t0 + k * control_dt``, caught up only as fast as the body can) and the largest lag is
+        :attr:`DriveResult.tick_lag_max` (realtime only).
       source: the stick (:mod:`ijoy_jax.live.inputs`): ``axes(t)``; a source with ``command_at(step)``
         (a replay) gives each decision's command directly.
       decider: :class:`~ijoy_jax.live.LocalDecider` or :class:`~ijoy_jax.live.RemoteDecider`.
