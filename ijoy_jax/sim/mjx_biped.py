@@ -33,12 +33,12 @@ setting and terrain kind (2D or 2.5D) in this process and shared by every robot
 drive's clock starts.
 
 Where it runs: on ``device`` (default: JAX's default device, the GPU when JAX
-has one). On a CPU it is correct but not made for real time: each tick is a
-call from the host into XLA, and on this project's 2-core CPU the drive's
-decision thread competes with it for the cores, so a drive may fall behind the
-wall clock; the loop measures by how much (``tick_lag_max_s`` in the summary;
-docs/drive.md has the figures). :class:`ijoy_jax.sim.native.NativeBiped`
-(``ijoy drive --robot native``) is the biped for real time on a CPU.
+has one). A CPU runs it too, with less headroom than native MuJoCo: on this
+project's 2-core CPU a 10 ms tick took about 3 ms alone and 4 ms in a drive
+(beside the decision thread), so a loaded machine can make ticks late; the
+drive measures by how much (``tick_lag_max_s`` in its summary; docs/drive.md
+has the figures). :class:`ijoy_jax.sim.native.NativeBiped` (``ijoy drive
+--robot native``) is the biped for real time on a CPU.
 
 Units: metres, radians, seconds. Soles are (x, y, z, roll, pitch, yaw),
 ``R = Rz(yaw) Ry(pitch) Rx(roll)``; feet are planar poses (x, y, yaw), row 0
