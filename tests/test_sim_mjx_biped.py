@@ -1,15 +1,15 @@
 """The MJX biped stepped tick by tick (ijoy_jax.sim.mjx_biped): the scanned rollout's steps, compiled once.
 
-MJX compiles slowly on a CPU (about 45 s for the robot's programs, 55 s for a rollout), so every robot here
+MJX compiles slowly on a CPU (the reference rollout and the robot's seven programs: 58 s here), so every robot here
 walks the small map of the live tests (tests/_server_util.py: 40 x 32 cells at 5 cm) as a 2.5D map, the map
 ``ijoy drive --robot mjx --terrain flat --height`` walks in tests/test_live.py: one Sim, one set of the robot's
 programs for the file and that drive (in memory, or through the persistent compilation cache), and one
 reference rollout program (three steps) for both maps, flat and rough.
 
 The rollout and the robot compile the same operations into one program and into seven: XLA fuses and
-vectorises them differently, so their float32 roundings differ (the preview gains' Riccati solve and the
-sums over the preview horizon already differ by about 1e-5 relative when the robot stands), and the contacts
-amplify the difference step by step; hence the tolerances below. One robot is deterministic, bit for bit.
+vectorises them differently, so their float32 roundings differ (with XLA's default CPU emitters the preview
+servo's error sum already differs by 2e-5 relative when the robot stands), and the contacts amplify the
+difference step by step; hence the tolerances below. One robot is deterministic, bit for bit.
 """
 
 import jax
@@ -24,11 +24,13 @@ from ijoy_jax.sim import walker as W
 
 STEPS = 3
 COMMANDS = np.array([[0.25, 0.0, 0.0]] * STEPS, np.float32)  # full forward: 0.2 m steps
-# Rollout against robot after three steps on these maps (measured): the landed soles within 0.11 mm and 0.16 mrad,
-# the feet within 0.5 mm, and the stance sole's yaw within 3.8 mrad (it pivots on the ground while the other foot
-# swings; stick-slip makes it the most sensitive number). For scale: the rollout's own feet move by 0.015 mm and
-# 0.1 mrad when its start moves by one float32 ulp, its vmapped twin (rollout_batch) differs by 0.01 mm and
-# 0.13 mrad, and a 10 ms control delay (physics.Dynamics.latency) moves the feet by 3 to 7 mm.
+# Rollout against robot after three steps on these maps (measured): with the classic CPU emitters the tests compile
+# with (tests/conftest.py), the landed soles within 0.006 mm and 0.013 mrad, the feet within 0.01 mm and 0.12 mrad;
+# with XLA's default fusion emitters the landed soles within 0.11 mm and 0.16 mrad, the feet within 0.5 mm, and the
+# stance sole's yaw within 3.8 mrad (it pivots on the ground while the other foot swings; stick-slip makes it the
+# most sensitive number). The tolerances hold for both. For scale: the rollout's own feet move by 0.015 mm and
+# 0.1 mrad when its start moves by one float32 ulp, its vmapped twin (rollout_batch) differs by 0.01 mm and 0.13
+# mrad, and a 10 ms control delay (physics.Dynamics.latency) moves the feet by 3 to 7 mm.
 POSITION_TOL = 1e-3  # m
 ANGLE_TOL = 1e-2  # rad
 SOLE_TOL = np.array([POSITION_TOL] * 3 + [ANGLE_TOL] * 3)  # x, y, z, roll, pitch, yaw
