@@ -45,6 +45,8 @@ def test_build_passes_with_warnings_as_errors(html):
     ("api/live.html", 'id="ijoy_jax.live.drive"'),  # the function; its module is ijoy_jax.live.loop
     ("api/live.html", 'id="ijoy_jax.live.loop.scripted_commands"'),
     ("api/sweep.html", 'id="ijoy_jax.sweep.recorded.read_commands"'),
+    ("api/sim.html", 'id="ijoy_jax.sim.mjx_biped.MjxBiped"'),  # ijoy drive --robot mjx's body
+    ("api/sim.html", 'id="ijoy_jax.sim.walker.tick"'),  # the walker's step in public parts
     ("drive.html", "A recorded drive as a sweep"),
     ("sweeps.html", "plan.inputs"),  # the section on a person's commands (sweeps/README.md)
     ("server.html", "unsupported_version"),

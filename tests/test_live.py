@@ -1,7 +1,7 @@
 """ijoy drive (ijoy_jax.live): the stick mapping, trace files, the live loop against independent references, a
 real footstep server process on localhost, recording and bit-exact replay, a recorded drive as a sweep, the
-native MuJoCo robot, the CLI's one-line errors, and force-feedback effects checked against the kernel's own
-struct layout.
+MuJoCo robot on native MuJoCo and on MJX, the CLI's one-line errors, and force-feedback effects checked against
+the kernel's own struct layout.
 
 Every drive walks the small map of the server tests (tests/_server_util.py), so each program compiles once for
 the module and the files that share its xdist worker (tests/conftest.py: ONE_WORKER); one in-process recorded
@@ -10,6 +10,7 @@ drive (``recorded``) serves every test that needs one. Exactly one test runs the
 """
 
 import contextlib
+import gc
 import io
 import json
 import subprocess
@@ -272,8 +273,10 @@ def test_decisions_overlap_the_step_and_wait_when_late(trace):
     assert len(res.latencies) == 3 and np.all(res.latencies >= 0.3)
     assert np.all(res.slacks < 0) and res.summary()["late"] == 3
     body = live.PerfectBody(robot, start, control_dt=0.05)
+    frozen = []  # Python's garbage collector leaves what existed before the clock alone during the drive
     res = live.drive(terrain, robot, body, live.ScriptInput(trace), live.LocalDecider(terrain, robot), realtime=True,
-                     num_steps=2)
+                     num_steps=2, on_tick=lambda _: frozen.append(gc.get_freeze_count()))
+    assert min(frozen) > 0 and gc.get_freeze_count() == 0
     assert res.summary()["late"] == 0 and np.all(res.slacks > 0)
     assert res.wall_s == pytest.approx(3 * 0.8, abs=0.3)  # the warm-up and two steps, paced to the wall clock
 
@@ -315,6 +318,34 @@ def test_native_robot_drives_and_replays(trace, tmp_path):
     assert info["walker"] == "mjx" and info["decisions"] == 3 and info["terrain"] == "family"
     cfg = sweep.load_config(tmp_path / "native.toml")
     assert cfg.walker == "mjx" and cfg.family == "flat" and cfg.num_steps == 3
+
+
+def test_mjx_robot_drives_through_the_cli_and_replays(trace, tmp_path, capsys):
+    """``ijoy drive --robot mjx`` (the command line, in this process): the MuJoCo biped on MJX, headless and
+    scripted, on the 2.5D flat map tests/test_sim_mjx_biped.py walks (its compiled programs); it walks without
+    falling, lands where it was sent, says where MJX runs, and its recording replays identically through the
+    command line (one robot on MJX is deterministic); exported, it is a walker = "mjx" sweep."""
+    out = tmp_path / "mjx.mcap"
+    args = ["drive", "--robot", "mjx", "--script", str(trace), "--headless", "--record", str(out), "--terrain", "flat",
+            "--height", "--shape", f"{SHAPE[0]}x{SHAPE[1]}", "--resolution", str(RES), "--steps", "3", "--ff", "off",
+            "--json"]
+    assert cli.main(args) == 0
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out.strip().splitlines()[-1])
+    assert "the MJX biped runs on" in captured.err
+    assert summary["decisions"] == 3 and summary["steps_taken"] == 3 and summary["late"] == 0
+    assert summary["tick_lag_max_s"] == 0.0  # headless: virtual time, nothing paced
+    rec = live.read_recording(out)
+    assert rec.config["settings"]["body"] == "mjx" and rec.terrain.has_height
+    logs = [s["log"] for s in rec.states[1:]]
+    assert len(logs) == 3 and not any(bool(g["fallen"]) for g in logs)
+    assert max(float(g["placement_error"]) for g in logs) < 0.03
+    feet = np.asarray(rec.states[-1]["feet"])
+    assert feet[:, 0].mean() > np.asarray(rec.states[0]["feet"])[:, 0].mean() + 0.2  # it walked forward
+    assert cli.main(["drive", "--replay", str(out)]) == 0
+    assert "footsteps identical" in capsys.readouterr().out
+    info = live.session.export_sweep(rec, tmp_path / "mjx.toml", out)
+    assert info["walker"] == "mjx" and info["decisions"] == 3
 
 
 # ------------------------------------------------------------------------------------------- a drive as a sweep

@@ -40,8 +40,10 @@ def add_parser(sub) -> None:
     ter.add_argument("--height-scale", type=float, default=0.5 / 255,
                      help="m per image unit of --image (default: 0.5/255, white = 0.5 m)")
     rob = d.add_argument_group("robot")
-    rob.add_argument("--robot", choices=["perfect", "native"], default="perfect",
-                     help="the paper's perfect walker, or the MuJoCo biped on native MuJoCo (default: %(default)s)")
+    rob.add_argument("--robot", choices=["perfect", "native", "mjx"], default="perfect",
+                     help="the paper's perfect walker, the MuJoCo biped on native MuJoCo (real time on a CPU), or "
+                          "the same biped on MJX (JAX's default device, the GPU when there is one; on a CPU it may "
+                          "lag the wall clock, reported as tick lag) (default: %(default)s)")
     rob.add_argument("--margin", type=float, default=0.02, help="safety margin in m (default: %(default)s)")
     rob.add_argument("--start", default=None, metavar="X,Y,THETA", help="start of the feet's midpoint (default: the "
                                                                          "terrain's start zone)")
@@ -162,6 +164,8 @@ def main(args) -> int:
         source = _live_source(kind, view)
     feedback = _feedback(args.ff)
     realtime = not args.headless or args.realtime or not args.script
+    if args.robot == "mjx":
+        _say_where_mjx_runs(realtime)
     try:
         result = live.run(settings, source, realtime=realtime, num_steps=args.steps, duration=args.duration,
                           record_to=args.record, on_tick=None if view is None else view.publish, feedback=feedback,
@@ -175,6 +179,16 @@ def main(args) -> int:
             view.close()
     _report(result.summary(), args, extra={"record": args.record} if args.record else {})
     return 0
+
+
+def _say_where_mjx_runs(realtime: bool) -> None:
+    import jax
+
+    dev = jax.devices()[0]
+    slow = dev.platform == "cpu" and realtime
+    print(f"ijoy drive: the MJX biped runs on {dev.platform} ({dev.device_kind})"
+          + ("; on a CPU its ticks may fall behind the wall clock (reported; --robot native is the CPU's real-time "
+             "biped)" if slow else ""), file=sys.stderr, flush=True)
 
 
 def _never():
@@ -214,7 +228,10 @@ def _report(summary: dict, args, extra=None) -> None:
     ms = lambda v: f"{1000 * v:.1f} ms"  # noqa: E731
     print(f"ijoy drive: {summary['steps']} steps ({summary['steps_taken']} taken), decision latency p50 "
           f"{ms(summary['latency_p50_s'])}, p99 {ms(summary['latency_p99_s'])}, max {ms(summary['latency_max_s'])}, "
-          f"late {summary['late']}" + (f"; recorded to {summary['record']}" if summary.get("record") else ""))
+          f"late {summary['late']}"
+          + (f", ticks behind the wall clock by up to {ms(summary['tick_lag_max_s'])}"
+             if summary.get("tick_lag_max_s", 0) > 0 else "")
+          + (f"; recorded to {summary['record']}" if summary.get("record") else ""))
 
 
 def _replay(args) -> int:

@@ -5,8 +5,9 @@ file, the terminal's keys, a gamepad through SDL, or the browser view's keyboard
 mapped through a dead zone onto the robot's command range; a footstep decider (:mod:`.deciders`: the
 selector in this process, or the footstep server ``ijoy serve`` over the network); a robot that
 executes the steps tick by tick (:mod:`.bodies`: the perfect walker; :mod:`ijoy_jax.sim.native`: the
-MuJoCo biped on native MuJoCo); the loop (:mod:`.loop`) that makes the decision for the future
-stance while the current step executes and measures its latency; a recording in MCAP
+MuJoCo biped on native MuJoCo; :mod:`ijoy_jax.sim.mjx_biped`: the same biped on MJX, on a GPU); the
+loop (:mod:`.loop`) that makes the decision for the future stance while the current step executes and
+measures its latency; a recording in MCAP
 (:mod:`.record`) that :func:`replay` reproduces bit for bit; the live view in a browser
 (:mod:`.view`); force feedback on a Linux device (:mod:`.forcefeedback`).
 

@@ -1,6 +1,7 @@
 """The robots a live drive steps in real time: the paper's perfect walker, tick by tick, on the host.
 
-A live robot (a *body*) has the host protocol of :class:`ijoy_jax.sim.native.NativeBiped`:
+A live robot (a *body*) has the host protocol of :class:`ijoy_jax.sim.native.NativeBiped` (and of
+:class:`ijoy_jax.sim.mjx_biped.MjxBiped`, the same biped on MJX):
 ``stance()``, ``future_stance()`` (Algorithm 1's ComputeStanceLocation while a step executes),
 ``begin(foothold, go)``, ``tick() -> bool`` (one control period of ``control_dt`` s; False at the
 step's end), ``end()``, ``feet()``, ``ticks_per_step`` and ``control_dt``. :class:`PerfectBody` is

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import dataclasses
+import gc
 import math
 import threading
 import time
@@ -178,8 +179,11 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
 
     Args:
       terrain, robot: the ground and the robot model the decisions are made for.
-      body: the robot that executes the steps (:class:`ijoy_jax.live.PerfectBody` or
-        :class:`ijoy_jax.sim.native.NativeBiped`), standing at its start.
+      body: the robot that executes the steps (:class:`ijoy_jax.live.PerfectBody`,
+        :class:`ijoy_jax.sim.native.NativeBiped` or :class:`ijoy_jax.sim.mjx_biped.MjxBiped`), standing at its
+        start. A body slower than real time sets the pace: its ticks run behind the wall clock (the schedule
+        stays ``t0 + k * control_dt``, caught up only as fast as the body can) and the largest lag is
+        :attr:`DriveResult.tick_lag_max` (realtime only).
       source: the stick (:mod:`ijoy_jax.live.inputs`): ``axes(t)``; a source with ``command_at(step)``
         (a replay) gives each decision's command directly.
       decider: :class:`~ijoy_jax.live.LocalDecider` or :class:`~ijoy_jax.live.RemoteDecider`.
@@ -262,6 +266,13 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
         outlook.view = {}
         if outlook.tick is not None:
             cue.tick_force(outlook.tick, jnp.zeros(3, jnp.float32))
+    if realtime:
+        # Python's full collections scan every object, and with JAX, its compiled programs and a MuJoCo model
+        # loaded one took 0.14 to 0.35 s on this project's CPU: the longest stall of a real-time drive (the MJX
+        # biped's ticks fell 0.3 s behind the wall clock at one). Collect now, before the clock starts, and keep
+        # what exists out of the drive's collections (gc.freeze; gc.unfreeze at its end).
+        gc.collect()
+        gc.freeze()
     warmup_s = time.perf_counter() - t_warm
 
     decisions, states, latencies, slacks = [], [], [], []
@@ -354,5 +365,7 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
         stopped_by = "stop"
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+        if realtime:
+            gc.unfreeze()
     return DriveResult(decisions, states, np.asarray(latencies), np.asarray(slacks), lag_max,
                        time.perf_counter() - wall0, stopped_by, warmup_s)

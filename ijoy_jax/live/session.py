@@ -34,8 +34,10 @@ from ijoy_jax.terrain import Terrain, generators
 __all__ = ["BODIES", "SWEEP_TERRAINS", "DriveSettings", "ReplayInput", "build_body", "export_sweep", "export_trace",
            "open_terrain", "replay", "run", "server_address"]
 
-BODIES = ("perfect", "native")
-"""The robots a drive can step: the paper's perfect walker, or the MuJoCo biped on native MuJoCo (CPU)."""
+BODIES = ("perfect", "native", "mjx")
+"""The robots a drive can step: the paper's perfect walker, the MuJoCo biped on native MuJoCo (the one for real
+time on a CPU), or the same biped on MJX (:class:`ijoy_jax.sim.mjx_biped.MjxBiped`: JAX's default device, the GPU
+when there is one)."""
 SWEEP_TERRAINS = ("recording", "family")
 """Where an exported sweep's terrain comes from (:func:`export_sweep`): the recording's own map, or the
 generator family it was drawn from (replicate 0 is the recorded map)."""
@@ -53,7 +55,7 @@ class DriveSettings:
       start: (x, y, theta) of the feet's midpoint (m, rad), or None: the terrain's start zone.
       first_swing: +1 left foot first, -1 right.
       deadzone, decide_at: as :func:`ijoy_jax.live.drive`.
-      control_dt: s per tick of the perfect body (the MuJoCo biped's is its controller's).
+      control_dt: s per tick of the perfect body (the MuJoCo bipeds' is their controller's).
       decider: "local" or "server" (the footstep server at ``server``, "host:port").
     """
 
@@ -141,7 +143,12 @@ def _start(settings: DriveSettings, robot: Robot, default) -> np.ndarray:
 
 
 def build_body(kind: str, terrain: Terrain, robot: Robot, start, first_swing=1, control_dt=DEFAULT_CONTROL_DT):
-    """A standing robot of kind ``kind`` (:data:`BODIES`) at ``start`` (2, 3)."""
+    """A standing robot of kind ``kind`` (:data:`BODIES`) at ``start`` (2, 3) (x, y, yaw of the feet, row 0 left).
+
+    ``control_dt`` (s) is the perfect body's tick; the MuJoCo bipeds tick at their controller's period. The MJX
+    biped's programs compile when the first one of a grid and terrain kind (2D or 2.5D) is built (about a
+    minute on a 2-core CPU) and are shared by the next ones (a replay's).
+    """
     if kind == "perfect":
         return PerfectBody(robot, start, first_swing, control_dt)
     if kind == "native":
@@ -149,19 +156,26 @@ def build_body(kind: str, terrain: Terrain, robot: Robot, start, first_swing=1, 
 
         sim = _sim_for(float(terrain.resolution), robot)
         return native.NativeBiped(sim, terrain, robot, start, first_swing)
+    if kind == "mjx":
+        from ijoy_jax.sim import mjx_biped
+
+        sim = _sim_for(float(terrain.resolution), robot, tuple(int(n) for n in terrain.shape))
+        return mjx_biped.MjxBiped(sim, terrain, robot, start, first_swing)
     raise ValueError(f"body must be one of {BODIES}, got {kind!r}")
 
 
 _SIMS: dict = {}
 
 
-def _sim_for(resolution: float, robot: Robot):
-    """One Sim per footprint and step time in this process, so its compiled programs are shared."""
+def _sim_for(resolution: float, robot: Robot, shape: tuple[int, int] = (2, 2)):
+    """One Sim per grid, footprint and step time in this process, so its compiled programs are shared (the
+    native biped builds its own model per terrain: its Sim's grid is a placeholder, (2, 2); the MJX biped's
+    height field is the Sim's, of the terrain's grid)."""
     from ijoy_jax.sim import walker
 
-    key = (resolution, float(robot.foot_length), float(robot.foot_width), float(robot.step_time))
+    key = (shape, resolution, float(robot.foot_length), float(robot.foot_width), float(robot.step_time))
     if key not in _SIMS:
-        _SIMS[key] = walker.make_sim((2, 2), resolution, robot=robot)
+        _SIMS[key] = walker.make_sim(shape, resolution, robot=robot)
     return _SIMS[key]
 
 
@@ -369,7 +383,7 @@ def export_sweep(recording: record.Recording, path, recording_path, *, terrain: 
     The file replays the recorded decisions' commands step by step (``[command] file``, the recording; the
     recording's first swing) with the drive's robot (every value that differs from HRP-2's defaults in
     ``[robot]``, and its density) and walker (``walker = "perfect"`` for the perfect body, ``"mjx"`` for the
-    MuJoCo biped, which on the GPU is the batched MJX one), ``num_steps`` = the recorded decisions,
+    MuJoCo biped, native or MJX: the sweep's is the batched MJX one), ``num_steps`` = the recorded decisions,
     ``method = "exhaustive"`` (the live deciders'), one scenario per cell. ``terrain``:
 
     * ``"recording"``: ``[terrain] recording``, the recorded map and start feet;
@@ -410,9 +424,9 @@ def export_sweep(recording: record.Recording, path, recording_path, *, terrain: 
     settings = recording.config.get("settings", {})
     spec = settings.get("terrain", {})
     body = settings.get("body", "perfect")
-    walker = {"perfect": "perfect", "native": "mjx"}.get(body)
+    walker = {"perfect": "perfect", "native": "mjx", "mjx": "mjx"}.get(body)
     if walker is None:
-        raise ValueError(f"the recording's body {body!r} has no sweep walker (perfect or native)")
+        raise ValueError(f"the recording's body {body!r} has no sweep walker (perfect, native or mjx)")
     robot = recording.robot
     density = _density(robot, spec)
     defaults = sweep.ROBOT_DEFAULTS

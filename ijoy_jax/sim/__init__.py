@@ -5,7 +5,9 @@ Modules: :mod:`.model` (the MjSpec robot and the terrain's height field),
 :mod:`.preview` (LIPM/ZMP preview control), :mod:`.swing` (swing-foot paths
 over the terrain), :mod:`.controller` (the walking pattern generator: a
 footstep to joint targets, tick by tick), :mod:`.walker` (the MJX robot as a
-:class:`ijoy_jax.control.Walker` and its rollout), :mod:`.physics` (the
+:class:`ijoy_jax.control.Walker`, its step in public parts: begin, tick, end,
+and its rollout), :mod:`.native` and :mod:`.mjx_biped` (one biped stepped tick
+by tick for a live drive: on native MuJoCo, or on MJX), :mod:`.physics` (the
 traced :class:`~ijoy_jax.sim.physics.Dynamics` a user varies per robot: friction,
 mass, actuator stiffness, control delay, stance noise, pushes), :mod:`.render`
 (offscreen images of a rollout). Sweeps over the physics (the safety margin under
