@@ -42,8 +42,8 @@ def add_parser(sub) -> None:
     rob = d.add_argument_group("robot")
     rob.add_argument("--robot", choices=["perfect", "native", "mjx"], default="perfect",
                      help="the paper's perfect walker, the MuJoCo biped on native MuJoCo (real time on a CPU), or "
-                          "the same biped on MJX (JAX's default device, the GPU when there is one; on a CPU it may "
-                          "lag the wall clock, reported as tick lag) (default: %(default)s)")
+                          "the same biped on MJX (on the CPU: one robot runs faster there than on a GPU; a late "
+                          "tick is reported as tick lag) (default: %(default)s)")
     rob.add_argument("--margin", type=float, default=0.02, help="safety margin in m (default: %(default)s)")
     rob.add_argument("--start", default=None, metavar="X,Y,THETA", help="start of the feet's midpoint (default: the "
                                                                          "terrain's start zone)")
@@ -184,11 +184,10 @@ def main(args) -> int:
 def _say_where_mjx_runs(realtime: bool) -> None:
     import jax
 
-    dev = jax.devices()[0]
-    slow = dev.platform == "cpu" and realtime
+    dev = jax.devices("cpu")[0]  # live.session.BODIES: the drive's MJX biped runs on the CPU
     print(f"ijoy drive: the MJX biped runs on {dev.platform} ({dev.device_kind})"
-          + ("; on a CPU its ticks may fall behind the wall clock (reported; --robot native is the CPU's real-time "
-             "biped)" if slow else ""), file=sys.stderr, flush=True)
+          + ("; its ticks may fall behind the wall clock on a busy machine (reported; --robot native has more "
+             "headroom)" if realtime else ""), file=sys.stderr, flush=True)
 
 
 def _never():

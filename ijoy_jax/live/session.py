@@ -35,9 +35,10 @@ __all__ = ["BODIES", "SWEEP_TERRAINS", "DriveSettings", "ReplayInput", "build_bo
            "open_terrain", "replay", "run", "server_address"]
 
 BODIES = ("perfect", "native", "mjx")
-"""The robots a drive can step: the paper's perfect walker, the MuJoCo biped on native MuJoCo (the one for real
-time on a CPU), or the same biped on MJX (:class:`ijoy_jax.sim.mjx_biped.MjxBiped`: JAX's default device, the GPU
-when there is one)."""
+"""The robots a drive can step: the paper's perfect walker, the MuJoCo biped on native MuJoCo, or the same biped
+on MJX (:class:`ijoy_jax.sim.mjx_biped.MjxBiped`), which a drive runs on the CPU whatever the machine: one robot's
+10 ms tick took 2.8 ms on a 2-core CPU but 10.2 ms (2D map) and 12.5 ms (2.5D) on an H200, where each of its many
+small kernels waits for a launch (2026-11-26), so on a GPU it fell behind the wall clock."""
 SWEEP_TERRAINS = ("recording", "family")
 """Where an exported sweep's terrain comes from (:func:`export_sweep`): the recording's own map, or the
 generator family it was drawn from (replicate 0 is the recorded map)."""
@@ -160,7 +161,8 @@ def build_body(kind: str, terrain: Terrain, robot: Robot, start, first_swing=1, 
         from ijoy_jax.sim import mjx_biped
 
         sim = _sim_for(float(terrain.resolution), robot, tuple(int(n) for n in terrain.shape))
-        return mjx_biped.MjxBiped(sim, terrain, robot, start, first_swing)
+        # One robot runs faster on the CPU than on a GPU (BODIES): the drive's MJX body runs there on any machine.
+        return mjx_biped.MjxBiped(sim, terrain, robot, start, first_swing, device=jax.devices("cpu")[0])
     raise ValueError(f"body must be one of {BODIES}, got {kind!r}")
 
 
