@@ -477,8 +477,13 @@ def test_vmaps_over_terrains_and_robot_parameters():
     f = jax.vmap(lambda t, r: ij.foot_cost(t, r, stance, -1, steps, action_index=jnp.arange(496)))
     out = f(batch, robots)
     for i in range(3):
-        ref = ij.foot_cost(ts[i], ROBOT.replace(margin=margins[i]), stance, -1, steps, action_index=np.arange(496))
-        np.testing.assert_array_equal(np.asarray(out[i]), np.asarray(ref))
+        ref = np.asarray(ij.foot_cost(ts[i], ROBOT.replace(margin=margins[i]), stance, -1, steps,
+                                      action_index=np.arange(496)))
+        got = np.asarray(out[i])
+        # The same steps are valid; the costs agree to float32 rounding: XLA compiles the batched program on
+        # its own and need not round alike (with its classic CPU emitters 3 of 496 costs differ in the last bit).
+        np.testing.assert_array_equal(np.isinf(got), np.isinf(ref))
+        np.testing.assert_allclose(got, ref, rtol=1e-6, atol=0)
     # A larger margin never makes an invalid step valid (monotone in the margin on this terrain).
     inf = np.isinf(np.asarray(f(jax.tree_util.tree_map(lambda x: jnp.stack([x[0]] * 3), batch), robots)))
     assert (inf[0] <= inf[1]).all() and (inf[1] <= inf[2]).all() and inf[2].sum() > inf[0].sum()

@@ -278,7 +278,9 @@ def test_decisions_overlap_the_step_and_wait_when_late(trace):
                      num_steps=2, on_tick=lambda _: frozen.append(gc.get_freeze_count()))
     assert min(frozen) > 0 and gc.get_freeze_count() == 0
     assert res.summary()["late"] == 0 and np.all(res.slacks > 0)
-    assert res.wall_s == pytest.approx(3 * 0.8, abs=0.3)  # the warm-up and two steps, paced to the wall clock
+    # The warm-up and two steps, paced to the wall clock: never ahead of it, and behind it only by the lag the
+    # loop measured and reports (a loaded 2-core machine stalled this thread 0.6 s once, in a full cold run).
+    assert 3 * 0.8 - 0.02 <= res.wall_s <= 3 * 0.8 + res.tick_lag_max + 0.1, (res.wall_s, res.tick_lag_max)
 
 
 def test_no_valid_step_stands_and_decides_again():

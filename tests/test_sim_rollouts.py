@@ -82,8 +82,9 @@ def test_wall_approach_then_step_in_place(runs):
     # DCM feedback's CoP shift), so now and then a lattice step forward fits the margin again and is taken. Which
     # steps those are turns on that millimetre (measured: with XLA's default CPU emitters 6 of the last 8 steps
     # were the step in place p0 and two went 5 cm forward and back; with the suite's classic emitters 5 steps in
-    # place, then one foot 5 cm ahead and each foot put back where it stood: 3 of the last 8 in place). So: each of the last 8 steps puts its foot
-    # back within a few mm or one lattice step (5 cm) away, at most 3 move it, and the feet make no progress.
+    # place, then one foot 5 cm ahead and each foot put back where it stood: 3 of the last 8 in place). So: each
+    # of the last 8 steps puts its foot back within a few mm or one lattice step (5 cm) away, at most 3 move it,
+    # and the feet make no progress.
     x = traj.commanded[-10:, 0]
     moved = np.abs(x[2:] - x[:-2])  # each foot against its own previous step (the sides alternate)
     assert (traj.sides[-10:][2:] == traj.sides[-10:][:-2]).all()
