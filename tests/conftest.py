@@ -1,5 +1,7 @@
 import gc
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 # XLA's CPU backend compiles fused loops with its MLIR fusion emitters by default; its classic emitters compile
@@ -7,9 +9,24 @@ from pathlib import Path
 # 57-65 s -> 39-46 s, the same run time, results equal to float32 rounding), and the suite is compile-bound on
 # a 2-core CI machine. Set before JAX starts its backend, so this process, the xdist workers, the notebooks'
 # kernels and the subprocess tests all compile alike (a caller's own XLA_FLAGS are kept, ours appended).
+# XLA aborts the process on a flag it does not know, and jaxlib is not pinned: the flag is set only where a
+# child process with it starts JAX's CPU backend (one probe per run; the workers inherit the result).
 _XLA_FLAG = "--xla_cpu_use_fusion_emitters=false"
-if _XLA_FLAG.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " " + _XLA_FLAG).strip()
+
+
+def _with_flag(flags: str, flag: str) -> str:
+    return (flags + " " + flag).strip()
+
+
+def _xla_knows(flag: str) -> bool:
+    env = dict(os.environ, XLA_FLAGS=_with_flag(os.environ.get("XLA_FLAGS", ""), flag), JAX_PLATFORMS="cpu")
+    probe = subprocess.run([sys.executable, "-c", "import jax; jax.devices()"], env=env, capture_output=True,
+                           timeout=300)
+    return probe.returncode == 0
+
+
+if _XLA_FLAG.split("=")[0] not in os.environ.get("XLA_FLAGS", "") and _xla_knows(_XLA_FLAG):
+    os.environ["XLA_FLAGS"] = _with_flag(os.environ.get("XLA_FLAGS", ""), _XLA_FLAG)
 
 import hypothesis  # noqa: E402
 import jax  # noqa: E402
