@@ -58,12 +58,12 @@ from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import physics, walker
+from ijoy_jax.sim.stepped import PLANAR, SteppedBiped
 from ijoy_jax.sim.walker import Sim, StepLog
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["MjxBiped", "compiled_programs"]
 
-_PLANAR = np.array([0, 1, 5])  # x, y, yaw of a sole (6,)
 
 # One program each, shared by every MjxBiped (the Sim and the World are traced pytree arguments).
 _world = jax.jit(walker.make_world)
@@ -86,7 +86,7 @@ def compiled_programs() -> int:
     return sum(compiled_count(f) for f in _PROGRAMS)
 
 
-class MjxBiped:
+class MjxBiped(SteppedBiped):
     """One simulated biped on MJX, advanced by control ticks from the host (a host object holding device state).
 
     Args:
@@ -194,10 +194,6 @@ class MjxBiped:
             return np.asarray(self.state.soles)
         return np.asarray(_soles(self._lean_sim, self._step[1].data))
 
-    def feet(self) -> np.ndarray:
-        """(2, 3) float32 the measured feet (x, y, yaw; m, rad), row 0 left, now (a swinging foot where it is)."""
-        return self.soles()[:, _PLANAR]
-
     def qpos(self) -> np.ndarray:
         """(nq,) float32 the robot's generalised positions now (pelvis position and quaternion, the joints)."""
         data = self.state.data if self._step is None else self._step[1].data
@@ -223,25 +219,10 @@ class MjxBiped:
         step = self._step[0]
         if not bool(step.go):
             return st
-        target = np.asarray(step.target, np.float32)[_PLANAR]
+        target = np.asarray(step.target, np.float32)[PLANAR]
         return control.StanceInfo(target, np.float32(-st.stance_side), st.stance)
 
     # -- stepping -----------------------------------------------------------------------------------------------
-
-    @property
-    def ticks_per_step(self) -> int:
-        """Control periods per step (``step_time / control_dt``)."""
-        return self.cfg.ticks_per_step
-
-    @property
-    def control_dt(self) -> float:
-        """s per control tick (``cfg.control_dt``)."""
-        return float(self.cfg.control_dt)
-
-    @property
-    def stepping(self) -> bool:
-        """A step is in progress (between :meth:`begin` and :meth:`end`)."""
-        return self._step is not None
 
     def begin(self, foothold, go: bool) -> None:
         """Start a step to ``foothold`` (6,) (:attr:`ijoy_jax.select.StepChoice.foothold`: x, y, z, roll,
@@ -290,13 +271,6 @@ class MjxBiped:
         self.fallen = bool(log.fallen)
         self.fresh = False
         return log
-
-    def execute(self, foothold, go: bool) -> StepLog:
-        """One whole step (:meth:`begin`, every :meth:`tick`, :meth:`end`), as fast as the device runs it."""
-        self.begin(foothold, go)
-        while self.tick():
-            pass
-        return self.end()
 
     def warm_up(self) -> None:
         """Compile the step's programs now (a drive calls it before its clock starts, so the first step is not

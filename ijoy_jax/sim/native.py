@@ -46,12 +46,12 @@ import numpy as np
 from ijoy_jax import control, geometry, select
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import controller, kinematics, model, swing
+from ijoy_jax.sim.stepped import PLANAR, SteppedBiped
 from ijoy_jax.sim.walker import Sim, StepLog, ankle_wrench, centre_of_mass, check_robot
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["NativeBiped", "Programs", "programs"]
 
-_PLANAR = np.array([0, 1, 5])  # x, y, yaw of a sole (6,)
 
 
 class Programs:
@@ -84,11 +84,11 @@ class Programs:
             pst, psw = (jnp.where(left_swings, planned[1], planned[0]),
                         jnp.where(left_swings, planned[0], planned[1]))
             target = rest(phys, jnp.asarray(foothold, jnp.float32))
-            pose = target[_PLANAR]
-            top = (swing.corridor_height(phys, sw[_PLANAR], pose, *foot)
+            pose = target[PLANAR]
+            top = (swing.corridor_height(phys, sw[PLANAR], pose, *foot)
                    + jnp.maximum(tilt_drop(psw), tilt_drop(target)))
-            rel = geometry.relative(st[_PLANAR], pose)
-            planar = geometry.compose(pst[_PLANAR], rel)
+            rel = geometry.relative(st[PLANAR], pose)
+            planar = geometry.compose(pst[PLANAR], rel)
             ptarget = jnp.concatenate([planar[:2], target[2:5], planar[2:]])
             p = controller.plan_step(anchor, pst, psw, ptarget, go & ~fresh, swing_side, top, cfg.clearance)
             p = jax.tree_util.tree_map(lambda a, b: jnp.where(fresh, a, b),
@@ -124,7 +124,7 @@ def _physical(sim: Sim, terrain: Terrain) -> Terrain:
     return terrain.replace(height=jnp.asarray(h, jnp.float32), has_height=True)
 
 
-class NativeBiped:
+class NativeBiped(SteppedBiped):
     """One simulated biped on native MuJoCo, advanced by control ticks (a host object, not a pytree).
 
     Args:
@@ -199,10 +199,6 @@ class NativeBiped:
                         np.arctan2(mat[:, 1, 0], mat[:, 0, 0])], 1)
         return np.concatenate([pos, rpy], 1).astype(np.float32)
 
-    def feet(self) -> np.ndarray:
-        """(2, 3) float32 the measured feet (x, y, yaw), row 0 left."""
-        return self.soles()[:, _PLANAR]
-
     def stance(self) -> control.StanceInfo:
         """The next decision's stance (ComputeStanceLocation): the measured stance foot, its side, the swing foot.
 
@@ -225,25 +221,10 @@ class NativeBiped:
         st = self.stance()
         if not self._step["go"]:
             return st
-        target = self._step["target"][_PLANAR]
+        target = self._step["target"][PLANAR]
         return control.StanceInfo(target.astype(np.float32), np.float32(-st.stance_side), st.stance)
 
     # -- stepping -----------------------------------------------------------------------------------------------
-
-    @property
-    def ticks_per_step(self) -> int:
-        """Control periods per step (``step_time / control_dt``)."""
-        return self.cfg.ticks_per_step
-
-    @property
-    def control_dt(self) -> float:
-        """s per control tick (``cfg.control_dt``)."""
-        return float(self.cfg.control_dt)
-
-    @property
-    def stepping(self) -> bool:
-        """A step is in progress (between :meth:`begin` and :meth:`end`)."""
-        return self._step is not None
 
     def begin(self, foothold, go: bool) -> None:
         """Start a step to ``foothold`` (6,) (:attr:`ijoy_jax.select.StepChoice.foothold`), or stand if not ``go``.
@@ -340,13 +321,6 @@ class NativeBiped:
         c, v = centre_of_mass(self.sim, self.d)
         p.tick(plan, cs, window, base, np.asarray(ankle_wrench(self.sim, self.d), f32),
                (np.asarray(c[:2], f32), np.asarray(v[:2], f32)))
-
-    def execute(self, foothold, go: bool) -> StepLog:
-        """One whole step (:meth:`begin`, every :meth:`tick`, :meth:`end`), as fast as the CPU runs it."""
-        self.begin(foothold, go)
-        while self.tick():
-            pass
-        return self.end()
 
     # -- helpers ------------------------------------------------------------------------------------------------
 
