@@ -147,6 +147,73 @@ def test_swing_degenerate_inputs_no_nan():
     assert np.all(z >= -1e-7) and np.all(np.diff(z) >= -1e-7)
 
 
+
+def test_constant_profile_is_the_one_apex_path():
+    start = jnp.array([0.1, -0.2, 0.02, 0.3])
+    end = jnp.array([0.5, -0.1, 0.07, 0.1])
+    f = jax.jit(jax.vmap(path, (None, None, None, 0, None)))
+    s = jnp.linspace(-0.1, 1.1, 121)
+    for apex, lift in ((0.15, 0.25), (0.07, 0.2), (0.3, 0.5)):  # at or above both soles
+        one = f(start, end, apex, s, lift)
+        for n in (2, 16):
+            np.testing.assert_allclose(f(start, end, jnp.full(n, apex), s, lift), one, atol=1e-6)
+    with pytest.raises(ValueError, match="profile"):
+        sw.swing_pose(start, end, jnp.zeros(1), 0.5)
+    with pytest.raises(ValueError, match="profile"):
+        sw.swing_pose(start, end, jnp.zeros((2, 3)), 0.5)
+
+
+def _progress(s, lift):
+    """The horizontal progress u(s) of swing_pose (its closed form, float64)."""
+    return np.asarray(sw.smoothstep(np.clip((np.asarray(s, np.float64) - lift) / (1 - 2 * lift), 0, 1)))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-0.2, 0.35, allow_subnormal=False), min_size=2, max_size=20),
+       st.floats(-0.1, 0.1, allow_subnormal=False), st.floats(-0.1, 0.1, allow_subnormal=False), st.floats(0.05, 0.45))
+def test_staged_path_stays_above_the_profile_between_its_points(need, z0, z1, lift):
+    """Between the profile's points i and i + 1 the sole is at least as high as both ask; it never rises
+    above the highest level (profile and ends); it starts and ends exactly at the soles, at rest."""
+    need = np.asarray(need, np.float64)
+    n = len(need)
+    with enable_x64():
+        start = jnp.array([0.0, 0.0, z0, 0.0], jnp.float64)
+        end = jnp.array([0.6, 0.1, z1, 0.2], jnp.float64)
+        s = jnp.linspace(0.0, 1.0, 4001)
+        z = np.asarray(jax.vmap(lambda si: sw.swing_pose(start, end, jnp.asarray(need), si, lift=lift)[0][2])(s))
+        vel = jax.vmap(lambda si: sw.swing_velocity(start, end, jnp.asarray(need), si, lift=lift)[0][2])(
+            jnp.array([0.0, 1.0]))
+    u = _progress(np.asarray(s), lift) * (n - 1)  # in units of the profile's spacing
+    below = np.floor(u).astype(int)
+    ask = np.maximum(need[np.clip(below, 0, n - 1)], need[np.clip(below + 1, 0, n - 1)])
+    moving = (u > 0) & (u < n - 1)
+    assert np.all(z[moving] >= ask[moving] - 1e-9)
+    assert np.all(z <= max(need.max(), z0, z1) + 1e-9)
+    assert z[0] == z0 and z[-1] == z1
+    np.testing.assert_allclose(vel, 0.0, atol=1e-9)
+
+
+def test_staged_path_climbs_a_stair_in_two_stages():
+    """A foot lifted from a lower tread over the stance tread onto the next one (two 10 cm risers, 5 cm
+    clearance): it clears the first riser, and gains the second while it moves forward; the one-apex path
+    rises both before it moves."""
+    n = 16
+    u = np.linspace(0.0, 1.0, n)
+    terrain = np.where(u < 0.05, 0.0, np.where(u < 0.55, 0.1, 0.2))  # the footprint's highest cell along the path
+    need = jnp.asarray(terrain + 0.05, jnp.float32)
+    start = jnp.array([0.0, 0.0, 0.0, 0.0])
+    end = jnp.array([0.6, 0.0, 0.2, 0.0])
+    lift = 0.2
+    z_at = lambda apex, s: float(sw.swing_pose(start, end, apex, s, lift=lift)[0][2])  # noqa: E731
+    assert z_at(need, lift) == pytest.approx(0.15, abs=1e-6)  # the transfer starts one riser up
+    assert z_at(jnp.max(need), lift) == pytest.approx(0.25, abs=1e-6)
+    # the second riser is cleared by the time the foot reaches the point before the first that asks for it
+    grid = np.linspace(0.0, 1.0, 20001)
+    s_there = grid[np.argmax(_progress(grid, lift) >= 8 / 15)]
+    assert z_at(need, s_there) >= 0.25 - 1e-6
+    assert z_at(need, 0.5 * (lift + s_there)) < 0.25 - 0.01  # and not long before
+
+
 _TERRAIN = ij.terrain.from_arrays(
     (
         np.random.default_rng(7).uniform(0, 0.15, (40, 40)) * (np.random.default_rng(8).uniform(size=(40, 40)) < 0.2)

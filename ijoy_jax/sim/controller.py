@@ -22,7 +22,10 @@ Soles are full poses (x, y, z, roll, pitch, yaw): on uneven ground each
 foothold's sole is tilted parallel to the plane under it (the walker fits it,
 or takes it from the selector's foothold) and rests on the ground there; the
 swing sole turns to that tilt during the transfer and descends parallel to
-it, and the pelvis keeps ``pelvis_height`` above the lower sole.
+it, its path gains height in stages as the terrain along it asks
+(:func:`ijoy_jax.sim.swing.swing_pose`), and the pelvis moves smoothly from
+``pelvis_height`` above the lower sole at lift-off to as high above the lower
+sole at touch-down (:func:`pattern`).
 
 A dynamics filter (``filter_passes``, on by default) corrects the ZMP
 reference by the multibody ZMP error of the planned motion
@@ -72,10 +75,12 @@ class WalkConfig:
         (0.65: knees bent 0.85 rad standing). Higher, a wide step combined with
         a long one leaves the legs out of reach: the knee straightens before
         the swing foot is down and the weight moves onto a foot still in the air.
-      clearance: the swing sole rises this far above the highest terrain under
-        its swept footprint.
+      clearance: the swing sole rises this far above the terrain under its
+        swept footprint, as high at each part of the path as that part needs
+        (:func:`swing.swing_pose`, with the walker's :func:`swing.corridor_profile`).
       swing_lift: fraction of the swing spent rising (and as much descending)
-        before (after) the foot moves horizontally (:func:`swing.swing_pose`).
+        before (after) the foot moves horizontally, and on each stage of
+        height gained or lost in between (:func:`swing.swing_pose`).
       filter_passes: passes of the dynamics filter (:func:`zmp_correction`)
         run at the start of every step, warm-started from the previous step's;
         0 tracks the LIPM's ZMP uncorrected (the robot then falls within a few
@@ -164,7 +169,7 @@ class StepPlan(NamedTuple):
     stance: jax.Array  # (6,) stance sole
     swing_from: jax.Array  # (6,) swing sole at lift-off
     swing_to: jax.Array  # (6,) swing sole at touch-down (== swing_from when not walking)
-    apex: jax.Array  # () absolute height the swing sole rises to
+    apex: jax.Array  # () absolute height the swing sole rises to, or (n,) its lowest heights along the path
     swing_side: jax.Array  # () +1 if the left foot swings
     go: jax.Array  # () bool: False = stand on both feet (StopWalking)
 
@@ -201,13 +206,19 @@ def plan_step(anchor, stance, swing_from, pose, go, swing_side, corridor_top, cl
         ground, parallel to its plane).
       go: () bool, False to stand (StopWalking).
       swing_side: () +1 if the left foot swings.
-      corridor_top: () highest terrain under the swept footprint (m).
+      corridor_top: () highest terrain under the swept footprint (m), or (n,) its profile along the path
+        (:func:`ijoy_jax.sim.swing.corridor_profile`): the swing foot then gains height in stages, as the
+        path needs it (:func:`ijoy_jax.sim.swing.swing_pose`).
       clearance: () the swing sole's margin above it (m).
     """
     swing_to = jnp.where(go, pose, swing_from)
     stride = swing_to[:2] - swing_from[:2]
     mid = 0.5 * (stance[:2] + swing_from[:2])
-    apex = jnp.maximum(corridor_top, jnp.maximum(swing_from[2], swing_to[2])) + clearance
+    top = jnp.asarray(corridor_top, jnp.float32)
+    if top.ndim == 0:
+        apex = jnp.maximum(top, jnp.maximum(swing_from[2], swing_to[2])) + clearance
+    else:  # the first footprint is the lift-off sole's, the last the touch-down sole's
+        apex = top.at[0].max(swing_from[2]).at[-1].max(swing_to[2]) + clearance
     anchor = jnp.asarray(anchor, jnp.float32)
     walking = jnp.stack([anchor, stance[:2], swing_to[:2], stance[:2] + stride])
     standing = jnp.stack([anchor, mid, mid, mid])
@@ -286,10 +297,16 @@ def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPla
     lipm, err_sum, _ = preview.preview_update(pgains, cs.lipm, cs.err_sum, ztrack)
     t = cs.t + cfg.control_dt
     feet = foot_targets(cfg, plan, t)
-    # Ground under the body: the lower of the stance sole and the swing sole's start/end heights (the mean would
-    # stretch the lower leg straight, its knee singular, once one foot stands 5 cm higher than the other).
-    s = swing_phase(cfg, t)
-    ground = jnp.minimum(plan.stance[2], (1 - s) * plan.swing_from[2] + s * plan.swing_to[2])
+    # Ground under the body: the lower of the stance sole and the swing sole (the mean would stretch the lower leg
+    # straight, its knee singular, once one foot stands 5 cm higher than the other), at lift-off at the step's
+    # start and at touch-down at its end, in between a quintic in time: the pelvis starts and stops its vertical
+    # motion at rest. (Following the swing sole's height linearly, with a kink where the two soles' heights
+    # cross, jerked the body at every riser: on stairs of 7.5-15 cm the stance foot unloaded and rocked, and 18.6 %
+    # of the robots fell going up, 51.1 % going down, against 12.1 % and 22.2 % with this profile; MJX, 1024 maps
+    # each, docs/walk_families.md.)
+    u = swing.smoothstep(t / cfg.step_time)
+    ground = ((1 - u) * jnp.minimum(plan.stance[2], plan.swing_from[2])
+              + u * jnp.minimum(plan.stance[2], plan.swing_to[2]))
     yaw_mid = feet[0, 5] + 0.5 * geometry.wrap_angle(feet[1, 5] - feet[0, 5])
     # The pelvis that puts the CoM model (1 - b) pelvis + b mean(soles) + offset on the LIPM's CoM.
     b = cfg.leg_share
@@ -439,7 +456,7 @@ def next_plan(cfg: WalkConfig, plan: StepPlan) -> StepPlan:
     """The step after ``plan`` as the ZMP plan assumes it: the other foot repeats the stride (or both stand)."""
     stride_yaw = geometry.wrap_angle(plan.swing_to[5] - plan.swing_from[5])
     target = jnp.concatenate([plan.zmp[3], plan.stance[2:5], (plan.stance[5] + stride_yaw)[None]])
-    top = plan.apex - cfg.clearance
+    top = jnp.broadcast_to(jnp.max(plan.apex), plan.apex.shape) - cfg.clearance  # one height: no terrain known
     return plan_step(plan.stance[:2], plan.swing_to, plan.stance, target, plan.go, -plan.swing_side, top,
                      cfg.clearance)
 

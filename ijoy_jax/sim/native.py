@@ -85,7 +85,7 @@ class Programs:
                         jnp.where(left_swings, planned[0], planned[1]))
             target = rest(phys, jnp.asarray(foothold, jnp.float32))
             pose = target[PLANAR]
-            top = (swing.corridor_height(phys, sw[PLANAR], pose, *foot)
+            top = (swing.corridor_profile(phys, sw[PLANAR], pose, *foot)
                    + jnp.maximum(tilt_drop(psw), tilt_drop(target)))
             rel = geometry.relative(st[PLANAR], pose)
             planar = geometry.compose(pst[PLANAR], rel)

@@ -17,6 +17,16 @@ apex, so above every cell the swept foot covers (up to the sampling bound in
 :func:`corridor_height`); during lift and descent the foot is over its own
 start or end footprint and above the terrain it stands on.
 
+Given the terrain's height *along* the path (:func:`corridor_profile`: the
+footprint's height at evenly spaced points of the horizontal path) instead of
+one apex, the foot gains height in stages: each rise ends as the foot reaches
+the footprint that needs it, and each descent starts once the foot has passed
+the footprint that held it up (:func:`swing_pose`). Climbing stairs, the foot
+lifted from a lower tread clears the next riser first and the one after while
+it moves forward, instead of rising two risers while it is still behind the
+body, where the leg cannot hold the sole level (the toe drops and catches the
+riser: measured in MJX, issue #20).
+
 Heights are read from ``terrain.height`` as they are: the caller passes a
 terrain whose 2D obstacles are already raised to their physical height (as in
 the simulator's height field). Cells off the map count as ``off_map_height``
@@ -31,6 +41,7 @@ import math
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ijoy_jax import geometry
 from ijoy_jax.footcost import window_cells
@@ -274,21 +285,40 @@ def corridor_height(
     Returns:
       () largest height (m).
     """
+    return jnp.max(corridor_profile(terrain, start, end, foot_length, foot_width, samples, margin,
+                                    max_radius=max_radius, off_map_height=off_map_height))
+
+
+def corridor_profile(
+    terrain: Terrain,
+    start,
+    end,
+    foot_length,
+    foot_width,
+    samples: int = 16,
+    margin=0.0,
+    *,
+    max_radius: float | None = None,
+    off_map_height=0.0,
+) -> jax.Array:
+    """(samples,) highest terrain (m) under the foot at ``samples`` poses evenly spaced along the straight path
+    from ``start`` to ``end`` (both included; :func:`corridor_height` is their maximum, and its sampling bound
+    holds between neighbouring samples). Arguments as in :func:`corridor_height`; a pose that is not finite
+    gives NaN."""
     samples = int(samples)
     if samples < 2:
         raise ValueError(f"samples must be >= 2, got {samples}")
     k = _window(foot_length, foot_width, margin, max_radius, terrain.resolution)
     hl = 0.5 * jnp.asarray(foot_length) + margin
     hw = 0.5 * jnp.asarray(foot_width) + margin
-    return _corridor_height(terrain, start, end, hl, hw, k, samples, off_map_height)
+    return _corridor_profile(terrain, start, end, hl, hw, k, samples, off_map_height)
 
 
 @functools.partial(jax.jit, static_argnums=(5, 6))
-def _corridor_height(terrain, start, end, hl, hw, k: int, samples: int, off_map_height):
+def _corridor_profile(terrain, start, end, hl, hw, k: int, samples: int, off_map_height):
     u = jnp.linspace(0.0, 1.0, samples)
     poses = jax.vmap(lambda ui: _lerp_pose(start, end, ui))(u)
-    heights = jax.vmap(lambda p: _footprint_height_impl(terrain, p, hl, hw, k, off_map_height))(poses)
-    return jnp.max(heights)
+    return jax.vmap(lambda p: _footprint_height_impl(terrain, p, hl, hw, k, off_map_height))(poses)
 
 
 def swing_apex(
@@ -336,33 +366,47 @@ def swing_pose(start, end, apex, s, *, lift=0.25) -> tuple[jax.Array, jax.Array]
 
     With ``a = lift`` and ``q(u) = 10u^3 - 15u^4 + 6u^5`` (u clipped to [0, 1]):
 
-    - vertical: ``z = z0 + (h - z0) q(s / a)`` for ``s <= a``; ``h`` for
-      ``a <= s <= 1 - a``; ``z = h + (z1 - h) q((s - 1 + a) / a)`` after, with
-      ``h = max(apex, z0, z1)``;
     - horizontal: ``(x, y, yaw) = lerp(start, end, q((s - a) / (1 - 2a)))``,
-      yaw the short way round.
+      yaw the short way round: the foot moves only for ``a <= s <= 1 - a``;
+    - vertical, with one ``apex`` height ``h``: ``z = z0 + (h - z0) q(s / a)``
+      for ``s <= a``; ``h`` for ``a <= s <= 1 - a``; ``z = h + (z1 - h) q((s
+      - 1 + a) / a)`` after, with ``h = max(apex, z0, z1)``: the foot rises
+      and descends vertically and moves horizontally only at the apex;
+    - vertical, with ``apex`` a profile ``h_0 .. h_{n-1}`` (the lowest heights
+      allowed with the foot at the n evenly spaced points ``u_i = i / (n -
+      1)`` of its horizontal path, e.g. :func:`corridor_profile` plus a
+      clearance): the foot gains and loses height in stages of duration
+      ``a``. Each rise the profile asks for (its running maximum from the
+      start, which begins at z0) is complete when the foot reaches the point
+      before the one that asks for it, each descent (the running maximum from
+      the end, which ends at z1) begins once the foot has passed the point
+      after the one that held it up. So between neighbouring points the sole
+      is at least as high as both ask; with a constant profile at or above
+      both soles the path is the one-apex path.
 
-    So the foot rises and descends vertically and moves horizontally only at
-    the apex height; position, velocity and acceleration are continuous, and
-    velocity and acceleration are zero at ``s = 0`` and ``s = 1`` (and at the
-    two corners ``s = a``, ``s = 1 - a``). Times: peak horizontal speed is
-    ``1.875 |d| / ((1 - 2a) T)`` and peak acceleration ``5.77 |d| / ((1 -
-    2a) T)^2`` for a swing of duration T; the vertical ones use ``a T``.
+    Position, velocity and acceleration are continuous, and velocity and
+    acceleration are zero at ``s = 0`` and ``s = 1``. Times: peak horizontal
+    speed is ``1.875 |d| / ((1 - 2a) T)`` and peak acceleration ``5.77 |d| /
+    ((1 - 2a) T)^2`` for a swing of duration T; each vertical stage uses
+    ``a T``.
 
     Args:
       start: (4,) lift-off pose (x, y, z, yaw) of the sole centre (m, rad).
       end: (4,) touch-down pose (x, y, z, yaw).
       apex: () absolute sole height (m) during the transfer, e.g. from
-        :func:`swing_apex`; raised to ``max(start z, end z)`` if lower.
+        :func:`swing_apex`, raised to ``max(start z, end z)`` if lower; or
+        (n,) n >= 2 such heights along the path (see above).
       s: () swing phase in [0, 1] (clipped), elapsed swing time over swing
         duration.
-      lift: fraction ``a`` of the phase for the lift and for the descent, in
-        (0, 0.5]; a Python float is checked, a traced one is clipped.
+      lift: fraction ``a`` of the phase for the lift and for the descent (and
+        for each stage between), in (0, 0.5]; a Python float is checked, a
+        traced one is clipped.
 
     Returns:
-      ``(pos (3,), yaw ())``: sole-centre position (m) and yaw (rad). At s = 1
-      they equal ``end`` exactly (yaw exactly when ``|end yaw - start yaw| <
-      pi``, otherwise modulo 2 pi; yaw is continuous, not wrapped).
+      ``(pos (3,), yaw ())``: sole-centre position (m) and yaw (rad). At s = 0
+      and 1 they equal ``start`` and ``end`` exactly (yaw exactly when ``|end
+      yaw - start yaw| < pi``, otherwise modulo 2 pi; yaw is continuous, not
+      wrapped).
 
     Example:
       >>> p, yaw = swing_pose(jnp.array([0., 0.1, 0., 0.]), jnp.array([0.3, 0.1, 0.05, 0.]), 0.1, 0.5)
@@ -371,7 +415,39 @@ def swing_pose(start, end, apex, s, *, lift=0.25) -> tuple[jax.Array, jax.Array]
     """
     if isinstance(lift, (int, float)) and not (0.0 < float(lift) <= 0.5):
         raise ValueError(f"lift must be in (0, 0.5], got {lift}")
+    if jnp.ndim(apex) > 1 or (jnp.ndim(apex) == 1 and jnp.shape(apex)[0] < 2):
+        raise ValueError(f"apex must be a height () or a profile (n,) with n >= 2, got shape {jnp.shape(apex)}")
     return _swing_pose(start, end, apex, s, lift)
+
+
+def _inverse_smoothstep(u: np.ndarray) -> np.ndarray:
+    """x in [0, 1] with :func:`smoothstep` (x) = u, for u in [0, 1] (float64 bisection: it is increasing)."""
+    lo, hi = np.zeros_like(u, np.float64), np.ones_like(u, np.float64)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        below = mid * mid * mid * (10.0 + mid * (-15.0 + 6.0 * mid)) < u
+        lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+    return 0.5 * (lo + hi)
+
+
+def _staged_height(z0, z1, need, s, a):
+    """The sole's height at phase s for the height profile ``need`` (n,) (see :func:`swing_pose`)."""
+    n = need.shape[0]
+    levels = jnp.concatenate([z0[None], need, z1[None]])  # the start, the n points, the end
+    up = jax.lax.cummax(levels)
+    down = jax.lax.cummax(levels, reverse=True)
+    rise = up[1:] - up[:-1]  # (n + 1,) the gain each level asks for beyond those before it
+    fall = down[:-1] - down[1:]  # (n + 1,) the loss each level allows once passed
+    point = np.clip(np.arange(n + 2) - 1, 0, n - 1)  # the point of the path each level stands for
+    reach = a + (1.0 - 2.0 * a) * jnp.asarray(_inverse_smoothstep(np.linspace(0.0, 1.0, n)), need.dtype)
+    done = reach[np.clip(point[1:] - 1, 0, n - 1)]  # a rise ends as the foot reaches the point before
+    begin = reach[np.clip(point[:-1] + 1, 0, n - 1)]  # a descent begins once it has passed the point after
+    gained = smoothstep((s - done + a) / a)
+    lost = smoothstep((s - begin) / a)
+    # the same sum written from either end, so that s = 0 and s = 1 give z0 and z1 exactly
+    from_start = z0 + jnp.sum(rise * gained) - jnp.sum(fall * lost)
+    from_end = z1 + jnp.sum(fall * (1.0 - lost)) - jnp.sum(rise * (1.0 - gained))
+    return jnp.where(s <= 0.5, from_start, from_end)
 
 
 @jax.jit
@@ -380,10 +456,10 @@ def _swing_pose(start, end, apex, s, lift):
     end = jnp.asarray(end, start.dtype)
     a = jnp.clip(jnp.asarray(lift, start.dtype), 1e-3, 0.5)
     s = jnp.clip(jnp.asarray(s, start.dtype), 0.0, 1.0)
-    h = jnp.maximum(jnp.maximum(jnp.asarray(apex, start.dtype), start[2]), end[2])
-    up = smoothstep(s / a)
-    down = smoothstep((s - 1.0 + a) / a)
-    z = jnp.where(s <= a, (1.0 - up) * start[2] + up * h, (1.0 - down) * h + down * end[2])
+    need = jnp.asarray(apex, start.dtype).reshape(-1)
+    if need.shape[0] == 1:  # one apex: the same height all along
+        need = jnp.concatenate([need, need])
+    z = _staged_height(start[2], end[2], need, s, a)
     # 1 - 2a may be 0 (lift = 0.5): then the transfer is a step at s = 0.5.
     span = 1.0 - 2.0 * a
     safe_span = jnp.where(span > 0, span, 1.0)

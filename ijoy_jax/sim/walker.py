@@ -430,7 +430,7 @@ def begin_step(sim: Sim, world: World, state: SimState, foothold, go) -> tuple[S
     target = _rest(sim, world, foothold)
     pose = target[_PLANAR]
     # the sole's lowest corner clears the swept terrain by the clearance, whatever the soles' tilts
-    top = (swing.corridor_height(world.phys, sw[_PLANAR], pose, params.foot_length, params.foot_width)
+    top = (swing.corridor_profile(world.phys, sw[_PLANAR], pose, params.foot_length, params.foot_width)
            + jnp.maximum(_tilt_drop(sim, psw), _tilt_drop(sim, target)))
     # The step relative to the measured stance foot, applied to the commanded one: the plan stays
     # continuous (no jump to the measured soles' millimetres), the foot lands where the selector chose
