@@ -194,7 +194,7 @@ def test_climbs_and_descends_stairs_two_risers_per_swing(sim, direction):
     docs/walk_families.md). The soles land 1 cm behind the treads' centres, their toes 3.9 cm from the next
     riser's cell: with 2.9 cm (centred) the climb fell at its last step under the suite's XLA flags, its toe on
     the riser after a landing 2 cm long (MuJoCo's height field ramps over the cell next to a riser: the
-    toe's real room is a centimetre less than the cells say; what is left of the falls on 30 cm treads)."""
+    toe's real room is a centimetre less than the cells say)."""
     nx, ny = sim.shape
     x = (np.arange(nx) + 0.5) * sim.resolution - 0.5 * nx * sim.resolution
     risers = 0.16 + 0.3 * np.arange(5)  # treads of 0.3 m from x = 0.16, 0.46, ..., 1.36 (the top)
