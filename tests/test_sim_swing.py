@@ -90,6 +90,12 @@ def test_corridor_height_sees_obstacle_between():
     assert float(sw.corridor_height(t, start, end, FOOT_L, FOOT_W)) == pytest.approx(0.12)
     apex = sw.swing_apex(t, jnp.array([0.35, 0.4, 0.0, 0.0]), jnp.array([0.9, 0.4, 0.0, 0.3]), FOOT_L, FOOT_W, 0.05)
     assert float(apex) == pytest.approx(0.17)
+    # the profile: the footprint's height at each of the evenly spaced poses (yaw the short way round)
+    prof = np.asarray(sw.corridor_profile(t, start, end, FOOT_L, FOOT_W, samples=12))
+    u = np.linspace(0.0, 1.0, 12)
+    want = [float(sw.footprint_height(t, (1 - ui) * start + ui * end, FOOT_L, FOOT_W)) for ui in u]
+    np.testing.assert_array_equal(prof, want)
+    assert prof[0] == 0.0 and prof[-1] == 0.0 and prof.max() == pytest.approx(0.12)
 
 
 def path(start, end, apex, s, lift=0.25):
