@@ -24,8 +24,8 @@ the footprint that needs it, and each descent starts once the foot has passed
 the footprint that held it up (:func:`swing_pose`). Climbing stairs, the foot
 lifted from a lower tread clears the next riser first and the one after while
 it moves forward, instead of rising two risers while it is still behind the
-body, where the leg cannot hold the sole level (the toe drops and catches the
-riser: measured in MJX, issue #20).
+body (in MJX, robots that fell on stairs had their swing foot stopped short
+against a riser, pitched 20-30 degrees; docs/walk_families.md).
 
 Heights are read from ``terrain.height`` as they are: the caller passes a
 terrain whose 2D obstacles are already raised to their physical height (as in
