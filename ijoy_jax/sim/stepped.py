@@ -23,9 +23,12 @@ PLANAR = np.array([0, 1, 5])
 
 class SteppedBiped:
     """Base of a biped stepped from the host. A subclass sets ``cfg`` (its
-    :class:`~ijoy_jax.sim.controller.WalkConfig`) and ``_step`` (None between steps), and defines ``soles()``
+    :class:`~ijoy_jax.sim.controller.WalkConfig`) and keeps the step in progress in ``_step`` (this base's
+    attribute: None between steps, whatever the subclass needs during one), and defines ``soles()``
     ((2, 6) measured soles, row 0 left), ``begin(foothold, go)``, ``tick() -> bool`` (False after the step's
     last period) and ``end() -> StepLog``."""
+
+    _step = None
 
     def feet(self) -> np.ndarray:
         """(2, 3) float32 the measured feet (x, y, yaw; m, rad), row 0 left, now (a swinging foot where it is)."""
