@@ -491,6 +491,12 @@ def correction_length(cfg: WalkConfig) -> int:
     return cfg.ticks_per_step + 2 * cfg.horizon
 
 
+def filtered_length(cfg: WalkConfig) -> int:
+    """Periods the dynamics filter plays and corrects (:func:`zmp_correction`): this step and the assumed next
+    one, or the preview horizon after this step where that is shorter."""
+    return cfg.ticks_per_step + min(cfg.horizon, cfg.ticks_per_step)
+
+
 def carry_correction(cfg: WalkConfig, corr) -> jax.Array:
     """The correction a step leaves for the next one: shifted by one step, zeros where it had none."""
     steps = cfg.ticks_per_step
@@ -501,13 +507,24 @@ def zmp_correction(m_free, params, cfg: WalkConfig, pgains: preview.PreviewGains
                    passes: int = 1, init=None) -> jax.Array:
     """The dynamics filter (Kajita et al. 2003, as fixed-point passes): ZMP corrections for one step.
 
-    Plays the step's pattern (and the horizon after it, with the assumed next
-    step: :func:`next_plan`) kinematically, measures its multibody ZMP with
-    inverse dynamics (:func:`ijoy_jax.sim.dynamics.motion_zmp` on ``m_free``,
-    the model without constraints), and adds the error to the correction the
-    LIPM tracks; each pass replans with it. Returns
-    (:func:`correction_length`, 2) corrections indexed by control period, for
-    :func:`control_tick`'s windows.
+    Plays the step's pattern and the assumed next step's (:func:`next_plan`)
+    kinematically, measures its multibody ZMP with inverse dynamics
+    (:func:`ijoy_jax.sim.dynamics.motion_zmp` on ``m_free``, the model without
+    constraints), and adds the error to the correction the LIPM tracks; each
+    pass replans with it. Returns (:func:`correction_length`, 2) corrections
+    indexed by control period, for :func:`control_tick`'s windows.
+
+    Only the periods of those two steps are measured (:func:`filtered_length`):
+    after them the played pattern takes no further step (its feet stay where
+    the second put them while the LIPM, previewing a reference that walks on,
+    carries the body past them), so the error measured there comes from a
+    motion no robot makes. Corrected there too, that tail fed itself through
+    :func:`carry_correction` from step to step: on stairs,
+    where each step lifts the body by a riser, it grew tenfold a step (2 m,
+    23 m, 135 m at the fourth to sixth step of a 10.6 cm climb, native
+    MuJoCo), the LIPM's preview read it and the plan itself ran off at the
+    end of a step (the pattern's CoM at 1.3 m/s, then -3 m/s), the fall of
+    about a fifth of the robots climbing 30 cm treads (docs/walk_families.md).
 
     ``init`` warm-starts the passes, normally with the previous step's result
     moved on by one step (:func:`carry_correction`). It matters: the first two
@@ -518,7 +535,7 @@ def zmp_correction(m_free, params, cfg: WalkConfig, pgains: preview.PreviewGains
     pattern's multibody ZMP and its reference on 0.2 m forward steps
     (6 cm without the filter).
     """
-    length = cfg.ticks_per_step + cfg.horizon
+    length = filtered_length(cfg)
     # the support's height: the stance sole's during this step, the landed swing sole's after it
     ground = jnp.where(jnp.arange(length) < cfg.ticks_per_step, plan.stance[2], plan.swing_to[2])
     # windows of predict() reach period length + N = correction_length
