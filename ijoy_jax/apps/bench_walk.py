@@ -842,7 +842,7 @@ def plot(rows: Sequence[dict], path=None):
             ax.set_ylim(0, max(1.0, ax.get_ylim()[1]))
         ax.grid(axis="y", alpha=0.3)
         ax.axhline(0.0, color="black", lw=0.6)
-    axes[0].legend(fontsize=8, ncol=2, loc="upper right")
+    axes[0].legend(fontsize=8, ncol=2, loc="upper left")
     axes[-1].set_xticks(x, families, rotation=20)
     first = next((r for r in rows if r.get("name") == "walk" and "skipped" not in r), {})
     axes[0].set_title(f"HRP-2 joystick per terrain family: {first.get('batch', '?')} robots x "
