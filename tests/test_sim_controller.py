@@ -213,6 +213,41 @@ def test_climbs_and_descends_stairs_two_risers_per_swing(sim, direction):
     np.testing.assert_allclose(walk.soles()[:, 2], 0.6 if direction > 0 else 0.0, atol=0.01)
     assert walk.soles()[:, 0].min() - 0.5 * sim.params.foot_length > risers[-1]  # both wholly past the last riser
 
+@pytest.mark.parametrize("drop", [0.0, 0.3])
+def test_descent_drop_lowers_the_pelvis_on_steps_down_only(sim, drop):
+    """``WalkConfig.descent_drop``: stepping down 14 cm onto the next tread and again, the pelvis stands
+    ``pelvis_height`` above the lower sole less ``drop`` times the drop, at both ends of each step, so the
+    height is the same where one step ends and the next begins; stepping up it is the lower sole's, as
+    without it (the default 0 is the old pattern exactly)."""
+    cfg = dataclasses.replace(sim.cfg, descent_drop=drop)
+    params, pg, h = sim.params, controller.gains(sim.cfg), 0.14
+    dt, T = cfg.control_dt, cfg.step_time
+
+    def sole(x, y, z):
+        return jnp.array([x, y, z, 0.0, 0.0, 0.0], jnp.float32)
+
+    def pelvis_z(stance, swing_from, target, side, t):
+        plan = controller.plan_step(stance[:2], stance, swing_from, target, True, side, jnp.maximum(
+            swing_from[2], target[2]), cfg.clearance)
+        cs = controller.init_state(pg, stance[:2])._replace(t=jnp.float32(t - dt))  # pattern() adds one period
+        return float(controller.pattern(params, cfg, pg, plan, cs)[0][2])
+
+    a, b, c = sole(0.0, 0.095, h), sole(0.3, -0.095, 0.0), sole(0.6, 0.095, -h)  # down, tread after tread
+    d = sole(0.9, -0.095, -2 * h)
+    start, end = pelvis_z(b, a, c, 1.0, dt), pelvis_z(b, a, c, 1.0, T)
+    np.testing.assert_allclose(start, cfg.pelvis_height + 0.0 - drop * h, atol=1e-4)
+    np.testing.assert_allclose(end, cfg.pelvis_height - h - drop * h, atol=1e-4)
+    np.testing.assert_allclose(pelvis_z(c, b, d, -1.0, dt), end, atol=1e-4)  # the next step starts there
+    up = pelvis_z(b, c, a, 1.0, T)  # the same treads climbed: stance b, landing on a, 14 cm up
+    np.testing.assert_allclose(up, cfg.pelvis_height + 0.0, atol=1e-4)
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan"), "0.3", True])
+def test_walk_config_refuses_a_descent_drop_outside_zero_one(bad):
+    with pytest.raises(ValueError, match="descent_drop"):
+        controller.WalkConfig(descent_drop=bad)
+
+
 def test_pelvis_stays_above_the_lower_foot(sim):
     """One foot 8 cm up: both knees stay bent (the flat stance's knee is 0.57 rad)."""
     cfg, params = sim.cfg, sim.params
