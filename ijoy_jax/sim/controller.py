@@ -119,12 +119,14 @@ class WalkConfig:
         the step's start, the stance sole above the touch-down sole at its
         end) the pelvis goes this fraction of the height difference lower
         than ``pelvis_height`` above the lower sole, so the swing leg reaches
-        a foothold two risers down (0 = off, the default until measured in
-        MJX; :func:`pattern`). Native MuJoCo, six refined descents of 13.4-14.7 cm
-        risers on 30 cm treads that fell in MJX: without it four fell or
-        tilted past 17 degrees at the last step onto the floor (the swing
-        knee straight 10 cm above the foothold); with 0.3 none tilted past
-        2.6 degrees (docs/walk_families.md).
+        a foothold two risers down (0 = off, the default: not yet measured
+        in MJX, and mixed on native MuJoCo; :func:`pattern`). Six refined
+        descents of 13.4-14.7 cm risers on 30 cm treads that fell in MJX:
+        without it four fell or tilted past 17 degrees at the last step onto
+        the floor (the swing knee straight 10 cm above the foothold), with
+        0.3 none tilted past 2.6 degrees; but on 16 parametric flights of
+        7.5-15 cm none fell without it and the 15 cm one fell with 0.3 (the
+        stance ankle driven past its -75 degree limit). docs/walk_families.md.
       dcm_gain: the DCM feedback (0 = off; :func:`dcm_error`): the centre of
         pressure the ankles' damping control steers to is the ZMP reference
         plus ``dcm_gain`` times how far the measured capture point runs ahead
