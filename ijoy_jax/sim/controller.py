@@ -119,8 +119,8 @@ class WalkConfig:
         the step's start, the stance sole above the touch-down sole at its
         end) the pelvis goes this fraction of the height difference lower
         than ``pelvis_height`` above the lower sole, so the swing leg reaches
-        a foothold two risers down (0 = off, the default: not yet measured
-        in MJX, and mixed on native MuJoCo; :func:`pattern`). Six refined
+        a foothold two risers down (0 = off, the default, which compiles the
+        pattern without it: not yet measured in MJX; :func:`pattern`). Six refined
         descents of 13.4-14.7 cm risers on 30 cm treads that fell in MJX:
         without it four fell or tilted past 17 degrees at the last step onto
         the floor (the swing knee straight 10 cm above the foothold), with
@@ -325,8 +325,11 @@ def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPla
     # of the robots fell going up, 51.1 % going down, against 12.1 % and 22.2 % with this profile; MJX, 1024 maps
     # each, docs/walk_families.md.)
     u = swing.smoothstep(t / cfg.step_time)
-    ground = (1 - u) * _support_height(cfg, plan.stance[2], plan.swing_from[2]) + u * _support_height(
-        cfg, plan.swing_to[2], plan.stance[2])
+    ground = ((1 - u) * jnp.minimum(plan.stance[2], plan.swing_from[2])
+              + u * jnp.minimum(plan.stance[2], plan.swing_to[2]))
+    if cfg.descent_drop:  # static: without it the program is the one measured before the setting existed
+        ground = ground - cfg.descent_drop * ((1 - u) * _step_down(plan.stance[2], plan.swing_from[2])
+                                              + u * _step_down(plan.swing_to[2], plan.stance[2]))
     yaw_mid = feet[0, 5] + 0.5 * geometry.wrap_angle(feet[1, 5] - feet[0, 5])
     # The pelvis that puts the CoM model (1 - b) pelvis + b mean(soles) + offset on the LIPM's CoM.
     b = cfg.leg_share
@@ -338,12 +341,12 @@ def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPla
     return jnp.concatenate([pelvis_pos, quat, q]), cs._replace(lipm=lipm, err_sum=err_sum, t=t), zref[0]
 
 
-def _support_height(cfg: WalkConfig, front, rear) -> jax.Array:
-    """The height the pelvis stands ``cfg.pelvis_height`` above, for soles at heights ``front`` (the sole the
-    body moves onto: the stance sole at a step's start, the touch-down sole at its end) and ``rear``: the lower
-    of the two, lowered by ``cfg.descent_drop`` times the drop where the body steps down. A step's end and the
-    next step's start see the same two soles in the same roles, so the height is continuous."""
-    return jnp.minimum(front, rear) - cfg.descent_drop * jnp.maximum(rear - front, 0.0)
+def _step_down(front, rear) -> jax.Array:
+    """How far the body steps down (m, >= 0) between soles at heights ``rear`` and ``front`` (the sole it moves
+    onto: the stance sole at a step's start, the touch-down sole at its end). A step's end and the next step's
+    start see the same two soles in the same roles, so ``WalkConfig.descent_drop`` keeps the pelvis height
+    continuous."""
+    return jnp.maximum(rear - front, 0.0)
 
 
 def legs_ik(params, pelvis_pos, pelvis_rot, feet) -> jax.Array:
