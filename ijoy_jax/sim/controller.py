@@ -42,6 +42,7 @@ MJX rollout vmaps them.
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from typing import NamedTuple
 
 import jax
@@ -165,7 +166,7 @@ class WalkConfig:
 
     def __post_init__(self):
         drop = self.descent_drop
-        if isinstance(drop, bool) or not isinstance(drop, (int, float)) or not 0.0 <= drop <= 1.0:
+        if isinstance(drop, bool) or not isinstance(drop, numbers.Real) or not 0.0 <= drop <= 1.0:
             raise ValueError(f"WalkConfig.descent_drop must be a number in [0, 1] (a fraction), got {drop!r}")
 
     @property
