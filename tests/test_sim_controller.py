@@ -375,6 +375,17 @@ def test_carry_correction_moves_on_by_one_step():
     np.testing.assert_array_equal(out[n - steps:], 0.0)
 
 
+def _stood_up(sim, stance, swing_from):
+    """The controller's state after the warm-up step the walker starts with (both feet down, the left to swing
+    next), from rest with the CoM at the model's offset."""
+    cfg, params = sim.cfg, sim.params
+    pg = controller.gains(cfg)
+    prepare = controller.prepare_plan(stance, swing_from, 1.0)
+    cs = controller.init_state(pg, jnp.array([cfg.com_offset, 0.0], jnp.float32))
+    return jax.jit(lambda cs: jax.lax.scan(lambda c, _: (controller.control_tick(params, cfg, pg, prepare, c)[1], None),
+                                           cs, None, length=cfg.ticks_per_step)[0])(cs)
+
+
 def test_dynamics_filter_brings_the_patterns_zmp_to_its_reference(sim):
     """A forward 0.2 m step: the multibody ZMP of the corrected pattern is much closer to the reference."""
     cfg, params = sim.cfg, sim.params
@@ -383,11 +394,7 @@ def test_dynamics_filter_brings_the_patterns_zmp_to_its_reference(sim):
     swing_from = jnp.array([0.0, 0.095, 0.0, 0.0, 0.0, 0.0], jnp.float32)
     target = jnp.array([0.2, 0.095, 0.0, 0.0, 0.0, 0.0], jnp.float32)
     plan = controller.plan_step(jnp.zeros(2), stance, swing_from, target, True, 1.0, 0.0, cfg.clearance)
-    cs = controller.init_state(pg, jnp.array([cfg.com_offset, 0.0], jnp.float32))
-    prepare = controller.prepare_plan(stance, swing_from, 1.0)  # from rest, as the walker starts
-    cs = jax.jit(lambda cs: jax.lax.scan(lambda c, _: (controller.control_tick(params, cfg, pg, prepare, c)[1], None),
-                                         cs, None, length=cfg.ticks_per_step)[0])(cs)
-    cs = cs._replace(t=jnp.zeros((), jnp.float32))
+    cs = _stood_up(sim, stance, swing_from)._replace(t=jnp.zeros((), jnp.float32))
     length = cfg.ticks_per_step
 
     @jax.jit
@@ -433,10 +440,7 @@ def test_dynamics_filter_stays_bounded_up_a_flight_of_stairs(sim):
         return cs, corr
 
     feet = {1.0: sole(-2, 1.0), -1.0: sole(-2, -1.0)}
-    cs = controller.init_state(pg, jnp.array([cfg.com_offset, 0.0], jnp.float32))
-    prepare = controller.prepare_plan(feet[-1.0], feet[1.0], 1.0)
-    cs = jax.jit(lambda cs: jax.lax.scan(lambda c, _: (controller.control_tick(params, cfg, pg, prepare, c)[1], None),
-                                         cs, None, length=cfg.ticks_per_step)[0])(cs)
+    cs = _stood_up(sim, feet[-1.0], feet[1.0])
     corr = jnp.zeros((controller.correction_length(cfg), 2), jnp.float32)
     anchor, side, peaks = 0.5 * (feet[1.0][:2] + feet[-1.0][:2]), 1.0, []
     for i in range(6):
