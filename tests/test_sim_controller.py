@@ -213,12 +213,14 @@ def test_climbs_and_descends_stairs_two_risers_per_swing(sim, direction):
     np.testing.assert_allclose(walk.soles()[:, 2], 0.6 if direction > 0 else 0.0, atol=0.01)
     assert walk.soles()[:, 0].min() - 0.5 * sim.params.foot_length > risers[-1]  # both wholly past the last riser
 
-@pytest.mark.parametrize("drop", [0.0, 0.3])
+@pytest.mark.parametrize("drop", [0.0, 0.15, 0.3])
 def test_descent_drop_lowers_the_pelvis_on_steps_down_only(sim, drop):
     """``WalkConfig.descent_drop``: stepping down 14 cm onto the next tread and again, the pelvis stands
     ``pelvis_height`` above the lower sole less ``drop`` times the drop, at both ends of each step, so the
     height is the same where one step ends and the next begins; stepping up it is the lower sole's, as
-    without it (the default 0 is the old pattern exactly)."""
+    without it (0 compiles the old pattern exactly). Standing straddled between the two treads (the swing
+    side stays, so every standing step has the same roles) the pelvis holds the height the last step ended
+    at, through one standing step and the next."""
     cfg = dataclasses.replace(sim.cfg, descent_drop=drop)
     params, pg, h = sim.params, controller.gains(sim.cfg), 0.14
     dt, T = cfg.control_dt, cfg.step_time
@@ -226,11 +228,16 @@ def test_descent_drop_lowers_the_pelvis_on_steps_down_only(sim, drop):
     def sole(x, y, z):
         return jnp.array([x, y, z, 0.0, 0.0, 0.0], jnp.float32)
 
-    def pelvis_z(stance, swing_from, target, side, t):
-        plan = controller.plan_step(stance[:2], stance, swing_from, target, True, side, jnp.maximum(
+    def plan(stance, swing_from, target, side, go=True):
+        return controller.plan_step(stance[:2], stance, swing_from, target, go, side, jnp.maximum(
             swing_from[2], target[2]), cfg.clearance)
-        cs = controller.init_state(pg, stance[:2])._replace(t=jnp.float32(t - dt))  # pattern() adds one period
-        return float(controller.pattern(params, cfg, pg, plan, cs)[0][2])
+
+    def height(p, t):
+        cs = controller.init_state(pg, p.stance[:2])._replace(t=jnp.float32(t - dt))  # pattern() adds a period
+        return float(controller.pattern(params, cfg, pg, p, cs)[0][2])
+
+    def pelvis_z(stance, swing_from, target, side, t, go=True):
+        return height(plan(stance, swing_from, target, side, go), t)
 
     a, b, c = sole(0.0, 0.095, h), sole(0.3, -0.095, 0.0), sole(0.6, 0.095, -h)  # down, tread after tread
     d = sole(0.9, -0.095, -2 * h)
@@ -238,6 +245,17 @@ def test_descent_drop_lowers_the_pelvis_on_steps_down_only(sim, drop):
     np.testing.assert_allclose(start, cfg.pelvis_height + 0.0 - drop * h, atol=1e-4)
     np.testing.assert_allclose(end, cfg.pelvis_height - h - drop * h, atol=1e-4)
     np.testing.assert_allclose(pelvis_z(c, b, d, -1.0, dt), end, atol=1e-4)  # the next step starts there
+    for t in (dt, 0.5 * T, T):  # or it stands on c with b behind, step after step, at that height
+        np.testing.assert_allclose(pelvis_z(c, b, d, -1.0, t, go=False), end, atol=1e-4)
+    walked = controller.next_plan(cfg, plan(b, a, c, 1.0))  # after a step taken the other foot swings
+    np.testing.assert_array_equal(np.stack([walked.stance, walked.swing_from]), np.stack([c, b]))
+    assert float(walked.swing_side) == -1.0 and bool(walked.go)
+    np.testing.assert_allclose(height(walked, dt), end, atol=1e-4)
+    # the dynamics filter's assumed next step (next_plan) stands too, in the same roles, at the same height
+    after = controller.next_plan(cfg, plan(c, b, d, -1.0, go=False))
+    np.testing.assert_array_equal(np.stack([after.stance, after.swing_from]), np.stack([c, b]))
+    assert float(after.swing_side) == -1.0 and not bool(after.go)
+    np.testing.assert_allclose([height(after, dt), height(after, T)], [end, end], atol=1e-4)
     up = pelvis_z(b, c, a, 1.0, T)  # the same treads climbed: stance b, landing on a, 14 cm up
     np.testing.assert_allclose(up, cfg.pelvis_height + 0.0, atol=1e-4)
 
