@@ -120,12 +120,13 @@ class WalkConfig:
         the step's start, the stance sole above the touch-down sole at its
         end) the pelvis goes this fraction of the height difference lower
         than ``pelvis_height`` above the lower sole, so the swing leg reaches
-        a foothold two risers down (0 = off, which compiles the pattern
-        without it; :func:`pattern`). Measured in MJX (1024 refined descents
-        of 5-15 cm risers, held forward commands): 4.0 % fell at 0, 0.2 % at
-        0.15, 0.1 % at 0.1. On native MuJoCo 0.3 walked the six maps that
-        fell in MJX but drove the stance ankle past its -75 degree limit on a
-        15 cm flight; 0.15 walked both sets. docs/walk_families.md.
+        a foothold two risers down; a standing step keeps the height it
+        starts at (0 = off, which compiles the pattern without it;
+        :func:`pattern`). Measured in MJX (1024 refined descents of 5-15 cm
+        risers): held forward commands 4.0 % fell at 0, 0.1 % at 0.15;
+        random ones 0.1 and 0.3 %. On native MuJoCo 0.3 drove the
+        stance ankle past its -75 degree limit on a 15 cm flight; 0.15
+        walked every flight tried. docs/walk_families.md.
       dcm_gain: the DCM feedback (0 = off; :func:`dcm_error`): the centre of
         pressure the ankles' damping control steers to is the ZMP reference
         plus ``dcm_gain`` times how far the measured capture point runs ahead
