@@ -12,6 +12,8 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ijoy_jax import geometry, robots, select
 from ijoy_jax import terrain as T
@@ -260,10 +262,48 @@ def test_descent_drop_lowers_the_pelvis_on_steps_down_only(sim, drop):
     np.testing.assert_allclose(up, cfg.pelvis_height + 0.0, atol=1e-4)
 
 
-@pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan"), "0.3", True])
-def test_walk_config_refuses_a_descent_drop_outside_zero_one(bad):
-    with pytest.raises(ValueError, match="descent_drop"):
-        controller.WalkConfig(descent_drop=bad)
+WALK_FIELDS = [f.name for f in dataclasses.fields(controller.WalkConfig)]
+
+
+@pytest.mark.parametrize("name", WALK_FIELDS)
+def test_walk_config_checks_every_field(name):
+    """A NaN in any field is refused with the field's name, directly and through ``dataclasses.replace``."""
+    with pytest.raises(ValueError, match=rf"WalkConfig\.{name} "):
+        controller.WalkConfig(**{name: float("nan")})
+    with pytest.raises(ValueError, match=rf"WalkConfig\.{name} "):
+        dataclasses.replace(controller.WalkConfig(), **{name: float("inf")})
+
+
+@pytest.mark.parametrize("name, bad", [
+    ("step_time", 0.0), ("step_time", -0.8), ("control_dt", 0.0), ("ds_fraction", 1.0), ("ds_fraction", -0.1),
+    ("preview_time", 0.0), ("preview_time", 0.005), ("com_height", 0.0), ("pelvis_height", -0.65),
+    ("clearance", -0.01), ("swing_lift", 0.0), ("swing_lift", 0.6), ("leg_share", 1.0), ("leg_share", -0.1),
+    ("preview_q", -1.0), ("preview_r", 0.0), ("land_gain", -0.5), ("land_ramp", 0.0), ("land_ramp", 1.5),
+    ("land_decay", 0.0), ("stance_gain", -0.1), ("ankle_damping", -150.0), ("ankle_leak", 0.0), ("cop_edge", -0.01),
+    ("contact_force", 0.0), ("dcm_gain", -3.0), ("descent_drop", -0.1), ("descent_drop", 1.5),
+    ("descent_drop", "0.3"), ("descent_drop", True), ("filter_passes", -1), ("filter_passes", 1.5),
+    ("filter_passes", True), ("com_offset", None), ("step_time", jnp.float32(0.8)),
+])
+def test_walk_config_refuses_values_outside_their_range(name, bad):
+    with pytest.raises(ValueError, match=rf"WalkConfig\.{name} "):
+        controller.WalkConfig(**{name: bad})
+
+
+def test_walk_config_accepts_the_ends_its_fields_document():
+    """The "0 = off" settings, the closed ends of the fractions, NumPy scalars, a preview of one period."""
+    cfg = controller.WalkConfig(ds_fraction=0.0, swing_lift=0.5, land_ramp=1.0, descent_drop=np.float64(1.0),
+                                ankle_damping=0, dcm_gain=0.0, stance_gain=0.0, land_gain=0.0, clearance=0.0,
+                                cop_edge=0.0, leg_share=0.0, preview_q=0.0, filter_passes=np.int64(0),
+                                com_offset=-0.02, preview_time=0.01)
+    assert cfg.horizon == 1 and cfg.descent_drop == 1.0 and cfg.filter_passes == 0
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from(WALK_FIELDS), st.one_of(st.none(), st.text(max_size=3), st.complex_numbers(),
+                                               st.lists(st.floats(), max_size=2), st.booleans()))
+def test_walk_config_refuses_hostile_values_by_name(name, bad):
+    with pytest.raises(ValueError, match=rf"WalkConfig\.{name} "):
+        controller.WalkConfig(**{name: bad})
 
 
 def test_pelvis_stays_above_the_lower_foot(sim):

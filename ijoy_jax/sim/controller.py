@@ -42,6 +42,7 @@ MJX rollout vmaps them.
 from __future__ import annotations
 
 import dataclasses
+import math
 import numbers
 from typing import NamedTuple
 
@@ -50,6 +51,35 @@ import jax.numpy as jnp
 
 from ijoy_jax import geometry
 from ijoy_jax.sim import dynamics, kinematics, preview, swing
+
+_INF = math.inf
+# WalkConfig's numeric fields: (low, high, low allowed, high allowed). The open ends are divisors (times, the
+# swing's lift fraction, the CoM model's 1 - leg_share) or would make a mechanism vanish in a way its field's
+# own "0 = off" does not describe.
+_RANGES: dict[str, tuple[float, float, bool, bool]] = {
+    "step_time": (0.0, _INF, False, False),
+    "ds_fraction": (0.0, 1.0, True, False),
+    "control_dt": (0.0, _INF, False, False),
+    "preview_time": (0.0, _INF, False, False),
+    "com_height": (0.0, _INF, False, False),
+    "pelvis_height": (0.0, _INF, False, False),
+    "clearance": (0.0, _INF, True, False),
+    "swing_lift": (0.0, 0.5, False, True),
+    "com_offset": (-_INF, _INF, False, False),
+    "leg_share": (0.0, 1.0, True, False),
+    "preview_q": (0.0, _INF, True, False),
+    "preview_r": (0.0, _INF, False, False),
+    "land_gain": (0.0, _INF, True, False),
+    "land_ramp": (0.0, 1.0, False, True),
+    "land_decay": (0.0, _INF, False, False),
+    "stance_gain": (0.0, _INF, True, False),
+    "ankle_damping": (0.0, _INF, True, False),
+    "ankle_leak": (0.0, _INF, False, False),
+    "cop_edge": (0.0, _INF, True, False),
+    "contact_force": (0.0, _INF, False, False),
+    "dcm_gain": (0.0, _INF, True, False),
+    "descent_drop": (0.0, 1.0, True, True),
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -135,6 +165,13 @@ class WalkConfig:
         to. Measured on rough ground (native MuJoCo, 32 maps, held forward
         commands, with the selector's ``support`` limit): 2-3 fell 2-3 of
         32 where 0 fell 13 (BENCHMARKS.md).
+
+    Every field is checked when a config is made, ``dataclasses.replace``
+    included: a value that is not a finite number in its field's range
+    (times and the CoM height positive, fractions within [0, 1],
+    ``swing_lift`` in (0, 0.5], gains and damping >= 0, ``filter_passes`` a
+    whole number >= 0, ``preview_time`` at least ``control_dt``) raises
+    ValueError naming the field.
     """
 
     step_time: float = 0.8
@@ -162,9 +199,21 @@ class WalkConfig:
     descent_drop: float = 0.15
 
     def __post_init__(self):
-        drop = self.descent_drop
-        if isinstance(drop, bool) or not isinstance(drop, numbers.Real) or not 0.0 <= drop <= 1.0:
-            raise ValueError(f"WalkConfig.descent_drop must be a number in [0, 1] (a fraction), got {drop!r}")
+        # Every field is checked here, so dataclasses.replace is checked too: the config is static (hashed into
+        # the compiled programs), so a NaN or a zero time constant would otherwise reach the physics unflagged.
+        for name, (lo, hi, lo_in, hi_in) in _RANGES.items():
+            v = getattr(self, name)
+            ok = not isinstance(v, bool) and isinstance(v, numbers.Real) and math.isfinite(v)
+            ok = ok and (lo <= v if lo_in else lo < v) and (v <= hi if hi_in else v < hi)
+            if not ok:
+                span = f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
+                raise ValueError(f"WalkConfig.{name} must be a finite number in {span}, got {v!r}")
+        passes = self.filter_passes
+        if isinstance(passes, bool) or not isinstance(passes, numbers.Integral) or passes < 0:
+            raise ValueError(f"WalkConfig.filter_passes must be a whole number >= 0, got {passes!r}")
+        if self.preview_time < self.control_dt:
+            raise ValueError(f"WalkConfig.preview_time ({self.preview_time} s) must be at least one control period "
+                             f"(control_dt {self.control_dt} s)")
 
     @property
     def ticks_per_step(self) -> int:
