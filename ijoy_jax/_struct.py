@@ -1,5 +1,6 @@
 """A small frozen-dataclass pytree helper (static fields are metadata, the rest are leaves), and the two
-boundary helpers every public function shares (:func:`is_traced`, :func:`as_array`).
+boundary helpers every public function shares (:func:`is_traced`, :func:`as_array`), and the range checks of
+the static configuration classes (:func:`check_real`, :func:`check_whole`).
 
 Like ``mjx._src.dataclasses`` and ``flax.struct``: a field declared with
 ``static_field()`` is part of the tree's structure (hashable, never traced:
@@ -10,6 +11,8 @@ differentiated.
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 from typing import Any, TypeVar
 
 import jax
@@ -82,3 +85,24 @@ def check_numeric(name: str, value) -> None:
     kind = (value.dtype if hasattr(value, "dtype") else np.asarray(value).dtype).kind
     if kind not in "biuf":
         raise TypeError(f"{name} must be numbers, got {value!r}")
+
+
+def check_real(label: str, value, lo: float = -math.inf, hi: float = math.inf, *, lo_in: bool = True,
+               hi_in: bool = True) -> None:
+    """Raise a ValueError naming ``label`` unless ``value`` is a finite Python or NumPy real in the range.
+
+    For static configuration (hashed into compiled programs, so never traced): a bool, a string, None, an
+    array or a complex number is refused as well as a NaN, an infinity or a value outside ``lo``..``hi``
+    (``lo_in``/``hi_in``: whether the end itself is allowed).
+    """
+    ok = not isinstance(value, bool) and isinstance(value, numbers.Real) and math.isfinite(value)
+    ok = ok and (lo <= value if lo_in else lo < value) and (value <= hi if hi_in else value < hi)
+    if not ok:
+        span = f"{'[' if lo_in and lo > -math.inf else '('}{lo:g}, {hi:g}{']' if hi_in and hi < math.inf else ')'}"
+        raise ValueError(f"{label} must be a finite number in {span}, got {value!r}")
+
+
+def check_whole(label: str, value, lo: int = 0) -> None:
+    """Raise a ValueError naming ``label`` unless ``value`` is a Python or NumPy integer (not a bool) >= ``lo``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lo:
+        raise ValueError(f"{label} must be a whole number >= {lo}, got {value!r}")

@@ -7,6 +7,8 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax.sim import model
@@ -79,11 +81,39 @@ def test_shin_contacts_flag():
     assert np.all(m.geom_contype[model.model_index(m).shin_geom] == 1)
 
 
-@pytest.mark.parametrize("bad", [dict(thigh=-0.3), dict(kp=(1.0,) * 5), dict(z_hi=-1.0), dict(timestep=0.0),
-                                 dict(stand_height=0.9), dict(nonsense=1.0)])
-def test_bad_params(bad):
-    with pytest.raises(ValueError):
+@pytest.mark.parametrize("bad, match", [
+    (dict(thigh=-0.3), r"BipedParams\.thigh "), (dict(kp=(1.0,) * 5), r"BipedParams\.kp must be a tuple of 6"),
+    (dict(z_hi=-1.0), "must exceed z_lo"), (dict(timestep=0.0), r"BipedParams\.timestep "),
+    (dict(stand_height=0.9), "straight leg"), (dict(nonsense=1.0), "unknown BipedParams fields"),
+    (dict(thigh="0.3"), r"BipedParams\.thigh "), (dict(friction=True), r"BipedParams\.friction "),
+    (dict(hip_offset_y=-0.01), r"BipedParams\.hip_offset_y "), (dict(iterations=2.5), r"BipedParams\.iterations "),
+    (dict(ls_iterations=0), r"BipedParams\.ls_iterations "), (dict(sole_grid=(3, 0)), r"BipedParams\.sole_grid\[1\] "),
+    (dict(kp=(1.0,) * 5 + (float("nan"),)), r"BipedParams\.kp\[5\] "), (dict(kv=(1.0,) * 5 + (-1.0,)), r"kv\[5\]"),
+    (dict(kp=[1.0] * 6), "must be a tuple"), (dict(shin_contacts=1), "shin_contacts must be True or False"),
+    (dict(range_lo=P.range_hi), "range_lo must be below range_hi"), (dict(sole_radius=0.1), "too large for the foot"),
+])
+def test_bad_params(bad, match):
+    with pytest.raises(ValueError, match=match):
         model.biped_params(**bad)
+
+
+PARAM_FIELDS = [f.name for f in dataclasses.fields(model.BipedParams)]
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.sampled_from(PARAM_FIELDS), st.one_of(st.none(), st.text(max_size=3), st.complex_numbers(),
+                                                st.sampled_from([float("nan"), float("inf"), -float("inf")]),
+                                                st.lists(st.floats(), max_size=2)))
+def test_biped_params_refuse_hostile_values_by_name(name, bad):
+    """Every field, through ``dataclasses.replace`` too: a clear ValueError naming it, never MuJoCo's compiler."""
+    with pytest.raises(ValueError, match=rf"BipedParams\.{name}[ \[]"):
+        dataclasses.replace(P, **{name: bad})
+
+
+def test_biped_params_accept_numpy_scalars_and_the_documented_zeros():
+    p = model.BipedParams(thigh=np.float32(0.3), iterations=np.int64(3), friction=0.0, hip_offset_y=0,
+                          sole_grid=(np.int32(2), 2), damping=(0.0,) * 6, shin_contacts=np.bool_(True))
+    assert p.iterations == 3 and p.friction == 0.0
 
 
 def test_standing_qpos_puts_soles_on_the_commanded_poses():

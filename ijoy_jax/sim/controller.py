@@ -43,13 +43,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from ijoy_jax import geometry
+from ijoy_jax._struct import check_real, check_whole
 from ijoy_jax.sim import dynamics, kinematics, preview, swing
 
 _INF = math.inf
@@ -202,15 +202,8 @@ class WalkConfig:
         # Every field is checked here, so dataclasses.replace is checked too: the config is static (hashed into
         # the compiled programs), so a NaN or a zero time constant would otherwise reach the physics unflagged.
         for name, (lo, hi, lo_in, hi_in) in _RANGES.items():
-            v = getattr(self, name)
-            ok = not isinstance(v, bool) and isinstance(v, numbers.Real) and math.isfinite(v)
-            ok = ok and (lo <= v if lo_in else lo < v) and (v <= hi if hi_in else v < hi)
-            if not ok:
-                span = f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
-                raise ValueError(f"WalkConfig.{name} must be a finite number in {span}, got {v!r}")
-        passes = self.filter_passes
-        if isinstance(passes, bool) or not isinstance(passes, numbers.Integral) or passes < 0:
-            raise ValueError(f"WalkConfig.filter_passes must be a whole number >= 0, got {passes!r}")
+            check_real(f"WalkConfig.{name}", getattr(self, name), lo, hi, lo_in=lo_in, hi_in=hi_in)
+        check_whole("WalkConfig.filter_passes", self.filter_passes, 0)
         if self.preview_time < self.control_dt:
             raise ValueError(f"WalkConfig.preview_time ({self.preview_time} s) must be at least one control period "
                              f"(control_dt {self.control_dt} s)")

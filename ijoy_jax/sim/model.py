@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
+from ijoy_jax._struct import check_real, check_whole
 from ijoy_jax.sim import kinematics
 
 __all__ = [
@@ -63,6 +64,20 @@ SIDES = ("left", "right")
 JOINTS = ("hip_yaw", "hip_roll", "hip_pitch", "knee", "ankle_pitch", "ankle_roll")
 _AXES = ((0, 0, 1), (1, 0, 0), (0, 1, 0), (0, 1, 0), (0, 1, 0), (1, 0, 0))
 _FOOT_THICKNESS = 0.03  # visual/inertial foot box height above the sole, metres
+
+
+# BipedParams' scalar fields: (lower bound, bound allowed); every one must also be finite. Lengths, masses,
+# radii, the timestep and the base are divisors or would collapse a body; the offsets and friction may be 0.
+_LOWER_BOUNDS: dict[str, tuple[float, bool]] = {
+    **{name: (0.0, False) for name in (
+        "thigh", "shank", "ankle_height", "foot_length", "foot_width", "stand_height", "stand_width", "pelvis_mass",
+        "torso_mass", "head_mass", "arm_mass", "thigh_mass", "shank_mass", "foot_mass", "sole_radius",
+        "shin_radius", "thigh_radius", "timestep", "base_depth")},
+    "hip_offset_y": (0.0, True), "friction": (0.0, True),
+    **{name: (-math.inf, False) for name in ("obstacle_height", "z_lo", "z_hi")},
+}
+# The per-joint tuples (hip yaw, roll, pitch, knee, ankle pitch, roll); all but the limits must be >= 0.
+_JOINT_FIELDS = ("range_lo", "range_hi", "armature", "damping", "kp", "kv", "force")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -158,35 +173,33 @@ class BipedParams:
     base_depth: float = 0.1
 
     def __post_init__(self):
-        positive = ("thigh", "shank", "ankle_height", "foot_length", "foot_width", "stand_height", "stand_width",
-                    "pelvis_mass", "torso_mass", "head_mass", "arm_mass", "thigh_mass", "shank_mass", "foot_mass",
-                    "sole_radius", "shin_radius", "thigh_radius", "timestep", "base_depth")
-        for name in positive:
+        # Static (hashed into the compiled model): a field is a finite Python/NumPy number in its range, so a
+        # string, a bool or a NaN is refused here by name, not by MuJoCo's compiler or a NaN in the physics.
+        for name, (lo, lo_in) in _LOWER_BOUNDS.items():
+            check_real(f"BipedParams.{name}", getattr(self, name), lo, lo_in=lo_in)
+        for name in _JOINT_FIELDS:
             v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"BipedParams.{name} must be a positive finite number, got {v!r}")
-        for name in ("hip_offset_y", "friction", "obstacle_height", "z_lo", "z_hi"):
-            v = getattr(self, name)
-            if not math.isfinite(v) or (name in ("hip_offset_y", "friction") and v < 0):
-                raise ValueError(f"BipedParams.{name} must be finite (and >= 0 for lengths), got {v!r}")
-        for name in ("range_lo", "range_hi", "armature", "damping", "kp", "kv", "force"):
-            v = getattr(self, name)
-            if len(v) != 6 or not all(math.isfinite(x) for x in v):
-                raise ValueError(f"BipedParams.{name} must be 6 finite numbers (one per leg joint), got {v!r}")
-            if name not in ("range_lo", "range_hi") and min(v) < 0:
-                raise ValueError(f"BipedParams.{name} must be >= 0, got {v!r}")
+            if not isinstance(v, tuple) or len(v) != 6:
+                raise ValueError(f"BipedParams.{name} must be a tuple of 6 numbers (one per leg joint), got {v!r}")
+            lo = -math.inf if name in ("range_lo", "range_hi") else 0.0
+            for j, x in enumerate(v):
+                check_real(f"BipedParams.{name}[{j}]", x, lo)
+        if not isinstance(self.sole_grid, tuple) or len(self.sole_grid) != 2:
+            raise ValueError(f"BipedParams.sole_grid must be a tuple of two counts >= 1, got {self.sole_grid!r}")
+        for j, n in enumerate(self.sole_grid):
+            check_whole(f"BipedParams.sole_grid[{j}]", n, 1)
+        check_whole("BipedParams.iterations", self.iterations, 1)
+        check_whole("BipedParams.ls_iterations", self.ls_iterations, 1)
+        if not isinstance(self.shin_contacts, (bool, np.bool_)):
+            raise ValueError(f"BipedParams.shin_contacts must be True or False, got {self.shin_contacts!r}")
         if any(lo >= hi for lo, hi in zip(self.range_lo, self.range_hi, strict=True)):
             raise ValueError("BipedParams.range_lo must be below range_hi for every joint")
         if self.z_hi <= self.z_lo:
             raise ValueError(f"BipedParams.z_hi ({self.z_hi}) must exceed z_lo ({self.z_lo})")
-        if len(self.sole_grid) != 2 or min(self.sole_grid) < 1:
-            raise ValueError(f"BipedParams.sole_grid must be two counts >= 1, got {self.sole_grid!r}")
         if 2 * self.sole_radius > min(self.foot_length, self.foot_width):
             raise ValueError("BipedParams.sole_radius is too large for the foot")
         if self.stand_height >= self.thigh + self.shank + self.ankle_height:
             raise ValueError("BipedParams.stand_height must be below the straight leg's length")
-        if self.iterations < 1 or self.ls_iterations < 1:
-            raise ValueError("BipedParams.iterations and ls_iterations must be >= 1")
 
     @property
     def total_mass(self) -> float:
