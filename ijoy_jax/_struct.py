@@ -32,7 +32,10 @@ def static_field(**kwargs: Any) -> Any:
 def pytree_dataclass(cls: type[T]) -> type[T]:
     """Turn ``cls`` into a frozen dataclass registered as a JAX pytree.
 
-    Adds ``replace(**changes)``, returning a copy with some fields changed.
+    Adds ``replace(**changes)``, returning a copy with some fields changed. A Python number given for a
+    floating-point leaf takes that leaf's dtype (``1e39`` becomes ``inf`` in float32, which the boundary checks
+    name): left as a Python float it would be a weakly typed leaf, and a jitted function called with it and
+    with the original would compile twice.
     """
     cls = dataclasses.dataclass(frozen=True)(cls)
     fields = dataclasses.fields(cls)
@@ -41,10 +44,22 @@ def pytree_dataclass(cls: type[T]) -> type[T]:
     jax.tree_util.register_dataclass(cls, data_fields=data, meta_fields=meta)
 
     def replace(self: T, **changes: Any) -> T:
+        for name in set(changes) & set(data):
+            changes[name] = _like_leaf(getattr(self, name), changes[name])
         return dataclasses.replace(self, **changes)
 
     cls.replace = replace  # type: ignore[attr-defined]
     return cls
+
+
+def _like_leaf(old: Any, value: Any) -> Any:
+    """``value`` as an array of ``old``'s floating dtype if it is a plain Python int or float, else as given."""
+    dtype = getattr(old, "dtype", None)
+    if (dtype is None or isinstance(value, bool) or not isinstance(value, (int, float))
+            or not jnp.issubdtype(dtype, jnp.floating)):
+        return value
+    with np.errstate(over="ignore"):
+        return jnp.asarray(value, dtype)
 
 
 def is_traced(*trees: Any) -> bool:

@@ -147,6 +147,23 @@ def test_set_leaves_sets_every_named_leaf_under_jit():
     assert float(r.w) == 1.0  # the original is untouched
 
 
+def test_python_numbers_set_by_replace_keep_the_leaf_dtype_and_do_not_recompile():
+    """A Python float set through replace/set_leaves was a weakly typed leaf: a jitted function of the robot
+    compiled once for the preset and once more for every robot so changed (found in a physics variant run)."""
+    r = ij.robots.hrp2()
+    f = jax.jit(lambda robot: robot.w * robot.metrics.support_limit + robot.margin)
+    f(r)
+    changed = [robots.set_leaves(r, {"metrics.support_limit": 0.003, "w": 2}), r.replace(margin=0.05),
+               r.replace(w=1e39)]  # beyond float32: inf, as the boundary checks see it
+    for robot in changed:
+        f(robot)
+    assert f._cache_size() == 1
+    for robot in changed:
+        leaves = (robot.w, robot.margin, robot.metrics.support_limit)
+        assert all(jax.typeof(x) == jax.typeof(r.w) for x in leaves)
+    assert float(changed[0].w) == 2.0 and np.isinf(float(changed[2].w))
+    assert r.replace(w=True).w is True  # not a number: left for the boundary check to name
+
 def test_command_range_spans_the_action_set_around_step_in_place():
     robot = robots.hrp2()
     lo, hi = robots.command_range(robot)
