@@ -48,7 +48,9 @@ from ijoy_jax.sweep.config import (
     MAX_NUM_STEPS,
     MAX_OBJECT_SLOTS,
     MAX_SCENARIOS,
+    METRICS,
     MIN_RESOLUTION,
+    PHYSICS_METRICS,
     ROBOT_DEFAULTS,
     SELECTOR_DEFAULTS,
     SIM_MIN_RESOLUTION,
@@ -77,9 +79,7 @@ from ijoy_jax.sweep.execute import (
 )
 from ijoy_jax.sweep.results import (
     EXTRA_METRICS,
-    METRICS,
     PAPER_ACTIONS,
-    PHYSICS_METRICS,
     PHYSICS_PLOT_METRICS,
     PLOT_METRICS,
     SELECTOR_PLOT_METRICS,

@@ -142,6 +142,8 @@ from ijoy_jax.terrain.family import Family, ParamError
 
 __all__ = [
     "COMMAND_KEYS",
+    "METRICS",
+    "PHYSICS_METRICS",
     "SELECTOR_DEFAULTS",
     "SIM_MIN_RESOLUTION",
     "WALKERS",
@@ -217,6 +219,22 @@ _SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps",
 SELECTOR_DEFAULTS: Mapping[str, float] = MappingProxyType({"horizon": 1, "refine": False, "discount": 1.0})
 """The selector options a sweep may vary (``selector.<name>``; fixed values: the ``[sweep]`` keys of the same
 name) and their defaults: the lookahead's horizon (static, int >= 1), refinement (static, bool) and discount."""
+
+# The metric columns of every results table (ijoy_jax.sweep.results reads and aggregates them; here they
+# count towards the table's size before a sweep runs).
+METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
+           "footholds_near_obstacles", "invalid_footholds", "distance_along", "distance_across", "mean_deviation",
+           "mean_foot_cost", "commands_not_finite", "unsupported_decisions")
+"""Rollout metrics (:meth:`ijoy_jax.Trajectory.summary`) in every results table (``footholds_near_obstacles``:
+footholds taken with an obstacle within :data:`ijoy_jax.control.NEAR_OBSTACLE` of the foot; absent from
+results written before it existed, which aggregate without it)."""
+
+PHYSICS_METRICS = ("fell", "collided", "obstacle_contacts", "placement_error_mean", "placement_error_p95",
+                   "yaw_error_mean", "tilt_error_p95", "dynamics_invalid")
+"""Per-scenario metrics of a ``walker = "mjx"`` sweep (:func:`ijoy_jax.sim.walker.summary`): the robot fell,
+touched an obstacle (``collided``) and in how many steps, its touch-down errors (m, rad), and whether a
+physics value was out of bounds (``dynamics_invalid``; refused before compute, so False)."""
+
 _SELECTOR_STATIC = ("horizon", "refine")  # shape or program changing: [grid] only, one compile per value
 _TERRAIN_KEYS = ("family", "shape", "resolution", "has_height", "max_count", "params")
 _RECORDING_KEY = "recording"  # [terrain] recording: a drive recording's terrain, instead of the _TERRAIN_KEYS
@@ -929,8 +947,6 @@ def table_bytes(cfg: SweepConfig, num_scenarios: int | None = None) -> int:
       >>> 100_000 < table_bytes(cfg) < 10_000_000
       True
     """
-    from ijoy_jax.sweep.results import METRICS, PHYSICS_METRICS
-
     fam = None if cfg.family is None else generators.FAMILIES[cfg.family]
     terrain_columns = 0 if fam is None else len(fam.rules) + len(fam.metric_names)
     command_columns = 0 if cfg.command_file is not None else len(COMMAND_KEYS)

@@ -29,26 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ijoy_jax.sweep.config import METRICS, PHYSICS_METRICS, ROBOT_DEFAULTS, parse_config
 from ijoy_jax.terrain import generators
 
-__all__ = ["EXTRA_METRICS", "METRICS", "PAPER_ACTIONS", "PHYSICS_METRICS", "PHYSICS_PLOT_METRICS", "PLAN_KEY",
+__all__ = ["EXTRA_METRICS", "PAPER_ACTIONS", "PHYSICS_PLOT_METRICS", "PLAN_KEY",
            "PLOT_METRICS", "SELECTOR_PLOT_METRICS", "UNITS", "IncompleteSweepError", "action_counts",
            "aggregate", "b_max", "check_plans", "describe_plan", "load", "load_aggregates", "paired_differences",
            "part_plan", "plan_hash",
            "plot", "plot_crossing", "t_quantile"]
-
-METRICS = ("steps_taken", "steps_in_place", "steps_stationary", "stopped", "footholds_on_obstacles",
-           "footholds_near_obstacles", "invalid_footholds", "distance_along", "distance_across", "mean_deviation",
-           "mean_foot_cost", "commands_not_finite", "unsupported_decisions")
-"""Rollout metrics (:meth:`ijoy_jax.Trajectory.summary`) in every results table (``footholds_near_obstacles``:
-footholds taken with an obstacle within :data:`ijoy_jax.control.NEAR_OBSTACLE` of the foot; absent from
-results written before it existed, which aggregate without it)."""
-
-PHYSICS_METRICS = ("fell", "collided", "obstacle_contacts", "placement_error_mean", "placement_error_p95",
-                   "yaw_error_mean", "tilt_error_p95", "dynamics_invalid")
-"""Per-scenario metrics of a ``walker = "mjx"`` sweep (:func:`ijoy_jax.sim.walker.summary`): the robot fell,
-touched an obstacle (``collided``) and in how many steps, its touch-down errors (m, rad), and whether a
-physics value was out of bounds (``dynamics_invalid``; refused before compute, so False)."""
 
 EXTRA_METRICS = generators.METRIC_NAMES
 """Family-specific metrics (every family's ``metric_names``, :data:`ijoy_jax.terrain.generators.METRIC_NAMES`),
@@ -248,8 +236,6 @@ def load(path, *, partial: bool = False):
 
 
 def _swept(path) -> tuple[str, ...]:
-    from ijoy_jax.sweep.config import parse_config
-
     man = json.loads((Path(path) / "manifest.json").read_text())
     return parse_config(man["sweep_text"], man.get("sweep_file", "<manifest>")).swept
 
@@ -416,8 +402,6 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
         metrics = (PHYSICS_PLOT_METRICS if "fell.mean" in agg else SELECTOR_PLOT_METRICS if selector
                    else PLOT_METRICS)
     import matplotlib
-
-    from ijoy_jax.sweep.config import ROBOT_DEFAULTS
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
