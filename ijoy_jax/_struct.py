@@ -58,8 +58,8 @@ def _like_leaf(old: Any, value: Any) -> Any:
     if (dtype is None or isinstance(value, bool) or not isinstance(value, (int, float))
             or not jnp.issubdtype(dtype, jnp.floating)):
         return value
-    with np.errstate(over="ignore"):
-        return jnp.asarray(value, dtype)
+    with np.errstate(over="ignore"):  # float64 leaves stay float32 without x64, as JAX stores them
+        return jnp.asarray(value, jax.dtypes.canonicalize_dtype(dtype))
 
 
 def is_traced(*trees: Any) -> bool:
