@@ -402,10 +402,37 @@ def test_touchdown_feet_of_the_perfect_robot_are_its_final_feet():
     (dict(resolution=0.03), "whole cells"),
     (dict(forward=float("nan")), "forward speed"),
     (dict(refine="yes"), "refine must be True or False"),
+    (dict(robot_leaves={"foot_length": 0.3}), "unknown robot leaves"),
+    (dict(robot_leaves={"metrics.support_limit": -1.0}), r"robot\.metrics\.support_limit must be finite"),
+    (dict(robot_leaves={"w": "2"}), r"robot\.w must be a number"),
+    (dict(robot_leaves={"margin": float("inf")}), r"robot\.margin"),
 ])
 def test_run_refuses_bad_options_before_any_compute(kwargs, message):
     with pytest.raises(ValueError, match=message):
         B.run(**kwargs)
+
+
+def test_robot_leaves_reach_the_choice_and_are_recorded(maps):
+    """``robot_leaves`` (``ijoy bench walk --set``) walk the robot the selector would get from set_leaves: the
+    same trajectory as a direct rollout with that robot, different from the preset's on rough ground (a zero
+    support limit refuses every foothold whose corners do not all touch), and in every row."""
+    leaves = {"metrics.support_limit": 0.0, "w": 2}
+    rows = B.run(["rough"], batch=BATCH, steps=4, commands=("forward",), walkers=("perfect",), seed=5,
+                 robot_leaves=leaves)
+    base = B.run(["rough"], batch=BATCH, steps=4, commands=("forward",), walkers=("perfect",), seed=5)
+    row, row0 = rows[0], base[0]
+    assert row["robot_leaves"] == {"metrics.support_limit": 0.0, "w": 2.0} and row0["robot_leaves"] == {}
+    assert rows[-1]["robot_leaves"] == row["robot_leaves"]
+    assert row["progress_mean_m"] < row0["progress_mean_m"]
+    robot = robots.set_leaves(robots.hrp2(), leaves)
+    k_map, k_cmd = jax.random.split(jax.random.fold_in(jax.random.key(5), list(B.FAMILIES).index("rough")))
+    terr = B.FAMILIES["rough"].make(k_map, BATCH, shape=SHAPE, resolution=RES)
+    starts = B.start_stances(robot, BATCH)
+    cmd = B.commands_for("forward", jax.random.fold_in(k_cmd, B.COMMANDS.index("forward")), robot, BATCH, 4,
+                         B.FORWARD)
+    direct = B.aggregate(jax.device_get(B.perfect_rollouts(terr, robot, starts, cmd, num_steps=4)), starts)
+    assert direct["progress_mean_m"] == pytest.approx(row["progress_mean_m"], abs=1e-6)
+    assert direct["steps_made_mean"] == row["steps_made_mean"] and direct["stops"] == row["stops"]
 
 
 def rows_for_table():

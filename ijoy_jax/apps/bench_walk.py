@@ -640,9 +640,25 @@ def check_options(families: Sequence[str] | None, *, batch: int, steps: int, com
     return [n for n in FAMILIES if n in names]
 
 
+def check_robot_leaves(values: Mapping[str, float] | None) -> dict[str, float]:
+    """Validate :func:`run`'s ``robot_leaves`` (names in :data:`ijoy_jax.robots.SELECTOR_LEAVES`, values that
+    :func:`ijoy_jax.robots.check_robot` accepts on the preset); returns them as a dict of floats."""
+    values = {} if values is None else dict(values)
+    unknown = [n for n in values if n not in robots.SELECTOR_LEAVES]
+    if unknown:
+        raise ValueError(f"unknown robot leaves {unknown}; the choice's leaves: {', '.join(robots.SELECTOR_LEAVES)}")
+    for name, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise ValueError(f"robot.{name} must be a number, got {value!r}")
+    out = {n: float(v) for n, v in values.items()}
+    robots.check_robot(robots.set_leaves(robots.hrp2(), out))  # names the first bad value
+    return out
+
+
 def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int = 30,
         commands: Sequence[str] = COMMANDS, resolution: float = RESOLUTION, seed: int = 0, chunk: int | None = None,
         walkers: Sequence[str] = WALKERS, forward: float = FORWARD, refine: bool = False,
+        robot_leaves: Mapping[str, float] | None = None,
         emit: Callable[[dict], None] | None = None) -> list[dict[str, Any]]:
     """Walk ``batch`` robots per family and command kind with each walker; one record per row (and skips).
 
@@ -659,6 +675,9 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
       forward: the held forward command (m/s) of families without their own (:attr:`WalkFamily.forward`).
       refine: both walkers refine each lattice choice to a continuous foothold (:mod:`ijoy_jax.refine`,
         ``refine=True`` of :func:`ijoy_jax.control.rollout` and :func:`ijoy_jax.sim.walker.rollout_batch`).
+      robot_leaves: values of the selector's robot leaves (:data:`ijoy_jax.robots.SELECTOR_LEAVES` by dotted
+        name, e.g. ``{"metrics.support_limit": 0.003}``) set on every family's robot: both walkers choose with
+        them; traced, so they reuse the compiled programs. Recorded in each row as ``robot_leaves``.
       emit: called with each record as soon as it exists (e.g. to print JSON lines).
 
     Returns:
@@ -672,6 +691,7 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
     """
     names = check_options(families, batch=batch, steps=steps, commands=commands, resolution=resolution,
                           chunk=chunk, walkers=walkers, forward=forward)
+    leaves = check_robot_leaves(robot_leaves)
     if not isinstance(refine, (bool, np.bool_)):
         raise ValueError(f"refine must be True or False, got {refine!r}")
     refine = bool(refine)
@@ -694,12 +714,12 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
     programs0, t_all = W.compiled_programs(), time.perf_counter()
     perfect_compile = 0.0
     setup = dict(batch=batch, steps=steps, resolution=resolution, shape=list(shape), chunk=chunk, seed=seed,
-                 forward_m_s=forward, refine=refine, **info)
+                 forward_m_s=forward, refine=refine, robot_leaves=leaves, **info)
     key = jax.random.key(seed)
     for i, name in enumerate(names):
         fam = FAMILIES[name]
         try:
-            robot = fam.robot()
+            robot = robots.set_leaves(fam.robot(), leaves)
         except TypeError as e:
             record(dict(name="walk", family=name, skipped=f"robots.hrp2(reach={fam.reach}) failed: {e}", **setup))
             continue

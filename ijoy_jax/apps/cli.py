@@ -101,6 +101,9 @@ def main(argv: list[str] | None = None) -> int:
     walk.add_argument("--seed", type=int, default=None, help="maps and random commands (default: 0)")
     walk.add_argument("--refine", action="store_const", const=True, default=None,
                       help="refine each lattice choice to a continuous foothold (both walkers)")
+    walk.add_argument("--set", action="append", default=None, metavar="NAME=VALUE", dest="robot_set",
+                      help="a robot leaf of the choice for every family, e.g. metrics.support_limit=0.003 "
+                           "(repeatable; names: ijoy_jax.robots.SELECTOR_LEAVES)")
     walk.add_argument("--plot", default=None, help="write the bar plot (PNG) here")
     sweep = sub.add_parser("sweep", help="run a sweep declared in TOML, or summarise a finished one",
                            description="Sweeps over robot/selector parameters, terrains and commands "
@@ -193,7 +196,7 @@ def _run(args) -> int:
 
         if args.ref is not None and args.name != "check":
             raise ValueError(f"--ref is read or written by 'ijoy bench check' only, not by '{args.name}'")
-        walk_only = [f"--{k}" for k in _WALK_OPTIONS if getattr(args, k) is not None]
+        walk_only = [f"--{'set' if k == 'robot_set' else k}" for k in _WALK_OPTIONS if getattr(args, k) is not None]
         if walk_only and args.name != "walk":
             raise ValueError(f"{', '.join(walk_only)}: options of 'ijoy bench walk' only, not of '{args.name}'")
         for path in (args.ref, args.json, args.plot):  # refused before the benchmark runs, not after
@@ -234,7 +237,22 @@ def _run(args) -> int:
     return 2
 
 
-_WALK_OPTIONS = ("families", "batch", "steps", "commands", "resolution", "forward", "chunk", "seed", "refine", "plot")
+_WALK_OPTIONS = ("families", "batch", "steps", "commands", "resolution", "forward", "chunk", "seed", "refine",
+                 "robot_set", "plot")
+
+
+def _name_values(items) -> dict[str, float]:
+    """``["a.b=1.5", ...]`` (``--set``) as {name: value}; a ValueError naming the item that is not NAME=NUMBER."""
+    out = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not name.strip():
+            raise ValueError(f"--set takes NAME=NUMBER, e.g. metrics.support_limit=0.003; got {item!r}")
+    return out
 
 
 def _bench_walk(args) -> list[dict]:
@@ -250,7 +268,8 @@ def _bench_walk(args) -> list[dict]:
                           steps=given(args.steps, 6 if args.quick else 30), commands=kinds,
                           resolution=given(args.resolution, bench_walk.RESOLUTION), seed=given(args.seed, 0),
                           chunk=args.chunk, forward=given(args.forward, bench_walk.FORWARD),
-                          refine=given(args.refine, False), emit=lambda row: print(json.dumps(row), flush=True))
+                          refine=given(args.refine, False), robot_leaves=_name_values(args.robot_set),
+                          emit=lambda row: print(json.dumps(row), flush=True))
     print(bench_walk.markdown_table(rows))
     if args.plot:
         bench_walk.plot(rows, args.plot)
