@@ -241,23 +241,11 @@ _WALK_OPTIONS = ("families", "batch", "steps", "commands", "resolution", "forwar
                  "robot_set", "plot")
 
 
-def _name_values(items) -> dict[str, float]:
-    """``["a.b=1.5", ...]`` (``--set``) as {name: value}; a ValueError naming the item that is not NAME=NUMBER."""
-    out = {}
-    for item in items or ():
-        name, sep, value = item.partition("=")
-        try:
-            out[name.strip()] = float(value)
-        except ValueError:
-            sep = ""
-        if not sep or not name.strip():
-            raise ValueError(f"--set takes NAME=NUMBER, e.g. metrics.support_limit=0.003; got {item!r}")
-    return out
-
-
 def _bench_walk(args) -> list[dict]:
     """``ijoy bench walk``: JSON lines as the rows come, then the Markdown table; the plot with --plot."""
+    from ijoy_jax import robots
     from ijoy_jax.apps import bench_walk
+    from ijoy_jax.apps.options import number_assignments
 
     def given(value, default):
         return default if value is None else value
@@ -268,7 +256,9 @@ def _bench_walk(args) -> list[dict]:
                           steps=given(args.steps, 6 if args.quick else 30), commands=kinds,
                           resolution=given(args.resolution, bench_walk.RESOLUTION), seed=given(args.seed, 0),
                           chunk=args.chunk, forward=given(args.forward, bench_walk.FORWARD),
-                          refine=given(args.refine, False), robot_leaves=_name_values(args.robot_set),
+                          refine=given(args.refine, False),
+                          robot_leaves=number_assignments(args.robot_set, robots.SELECTOR_LEAVES,
+                                                          "metrics.support_limit=0.003"),
                           emit=lambda row: print(json.dumps(row), flush=True))
     print(bench_walk.markdown_table(rows))
     if args.plot:

@@ -53,21 +53,14 @@ def add_parser(sub) -> None:
 def build_robot(args):
     """The robot and its description from ``ijoy serve``'s options (ValueError names a bad one)."""
     from ijoy_jax import robots
+    from ijoy_jax.apps.options import number_assignments
 
     kwargs = {"margin": args.margin, "density": args.density}
     if args.reach is not None:
         kwargs["reach"] = args.reach
     if args.max_margin is not None:
         kwargs["max_margin"] = args.max_margin
-    leaves = {}
-    for item in args.set:
-        name, eq, value = item.partition("=")
-        if not eq or name.strip() not in robots.SCALAR_LEAVES:
-            raise ValueError(f"--set {item!r}: expected LEAF=VALUE with LEAF one of {list(robots.SCALAR_LEAVES)}")
-        try:
-            leaves[name.strip()] = float(value)
-        except ValueError:
-            raise ValueError(f"--set {item!r}: {value!r} is not a number") from None
+    leaves = number_assignments(args.set, robots.SCALAR_LEAVES, "w=2.0")
     robot = robots.hrp2(**kwargs)
     if leaves:
         import jax.numpy as jnp

@@ -14,6 +14,8 @@ import dataclasses
 import json
 import time
 
+from ijoy_jax.apps.options import assignments
+
 _SET_HELP = ("override one config field, VALUE parsed as JSON if it can be (0.05, [40, 40], true, \"x\"), "
              "else as a string; repeatable, applied after --config")
 
@@ -101,11 +103,8 @@ def _build_config(cls, args, extra: dict):
 
         with open(args.config, "rb") as f:
             values.update(tomllib.load(f))
-    for item in args.set:
-        key, sep, val = item.partition("=")
-        if not sep:
-            raise ValueError(f"--set expects KEY=VALUE, got {item!r}")
-        values[key.strip()] = _parse_value(val)
+    for key, val in assignments(args.set, "distance=0.04").items():
+        values[key] = _parse_value(val)
     values.update({k: v for k, v in extra.items() if v is not None})
     unknown = sorted(set(values) - fields)
     if unknown:
