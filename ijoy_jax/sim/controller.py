@@ -56,29 +56,19 @@ _INF = math.inf
 # WalkConfig's numeric fields: (low, high, low allowed, high allowed). The open ends are divisors (times, the
 # swing's lift fraction, the CoM model's 1 - leg_share) or would make a mechanism vanish in a way its field's
 # own "0 = off" does not describe.
+_POSITIVE = (0.0, _INF, False, False)
+_NON_NEGATIVE = (0.0, _INF, True, False)
 _RANGES: dict[str, tuple[float, float, bool, bool]] = {
-    "step_time": (0.0, _INF, False, False),
+    **dict.fromkeys(("step_time", "control_dt", "preview_time", "com_height", "pelvis_height", "preview_r",
+                     "land_decay", "ankle_leak", "contact_force"), _POSITIVE),
+    **dict.fromkeys(("clearance", "preview_q", "land_gain", "stance_gain", "ankle_damping", "cop_edge",
+                     "dcm_gain"), _NON_NEGATIVE),
     "ds_fraction": (0.0, 1.0, True, False),
-    "control_dt": (0.0, _INF, False, False),
-    "preview_time": (0.0, _INF, False, False),
-    "com_height": (0.0, _INF, False, False),
-    "pelvis_height": (0.0, _INF, False, False),
-    "clearance": (0.0, _INF, True, False),
-    "swing_lift": (0.0, 0.5, False, True),
-    "com_offset": (-_INF, _INF, False, False),
     "leg_share": (0.0, 1.0, True, False),
-    "preview_q": (0.0, _INF, True, False),
-    "preview_r": (0.0, _INF, False, False),
-    "land_gain": (0.0, _INF, True, False),
+    "swing_lift": (0.0, 0.5, False, True),
     "land_ramp": (0.0, 1.0, False, True),
-    "land_decay": (0.0, _INF, False, False),
-    "stance_gain": (0.0, _INF, True, False),
-    "ankle_damping": (0.0, _INF, True, False),
-    "ankle_leak": (0.0, _INF, False, False),
-    "cop_edge": (0.0, _INF, True, False),
-    "contact_force": (0.0, _INF, False, False),
-    "dcm_gain": (0.0, _INF, True, False),
     "descent_drop": (0.0, 1.0, True, True),
+    "com_offset": (-_INF, _INF, False, False),
 }
 
 
