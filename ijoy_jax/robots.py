@@ -58,9 +58,21 @@ class TerrainMetrics:
                  yet leaves a sole that rocks and pivots under load: the
                  simulated biped fell on such footholds
                  (:mod:`ijoy_jax.sim`, BENCHMARKS.md).
+      lean       how far a sole set on the plane leans to one side: the
+                 ground under its six contact points (toe, middle and heel
+                 of each long edge, ``lean_inset`` in from the edges; heights
+                 interpolated bilinearly between cell centres, as a height
+                 field's surface is) is compared side by side, each side by
+                 its point highest above the plane; the difference (m). The
+                 sole rests on its higher side and rolls toward the other by
+                 that gap over its width: on natural ground a ridge under one
+                 edge rolled the simulated biped's stance sole, and the
+                 robot with it, where the corner regions of ``support`` held
+                 high cells (docs/walk_families.md).
 
     A metric beyond its limit makes the cost +inf; otherwise its term is
     ``weight * metric``. Weights are cost units per radian or per metre.
+    ``lean_inset`` (m) is not a metric but where its points lie.
     """
 
     slope_weight: jax.Array
@@ -74,6 +86,9 @@ class TerrainMetrics:
     band_limit: jax.Array
     support_weight: jax.Array
     support_limit: jax.Array
+    lean_weight: jax.Array
+    lean_limit: jax.Array
+    lean_inset: jax.Array
 
 
 def default_metrics(
@@ -88,6 +103,9 @@ def default_metrics(
     band_limit=0.03,
     support_weight=10.0,
     support_limit=0.005,
+    lean_weight=10.0,
+    lean_limit=0.0015,
+    lean_inset=0.009,
 ) -> TerrainMetrics:
     """Default metric weights and limits (float32 scalars); any may be overridden."""
     vals = dict(locals())
@@ -266,6 +284,11 @@ def _in_window(xp, robot, length, width, margin):
     return 0.5 * xp.hypot(length + 2 * margin, width + 2 * margin) <= robot.max_radius + WINDOW_SLACK
 
 
+def _inset_inside(width, inset):
+    """The lean's points lie inside the sole, each on its own side: the inset is under half its width."""
+    return inset < 0.5 * width
+
+
 # (leaf names, what they must be, rule(xp, *values) -> bool). One list for both uses: check_robot raises on
 # the first rule a concrete robot breaks; robot_supported ANDs them all in jnp inside a trace.
 _ROBOT_RULES = (
@@ -291,9 +314,9 @@ def check_robot(robot) -> None:
     the margin at most :data:`MAX_SIZE`); margin, weights, costs, clearances and limits finite and >= 0;
     actions and p0 finite; the grown
     footprint within the static window ``max_radius`` (a larger margin or footprint needs a robot
-    built for it, ``make_robot(..., max_margin=...)``); no action making the footprints overlap.
-    The public boundaries (:func:`ijoy_jax.foot_cost_terms`, :func:`ijoy_jax.select_step`,
-    :func:`ijoy_jax.rollout`) call it; inside a trace the same rules are flagged instead
+    built for it, ``make_robot(..., max_margin=...)``); the lean's inset under half the foot width; no
+    action making the footprints overlap. The public boundaries (:func:`ijoy_jax.foot_cost_terms`,
+    :func:`ijoy_jax.select_step`, :func:`ijoy_jax.rollout`) call it; inside a trace the same rules are flagged instead
     (:func:`robot_supported`).
 
     Raises:
@@ -325,6 +348,10 @@ def check_robot(robot) -> None:
             f"{field}: robot's footprint {float(size[0])} x {float(size[1])} m grown by margin {float(size[2])} m "
             f"does not fit its static window (half-diagonal max_radius = {robot.max_radius:.4f} m): build the "
             f"robot with that margin or size (make_robot(..., max_margin=...), hrp2(margin=...)) instead of replace")
+    inset = values.get("metrics.lean_inset")
+    if all(v is not None for v in size[:2]) and inset is not None and not _inset_inside(size[1], inset):
+        raise ValueError(f"robot.metrics.lean_inset must be under half the foot width ({0.5 * float(size[1])} m): "
+                         f"the lean compares the sole's two long edges, got {float(inset)}")
     if all(v is not None for v in size[:2]) and "actions" in values:
         bad = footprints_overlap(values["actions"], float(size[0]), float(size[1]))
         if bad.any():
@@ -337,13 +364,15 @@ def robot_supported(robot: Robot) -> jax.Array:
     """() bool: the robot's values are ones FootCost and the selectors support (traceable).
 
     The rules of :func:`check_robot` that a traced value can break (a margin, weight or cost below 0, a
-    size <= 0, NaN/inf, a grown footprint beyond ``max_radius``), as one flag: where it is False
+    size <= 0, NaN/inf, a grown footprint beyond ``max_radius``, a lean inset of half the foot width or more),
+    as one flag: where it is False
     FootCost's ``unsupported`` term is +inf and :func:`ijoy_jax.select_step` reports no valid step, with
     ``unsupported`` set (never a negative cost or a silent stop). An action making the footprints overlap
     (deeper than :data:`OVERLAP_TOL`), e.g. after a longer ``foot_length``, is flagged too.
     """
     ok = [rule(jnp, get_leaf(robot, name)) for name, _, rule in _ROBOT_RULES]
     ok.append(_in_window(jnp, robot, robot.foot_length, robot.foot_width, robot.margin))
+    ok.append(_inset_inside(robot.foot_width, robot.metrics.lean_inset))
     # float32 corners: overlaps shallower than OVERLAP_TOL (rounding of touching feet) are not flagged
     ok.append(~jnp.any(_overlap(jnp, robot.actions, robot.foot_length, robot.foot_width, OVERLAP_TOL)))
     return jnp.all(jnp.stack(ok))
@@ -710,6 +739,9 @@ SCALAR_LEAVES: Mapping[str, LeafSpec] = MappingProxyType(
         "metrics.band_limit": LeafSpec("m", False, True),
         "metrics.support_weight": LeafSpec("cost/m", False, True),
         "metrics.support_limit": LeafSpec("m", False, True),
+        "metrics.lean_weight": LeafSpec("cost/m", False, True),
+        "metrics.lean_limit": LeafSpec("m", False, True),
+        "metrics.lean_inset": LeafSpec("m", False, True),
     }
 )
 """Every scalar Robot leaf a user may sweep or tune, by dotted name (:func:`get_leaf`), in a fixed order."""

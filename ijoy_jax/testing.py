@@ -63,8 +63,8 @@ class NumpyFootCost:
         self.metrics = {k: float(v) for k, v in vars(robot.metrics).items()}
 
     def plane(self, pose):
-        """(height at the centre, slope, roughness, bump, band, support, (dz/dx, dz/dy)) of the footprint at
-        ``pose``."""
+        """(height at the centre, slope, roughness, bump, band, support, lean, (dz/dx, dz/dy)) of the footprint
+        at ``pose``."""
         args = (self.res, self.origin, self.height.shape)
         fx, fy, _ = _touched(pose[0], pose[1], pose[2], self.L / 2, self.W / 2, *args)
         gx, gy, _ = _touched(pose[0], pose[1], pose[2], self.L / 2 + self.m, self.W / 2 + self.m, *args)
@@ -84,7 +84,9 @@ class NumpyFootCost:
             band_dev = float(np.abs(self.height[bx, by] - coef[0] - coef[1] * bu - coef[2] * bv).max())
         slope = math.atan(math.hypot(coef[1], coef[2]))
         support = support_gap(u, v, r, pose[2], self.L, self.W)
-        return coef[0], slope, float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev, support, (coef[1], coef[2])
+        lean = lean_gap(self.height, self.res, self.origin, pose, coef, self.L, self.W, self.metrics["lean_inset"])
+        return (coef[0], slope, float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev, support, lean,
+                (coef[1], coef[2]))
 
     def cost(self, stance, stance_h, start_h, swing_from, pose, a):
         """FootCost of the swing foot at ``pose`` executing action ``a`` from ``stance`` (+inf if invalid)."""
@@ -97,7 +99,7 @@ class NumpyFootCost:
         if not self.has_height:
             return total if reach <= self.max_distance + LIMIT_TOL else math.inf
         m = self.metrics
-        hgt, slope, rough, bump, band, support, grad = self.plane(pose)
+        hgt, slope, rough, bump, band, support, lean, grad = self.plane(pose)
         roll, pitch, _ = sole_rpy(*grad, pose[2])
         for val, lim in ((abs(pitch), self.max_pitch), (abs(roll), self.max_roll),
                          (math.hypot(reach, hgt - stance_h), self.max_distance)):
@@ -108,7 +110,8 @@ class NumpyFootCost:
                              (bump, m["bump_weight"], m["bump_limit"]),
                              (abs(hgt - stance_h), m["step_weight"], self.max_dh[a]),
                              (band, m["band_weight"], m["band_limit"]),
-                             (support, m["support_weight"], m["support_limit"])):
+                             (support, m["support_weight"], m["support_limit"]),
+                             (lean, m["lean_weight"], m["lean_limit"])):
             if val > lim + LIMIT_TOL:  # the library's one rule for limits (footcost.xla.exceeds)
                 return math.inf
             total += wt * val
@@ -277,11 +280,36 @@ def support_gap(u, v, resid, yaw, foot_length, foot_width) -> float:
     return float(max(gaps, default=0.0))
 
 
-def foot_metrics(height, res, origin, pose, foot_length, foot_width, margin):
+def lean_gap(height, res, origin, pose, coef, foot_length, foot_width, inset) -> float:
+    """The ``lean`` metric (m) of a sole at ``pose`` on the plane ``coef`` (height at the pose, dz/dx, dz/dy): the
+    ground at the toe, middle and heel of each long edge, ``inset`` in from the edges, interpolated bilinearly
+    between cell centres (indices clamped to the map: its edge extended), less the plane there; the difference
+    between the two edges' highest points."""
+    nx, ny = height.shape
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    side_tops = []
+    for across in (0.5 * foot_width - inset, inset - 0.5 * foot_width):
+        tops = []
+        for along in (0.5 * foot_length - inset, 0.0, inset - 0.5 * foot_length):
+            du, dv = along * c - across * s, along * s + across * c
+            gx = (pose[0] + du - origin[0]) / res - 0.5
+            gy = (pose[1] + dv - origin[1]) / res - 0.5
+            i, j = math.floor(gx), math.floor(gy)
+            tx, ty = gx - i, gy - j
+            cell = lambda a, b: float(height[min(max(a, 0), nx - 1), min(max(b, 0), ny - 1)])  # noqa: E731
+            ground = ((1 - tx) * ((1 - ty) * cell(i, j) + ty * cell(i, j + 1))
+                      + tx * ((1 - ty) * cell(i + 1, j) + ty * cell(i + 1, j + 1)))
+            tops.append(ground - (coef[0] + coef[1] * du + coef[2] * dv))
+        side_tops.append(max(tops))
+    return abs(side_tops[0] - side_tops[1])
+
+
+def foot_metrics(height, res, origin, pose, foot_length, foot_width, margin, *, lean_inset=0.009):
     """Plane fit and metrics of the footprint at ``pose`` (float64 brute force).
 
-    Returns dict(height, slope, roughness, bump, band, support, grad) where the
-    plane is the least-squares fit over the cells the footprint touches.
+    Returns dict(height, slope, roughness, bump, band, support, lean, grad) where the
+    plane is the least-squares fit over the cells the footprint touches; ``lean_inset`` (m; the default
+    :func:`ijoy_jax.robots.default_metrics`') places the lean's points.
     """
     shape = height.shape
     foot = rect_touches_cells(pose[0], pose[1], pose[2], foot_length / 2, foot_width / 2, res, shape, origin)
@@ -305,6 +333,7 @@ def foot_metrics(height, res, origin, pose, foot_length, foot_width, margin):
         bump=max(resid.max(), 0.0),
         band=np.abs(bres).max() if bres.size else 0.0,
         support=support_gap(u, v, resid, pose[2], foot_length, foot_width),
+        lean=lean_gap(height, res, origin, pose, coef, foot_length, foot_width, lean_inset),
         grad=(coef[1], coef[2]),
     )
 

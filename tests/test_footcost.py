@@ -209,6 +209,7 @@ def test_height_metrics_match_numpy_reference():
     terms = ij.foot_cost_terms(t, ROBOT, stance, -1, poses, action_index=np.zeros(n, int))
     ref_stance = foot_metrics(h, RES, (0, 0), stance, L, W, 0.02)
     checked = supports = 0
+    leans = []
     for i, p in enumerate(poses):
         hl, hw = L / 2, W / 2
         amb = False
@@ -232,6 +233,9 @@ def test_height_metrics_match_numpy_reference():
         if not corner_edge:
             assert float(terms.support_m[i]) == pytest.approx(ref["support"], abs=2e-5)
             supports += 1
+        # the lean's bilinear ground at six points (an independent loop over the map, clamped at its edges)
+        assert float(terms.lean_m[i]) == pytest.approx(ref["lean"], abs=2e-5)
+        leans.append(ref["lean"])
         assert float(terms.step_height_m[i]) == pytest.approx(ref["height"] - ref_stance["height"], abs=3e-5)
         # The sole on that plane (an independent construction from its normal) and the 3D distance of the soles.
         roll, pitch, _ = sole_rpy(*ref["grad"], p[2])
@@ -243,6 +247,7 @@ def test_height_metrics_match_numpy_reference():
         checked += 1
     assert checked > 0.9 * n
     assert supports > 0.85 * n
+    assert np.percentile(leans, 90) > 0.004 and np.percentile(leans, 10) < 0.002  # level and leaning soles
 
 
 def test_slope_of_a_ramp_and_its_limit():

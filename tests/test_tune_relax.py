@@ -128,6 +128,24 @@ def test_relaxed_cost_converges_to_exact_finite_costs(robot):
     assert errors[-1] < 0.02
 
 
+def test_relaxed_lean_converges_to_the_exact_lean(robot):
+    """The soft lean (tents with rounded corners, soft maxima) tends to the exact metric (bilinear ground at six
+    points) as the sharpness grows, on a map with leans of several millimetres."""
+    rng = np.random.default_rng(8)
+    h = 0.004 * rng.standard_normal((60, 60)) + np.arange(60)[:, None] * RES * 0.1
+    terrain = ij.terrain.from_arrays(h.astype(np.float32), None, RES)
+    stance, _ = _query(8)
+    acts = ij.robots.side_actions(robot, 1.0)
+    steps = ij.geometry.compose(jnp.asarray(stance), acts)
+    idx = jnp.arange(acts.shape[0])
+    exact = np.asarray(foot_cost_terms(terrain, robot, jnp.asarray(stance), -1.0, steps, action_index=idx).lean_m)
+    assert np.percentile(exact, 90) > 0.004
+    soft_lean = jax.jit(lambda k: relax.soft_foot_cost_terms(terrain, robot, jnp.asarray(stance), steps, idx,
+                                                             sharpness=k).lean_m)
+    errors = [float(np.median(np.abs(np.asarray(soft_lean(k)) - exact))) for k in (10.0, 100.0, 1000.0)]
+    assert errors[0] > errors[1] > errors[2] and errors[2] < 2e-5, errors
+
+
 def _float_leaves(robot, dtype):
     return jax.tree.map(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x, robot)
 
@@ -148,6 +166,11 @@ SCALAR_LEAVES = (
     "metrics.step_weight",
     "metrics.band_weight",
     "metrics.band_limit",
+    "metrics.support_weight",
+    "metrics.support_limit",
+    "metrics.lean_weight",
+    "metrics.lean_limit",
+    "metrics.lean_inset",
     "max_sole_pitch",
     "max_sole_roll",
     "max_sole_distance",

@@ -47,6 +47,7 @@ from ijoy_jax.footcost.xla import (
     SUPPORT_CORNER,
     checked_query,
     exceeds,
+    lean_points,
     metric_term,
     plane_metrics,
     query_supported,
@@ -60,7 +61,7 @@ from ijoy_jax.terrain import Terrain
 # Scalars of one decision, packed into one float32 vector (indices into ``par``).
 (_OX, _OY, _GHL, _GHW, _FHL, _FHW, _STANCE_H, _START_H, _SWX, _SWY, _SWING_MAX, _FW, _TOO_BIG,
  _SLOPE_W, _SLOPE_L, _ROUGH_W, _ROUGH_L, _BUMP_W, _BUMP_L, _STEP_W, _BAND_W, _BAND_L,
- _STX, _STY, _PITCH_L, _ROLL_L, _DIST_L, _SUPPORT_W, _SUPPORT_L) = range(29)
+ _STX, _STY, _PITCH_L, _ROLL_L, _DIST_L, _SUPPORT_W, _SUPPORT_L, _LEAN_W, _LEAN_L, _LEAN_INSET) = range(32)
 _NUM_PAR = 32
 # Rows of the per-candidate block ``cand``.
 _X, _Y, _T, _COST, _STEP_LIMIT, _CLEARANCE = range(6)
@@ -365,6 +366,26 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
         band = jnp.where(ok, band, 0.0)
         gaps = [jnp.where(corner > -jnp.inf, top - corner, 0.0) for corner in corners]
         support = jnp.where(ok, jnp.maximum(jnp.maximum(gaps[0], gaps[1]), jnp.maximum(gaps[2], gaps[3])), 0.0)
+
+        def above(du, dv):
+            """(C,) the ground above the plane at offsets (du, dv) from the foot centre: bilinear between cell
+            centres, four reads of the padded map, as footcost.xla's lean (same clamps on the map)."""
+            gx, gy = (cx + du) / res - 0.5, (cy + dv) / res - 0.5
+            i0, j0 = _floor_i32(gx, native), _floor_i32(gy, native)
+            tx, ty = gx - i0.astype(jnp.float32), gy - j0.astype(jnp.float32)
+
+            def at(di, dj):
+                return hp_ref[column_start(i0 + di, j0 + dj)] - h_ref
+
+            ground = (1.0 - tx) * ((1.0 - ty) * at(0, 0) + ty * at(0, 1)) + tx * ((1.0 - ty) * at(1, 0) + ty * at(1, 1))
+            return ground - (a + b * du + cc * dv)
+
+        # The lean (footcost.xla.plane_metrics): each side of the sole by its contact point highest above the plane.
+        du, dv = lean_points(p[_FHL], p[_FHW], p[_LEAN_INSET], c, s)
+        left, right = (functools.reduce(jnp.maximum, [above(du[i], dv[i]) for i in side])
+                       for side in (range(3), range(3, 6)))
+        lean = jnp.abs(left - right)
+        lean = jnp.where(ok & jnp.isfinite(lean), lean, 0.0)
         dh = height - p[_STANCE_H]
         # The sole on the fitted plane (footcost.xla.sole_tilt) and the reach over the height change.
         pitch, roll = sole_tilt(jnp.where(ok, b, 0.0), jnp.where(ok, cc, 0.0), t)
@@ -374,6 +395,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
                  + metric_term(p[_STEP_W], jnp.abs(dh), cand_ref[_STEP_LIMIT, :])
                  + metric_term(p[_BAND_W], band, p[_BAND_L])
                  + metric_term(p[_SUPPORT_W], support, p[_SUPPORT_L])
+                 + metric_term(p[_LEAN_W], lean, p[_LEAN_L])
                  + jnp.where(ankle_bad | out_of_reach(dh), jnp.inf, 0.0))
 
         if has_swing:
@@ -533,7 +555,8 @@ def foot_cost_fused(
            jnp.where(unsupported, 1.0, 0.0),
            m.slope_weight, m.slope_limit, m.roughness_weight, m.roughness_limit, m.bump_weight, m.bump_limit,
            m.step_weight, m.band_weight, m.band_limit, stance[0], stance[1], robot.max_sole_pitch,
-           robot.max_sole_roll, robot.max_sole_distance, m.support_weight, m.support_limit]
+           robot.max_sole_roll, robot.max_sole_distance, m.support_weight, m.support_limit,
+           m.lean_weight, m.lean_limit, m.lean_inset]
     par = jnp.stack([f32(q) for q in par] + [zero] * (_NUM_PAR - len(par)))
     padded = -(-num // block) * block
     order = None

@@ -117,8 +117,8 @@ class FootCostTerms(NamedTuple):
       action: the action's own cost.
       obstacle: 0, or +inf if the grown footprint touches an obstacle or
         leaves the map.
-      slope, roughness, bump, step, band, support: ``weight * metric``, or
-        +inf beyond the metric's limit (0 on 2D terrains).
+      slope, roughness, bump, step, band, support, lean: ``weight * metric``,
+        or +inf beyond the metric's limit (0 on 2D terrains).
       swing_path: 0, or +inf if the swing corridor is too high (or leaves the
         map) for the action's clearance.
       ankle: 0, or +inf if a sole on the fitted plane would tilt beyond what
@@ -139,7 +139,7 @@ class FootCostTerms(NamedTuple):
     Raw metrics (for plots and tests)::
 
       slope_angle (rad), roughness_m, bump_m, step_height_m (signed, up is
-      positive), band_m, support_m, path_height_m (corridor height above the higher
+      positive), band_m, support_m, lean_m, path_height_m (corridor height above the higher
       foothold; -inf if no check), foot_height_m (plane height at the foot
       centre), sole_pitch_rad and sole_roll_rad (the orientation of a sole on
       the fitted plane with the step's heading, ``R = Rz(yaw) Ry(pitch)
@@ -158,6 +158,7 @@ class FootCostTerms(NamedTuple):
     step: jax.Array
     band: jax.Array
     support: jax.Array
+    lean: jax.Array
     swing_path: jax.Array
     ankle: jax.Array
     reach: jax.Array
@@ -168,6 +169,7 @@ class FootCostTerms(NamedTuple):
     step_height_m: jax.Array
     band_m: jax.Array
     support_m: jax.Array
+    lean_m: jax.Array
     path_height_m: jax.Array
     foot_height_m: jax.Array
     sole_pitch_rad: jax.Array
@@ -190,6 +192,7 @@ class Plane(NamedTuple):
     bump: jax.Array  # largest residual under the foot (m)
     band: jax.Array  # largest |residual| in the safety band (m)
     support: jax.Array  # how far below the sole's resting cell the highest cell of its lowest corner lies (m)
+    lean: jax.Array  # how far the ground under the sole's lower side lies below its higher side's (m; lean_points)
     fitted: jax.Array  # () bool: the fit is finite (False: heights beyond float32's range; metrics then 0)
     grad_x: jax.Array  # dz/dx of the plane along world x (m/m)
     grad_y: jax.Array  # dz/dy of the plane along world y (m/m)
@@ -367,6 +370,13 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
     bump = jnp.maximum(top, 0.0)
     # a corner region without cells (a grid coarser than the sole's quarter) tells nothing: gap 0
     support = jnp.max(jnp.stack([jnp.where(jnp.isfinite(t), bump - t, 0.0) for t in corner_top]))
+    # The lean: the ground at the sole's contact points (lean_points), between cell centres as a height field
+    # meets a sphere or an edge, each side by its point highest above the plane.
+    du, dv = lean_points(hl, hw, robot.metrics.lean_inset, cos, sin)
+    du, dv = jnp.stack(du), jnp.stack(dv)
+    ground = bilinear_height(index.height_padded, k, cx + du, cy + dv, res, h_ref)
+    above = ground - (a + b * du + c * dv)
+    lean = jnp.abs(jnp.max(above[:3]) - jnp.max(above[3:]))
     ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(c)
     z = jnp.float32(0.0)
     return Plane(
@@ -376,10 +386,33 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
         bump=jnp.where(ok, bump, z),
         band=jnp.where(ok, band, z),
         support=jnp.where(ok, support, z),
+        lean=jnp.where(ok & jnp.isfinite(lean), lean, z),
         fitted=ok,
         grad_x=jnp.where(ok, b, z),
         grad_y=jnp.where(ok, c, z),
     )
+
+
+def lean_points(half_length, half_width, inset, cos, sin):
+    """The sole's six contact points of the ``lean`` metric: toe, middle and heel of its left edge, then of its
+    right edge, ``inset`` (m) in from the edges, as offsets from the sole's centre in world axes (m) for a heading
+    of cosine ``cos`` and sine ``sin``. Returns (du, dv), tuples of six, broadcast from the inputs (NumPy or JAX)."""
+    a, b = half_length - inset, half_width - inset
+    points = [(sa * a, sb * b) for sb in (1.0, -1.0) for sa in (1.0, 0.0, -1.0)]
+    return tuple(p * cos - q * sin for p, q in points), tuple(p * sin + q * cos for p, q in points)
+
+
+def bilinear_height(padded, pad: int, x, y, res, ref):
+    """Heights between cell centres (bilinear) at map coordinates ``x``, ``y`` (m, arrays of one shape) from the
+    map edge-padded by ``pad`` cells, less ``ref`` (m; subtracted from each cell first, for float32 conditioning);
+    beyond the padding the edge cells' (such poses are flagged off the map)."""
+    gx, gy = x / res - 0.5, y / res - 0.5
+    fx, fy = jnp.floor(gx), jnp.floor(gy)
+    tx, ty = gx - fx, gy - fy
+    i = jnp.clip(fx.astype(jnp.int32) + pad, 0, padded.shape[0] - 2)
+    j = jnp.clip(fy.astype(jnp.int32) + pad, 0, padded.shape[1] - 2)
+    return ((1.0 - tx) * ((1.0 - ty) * (padded[i, j] - ref) + ty * (padded[i, j + 1] - ref))
+            + tx * ((1.0 - ty) * (padded[i + 1, j] - ref) + ty * (padded[i + 1, j + 1] - ref)))
 
 
 def exceeds(metric, limit):
@@ -427,12 +460,13 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
         stepc = metric_term(metrics.step_weight, jnp.abs(dh), robot.max_step_height[action_index])
         band = metric_term(metrics.band_weight, plane.band, metrics.band_limit)
         support = metric_term(metrics.support_weight, plane.support, metrics.support_limit)
-        raw = (plane.slope, plane.roughness, plane.bump, dh, plane.band, plane.height, plane.support)
+        lean = metric_term(metrics.lean_weight, plane.lean, metrics.lean_limit)
+        raw = (plane.slope, plane.roughness, plane.bump, dh, plane.band, plane.height, plane.support, plane.lean)
         too_big = too_big | ~plane.fitted | ~stance_plane.fitted
         pitch, roll = sole_tilt(plane.grad_x, plane.grad_y, step[2])
     else:
-        slope = rough = bump = stepc = band = support = zero
-        raw = (zero, zero, zero, zero, zero, zero, zero)
+        slope = rough = bump = stepc = band = support = lean = zero
+        raw = (zero,) * 8
         pitch = roll = zero
     ankle_bad = exceeds(jnp.abs(pitch), robot.max_sole_pitch) | exceeds(jnp.abs(roll), robot.max_sole_roll)
     distance = sole_distance(step[0] - stance[0], step[1] - stance[1], raw[3])
@@ -458,10 +492,10 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
     unsupported = _inf_if(flagged)
     # +inf where flagged, whatever the other terms hold; a term that an unsupported value (a NaN weight, cost
     # or limit) makes NaN cannot be evaluated, and reads +inf too: no cost term is ever NaN.
-    action, slope, rough, bump, stepc, band, support = (jnp.where(jnp.isnan(t), jnp.inf, t)
-                                                        for t in (action, slope, rough, bump, stepc, band, support))
-    total = jnp.where(flagged, jnp.inf,
-                      action + obstacle + slope + rough + bump + stepc + band + support + swing + ankle + reach)
+    action, slope, rough, bump, stepc, band, support, lean = (
+        jnp.where(jnp.isnan(t), jnp.inf, t) for t in (action, slope, rough, bump, stepc, band, support, lean))
+    total = jnp.where(flagged, jnp.inf, action + obstacle + slope + rough + bump + stepc + band + support + lean
+                      + swing + ankle + reach)
     return FootCostTerms(
         total=total,
         action=action,
@@ -472,6 +506,7 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
         step=stepc,
         band=band,
         support=support,
+        lean=lean,
         swing_path=swing,
         ankle=ankle,
         reach=reach,
@@ -482,6 +517,7 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
         step_height_m=raw[3],
         band_m=raw[4],
         support_m=raw[6],
+        lean_m=raw[7],
         path_height_m=path_height,
         foot_height_m=raw[5],
         sole_pitch_rad=pitch,

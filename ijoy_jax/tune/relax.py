@@ -49,7 +49,7 @@ import jax.numpy as jnp
 
 from ijoy_jax import geometry
 from ijoy_jax.footcost import foot_cost_terms, window_cells
-from ijoy_jax.footcost.xla import SUPPORT_CORNER, sole_tilt
+from ijoy_jax.footcost.xla import SUPPORT_CORNER, lean_points, sole_tilt
 from ijoy_jax.robots import Robot, dist, side_actions, side_p0, side_sign
 from ijoy_jax.select import Targets, make_targets
 from ijoy_jax.terrain import Terrain
@@ -121,7 +121,7 @@ class SoftFootCostTerms(NamedTuple):
 
     Cost terms (cost units; finite): total (their sum), action, obstacle
     (barrier on the soft obstacle mass), slope, roughness, bump, step, band,
-    support (each ``weight * metric + barrier``; 0 on 2D terrains), swing_path
+    support, lean (each ``weight * metric + barrier``; 0 on 2D terrains), swing_path
     (clearance barrier on the swing corridor plus its off-map and length
     barriers; 0 without ``swing_from`` or on 2D terrains), ankle (barriers on
     the size of the sole's pitch and roll on the soft plane against the
@@ -129,7 +129,8 @@ class SoftFootCostTerms(NamedTuple):
     (barrier on the 3D distance of the soles against ``max_sole_distance``).
     Raw: obstacle_mass (cells, soft count of obstacle or off-map cells under
     the grown footprint), slope_angle (rad), roughness_m, bump_m,
-    step_height_m (signed), band_m, foot_height_m (m), support_m (m), path_height_m (m, soft
+    step_height_m (signed), band_m, foot_height_m (m), support_m (m), lean_m (m; soft maxima of each side,
+    a smooth magnitude of their difference), path_height_m (m, soft
     ``max(0, corridor top - higher foothold)``; 0 when not checked),
     sole_pitch_rad, sole_roll_rad (:func:`ijoy_jax.footcost.xla.sole_tilt` of
     the soft plane), sole_distance_m (m).
@@ -144,6 +145,7 @@ class SoftFootCostTerms(NamedTuple):
     step: jax.Array
     band: jax.Array
     support: jax.Array
+    lean: jax.Array
     obstacle_mass: jax.Array
     slope_angle: jax.Array
     roughness_m: jax.Array
@@ -152,6 +154,7 @@ class SoftFootCostTerms(NamedTuple):
     band_m: jax.Array
     foot_height_m: jax.Array
     support_m: jax.Array
+    lean_m: jax.Array
     swing_path: jax.Array
     path_height_m: jax.Array
     ankle: jax.Array
@@ -279,6 +282,41 @@ def _corners(patch: _Patch, robot: Robot, theta, m_foot, res: float, sharpness):
     a0, b0 = SUPPORT_CORNER * 0.5 * robot.foot_length, SUPPORT_CORNER * 0.5 * robot.foot_width
     return jnp.stack([m_foot * jax.nn.sigmoid(k * (sa * along - a0)) * jax.nn.sigmoid(k * (sb * across - b0))
                       for sa in (1.0, -1.0) for sb in (1.0, -1.0)])
+
+
+_TENT_CELLS = 6  # cells per axis under a soft tent: the ones dropped as a point moves on weigh ~exp(-2 sharpness)
+
+
+def _soft_ground(h_pad, k: int, x, y, res: float, ref, sharpness):
+    """(P,) heights less ``ref`` at map coordinates ``x``, ``y`` (P,) (m) from the map edge-padded by ``k``: the
+    bilinear interpolation of :func:`ijoy_jax.footcost.xla.bilinear_height` with its tents' corners rounded
+    over ``1 / sharpness`` cells (weights ``softplus(s (1 - sqrt(d^2 + 1/s^2))) / s`` of the distance d in cells,
+    normalised), so that the ground's gradient along a moving point is continuous; bilinear as s grows."""
+    def weights(g):
+        first = jnp.floor(g).astype(jnp.int32) - (_TENT_CELLS // 2 - 1)
+        d = g[:, None] - (first[:, None] + jnp.arange(_TENT_CELLS)).astype(g.dtype)
+        w = jax.nn.softplus(sharpness * (1.0 - jnp.sqrt(d * d + 1.0 / sharpness**2))) / sharpness
+        return first, w / jnp.sum(w, axis=1, keepdims=True)
+
+    fi, wi = weights(x / res - 0.5)
+    fj, wj = weights(y / res - 0.5)
+    i = jnp.clip(fi[:, None] + k + jnp.arange(_TENT_CELLS), 0, h_pad.shape[0] - 1)
+    j = jnp.clip(fj[:, None] + k + jnp.arange(_TENT_CELLS), 0, h_pad.shape[1] - 1)
+    return jnp.einsum("pi,pj,pij->p", wi, wj, h_pad[i[:, :, None], j[:, None, :]] - ref)
+
+
+def _soft_lean(h_pad, k: int, terrain: Terrain, robot: Robot, pose, plane: _SoftPlane, temp, sharpness):
+    """Soft FootCost lean (m): the exact metric's points (footcost.xla.plane_metrics) on the soft ground
+    (:func:`_soft_ground`), each side's highest point above the soft plane a soft maximum, the difference's
+    magnitude smooth."""
+    du, dv = lean_points(0.5 * robot.foot_length, 0.5 * robot.foot_width, robot.metrics.lean_inset,
+                         jnp.cos(pose[2]), jnp.sin(pose[2]))
+    du, dv = jnp.stack(du).astype(pose.dtype), jnp.stack(dv).astype(pose.dtype)
+    ground = _soft_ground(h_pad, k, pose[0] - terrain.origin[0] + du, pose[1] - terrain.origin[1] + dv,
+                          terrain.resolution, plane.height, sharpness)
+    above = ground - (plane.grad_x * du + plane.grad_y * dv)
+    left, right = (temp * jax.nn.logsumexp(above[side] / temp) for side in (slice(0, 3), slice(3, 6)))
+    return _smooth_abs(left - right, temp)
 
 
 def _barrier(metric, limit, sharpness, barrier_weight):
@@ -414,14 +452,16 @@ def soft_foot_cost_terms(
             stepc = term(metrics.step_weight, adh, robot.max_step_height[a])
             band = term(metrics.band_weight, pl.band, metrics.band_limit)
             support = term(metrics.support_weight, pl.support, metrics.support_limit)
-            raw = (pl.slope, pl.roughness, pl.bump, dh, pl.band, pl.height, pl.support)
+            lean_m = _soft_lean(h_pad, k, terrain, robot, step, pl, temp, sharpness)
+            lean = term(metrics.lean_weight, lean_m, metrics.lean_limit)
+            raw = (pl.slope, pl.roughness, pl.bump, dh, pl.band, pl.height, pl.support, lean_m)
             pitch, roll = sole_tilt(pl.grad_x, pl.grad_y, step[2])
             angle_eps = temp / res  # rad: 1 / sharpness
             ankle = (_barrier(_smooth_abs(pitch, angle_eps), robot.max_sole_pitch, sharpness, barrier_weight)
                      + _barrier(_smooth_abs(roll, angle_eps), robot.max_sole_roll, sharpness, barrier_weight))
         else:
-            slope = rough = bump = stepc = band = support = ankle = zero
-            raw = (zero,) * 7
+            slope = rough = bump = stepc = band = support = lean = ankle = zero
+            raw = (zero,) * 8
             pitch = roll = zero
         distance = geometry.safe_norm(geometry.safe_norm(step[0] - stance[0], step[1] - stance[1]), raw[3])
         reach = _barrier(distance, robot.max_sole_distance, sharpness, barrier_weight)
@@ -431,10 +471,10 @@ def soft_foot_cost_terms(
             swing, path_height = _swing_path(
                 terrain, robot, on_pad, hp_pad, kp, swing_from, step, h_ref, a, sharpness, barrier_weight, temp
             )
-        total = action + obstacle + slope + rough + bump + stepc + band + support + swing + ankle + reach
+        total = action + obstacle + slope + rough + bump + stepc + band + support + lean + swing + ankle + reach
         return SoftFootCostTerms(
-            total, action, obstacle, slope, rough, bump, stepc, band, support, mass, *raw, swing, path_height, ankle,
-            reach, pitch, roll, distance
+            total, action, obstacle, slope, rough, bump, stepc, band, support, lean, mass, *raw, swing, path_height,
+            ankle, reach, pitch, roll, distance
         )
 
     return jax.vmap(one)(steps, action_index)
