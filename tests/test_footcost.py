@@ -563,3 +563,26 @@ def test_block_sums_against_float64_sums(seed, altitude, block):
     got = sums[:, b, t + n, 0] - sums[:, b, t, 0]  # the kernel adds n (h_b - h_ref) to it
     want_span = (padded[:, j:j + n] - first[:, b:b + 1].astype(np.float64)).sum(1)
     np.testing.assert_allclose(got, want_span, rtol=0, atol=32 * 6e-8 * 2 * block * relief)
+
+
+def test_total_is_the_sum_of_the_cost_terms_and_the_named_terms_are_all_of_them():
+    """COST_TERMS (the live record's names too) holds every term the total sums: on a rough map with steps both
+    valid and refused by each kind of term, a finite total equals the sum of the others, and an infinite one has
+    an infinite term among them."""
+    rng = np.random.default_rng(9)
+    h = 0.004 * rng.standard_normal((50, 50)) + np.arange(50)[:, None] * RES * 0.2
+    h[30:, :] += 0.06
+    t = ij.terrain.from_arrays(h.astype(np.float32), None, RES)
+    stance = np.array([0.5, 0.5, 0.3])
+    terms = ij.foot_cost_terms(t, ROBOT, stance, -1, ij.action_steps(ROBOT, stance, -1),
+                               swing_from=np.array([0.45, 0.7, 0.3]))
+    names = footcost.COST_TERMS
+    assert names[0] == "total" and names[-1] == "unsupported" and {"support", "lean", "ankle"} <= set(names)
+    assert not any(n.endswith(("_m", "_rad", "_angle")) or n == "action_index" for n in names)
+    parts = np.stack([np.asarray(getattr(terms, n), np.float64) for n in names[1:]])
+    total = np.asarray(terms.total, np.float64)
+    finite = np.isfinite(total)
+    assert 20 < finite.sum() < len(total) - 20
+    np.testing.assert_allclose(parts[:, finite].sum(0), total[finite], rtol=1e-5, atol=1e-6)
+    assert np.isinf(parts[:, ~finite]).any(0).all()
+    assert np.isinf(np.asarray(terms.lean)).any()  # the lean refuses some of these steps

@@ -14,6 +14,7 @@ from ijoy_jax.footcost.index import index_terrain as index_terrain
 from ijoy_jax.footcost.index import swing_corridor as swing_corridor
 from ijoy_jax.footcost.index import window_cells as window_cells
 from ijoy_jax.footcost.pallas import foot_cost_fused as foot_cost_fused
+from ijoy_jax.footcost.xla import COST_TERMS as COST_TERMS
 from ijoy_jax.footcost.xla import MAX_COORDINATE as MAX_COORDINATE
 from ijoy_jax.footcost.xla import FootCostTerms as FootCostTerms
 from ijoy_jax.footcost.xla import foot_cost as foot_cost
@@ -22,6 +23,7 @@ from ijoy_jax.footcost.xla import query_supported as query_supported
 from ijoy_jax.footcost.xla import validate as validate
 
 __all__ = [
+    "COST_TERMS",
     "MAX_COORDINATE",
     "FootCostTerms",
     "TerrainIndex",

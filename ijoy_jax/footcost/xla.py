@@ -179,6 +179,11 @@ class FootCostTerms(NamedTuple):
 
 
 
+COST_TERMS: tuple[str, ...] = FootCostTerms._fields[: FootCostTerms._fields.index("unsupported") + 1]
+"""The names of :class:`FootCostTerms`' cost terms: ``total`` first, then the terms it sums, ``unsupported``
+last (the raw metrics after them are left out)."""
+
+
 class Plane(NamedTuple):
     """The least-squares plane under a footprint and its metrics (:func:`plane_metrics`; () float32 each).
 

@@ -50,9 +50,8 @@ __all__ = ["DEFAULT_REACH_DIRECTIONS", "TERM_NAMES", "DriveResult", "drive", "la
 
 DEFAULT_REACH_DIRECTIONS = 32
 """Directions of the cue's reach polygon shown in the live view."""
-TERM_NAMES = ("total", "action", "obstacle", "slope", "roughness", "bump", "step", "band", "support", "swing_path",
-              "ankle", "reach", "unsupported")
-"""The chosen foothold's named FootCost terms recorded with each decision (:class:`ijoy_jax.FootCostTerms`)."""
+TERM_NAMES = footcost.COST_TERMS
+"""The chosen foothold's named FootCost terms recorded with each decision (:data:`ijoy_jax.footcost.COST_TERMS`)."""
 
 
 @dataclasses.dataclass
