@@ -276,12 +276,13 @@ def scenarios_25d():
 
 def paper_metrics(robot):
     """The robot scored by the paper's metrics alone (slope, roughness, bump, step height, band): its ``support``
-    term off. The experiments replicate the paper's planner, which lets a sole straddle a low edge; the library's
-    default also refuses a sole that would rock on such an edge (``support``, for the simulated biped:
-    test_the_default_support_refuses_the_straddle_the_papers_metrics_allow). Off is a limit no footprint
-    reaches (1 m: limits must be finite) and no weight."""
-    return robot.replace(metrics=robot.metrics.replace(support_weight=jnp.float32(0.0),
-                                                       support_limit=jnp.float32(1.0)))
+    and ``lean`` terms off. The experiments replicate the paper's planner, which lets a sole straddle a low edge;
+    the library's default also refuses a sole that would rock on such an edge (``support``, for the simulated
+    biped: test_the_default_support_refuses_the_straddle_the_papers_metrics_allow) or roll onto one of its long
+    edges (``lean``). Off is a limit no footprint reaches (1 m: limits must be finite) and no weight."""
+    return robot.replace(metrics=robot.metrics.replace(
+        support_weight=jnp.float32(0.0), support_limit=jnp.float32(1.0),
+        lean_weight=jnp.float32(0.0), lean_limit=jnp.float32(1.0)))
 
 
 ROBOT = paper_metrics(ij.robots.hrp2(margin=0.02))
