@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     walk.add_argument("--seed", type=int, default=None, help="maps and random commands (default: 0)")
     walk.add_argument("--refine", action="store_const", const=True, default=None,
                       help="refine each lattice choice to a continuous foothold (both walkers)")
-    walk.add_argument("--set", action="append", default=None, metavar="NAME=VALUE", dest="robot_set",
+    walk.add_argument("--set", action="append", default=None, metavar="NAME=VALUE",
                       help="a robot leaf of the choice for every family, e.g. metrics.support_limit=0.003 "
                            "(repeatable; names: ijoy_jax.robots.SELECTOR_LEAVES)")
     walk.add_argument("--plot", default=None, help="write the bar plot (PNG) here")
@@ -196,7 +196,7 @@ def _run(args) -> int:
 
         if args.ref is not None and args.name != "check":
             raise ValueError(f"--ref is read or written by 'ijoy bench check' only, not by '{args.name}'")
-        walk_only = [f"--{'set' if k == 'robot_set' else k}" for k in _WALK_OPTIONS if getattr(args, k) is not None]
+        walk_only = [f"--{k}" for k in _WALK_OPTIONS if getattr(args, k) is not None]
         if walk_only and args.name != "walk":
             raise ValueError(f"{', '.join(walk_only)}: options of 'ijoy bench walk' only, not of '{args.name}'")
         for path in (args.ref, args.json, args.plot):  # refused before the benchmark runs, not after
@@ -238,7 +238,7 @@ def _run(args) -> int:
 
 
 _WALK_OPTIONS = ("families", "batch", "steps", "commands", "resolution", "forward", "chunk", "seed", "refine",
-                 "robot_set", "plot")
+                 "set", "plot")
 
 
 def _bench_walk(args) -> list[dict]:
@@ -257,7 +257,7 @@ def _bench_walk(args) -> list[dict]:
                           resolution=given(args.resolution, bench_walk.RESOLUTION), seed=given(args.seed, 0),
                           chunk=args.chunk, forward=given(args.forward, bench_walk.FORWARD),
                           refine=given(args.refine, False),
-                          robot_leaves=number_assignments(args.robot_set, robots.SELECTOR_LEAVES,
+                          robot_leaves=number_assignments(args.set, robots.SELECTOR_LEAVES,
                                                           "metrics.support_limit=0.003"),
                           emit=lambda row: print(json.dumps(row), flush=True))
     print(bench_walk.markdown_table(rows))
