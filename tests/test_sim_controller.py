@@ -399,15 +399,19 @@ def test_stance_gain_holds_the_carrying_sole_partly_level(sim):
 def test_stabiliser_rights_the_body_after_a_sideways_push(sim):
     """A 20 N sideways push on the pelvis for one whole step (16 Ns). Without the stabiliser the robot keeps
     rolling 3-6 degrees at every touch-down afterwards (each swing foot lands on its edge, tilted with the
-    body); with it the body stays within 1 degree (measured: 0.1-0.4)."""
+    body), or falls (on some CPUs, whose rounding differs, the rolls grow until it does); with it the body
+    stays within 1 degree (measured: 0.1-0.4)."""
 
     def tilts(cfg):
+        """Pelvis tilt (deg) after each step from the push on; +inf from the step at which the robot fell."""
         walk = _Native(W.make_sim(sim.shape, sim.resolution, cfg=cfg, robot=robots.hrp2()))
         out = []
         for n in range(6):
             walk.d.xfrc_applied[walk.sim.index.pelvis, 1] = 20.0 if n == 2 else 0.0
             _, fell = walk.step((0.1, 0.19, 0.0))
-            assert not fell, n
+            if fell:
+                out += [np.inf] * (6 - n)
+                break
             m = walk.d.xmat[walk.sim.index.pelvis].reshape(3, 3)
             out.append(np.degrees(np.arccos(np.clip(m[2, 2], -1, 1))))
         return np.array(out[2:])  # from the push on
@@ -415,8 +419,8 @@ def test_stabiliser_rights_the_body_after_a_sideways_push(sim):
     stiff = dataclasses.replace(sim.cfg, ankle_damping=0.0)  # the stabiliser alone, stiff ankles
     with_it = tilts(stiff)
     without = tilts(dataclasses.replace(stiff, land_gain=0.0))
-    assert with_it.max() < 1.0, with_it
-    assert without.max() > 2.0, without  # the test can tell
+    assert with_it.max() < 1.0, with_it  # standing (a fall reads +inf) and upright
+    assert without.max() > 2.0, without  # the test can tell: it rolls, or falls
     # With the ankles' damping control (the default) the yielding ankles let the push roll the body further
     # (3.5 degrees measured at the next touch-down), and the stabiliser rights it within a step.
     default = tilts(sim.cfg)
