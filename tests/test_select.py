@@ -426,3 +426,39 @@ def test_foothold_of_every_method_is_that_of_its_pose(method):
         ch = ij.select_step(t, ROBOT, stance[q], side[q], command[q], method=method, targets=TARGETS)
         want = select.foothold(t, ROBOT, ch.pose)
         np.testing.assert_allclose(np.asarray(ch.foothold), np.asarray(want), atol=1e-6)
+
+
+def test_on_a_plane_the_slope_weight_moves_every_cost_alike_and_no_choice():
+    """On ground of one plane every candidate pays the same slope cost, so ``metrics.slope_weight`` shifts every
+    valid candidate's cost by (weight change) x (plane angle) and leaves the choice alone: the reason the slope
+    families' walks do not depend on it (docs/walk_families.md, "Refined footholds on image maps"). The
+    margins (2 cm) keep the footprints on the map; traced weights, one compiled program."""
+    rng = np.random.default_rng(11)
+    n_maps, per_map = 4, 24
+    angle = np.radians(rng.uniform(2.0, 10.0, n_maps))
+    direction = rng.uniform(-np.pi, np.pi, n_maps)
+    xy = (np.stack(np.meshgrid(np.arange(SHAPE[0]), np.arange(SHAPE[1]), indexing="ij"), -1) + 0.5) * RES
+    height = np.tan(angle)[:, None, None] * (np.cos(direction)[:, None, None] * xy[..., 0]
+                                             + np.sin(direction)[:, None, None] * xy[..., 1])
+    n = n_maps * per_map
+    maps = ij.Terrain(jnp.asarray(np.repeat(height, per_map, 0), jnp.float32), jnp.ones((n,) + SHAPE, bool),
+                      jnp.zeros((n, 2)), RES, True)
+    stance, side, command, _ = _random_queries(12, n)
+
+    @jax.jit
+    def choose(weight):
+        robot = ij.robots.set_leaves(ROBOT, {"metrics.slope_weight": weight})
+        return jax.vmap(lambda t, st, sd, cmd: ij.select_step(t, robot, st, sd, cmd, targets=TARGETS))(
+            maps, stance, side, command)
+
+    low, high = choose(0.5), choose(2.0)
+    assert choose._cache_size() == 1  # the weight is traced
+    valid = np.asarray(low.valid)
+    assert valid.sum() >= n // 2  # most queries have a choice: the comparison is not empty
+    np.testing.assert_array_equal(np.asarray(high.valid), valid)
+    # The best cost moves by 1.5 x the plane's angle (each candidate's fit of an exact plane, float32 rounding):
+    # every candidate moved alike, so the choice is the same one, or one that was within rounding of it (a tie).
+    shift = (np.asarray(high.cost, np.float64) - np.asarray(low.cost, np.float64))[valid]
+    np.testing.assert_allclose(shift, 1.5 * np.repeat(angle, per_map)[valid], atol=TIE)
+    same = np.asarray(high.index) == np.asarray(low.index)
+    assert same.mean() >= 0.9, np.nonzero(~same)
