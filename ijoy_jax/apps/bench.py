@@ -37,7 +37,9 @@ GRID = (200, 200)  # 4 m x 4 m
 RES = 0.02
 
 
-def _terrain(has_height: bool, seed: int = 0) -> ij.Terrain:
+def workload_terrain(has_height: bool, seed: int = 0) -> ij.Terrain:
+    """The benchmarks' 4 m x 4 m map at 2 cm (:data:`GRID`, :data:`RES`): 0.2 % obstacle cells and, 2.5D, a 3 cm
+    swell along x plus 2 mm noise; the same map for the same ``seed``."""
     rng = np.random.default_rng(seed)
     free = rng.random(GRID) > 0.002
     h = None
@@ -50,7 +52,7 @@ def _terrain(has_height: bool, seed: int = 0) -> ij.Terrain:
 def _posts(seed: int = 5) -> ij.Terrain:
     """The 2.5D benchmark map with 30 posts 12-25 cm tall and 2-12 cm wide: taller than the HRP-2 preset's 10 cm
     clearance, so the fused kernel's swing-corridor broad phase rarely applies and its exact walk runs."""
-    base = _terrain(True)
+    base = workload_terrain(True)
     rng = np.random.default_rng(seed)
     h = np.asarray(base.height).copy()
     for _ in range(30):
@@ -60,7 +62,9 @@ def _posts(seed: int = 5) -> ij.Terrain:
     return ij.terrain.from_arrays(h.astype(np.float32), np.asarray(base.free), RES)
 
 
-def _queries(n: int, seed: int = 1):
+def workload_queries(n: int, seed: int = 1):
+    """``n`` decisions on :func:`workload_terrain`: (stance (n, 3), command (n, 3), swing_from (n, 3)), the
+    stance foot inside the map, the left swing foot behind and beside it; the same for the same ``seed``."""
     rng = np.random.default_rng(seed)
     stance = np.column_stack([rng.uniform(1.0, 3.0, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
     command = np.column_stack([rng.uniform(-0.25, 0.25, n), rng.uniform(-0.15, 0.15, n), rng.uniform(-0.4, 0.4, n)])
@@ -131,7 +135,7 @@ def bench_footcost(rows, quick: bool, chunk: int):
     n_act = robot.num_actions
     sizes = [1, 16] if quick else ([1, 16, 256, 2048] if _cpu() else [1, 16, 256, 2048, 16384, 65536])
     for has_height in (False, True):
-        terrain = _terrain(has_height)
+        terrain = workload_terrain(has_height)
         index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
 
         def one(stance, swing, terrain=terrain, index=index):
@@ -141,7 +145,7 @@ def bench_footcost(rows, quick: bool, chunk: int):
 
         f = _batched(one, chunk)
         for b in sizes:
-            stance, _, swing = _queries(b)
+            stance, _, swing = workload_queries(b)
             comp, run, flops, nbytes = _time(f, stance, swing)
             _emit(rows, dict(_env(), bench="footcost", terrain="2.5D" if has_height else "2D", batch=b,
                              candidates=b * n_act, compile_s=round(comp, 3), run_s=run,
@@ -152,7 +156,7 @@ def bench_footcost(rows, quick: bool, chunk: int):
 def bench_select(rows, quick: bool, chunk: int):
     robot = ij.robots.hrp2(margin=0.02)
     targets = ij.make_targets(robot)
-    terrain = _terrain(True)
+    terrain = workload_terrain(True)
     index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
     sizes = [1, 16] if quick else ([1, 16, 256, 1024] if _cpu() else [1, 16, 256, 4096, 32768])
     # The default windows cover margins up to 10 cm (a margin sweep never recompiles); the last case sizes them
@@ -180,7 +184,7 @@ def bench_select(rows, quick: bool, chunk: int):
         f = _batched(one, chunk if kernel == "xla" else 1 << 20)
         max_margin = 0.02 if rb is tight else 0.1
         for b in batches:
-            stance, command, swing = _queries(b)
+            stance, command, swing = workload_queries(b)
             if b == 1:  # one decision as a user makes it: no vmap over a batch of one (about 1.7x slower)
                 comp, run, flops, nbytes = _time(jax.jit(one), stance[0], command[0], swing[0])
             else:
@@ -225,7 +229,7 @@ def bench_select(rows, quick: bool, chunk: int):
 
     ref = NumpyFootCost(terrain, robot)
     n = 5 if quick else 20
-    stance, command, swing = (np.asarray(a, np.float64) for a in _queries(n))
+    stance, command, swing = (np.asarray(a, np.float64) for a in workload_queries(n))
     t0 = time.perf_counter()
     for q in range(n):
         ordered_select(ref, targets, stance[q], -1, command[q], swing[q])
@@ -296,7 +300,7 @@ def bench_lookahead(rows, quick: bool, chunk: int):
     targets = ij.make_targets(robot)
     cpu = _cpu()
     for has_height in (False, True):
-        terrain = _terrain(has_height)
+        terrain = workload_terrain(has_height)
         index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
         for name, kw in LOOKAHEAD_SELECTORS:
             kw = dict(kw, beam=n) if kw.get("beam") == -1 else kw
@@ -317,7 +321,7 @@ def bench_lookahead(rows, quick: bool, chunk: int):
             # a lookahead decision evaluates ~10-500x as many.
             f = _batched(one, max(1, chunk * n // _EVALS_AT_ONCE[name]))
             for b in sizes:
-                stance, command, swing = _queries(b)
+                stance, command, swing = workload_queries(b)
                 args = (stance[0], command[0], swing[0]) if b == 1 else (stance, command, swing)
                 fn = jax.jit(one) if b == 1 else f
                 comp, run, _, _ = _time(fn, *args, repeats=5, min_seconds=0.3, max_seconds=20.0)
@@ -403,9 +407,9 @@ def check(rows, quick: bool, chunk: int, path: str | None = None):
     out = {}
     kernels = ("xla",) if _cpu() else ("xla", "pallas")  # the reference is always the XLA path's decisions
     for has_height in (False, True):
-        terrain = _terrain(has_height, seed=3)
+        terrain = workload_terrain(has_height, seed=3)
         index = footcost.index_terrain(terrain, robot)
-        stance, command, swing = _queries(256 if quick else 2048, seed=4)
+        stance, command, swing = workload_queries(256 if quick else 2048, seed=4)
         for method in ("exhaustive", "ordered"):
             for kernel in kernels:
                 def one(st, cmd, sw, method=method, kernel=kernel, terrain=terrain, index=index):

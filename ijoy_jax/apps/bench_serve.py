@@ -1,7 +1,7 @@
 """Benchmark the footstep server: ``ijoy bench serve [--quick] [--json PATH]``.
 
 One run, one workload: HRP-2 (496 actions, margin 2 cm) on the benchmark's 2.5D map of 200 x 200 cells at
-2 cm (``bench._terrain``: a 3 cm swell, 2 mm noise, 0.2 % obstacle cells), full decisions with the swing-path
+2 cm (``bench.workload_terrain``: a 3 cm swell, 2 mm noise, 0.2 % obstacle cells), full decisions with the swing-path
 check, stances and commands from ``bench._queries``, sides alternating. Measured, in this order:
 
 * ``in_process``: :func:`ijoy_jax.select_step` called in this process with the map's prepared tables
@@ -53,7 +53,7 @@ def run(quick: bool = False, requests: int | None = None) -> dict:
 
     import ijoy_jax as ij
     from ijoy_jax import select
-    from ijoy_jax.apps.bench import _queries, _terrain
+    from ijoy_jax.apps.bench import workload_queries, workload_terrain
     from ijoy_jax.server import serve_subprocess
 
     n = requests or (50 if quick else 300)
@@ -61,8 +61,8 @@ def run(quick: bool = False, requests: int | None = None) -> dict:
            "python": sys.version.split()[0], "host": platform.machine(), "cpu_count": os.cpu_count(),
            "loadavg_1min_start": _loadavg(), "date": time.strftime("%Y-%m-%d"), "requests": n,
            "workload": "HRP-2, 496 actions, margin 0.02 m; 2.5D map 200 x 200 at 0.02 m; exhaustive, swing path"}
-    terrain, robot = _terrain(True), ij.robots.hrp2(margin=0.02)
-    stance, command, swing = (np.asarray(a) for a in _queries(n))
+    terrain, robot = workload_terrain(True), ij.robots.hrp2(margin=0.02)
+    stance, command, swing = (np.asarray(a) for a in workload_queries(n))
     sides = [-1 if i % 2 == 0 else 1 for i in range(n)]
     prepared = select.prepare(terrain, robot)
 

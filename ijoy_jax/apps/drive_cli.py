@@ -151,7 +151,7 @@ def main(args) -> int:
         raise ValueError(f"--steps must be >= 0, got {args.steps}")
     terrain, robot, start = live.open_terrain(settings.terrain, settings.margin)  # bad terrain: one line, now
     if settings.start is not None:
-        start = live.session._start(settings, robot, start)
+        start = live.session.start_feet(settings, robot, start)
     view = None
     if not args.headless:
         from ijoy_jax.live.view import ViewServer

@@ -44,8 +44,8 @@ from ijoy_jax import terrain as terrain_mod
 from ijoy_jax.robots import Robot, TerrainMetrics
 from ijoy_jax.terrain import Terrain
 
-__all__ = ["CHANNELS", "Recorder", "Recording", "read_recording", "robot_from_npz", "robot_to_npz", "terrain_from_npz",
-           "terrain_to_npz"]
+__all__ = ["CHANNELS", "Recorder", "Recording", "json_ready", "read_recording", "robot_from_npz", "robot_to_npz",
+           "terrain_from_npz", "terrain_to_npz"]
 
 _OBJ = {"type": "object"}
 _NUM = {"type": "number"}
@@ -66,14 +66,14 @@ CHANNELS: dict[str, dict] = {
 """Every channel's JSON Schema (draft 2020-12 keywords), by topic."""
 
 
-def _plain(x):
+def json_ready(x):
     """JSON-ready: arrays to lists, NumPy scalars to Python ones; infinities and NaN as strings ("inf")."""
     if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
+        return {str(k): json_ready(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
+        return [json_ready(v) for v in x]
     if isinstance(x, np.ndarray) or hasattr(x, "__array__") and not np.isscalar(x):
-        return _plain(np.asarray(x).tolist())
+        return json_ready(np.asarray(x).tolist())
     if isinstance(x, (np.bool_, bool)):
         return bool(x)
     if isinstance(x, (np.integer, int)):
@@ -154,7 +154,7 @@ class Recorder:
                                                                   schema_id=sid)
         self._seq = 0
         now = time.time_ns()
-        self._writer.add_metadata("ijoy.drive", {"config": json.dumps(_plain(config))})
+        self._writer.add_metadata("ijoy.drive", {"config": json.dumps(json_ready(config))})
         self._writer.add_attachment(create_time=now, log_time=0, name="terrain.npz",
                                     media_type="application/x-npz", data=terrain_to_npz(terrain))
         self._writer.add_attachment(create_time=now, log_time=0, name="robot.npz",
@@ -165,7 +165,7 @@ class Recorder:
         """One message on ``topic`` at the drive's time ``t`` (s)."""
         self._seq += 1
         self._writer.add_message(channel_id=self._channels[topic], log_time=max(int(round(t * 1e9)), 0),
-                                 data=json.dumps(_plain(message)).encode(), publish_time=time.time_ns(),
+                                 data=json.dumps(json_ready(message)).encode(), publish_time=time.time_ns(),
                                  sequence=self._seq)
 
     def close(self, summary: dict | None = None) -> None:

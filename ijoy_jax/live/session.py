@@ -32,7 +32,7 @@ from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain, generators
 
 __all__ = ["BODIES", "SWEEP_TERRAINS", "DriveSettings", "ReplayInput", "build_body", "export_sweep", "export_trace",
-           "open_terrain", "replay", "run", "server_address"]
+           "open_terrain", "replay", "run", "server_address", "start_feet"]
 
 BODIES = ("perfect", "native", "mjx")
 """The robots a drive can step: the paper's perfect walker, the MuJoCo biped on native MuJoCo, or the same biped
@@ -136,7 +136,9 @@ def open_terrain(spec: dict, margin: float = 0.02) -> tuple[Terrain, Robot, np.n
     raise ValueError(f"terrain spec kind must be 'family', 'image' or 'scenario', got {kind!r}")
 
 
-def _start(settings: DriveSettings, robot: Robot, default) -> np.ndarray:
+def start_feet(settings: DriveSettings, robot: Robot, default) -> np.ndarray:
+    """(2, 3) float32 start feet (x, y, yaw; row 0 left): ``settings.start`` (x, y, heading) as
+    :func:`ijoy_jax.robots.start_stance` places them, or ``default`` when it is None."""
     if settings.start is None:
         return np.asarray(default, np.float32)
     x, y, theta = (float(v) for v in settings.start)
@@ -217,7 +219,7 @@ def run(settings: DriveSettings, source, *, realtime: bool = True, num_steps=Non
     if terrain is None:
         terrain, robot_spec, start_spec = open_terrain(settings.terrain, settings.margin)
         robot = robot_spec if robot is None else robot
-        start = _start(settings, robot, start_spec) if start is None else start
+        start = start_feet(settings, robot, start_spec) if start is None else start
     if on_ready is not None:
         on_ready(terrain, robot, start)
     prepared = select.prepare(terrain, robot)

@@ -26,7 +26,7 @@ import numpy as np
 
 from ijoy_jax import robots
 from ijoy_jax.live.inputs import SharedAxes
-from ijoy_jax.live.record import _plain
+from ijoy_jax.live.record import json_ready
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
@@ -107,7 +107,7 @@ class ViewServer:
             state["reach_world"] = _reach_polygon(robot, state["next_stance"], state["next_side"], state["reach"],
                                                   state.get("reach_turn", 0.0))
         state["input_source"] = self.axes.source
-        text = json.dumps(_plain(state))
+        text = json.dumps(json_ready(state))
         with self._lock:
             self._state = text
             self._version += 1
