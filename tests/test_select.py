@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import select
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.testing import NumpyFootCost, foothold, ordered_select, rect_touches_cells
 
 RES = 0.02
@@ -452,7 +453,7 @@ def test_on_a_plane_the_slope_weight_moves_every_cost_alike_and_no_choice():
             maps, stance, side, command)
 
     low, high = choose(0.5), choose(2.0)
-    assert choose._cache_size() == 1  # the weight is traced
+    assert compiled_count(choose) == 1  # the weight is traced
     valid = np.asarray(low.valid)
     assert valid.sum() >= n // 2  # most queries have a choice: the comparison is not empty
     np.testing.assert_array_equal(np.asarray(high.valid), valid)
