@@ -18,6 +18,7 @@ from jax.test_util import check_grads
 import ijoy_jax as ij
 from ijoy_jax import cue, haptics, select
 from ijoy_jax.cue import field
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.robots import dist
 from ijoy_jax.testing import NumpyFootCost
 
@@ -435,21 +436,21 @@ def test_gradients_match_finite_differences_in_float64():
 def test_parameters_are_traced_leaves_no_recompile():
     f = _wall_feasible()
     cue.force(f, [0.25, 0.0, 0.0])
-    n_force = field._force_jit._cache_size()
+    n_force = compiled_count(field._force_jit)
     for kw in (dict(c1=0.3), dict(decay=0.02), dict(c2=0.5), dict(scales=[1.0, 2.0, 0.5]), dict(temperature=0.01)):
         cue.force(f, [0.2, 0.1, 0.0], **kw)
         cue.force(f, [0.2, 0.1, 0.0], cue.make_params(**kw))
-    assert field._force_jit._cache_size() == n_force
+    assert compiled_count(field._force_jit) == n_force
     cue.feasible_commands(WALL, ROBOT, STANCE, -1)
-    n_feas = field._feasible_jit._cache_size()
+    n_feas = compiled_count(field._feasible_jit)
     for stance, side, robot in (([1.0, 1.1, 0.3], 1, ROBOT), (STANCE, -1, ROBOT.replace(margin=jnp.float32(0.05))),
                                 (STANCE, 1, ROBOT.replace(w=jnp.float32(3.0), step_time=jnp.float32(0.6)))):
         cue.feasible_commands(WALL, robot, stance, side)
-    assert field._feasible_jit._cache_size() == n_feas
+    assert compiled_count(field._feasible_jit) == n_feas
     cue.reach(f, 8)
-    n_reach = field._reach_jit._cache_size()
+    n_reach = compiled_count(field._reach_jit)
     cue.reach(_flat_feasible(), 8, turn_rate=0.3)
-    assert field._reach_jit._cache_size() == n_reach
+    assert compiled_count(field._reach_jit) == n_reach
 
 
 def test_c2_is_aldurós_factor_per_unit_of_depth():
@@ -600,10 +601,10 @@ def test_the_prepared_tick_is_the_force_split_at_the_rate_boundary():
     np.testing.assert_array_equal(got, want)
     assert np.any(want != 0)
     cue.tick_force(tick, cmds[0])
-    n = field._tick_jit._cache_size()
+    n = compiled_count(field._tick_jit)
     for kw in (dict(c1=0.1), dict(decay=0.3), dict(temperature=0.003)):
         cue.tick_force(cue.prepare_tick(f, **kw), cmds[1])
-    assert field._tick_jit._cache_size() == n  # the parameters live in the tick's arrays: no recompile
+    assert compiled_count(field._tick_jit) == n  # the parameters live in the tick's arrays: no recompile
     with pytest.raises(TypeError, match="CueTick"):
         cue.tick_force(f, cmds[0])
     with pytest.raises(ValueError, match="command"):

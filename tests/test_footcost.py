@@ -13,6 +13,7 @@ from jax.test_util import check_grads
 import ijoy_jax as ij
 from ijoy_jax import footcost
 from ijoy_jax.footcost.xla import sole_tilt
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.sim.kinematics import rpy_to_rot
 from ijoy_jax.testing import foot_metrics, rect_touches_cells, sole_rpy
 
@@ -457,7 +458,7 @@ def test_no_recompile_when_parameters_or_terrain_values_change():
     steps = np.asarray(ij.action_steps(ROBOT, stance, -1))
     kw = dict(swing_from=np.array([0.6, 0.18, 0.0]), action_index=np.arange(496))
     ij.foot_cost(t, ROBOT, stance, -1, steps, **kw)
-    n = footcost.xla._foot_cost_terms_jit._cache_size()
+    n = compiled_count(footcost.xla._foot_cost_terms_jit)
     variants = [
         ROBOT.replace(margin=jnp.float32(0.05)),
         ROBOT.replace(w=jnp.float32(3.0), rotation_weight=jnp.float32(5.0)),
@@ -469,7 +470,7 @@ def test_no_recompile_when_parameters_or_terrain_values_change():
     for r in variants:
         ij.foot_cost(t, r, stance, -1, steps, **kw)
     ij.foot_cost(t.replace(height=t.height * 2), ROBOT, stance + 0.01, 1, steps, **kw)
-    assert footcost.xla._foot_cost_terms_jit._cache_size() == n
+    assert compiled_count(footcost.xla._foot_cost_terms_jit) == n
 
 
 def test_vmaps_over_terrains_and_robot_parameters():

@@ -10,6 +10,7 @@ from hypothesis.extra import numpy as hnp
 from jax.test_util import check_grads
 
 from ijoy_jax.haptics import effects as E
+from ijoy_jax.jit_cache import compiled_count
 
 # Linux effect fields are 16-bit integers: a field's quantisation step relative to full scale.
 Q16 = 1.0 / 0x7FFF
@@ -112,11 +113,11 @@ def test_joystick_forces_blend_and_saturate():
 def test_no_recompile_when_tuning():
     cfg = E.default_config()
     E.joystick_forces(cfg, jnp.array([0.01, 0.02]), jnp.ones(3))
-    before = E.joystick_forces._cache_size()
+    before = compiled_count(E.joystick_forces)
     for k in (10.0, 20.0, 30.0):
         tuned = cfg.replace(centring=E.linear_centring(k, 2.0), max_force=jnp.float32(k / 4))
         E.joystick_forces(tuned, jnp.array([0.03, -0.01]), jnp.ones(3))
-    assert E.joystick_forces._cache_size() == before
+    assert compiled_count(E.joystick_forces) == before
 
 
 def _decode_linux_condition(cond, x_evdev, max_force, max_deflection):

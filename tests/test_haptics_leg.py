@@ -8,6 +8,7 @@ from jax.test_util import check_grads
 
 from ijoy_jax.haptics import leg as L
 from ijoy_jax.haptics import workspace as W
+from ijoy_jax.jit_cache import compiled_count
 
 # The paper prints x to 4 decimals (0.1 mm); float32 FK of a 1.6 m leg is good to ~1e-6 m.
 PAPER_X_TOL = 1e-4
@@ -177,12 +178,12 @@ def test_no_recompile_over_geometry_and_pose():
     f = jax.jit(L.leg_repulsive_force)
     leg = L.alduro_leg(-1.0)
     f(leg, jnp.array(L.PAPER_Q), 1.0, 0.05)
-    before = f._cache_size()
+    before = compiled_count(f)
     rng = np.random.default_rng(1)
     for _ in range(3):
         q = jnp.asarray(rng.uniform(0.1, 0.9, 4) * np.asarray(leg.stroke), jnp.float32)
         f(leg.replace(thigh=leg.thigh * rng.uniform(0.9, 1.1)), q, rng.uniform(0.5, 2.0), rng.uniform(0.01, 0.2))
-    assert f._cache_size() == before
+    assert compiled_count(f) == before
 
 
 @pytest.mark.parametrize("c1,decay_length", [(float("nan"), 0.05), (-1.0, 0.05), (1.0, -0.05), (1.0, float("nan"))])

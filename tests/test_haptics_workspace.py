@@ -12,6 +12,7 @@ from hypothesis.extra import numpy as hnp
 from jax.test_util import check_grads
 
 from ijoy_jax.haptics import workspace as W
+from ijoy_jax.jit_cache import compiled_count
 
 # float64 planes against qhull's facets: both are a few ulps of O(1) numbers.
 TOL_F64 = 1e-9
@@ -422,10 +423,10 @@ def test_no_recompile():
         )
 
     call()
-    before = f._cache_size()
+    before = compiled_count(f)
     for _ in range(4):
         call()
-    assert f._cache_size() == before
+    assert compiled_count(f) == before
 
 
 def test_linearise_any_forward_kinematics():

@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import geometry, refine, robots, select, testing
+from ijoy_jax.jit_cache import compiled_count
 
 SMALL = ij.robots.hrp2(margin=0.02, density=0.25)
 HRP2 = ij.robots.hrp2(margin=0.02)
@@ -151,12 +152,12 @@ def test_refine_options_are_traced_and_never_recompile():
     stance, side, command, _ = _decision(1)
     targets = ij.make_targets(SMALL)
     ij.select_step(terrain, SMALL, stance, side, command, targets=targets, refine=refine.params())
-    before = select._select_jit._cache_size()
+    before = compiled_count(select._select_jit)
     for span, gain in ((0.5, 0.0), (1.0, 1e-3), (0.25, 1e-6)):
         c = ij.select_step(terrain, SMALL, stance, side, command, targets=targets,
                            refine=refine.params(span=span, min_gain=gain))
         assert bool(c.valid)
-    assert select._select_jit._cache_size() == before
+    assert compiled_count(select._select_jit) == before
 
 
 def test_traced_invalid_refine_options_are_flagged():

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import robots
+from ijoy_jax.jit_cache import compiled_count
 
 
 def test_hrp2_matches_the_paper():
@@ -157,7 +158,7 @@ def test_python_numbers_set_by_replace_keep_the_leaf_dtype_and_do_not_recompile(
                r.replace(w=1e39)]  # beyond float32: inf, as the boundary checks see it
     for robot in changed:
         f(robot)
-    assert f._cache_size() == 1
+    assert compiled_count(f) == 1
     for robot in changed:
         leaves = (robot.w, robot.margin, robot.metrics.support_limit)
         assert all(jax.typeof(x) == jax.typeof(r.w) for x in leaves)

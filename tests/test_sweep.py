@@ -31,6 +31,7 @@ import ijoy_jax as ij
 from ijoy_jax import select, sweep
 from ijoy_jax.apps import cli
 from ijoy_jax.footcost import pallas as footcost_kernel
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.sweep import execute
 from ijoy_jax.terrain import generators
 
@@ -244,13 +245,13 @@ def test_pallas_kernel_gives_the_same_results(reference, tmp_path, monkeypatch):
 def test_parameter_values_do_not_recompile(reference, tmp_path):
     _, stats = reference
     assert stats.compiles <= 1  # 0 if an earlier test of this module compiled the same shapes
-    cache = execute._run_chunk._cache_size()
+    cache = compiled_count(execute._run_chunk)
     other = BASE.replace('"robot.w" = [0.5, 2.0]', '"robot.w" = [0.1, 7.0]').replace(
         '"robot.margin" = [0.0, 0.05]', '"robot.margin" = [0.02, 0.08]').replace(
         "count = 6", "count = 2").replace("vx = [0.1, 0.3]", "vx = 0.2").replace("seed = 3", "seed = 11")
     s = sweep.run(write(tmp_path, other), tmp_path / "o", chunk_size=CHUNK, progress=False)
     assert s.computed == 12 and s.compiles == 0
-    assert execute._run_chunk._cache_size() == cache
+    assert compiled_count(execute._run_chunk) == cache
 
 
 def test_density_compiles_once_per_size(tmp_path):

@@ -10,6 +10,7 @@ from jax.test_util import check_grads
 
 import ijoy_jax as ij
 from ijoy_jax.footcost import foot_cost_terms
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.robots import get_leaf, set_leaf
 from ijoy_jax.select import prepare, select_step
 from ijoy_jax.tune import relax
@@ -270,9 +271,9 @@ def test_no_recompile_across_parameters(robot):
     stance, command = _query(8)
     f = jax.jit(_objective)
     f(terrain, robot, stance, command, 10.0, 1.0)
-    n = f._cache_size()
+    n = compiled_count(f)
     f(terrain, robot.replace(w=jnp.float32(2.0)), stance, command, 30.0, 0.1)
-    assert f._cache_size() == n
+    assert compiled_count(f) == n
 
 
 # ---------------------------------------------------------------------------

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import ijoy_jax as ij
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.robots import get_leaf, set_leaf
 from ijoy_jax.tune import relaxed_rollout
 
@@ -57,8 +58,8 @@ def test_relaxed_rollout_tends_to_exact_rollout(robot):
         ex = relaxed_rollout.relaxed_rollout_jit(terrain, robot, START, cmd, 8, sharpness=1000.0, tau=tau)
         errors.append(float(np.max(np.abs(np.asarray(ex.footsteps) - ref))))
         if tau == 1.0:
-            cache = relaxed_rollout.relaxed_rollout_jit._cache_size()
-    assert relaxed_rollout.relaxed_rollout_jit._cache_size() == cache  # new tau / sharpness values do not recompile
+            cache = compiled_count(relaxed_rollout.relaxed_rollout_jit)
+    assert compiled_count(relaxed_rollout.relaxed_rollout_jit) == cache  # new tau / sharpness values do not recompile
     # Gumbel-softmax: at tau -> 0 the log-probability gaps (cost gap / tau) swamp the O(1) Gumbel noise.
     gs = relaxed_rollout.relaxed_rollout_jit(terrain, robot, START, cmd, 8, sharpness=1000.0, tau=1e-3,
                                              estimator="gumbel", key=jax.random.key(0))

@@ -170,7 +170,7 @@ def make_tuner(
 
     Returns:
       :class:`Tuner`. ``step`` is one ``jax.jit`` function: it compiles once
-      (``tuner.step._cache_size() == 1`` after any number of steps).
+      (``jit_cache.compiled_count(tuner.step) == 1`` after any number of steps).
 
     Example:
       >>> import jax.numpy as jnp, optax
