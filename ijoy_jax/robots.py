@@ -92,7 +92,7 @@ class TerrainMetrics:
 
 
 def default_metrics(
-    slope_weight=0.5,
+    slope_weight=1.0,
     slope_limit=math.radians(20.0),
     roughness_weight=20.0,
     roughness_limit=0.01,

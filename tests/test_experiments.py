@@ -856,9 +856,10 @@ def test_the_papers_reach_marks_time_before_a_full_width_riser():
     foot, so the stance foot's toe (+0.121) is always ahead of the swing foot's heel (L - 0.121 = 0.079), and
     further than the margin (0.02) in front of a riser that the swing foot's grown heel has passed: a riser across
     both lanes can only be crossed by a foot straddling it. Straddling is valid for low risers, but with w = 1 it
-    costs more than marking time: the perfect robot walks up to the riser and marks time before every full-width
-    riser of 2 cm or more, up or down, and before one of 1.3 cm where it falls 15 cm ahead of a foothold (at 18 cm
-    it straddles that one: its roughness and slope cost less there). Stairs need a longer reach
+    costs more than marking time (test_w_trades_terrain_cost_against_following_the_command): the perfect robot
+    walks up to the riser and marks time before every full-width riser of 1.3 cm or more, up or down, wherever it
+    falls along the lattice (at a slope weight of 0.5, the default before issue #20's image maps, it straddled a
+    1.3 cm riser 18 cm ahead of a foothold). Stairs need a longer reach
     (test_a_longer_reach_climbs_and_descends_stairs)."""
     robot, runs = _stair_runs(0.20, BLOCKING_RISERS)
     acts = np.asarray(robot.actions)
@@ -867,9 +868,6 @@ def test_the_papers_reach_marks_time_before_a_full_width_riser():
         name = f"rise {rise} at x = {first}"
         assert traj.taken.all() and not traj.stopped.any() and traj.valid.all(), name
         crossed = [t for t in range(STAIR_STEPS) if min(abs(v) for v in _under(height, traj.footsteps[t])) > 1e-6]
-        if first == STAIR_X + 0.03 and rise == 0.013:  # the straddle is cheaper here: it walks on
-            assert crossed and traj.feet[:, 0].min() > first + 0.5, name
-            continue
         assert not crossed, (name, traj.footsteps[crossed[0]])  # no foot ever wholly beyond the riser
         assert traj.in_place[-4:].all() and _repeats(traj), name  # marking time ...
         assert np.all(first - (traj.feet[:, 0] + HL) < float(robot.margin) + TOL), (name, traj.feet)  # ... at it

@@ -260,7 +260,7 @@ def test_slope_of_a_ramp_and_its_limit():
     terms = ij.foot_cost_terms(t, ROBOT, pose[0], -1, pose, action_index=[0])
     assert float(terms.slope_angle[0]) == pytest.approx(alpha, abs=1e-4)
     assert float(terms.roughness_m[0]) < 1e-5
-    assert float(terms.slope[0]) == pytest.approx(0.5 * alpha, rel=1e-3)  # default weight 0.5 / rad
+    assert float(terms.slope[0]) == pytest.approx(float(ROBOT.metrics.slope_weight) * alpha, rel=1e-3)  # weight / rad
     steep = ROBOT.replace(metrics=ROBOT.metrics.replace(slope_limit=jnp.float32(math.radians(10))))
     assert np.isinf(ij.foot_cost_terms(t, steep, pose[0], -1, pose, action_index=[0]).slope[0])
 

@@ -19,9 +19,13 @@ RES = 0.02
 NUM_QUERIES = 24
 SCHEDULE = ((3.0, 1.0), (10.0, 0.3), (30.0, 0.1), (100.0, 0.03), (300.0, 0.01))  # (sharpness, tau)
 # Fraction of queries whose most probable action is an exact optimum at the end of the schedule.
-# Measured: 2D 24/24, 2.5D 22/24 (misses are footholds within a fraction of a cell of a limit).
+# Measured: 2D 24/24, 2.5D 20 of 23 valid queries (21 at the slope weight of 0.5; misses are footholds within a
+# fraction of a cell of a limit).
 FINAL_AGREEMENT = {False: 0.95, True: 0.85}
-SLACK = 1  # queries the agreement may drop by from one schedule point to the next (finite samples)
+# Queries the agreement may drop by from one schedule point to the next (finite samples): at the first two points
+# (tau 1 and 0.3, above most cost gaps) the mode is close to arbitrary; measured 2.5D: 8 -> 6 of 23 there with
+# the slope weight of 1 (7 -> 7 at 0.5), increasing from then on (12, 17, 20; 13, 17, 21 at 0.5).
+SLACK = 2
 FD_RTOL64 = 1e-5  # float64 central differences, h = 1e-6: truncation ~h^2 and rounding ~1e-16 / h
 FD_RTOL32 = 0.05  # float32 check_grads: eps 1e-2 of order-1 central differences on a sharp function
 
