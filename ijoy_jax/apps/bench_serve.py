@@ -1,8 +1,9 @@
 """Benchmark the footstep server: ``ijoy bench serve [--quick] [--json PATH]``.
 
 One run, one workload: HRP-2 (496 actions, margin 2 cm) on the benchmark's 2.5D map of 200 x 200 cells at
-2 cm (``bench.workload_terrain``: a 3 cm swell, 2 mm noise, 0.2 % obstacle cells), full decisions with the swing-path
-check, stances and commands from ``bench._queries``, sides alternating. Measured, in this order:
+2 cm (``bench.workload_terrain``: a 3 cm swell, 2 mm noise, 0.2 % obstacle cells), full decisions with the
+swing-path check, stances and commands from ``bench.workload_queries``, sides alternating. Measured, in this
+order:
 
 * ``in_process``: :func:`ijoy_jax.select_step` called in this process with the map's prepared tables
   (:func:`ijoy_jax.select.prepare`, as the server keeps them), each call synchronised with
