@@ -80,3 +80,55 @@ def test_zmp_on_a_raised_support_plane(setup, zmp_fn):
     np.testing.assert_allclose(np.asarray(raised - flat)[:, 1], 0.0, atol=ZMP_TOL)
     np.testing.assert_allclose(np.asarray(flat)[:, 0] - (com[0] + traj[1:-1, 0] - qpos[0]),
                                -com[2] * acc / G, atol=ZMP_TOL)
+
+
+def _inverse_dynamics_zmp(m, qpos, dt):
+    """The reference: the ZMP from the free joint's rows of ``mjx.inverse`` (the full inverse dynamics)."""
+    from mujoco import mjx
+
+    v = jax.vmap(lambda a, b: dynamics._free_velocity(a, b, dt))(qpos[:-1], qpos[1:])
+    qvel, qacc = 0.5 * (v[1:] + v[:-1]), (v[1:] - v[:-1]) / dt
+
+    def one(q, qv, qa):
+        d = mjx.inverse(m, mjx.make_data(m).replace(qpos=q, qvel=qv, qacc=qa))
+        f = d.qfrc_inverse[0:3]
+        tau = d.xmat[1].reshape(3, 3) @ d.qfrc_inverse[3:6] + jnp.cross(q[0:3], f)
+        return jnp.stack([-tau[1] / f[2], tau[0] / f[2]]), f[2]
+
+    return jax.vmap(one)(qpos[1:-1], qvel, qacc)
+
+
+def test_the_zmp_matches_full_inverse_dynamics_on_a_swinging_turning_motion(setup, zmp_fn):
+    """Every joint swinging, the body translating, rolling and turning: motion_zmp's Newton-Euler pass gives
+    the ZMP and vertical force of MuJoCo's full inverse dynamics (the one it replaced) to float32 rounding."""
+    m, qpos, com, mass = setup
+    rng = np.random.default_rng(3)
+    n = 30
+    t = np.arange(n) * 0.01
+    traj = np.tile(np.asarray(qpos, np.float64), (n, 1))
+    traj[:, 0] += 0.3 * t + 0.2 * t**2
+    traj[:, 1] += 0.05 * np.sin(6 * t)
+    yaw, roll = 0.3 * t**2, 0.05 * np.sin(5 * t)
+    traj[:, 3:7] = np.stack([np.cos(yaw / 2) * np.cos(roll / 2), np.cos(yaw / 2) * np.sin(roll / 2),
+                             np.sin(yaw / 2) * np.sin(roll / 2), np.sin(yaw / 2) * np.cos(roll / 2)], axis=1)
+    nj = traj.shape[1] - 7
+    traj[:, 7:] += 0.3 * np.sin(np.outer(t, rng.uniform(2, 8, nj)) + rng.uniform(0, 6, nj))
+    traj = jnp.asarray(traj, jnp.float32)
+    zmp, fz = zmp_fn(m, traj, dt=0.01)
+    want_zmp, want_fz = jax.jit(_inverse_dynamics_zmp, static_argnames="dt")(m, traj, dt=0.01)
+    assert float(np.ptp(np.asarray(want_zmp)[:, 0])) > 0.01  # the motion moves the ZMP (1.6 cm): a real comparison
+    np.testing.assert_allclose(zmp, want_zmp, atol=1e-5)  # m; measured 4.5e-8
+    np.testing.assert_allclose(fz, want_fz, rtol=1e-5)
+
+
+@pytest.mark.parametrize("change, match", [
+    (lambda mm: mm.jnt_stiffness.__setitem__(1, 5.0), "joint springs"),
+    (lambda mm: mm.body_gravcomp.__setitem__(1, 1.0), "gravity compensation"),
+    (lambda mm: setattr(mm.opt, "density", 1.2), "fluid forces"),
+    (lambda mm: mm.jnt_type.__setitem__(0, mujoco.mjtJoint.mjJNT_BALL), "first joint must be its free joint"),
+])
+def test_no_contact_model_refuses_forces_the_zmp_leaves_out(change, match):
+    mj_model = model._robot_model(model.biped_params())
+    change(mj_model)
+    with pytest.raises(ValueError, match=match):
+        dynamics.no_contact_model(mj_model)
