@@ -1,5 +1,7 @@
 """Tests of the multibody ZMP (ijoy_jax.sim.dynamics) against closed forms."""
 
+import copy
+
 import jax
 import jax.numpy as jnp
 import mujoco
@@ -98,10 +100,24 @@ def _inverse_dynamics_zmp(m, qpos, dt):
     return jax.vmap(one)(qpos[1:-1], qvel, qacc)
 
 
-def test_the_zmp_matches_full_inverse_dynamics_on_a_swinging_turning_motion(setup, zmp_fn):
+def _with_passive_forces(mj_model):
+    """The robot with every passive force motion_zmp models on the free joint's rows, and some on other rows:
+    damping and armature on the free joint's six dofs, springs on every hinge (their own rows only)."""
+    mj_model = copy.copy(mj_model)
+    mj_model.dof_damping[:6] = [30.0, 20.0, 40.0, 5.0, 8.0, 3.0]
+    mj_model.dof_armature[:6] = [0.5, 0.2, 0.4, 0.05, 0.08, 0.03]
+    mj_model.jnt_stiffness[1:] = 20.0
+    return mj_model
+
+
+@pytest.mark.parametrize("passive", [False, True], ids=["as built", "free-joint damping and armature, hinge springs"])
+def test_the_zmp_matches_full_inverse_dynamics_on_a_swinging_turning_motion(setup, zmp_fn, passive):
     """Every joint swinging, the body translating, rolling and turning: motion_zmp's Newton-Euler pass gives
-    the ZMP and vertical force of MuJoCo's full inverse dynamics (the one it replaced) to float32 rounding."""
+    the ZMP and vertical force of MuJoCo's full inverse dynamics (the one it replaced) to float32 rounding,
+    also with the passive forces no_contact_model allows (damping enters with mjx.inverse's sign)."""
     m, qpos, com, mass = setup
+    if passive:
+        m = dynamics.no_contact_model(_with_passive_forces(model._robot_model(model.biped_params())))
     rng = np.random.default_rng(3)
     n = 30
     t = np.arange(n) * 0.01
@@ -121,8 +137,15 @@ def test_the_zmp_matches_full_inverse_dynamics_on_a_swinging_turning_motion(setu
     np.testing.assert_allclose(fz, want_fz, rtol=1e-5)
 
 
+_TENDON_XML = """<mujoco><worldbody><body><freejoint/><geom size="0.1" mass="1"/>
+  <body pos="0 0 -0.2"><joint name="h1" axis="0 1 0"/><geom size="0.05" mass="0.5"/>
+  <body pos="0 0 -0.2"><joint name="h2" axis="0 1 0"/><geom size="0.05" mass="0.5"/></body></body></body>
+  </worldbody><tendon><fixed stiffness="3"><joint joint="h1" coef="1"/><joint joint="h2" coef="-1"/></fixed>
+  </tendon></mujoco>"""
+
+
 @pytest.mark.parametrize("change, match", [
-    (lambda mm: mm.jnt_stiffness.__setitem__(1, 5.0), "joint springs"),
+    (lambda mm: mm.jnt_stiffness.__setitem__(0, 5.0), "a spring on the free joint"),
     (lambda mm: mm.body_gravcomp.__setitem__(1, 1.0), "gravity compensation"),
     (lambda mm: setattr(mm.opt, "density", 1.2), "fluid forces"),
     (lambda mm: mm.jnt_type.__setitem__(0, mujoco.mjtJoint.mjJNT_BALL), "first joint must be its free joint"),
@@ -131,4 +154,16 @@ def test_no_contact_model_refuses_forces_the_zmp_leaves_out(change, match):
     mj_model = model._robot_model(model.biped_params())
     change(mj_model)
     with pytest.raises(ValueError, match=match):
+        dynamics.no_contact_model(mj_model)
+
+
+def test_no_contact_model_refuses_tendon_springs_and_names_every_force_left_out():
+    mj_model = mujoco.MjModel.from_xml_string(_TENDON_XML)
+    with pytest.raises(ValueError, match="tendon springs or dampers$"):
+        dynamics.no_contact_model(mj_model)
+    mj_model.tendon_stiffness[:] = 0.0
+    dynamics.no_contact_model(mj_model)  # the same model without the tendon's spring is accepted
+    mj_model.body_gravcomp[1] = 1.0
+    mj_model.tendon_damping[:] = 2.0
+    with pytest.raises(ValueError, match="gravity compensation, tendon springs or dampers"):
         dynamics.no_contact_model(mj_model)

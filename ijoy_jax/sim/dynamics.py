@@ -28,14 +28,21 @@ def no_contact_model(mj_model: mujoco.MjModel) -> mjx.Model:
     """The MJX model with constraints (contacts, joint limits) disabled, for inverse dynamics of free motion.
 
     Raises ValueError for a model whose free joint :func:`motion_zmp` would misread: one that is not the
-    first joint, or passive forces it leaves out (joint springs, gravity compensation, fluid forces).
+    first joint, or passive forces on its rows that it leaves out (a spring on the free joint, gravity
+    compensation, fluid forces, tendon springs or dampers). Springs on the other joints act on their own rows
+    only, and damping is modelled (:func:`motion_zmp`), so both are allowed.
     """
     if mj_model.njnt < 1 or mj_model.jnt_type[0] != mujoco.mjtJoint.mjJNT_FREE:
         raise ValueError("the robot's first joint must be its free joint")
-    if (np.any(mj_model.jnt_stiffness != 0) or np.any(mj_model.body_gravcomp != 0)
-            or mj_model.opt.density != 0 or mj_model.opt.viscosity != 0):
-        raise ValueError("motion_zmp models no joint springs, gravity compensation or fluid forces; "
-                         "this model has some")
+    leaves_out = [what for what, present in (
+        ("a spring on the free joint", mj_model.jnt_stiffness[0] != 0),
+        ("gravity compensation", np.any(mj_model.body_gravcomp != 0)),
+        ("fluid forces", mj_model.opt.density != 0 or mj_model.opt.viscosity != 0),
+        ("tendon springs or dampers", np.any(mj_model.tendon_stiffness != 0) or np.any(mj_model.tendon_damping != 0)),
+    ) if present]
+    if leaves_out:
+        raise ValueError(f"motion_zmp leaves out passive forces on the free joint's rows; this model has "
+                         f"{', '.join(leaves_out)}")
     m = copy.copy(mj_model)
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT) | int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
     return mjx.put_model(m)
@@ -88,11 +95,12 @@ def motion_zmp(m: mjx.Model, qpos: jax.Array, dt: float, ground=None) -> tuple[j
     def one(q, qv, qa, z):
         # The free joint's rows of mjx.inverse, without what they never need (the mass matrix and its
         # factor, sensors, constraints, a second Newton-Euler pass): the bias forces with the inertial
-        # term, plus the armature's and minus the damping's (the passive forces no_contact_model allows).
-        # The same to float32 rounding (4.5e-8 m of ZMP, test_sim_dynamics), at two thirds of the time.
+        # term, plus the armature's, minus the passive forces (inverse dynamics subtracts qfrc_passive):
+        # of those no_contact_model allows on these rows, the damping -dof_damping * qvel. The same to
+        # float32 rounding (4.5e-8 m of ZMP, test_sim_dynamics), at two thirds of the time.
         d = mjx.make_data(m).replace(qpos=q, qvel=qv, qacc=qa)
         d = mjx.rne(m, mjx.com_vel(m, mjx.com_pos(m, mjx.kinematics(m, d))), flg_acc=True)
-        qfrc = d.qfrc_bias + m.dof_armature * qa - m.dof_damping * qv
+        qfrc = d.qfrc_bias + m.dof_armature * qa + m.dof_damping * qv
         f = qfrc[0:3]
         # The free joint's torque is in the floating body's frame; kinematics computed its pose.
         tau = d.xmat[1].reshape(3, 3) @ qfrc[3:6] + jnp.cross(q[0:3], f)
