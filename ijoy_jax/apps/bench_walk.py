@@ -667,7 +667,8 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
       batch: robots (maps) per family; steps: steps per rollout.
       commands: some of :data:`COMMANDS`; the same maps serve both kinds.
       resolution: cell size (m) of the 5 m x 2 m maps.
-      seed: maps and random commands (family i uses ``fold_in(seed, i)``).
+      seed: maps and random commands: a family's come from ``fold_in(seed, i)``, i its index in
+        :data:`FAMILIES`, so it walks the same maps and commands whichever families run beside it.
       chunk: simulated rollouts per jitted call (equal chunks, one compile): default ``batch`` up to 1024 on an
         accelerator (a rollout holds tens of MB of selector windows; on an H100 1024 ran 1.6x the physics
         steps/s of 512), 32 on a CPU.
@@ -716,7 +717,7 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
     setup = dict(batch=batch, steps=steps, resolution=resolution, shape=list(shape), chunk=chunk, seed=seed,
                  forward_m_s=forward, refine=refine, robot_leaves=leaves, **info)
     key = jax.random.key(seed)
-    for i, name in enumerate(names):
+    for name in names:
         fam = FAMILIES[name]
         try:
             robot = robots.set_leaves(fam.robot(), leaves)
@@ -724,7 +725,7 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
             record(dict(name="walk", family=name, skipped=f"robots.hrp2(reach={fam.reach}) failed: {e}", **setup))
             continue
         robot_name = "hrp2()" if fam.reach is None else f"hrp2(reach={fam.reach})"
-        k_map, k_cmd = jax.random.split(jax.random.fold_in(key, i))
+        k_map, k_cmd = jax.random.split(jax.random.fold_in(key, list(FAMILIES).index(name)))
         t0 = time.perf_counter()
         maps = jax.block_until_ready(fam.make(k_map, batch, shape=shape, resolution=resolution))
         maps_s = time.perf_counter() - t0
