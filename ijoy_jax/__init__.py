@@ -20,7 +20,10 @@ Public API:
   tune                                               tuning by gradient (relaxed selector, optax tuners)
 """
 
+# _xla_workaround comes first (and sorts first): importing it sets XLA_FLAGS before any module below starts
+# JAX's backends, which read them once.
 from ijoy_jax import (
+    _xla_workaround,  # noqa: F401
     control,
     cue,
     footcost,
