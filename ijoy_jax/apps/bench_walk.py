@@ -144,6 +144,16 @@ class WalkFamily:
         """The family's robot: ``robots.hrp2()``, or ``robots.hrp2(reach=...)`` for a family with its own reach."""
         return robots.hrp2() if self.reach is None else robots.hrp2(reach=self.reach)
 
+    def maps(self, key, batch: int, *, shape, resolution: float) -> Terrain:
+        """:attr:`make` as one jitted program per family, batch and grid (a new key reuses it): the same maps
+        (to float32 rounding) as ``make`` op by op, which compiles each of its hundreds of small ops."""
+        return _jitted(self.make)(key, batch, shape=tuple(int(n) for n in shape), resolution=float(resolution))
+
+
+@functools.cache
+def _jitted(make: Callable[..., Terrain]) -> Callable[..., Terrain]:
+    return jax.jit(make, static_argnums=1, static_argnames=("shape", "resolution"))
+
 
 def grid_shape(resolution: float = RESOLUTION) -> tuple[int, int]:
     """(nx, ny) cells of the 5 m x 2 m map at ``resolution`` m (which must divide both extents)."""
@@ -313,7 +323,10 @@ def platforms(key, batch: int, *, shape, resolution: float, max_height: float | 
     0.1 m), so one foot walks on it and the other beside it. Boxes are surfaces drawn with
     :func:`ijoy_jax.terrain.scene.rasterize`.
     """
-    top = float(np.max(np.asarray(robots.hrp2().max_step_height))) if max_height is None else float(max_height)
+    if max_height is None:
+        with jax.ensure_compile_time_eval():  # the preset's leaves are constants, also under jit
+            max_height = float(np.max(np.asarray(robots.hrp2().max_step_height)))
+    top = float(max_height)
     ground = flat(key, batch, shape=shape, resolution=resolution)
     u = jax.random.uniform(as_key(key), (batch, 8), jnp.float32)
     side = jnp.where(u[:, 0] < 0.5, 1.0, -1.0)
@@ -388,8 +401,8 @@ def load_ground(path=None, *, resolution: float = RESOLUTION, height_scale: floa
 
 def window_offsets(key, batch: int, image_shape, shape) -> jax.Array:
     """(batch, 2) int32 cell offsets (ix, iy) of each robot's window in the image, uniform over the image."""
-    span = jnp.asarray([image_shape[0] - shape[0] + 1, image_shape[1] - shape[1] + 1], jnp.int32)
-    if int(jnp.min(span)) < 1:
+    span = np.asarray([image_shape[0] - shape[0] + 1, image_shape[1] - shape[1] + 1], np.int32)  # static
+    if int(span.min()) < 1:
         raise ValueError(f"ground image {tuple(image_shape)} cells is smaller than the map {tuple(shape)}")
     return jax.random.randint(as_key(key), (batch, 2), 0, span, jnp.int32)
 
@@ -727,7 +740,7 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
         robot_name = "hrp2()" if fam.reach is None else f"hrp2(reach={fam.reach})"
         k_map, k_cmd = jax.random.split(jax.random.fold_in(key, list(FAMILIES).index(name)))
         t0 = time.perf_counter()
-        maps = jax.block_until_ready(fam.make(k_map, batch, shape=shape, resolution=resolution))
+        maps = jax.block_until_ready(fam.maps(k_map, batch, shape=shape, resolution=resolution))
         maps_s = time.perf_counter() - t0
         lo, hi = float(jnp.min(maps.height)), float(jnp.max(maps.height))
         if sim is not None and (lo < HEIGHT_RANGE[0] or hi > HEIGHT_RANGE[1]):
