@@ -89,5 +89,6 @@ def test_import_sets_the_flag_keeps_a_callers_value_and_warns_when_too_late():
 
 
 def test_backends_started_reports_this_process():
+    """The started case (the fresh-process test's APPLIED True, where this jaxlib needs it, is the other)."""
     jax.devices()
     assert xw.backends_started()
