@@ -442,7 +442,7 @@ def test_robot_leaves_reach_the_choice_and_are_recorded(maps):
     assert row["progress_mean_m"] < row0["progress_mean_m"]
     robot = robots.set_leaves(robots.hrp2(), leaves)
     k_map, k_cmd = jax.random.split(jax.random.fold_in(jax.random.key(5), list(B.FAMILIES).index("rough")))
-    terr = B.FAMILIES["rough"].make(k_map, BATCH, shape=SHAPE, resolution=RES)
+    terr = B.FAMILIES["rough"].maps(k_map, BATCH, shape=SHAPE, resolution=RES)  # as run draws them
     starts = B.start_stances(robot, BATCH)
     cmd = B.commands_for("forward", jax.random.fold_in(k_cmd, B.COMMANDS.index("forward")), robot, BATCH, 4,
                          B.FORWARD)
