@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from jax import lax
 from hypothesis import given
 from hypothesis import strategies as st
 from mujoco import mjx
@@ -196,3 +197,37 @@ def test_nominal_dynamics_are_the_sims_own(sims):
     assert W.nominal_dynamics(slippery) == physics.NOMINAL.replace(friction=0.4)
     # every actuator is a position servo, whose kp put_dynamics scales
     assert set(np.asarray(a.mjx_model.actuator_biastype)) == {int(mujoco.mjtBias.mjBIAS_AFFINE)}
+
+
+def test_sensors_read_after_quiet_steps_are_the_sensors_every_step_computes(sims):
+    """The walker's physics steps run without MuJoCo's sensor stage and read the sensors once per control tick
+    (:func:`W.read_sensors`): the robot moves exactly as with sensors on, and the sensors read afterwards equal
+    those ``mjx.step`` computes in its last step (the ankles' force/torque and the CoM and its velocity).
+
+    Reference: five plain ``mjx.step`` calls of the model with its sensors, from a standing robot given a push and
+    joint targets off its pose (so the soles' contact forces and the accelerations are not zero)."""
+    sim = sims[0]
+    robot = ij.robots.hrp2()
+
+    @jax.jit
+    def both():
+        world = W.make_world(sim, TERRAIN)
+        d = W.init_state(sim, world, robot, ij.robots.start_stance(robot, 0.3, 0.25), 1).data
+        d = d.replace(qvel=d.qvel.at[0].set(0.3).at[4].set(-0.5), ctrl=d.ctrl + 0.05)
+        plain = lax.fori_loop(0, 5, lambda _, d: mjx.step(world.m, d), d)
+        quiet = lax.fori_loop(0, 4, lambda _, d: mjx.step(W.without_sensors(world.m), d), d)
+        start = W.step_start(quiet)
+        quiet = mjx.step(W.without_sensors(world.m), quiet)
+        return plain, quiet, W.read_sensors(world.m, quiet, start)
+
+    plain, quiet, read = both()
+    np.testing.assert_allclose(quiet.qpos, plain.qpos, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(quiet.qvel, plain.qvel, rtol=0, atol=1e-5)
+    # the quiet steps computed no sensor: sensordata is the start state's (zeros; init_state computes none)
+    assert not np.any(np.asarray(quiet.sensordata))
+    want = np.asarray(plain.sensordata)
+    assert np.abs(want).max() > 100.0  # the soles are loaded: the force sensors read hundreds of N
+    # float32, two traces of the same arithmetic: rounding of a few ulp of the largest value (hundreds of N)
+    np.testing.assert_allclose(read.sensordata, want, rtol=0, atol=1e-5 * np.abs(want).max())
+    for name in ("qpos", "qvel", "act", "time"):  # the integrated state stays
+        np.testing.assert_array_equal(getattr(read, name), getattr(quiet, name), err_msg=name)

@@ -222,6 +222,33 @@ def centre_of_mass(sim: Sim, d: mjx.Data) -> tuple[jax.Array, jax.Array]:
     return d.sensordata[adr[0]], d.sensordata[adr[1]]
 
 
+def without_sensors(m: mjx.Model) -> mjx.Model:
+    """``m`` with MuJoCo's sensor stage disabled (``opt.disableflags``, a static field): a physics step that
+    computes no ``sensordata`` and moves the robot exactly as ``m`` does."""
+    return m.replace(opt=m.opt.replace(disableflags=m.opt.disableflags | mjx.DisableBit.SENSOR))
+
+
+def step_start(d: mjx.Data) -> tuple[jax.Array, ...]:
+    """The state a physics step integrates: ``(qpos, qvel, act, time)`` of ``d`` (for :func:`read_sensors`)."""
+    return d.qpos, d.qvel, d.act, d.time
+
+
+def read_sensors(m: mjx.Model, d: mjx.Data, start: tuple[jax.Array, ...]) -> mjx.Data:
+    """``d`` with ``sensordata`` as ``mjx.step(m, .)`` would have filled it in the step that produced ``d``.
+
+    MuJoCo computes sensors in ``forward``, at the state the step starts from (``start``, its
+    :func:`step_start`), then integrates ``qpos``, ``qvel``, ``act`` and ``time``. Every other field the
+    sensors read (poses, ``cvel``, ``qacc``, the contacts and their forces) is still the step's own, so the
+    sensors are evaluated on ``d`` with the start state put back, and ``d`` keeps its integrated state. The
+    physics steps of a control tick run :func:`without_sensors` and this once after the last of them
+    (:func:`tick`): the ankles' force/torque sensors cost a second Newton-Euler pass.
+    """
+    qpos, qvel, act, time = start
+    sensed = mjx.sensor_acc(m, mjx.sensor_vel(m, mjx.sensor_pos(m, d.replace(qpos=qpos, qvel=qvel, act=act,
+                                                                              time=time))))
+    return sensed.replace(qpos=d.qpos, qvel=d.qvel, act=d.act, time=d.time)
+
+
 def _normal(sole) -> jax.Array:
     """(3,) the unit normal of a sole (6,) x, y, z, roll, pitch, yaw."""
     return kinematics.rpy_to_rot(sole[3:6])[:, 2]
@@ -488,16 +515,20 @@ def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
     q0 = d.ctrl
     fractions = jnp.arange(1, sim.substeps + 1, dtype=jnp.float32) / sim.substeps
 
+    quiet = without_sensors(world.m)  # the controller reads the sensors once per tick: after the last step
+
     def step_physics(c, frac):
-        d, touched, low, tilt = c
-        d = mjx.step(world.m, d.replace(ctrl=q0 + frac * (q - q0)))
+        d, _, touched, low, tilt = c
+        d = d.replace(ctrl=q0 + frac * (q - q0))
+        start = step_start(d)
+        d = mjx.step(quiet, d)
         low = jnp.minimum(low, d.qpos[2] - step.ground)
         tilt = jnp.maximum(tilt, _tilt(d.qpos[3:7]))
         touched = touched | _obstacle_contact(sim, world.terrain, d)
-        return (d, touched, low, tilt), None
+        return (d, start, touched, low, tilt), None
 
-    (d, touched, low, tilt), _ = lax.scan(step_physics, (d, touched, low, tilt), fractions)
-    return TickState(d, cs, touched, low, tilt, sent)
+    (d, start, touched, low, tilt), _ = lax.scan(step_physics, (d, step_start(d), touched, low, tilt), fractions)
+    return TickState(read_sensors(world.m, d, start), cs, touched, low, tilt, sent)
 
 
 def end_step(sim: Sim, world: World, state: SimState, step: Step, ticks: TickState,
