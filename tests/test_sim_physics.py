@@ -13,9 +13,9 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
-from jax import lax
 from hypothesis import given
 from hypothesis import strategies as st
+from jax import lax
 from mujoco import mjx
 
 import ijoy_jax as ij
