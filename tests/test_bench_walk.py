@@ -418,6 +418,7 @@ def test_touchdown_feet_of_the_perfect_robot_are_its_final_feet():
     (dict(resolution=0.03), "whole cells"),
     (dict(forward=float("nan")), "forward speed"),
     (dict(refine="yes"), "refine must be True or False"),
+    (dict(kernel="triton"), "kernel must be one of"),
     (dict(robot_leaves={"foot_length": 0.3}), "unknown robot leaves"),
     (dict(robot_leaves={"metrics.support_limit": -1.0}), r"robot\.metrics\.support_limit must be finite"),
     (dict(robot_leaves={"w": "2"}), r"robot\.w must be a number"),
@@ -426,6 +427,32 @@ def test_touchdown_feet_of_the_perfect_robot_are_its_final_feet():
 def test_run_refuses_bad_options_before_any_compute(kwargs, message):
     with pytest.raises(ValueError, match=message):
         B.run(**kwargs)
+
+
+def test_the_fused_kernel_reaches_the_selector_chooses_as_xla_and_is_recorded():
+    """``kernel="pallas"`` (``ijoy bench walk --kernel pallas``) puts the fused FootCost kernel (interpreted on
+    the CPU) in the perfect robot's selector, and every row names it. Its choices are XLA's on rough maps up to
+    float32 rounding: the decisions cost the same until a near-tie (two actions whose costs differ by rounding)
+    goes the other way, after which the robots walk on from different feet."""
+    robot = robots.hrp2()
+    starts = B.start_stances(robot, BATCH)
+    cmd = B.commands_for("random", 3, robot, BATCH, 3)
+    terrains = B.FAMILIES["rough"].maps(jax.random.key(3), BATCH, shape=SHAPE, resolution=RES)
+
+    def program(kernel):
+        return str(jax.make_jaxpr(lambda t: B.perfect_rollouts(t, robot, starts, cmd, num_steps=3,
+                                                               kernel=kernel))(terrains))
+
+    assert "pallas_call" in program("pallas") and "pallas_call" not in program("xla")
+    xla = B.perfect_rollouts(terrains, robot, starts, cmd, num_steps=3)
+    fused = B.perfect_rollouts(terrains, robot, starts, cmd, num_steps=3, kernel="pallas")
+    same_feet = np.all(np.abs(np.asarray(fused.footsteps) - np.asarray(xla.footsteps)) < 1e-5, axis=-1)
+    before = np.cumprod(np.concatenate([np.ones((BATCH, 1), bool), same_feet[:, :-1]], axis=1), axis=1) > 0
+    assert before.sum() >= 0.75 * before.size  # (the decisions up to and including each robot's first difference)
+    np.testing.assert_allclose(np.asarray(fused.cost)[before], np.asarray(xla.cost)[before], rtol=1e-6, atol=1e-6)
+    assert np.all(np.isfinite(np.asarray(xla.cost)[before]))
+    rows = B.run(["flat"], batch=BATCH, steps=2, commands=("forward",), walkers=("perfect",), kernel="pallas")
+    assert [r["kernel"] for r in rows] == ["pallas", "pallas"]
 
 
 def test_robot_leaves_reach_the_choice_and_are_recorded(maps):

@@ -23,6 +23,7 @@ CASES = [
     (["bench", "walk", "--plot", "no/such/folder/walk.png"], "no folder for"),
     (["bench", "sim", "--batch", "4"], "--batch: options of 'ijoy bench walk' only"),
     (["bench", "select", "--refine"], "--refine: options of 'ijoy bench walk' only"),
+    (["bench", "footcost", "--kernel", "pallas"], "--kernel: options of 'ijoy bench walk' only"),
     (["bench", "walk", "--set", "metrics.support_limit"], "--set takes NAME=VALUE, e.g. metrics.support_limit="),
     (["bench", "walk", "--set", "w=abc"], "--set 'w=abc': 'abc' is not a number"),
     (["bench", "walk", "--set", "foot_length=0.3"], "--set 'foot_length=0.3': 'foot_length' is not one of ['w',"),

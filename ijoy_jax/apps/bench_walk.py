@@ -574,22 +574,25 @@ def _stack_robot(robot: robots.Robot, batch: int) -> robots.Robot:
 
 
 def perfect_rollouts(terrains: Terrain, robot: robots.Robot, starts, commands, *, num_steps: int,
-                     targets=None, refine: bool = False) -> control.Trajectory:
+                     targets=None, refine: bool = False, kernel: str = "xla") -> control.Trajectory:
     """The perfect robot on B maps: one jitted ``vmap`` of :func:`ijoy_jax.control.rollout` (``method="ordered"``).
 
     ``terrains``, ``starts`` (B, 2, 3) and ``commands`` (B, num_steps, 3) are batched; the robot and its
     targets (:func:`ijoy_jax.make_targets`, built when None) are shared, and traced: new maps, commands or
     robot values reuse the compiled program. ``refine``: each lattice choice refined to a continuous foothold
-    (:mod:`ijoy_jax.refine`; one more program).
+    (:mod:`ijoy_jax.refine`; one more program). ``kernel``: FootCost's implementation (``select_step``'s).
     """
     targets = select.make_targets(robot) if targets is None else targets
-    return _perfect_jit(terrains, robot, starts, commands, targets, num_steps=int(num_steps), refine=bool(refine))
+    return _perfect_jit(terrains, robot, starts, commands, targets, num_steps=int(num_steps), refine=bool(refine),
+                        kernel=kernel)
 
 
-@functools.partial(jax.jit, static_argnames=("num_steps", "refine"))
-def _perfect_jit(terrains, robot, starts, commands, targets, *, num_steps: int, refine: bool = False):
+@functools.partial(jax.jit, static_argnames=("num_steps", "refine", "kernel"))
+def _perfect_jit(terrains, robot, starts, commands, targets, *, num_steps: int, refine: bool = False,
+                 kernel: str = "xla"):
     def one(t, s, c):
-        return control.rollout(t, robot, s, c, num_steps, method="ordered", targets=targets, refine=refine)
+        return control.rollout(t, robot, s, c, num_steps, method="ordered", targets=targets, refine=refine,
+                               kernel=kernel)
 
     return jax.vmap(one)(terrains, starts, commands)
 
@@ -604,8 +607,9 @@ def _timed(fn, *args, **kwargs):
 
 
 def simulated_rollouts(sim: W.Sim, terrains: Terrain, robot: robots.Robot, starts, commands, *, num_steps: int,
-                       chunk: int, targets=None, refine: bool = False):
-    """The MJX biped on B maps, ``chunk`` rollouts per :func:`ijoy_jax.sim.walker.rollout_batch` call.
+                       chunk: int, targets=None, refine: bool = False, kernel: str = "xla"):
+    """The MJX biped on B maps, ``chunk`` rollouts per :func:`ijoy_jax.sim.walker.rollout_batch` call
+    (``kernel``: FootCost's implementation in its selector).
 
     Every call has ``chunk`` rollouts (the last chunk wraps round to the first maps, its extra rollouts
     dropped), so all calls share one compiled program. Returns (trajectory on the host with leading axis B,
@@ -619,7 +623,7 @@ def simulated_rollouts(sim: W.Sim, terrains: Terrain, robot: robots.Robot, start
         idx = np.arange(lo, lo + chunk) % total
         part, c, r = _timed(W.rollout_batch, sim, jax.tree_util.tree_map(lambda x, idx=idx: x[idx], terrains),
                             stacked, starts[idx], commands[idx], num_steps=num_steps, method="ordered",
-                            targets=targets, refine=refine)
+                            targets=targets, refine=refine, kernel=kernel)
         parts.append(jax.tree_util.tree_map(lambda a, n=min(chunk, total - lo): a[:n], part))
         comp, run_s = comp + c, run_s + r
     return jax.tree_util.tree_map(lambda *a: np.concatenate(a), *parts), comp, run_s
@@ -632,7 +636,8 @@ def _device_info() -> dict[str, str]:
 
 
 def check_options(families: Sequence[str] | None, *, batch: int, steps: int, commands: Sequence[str],
-                  resolution: float, chunk: int | None, walkers: Sequence[str], forward: float) -> list[str]:
+                  resolution: float, chunk: int | None, walkers: Sequence[str], forward: float,
+                  kernel: str = "xla") -> list[str]:
     """Validate :func:`run`'s options before any compute; returns the family names in table order."""
     names = list(FAMILIES) if families is None else list(families)
     unknown = [n for n in names if n not in FAMILIES]
@@ -649,6 +654,8 @@ def check_options(families: Sequence[str] | None, *, batch: int, steps: int, com
         raise ValueError(f"walkers must be some of {WALKERS}, got {list(walkers)}")
     if not (math.isfinite(forward) and 0 <= forward):
         raise ValueError(f"forward speed must be a finite number of m/s >= 0, got {forward!r}")
+    if kernel not in select.KERNELS:
+        raise ValueError(f"kernel must be one of {select.KERNELS}, got {kernel!r}")
     grid_shape(resolution)
     return [n for n in FAMILIES if n in names]
 
@@ -670,7 +677,7 @@ def check_robot_leaves(values: Mapping[str, float] | None) -> dict[str, float]:
 
 def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int = 30,
         commands: Sequence[str] = COMMANDS, resolution: float = RESOLUTION, seed: int = 0, chunk: int | None = None,
-        walkers: Sequence[str] = WALKERS, forward: float = FORWARD, refine: bool = False,
+        walkers: Sequence[str] = WALKERS, forward: float = FORWARD, refine: bool = False, kernel: str = "xla",
         robot_leaves: Mapping[str, float] | None = None,
         emit: Callable[[dict], None] | None = None) -> list[dict[str, Any]]:
     """Walk ``batch`` robots per family and command kind with each walker; one record per row (and skips).
@@ -689,6 +696,9 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
       forward: the held forward command (m/s) of families without their own (:attr:`WalkFamily.forward`).
       refine: both walkers refine each lattice choice to a continuous foothold (:mod:`ijoy_jax.refine`,
         ``refine=True`` of :func:`ijoy_jax.control.rollout` and :func:`ijoy_jax.sim.walker.rollout_batch`).
+      kernel: FootCost's implementation in both walkers' selector (:data:`ijoy_jax.select.KERNELS`): "xla", or
+        "pallas", the fused kernel (on a GPU it compiles the MJX program several seconds faster, BENCHMARKS.md;
+        on a CPU it is interpreted, slowly). Recorded in each row.
       robot_leaves: values of the selector's robot leaves (:data:`ijoy_jax.robots.SELECTOR_LEAVES` by dotted
         name, e.g. ``{"metrics.support_limit": 0.003}``) set on every family's robot: both walkers choose with
         them; traced, so they reuse the compiled programs. Recorded in each row as ``robot_leaves``.
@@ -704,7 +714,7 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
       "walk_compiles" with the totals.
     """
     names = check_options(families, batch=batch, steps=steps, commands=commands, resolution=resolution,
-                          chunk=chunk, walkers=walkers, forward=forward)
+                          chunk=chunk, walkers=walkers, forward=forward, kernel=kernel)
     leaves = check_robot_leaves(robot_leaves)
     if not isinstance(refine, (bool, np.bool_)):
         raise ValueError(f"refine must be True or False, got {refine!r}")
@@ -728,7 +738,7 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
     programs0, t_all = W.compiled_programs(), time.perf_counter()
     perfect_compile = 0.0
     setup = dict(batch=batch, steps=steps, resolution=resolution, shape=list(shape), chunk=chunk, seed=seed,
-                 forward_m_s=forward, refine=refine, robot_leaves=leaves, **info)
+                 forward_m_s=forward, refine=refine, kernel=kernel, robot_leaves=leaves, **info)
     key = jax.random.key(seed)
     for name in names:
         fam = FAMILIES[name]
@@ -755,14 +765,14 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
                           maps_s=round(maps_s, 3), **dict(setup, forward_m_s=speed))
             if "perfect" in walkers:
                 traj, comp, run_s = _timed(perfect_rollouts, maps, robot, starts, cmd, num_steps=steps,
-                                           targets=targets, refine=refine)
+                                           targets=targets, refine=refine, kernel=kernel)
                 perfect_compile += comp
                 record(dict(common, walker="perfect", **aggregate(traj, starts), compile_s=round(comp, 3),
                             run_s=round(run_s, 4), decisions_per_s=batch * steps / max(run_s, 1e-9)))
             if sim is not None:
                 before = W.compiled_programs()
                 traj, comp, run_s = simulated_rollouts(sim, maps, robot, starts, cmd, num_steps=steps, chunk=chunk,
-                                                       targets=targets, refine=refine)
+                                                       targets=targets, refine=refine, kernel=kernel)
                 physics = batch * (steps + 1) * sim.substeps * sim.cfg.ticks_per_step
                 record(dict(common, walker="mjx", **aggregate(traj, starts), compile_s=round(comp, 3),
                             run_s=round(run_s, 4), physics_steps_per_s=physics / max(run_s, 1e-9),

@@ -101,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     walk.add_argument("--seed", type=int, default=None, help="maps and random commands (default: 0)")
     walk.add_argument("--refine", action="store_const", const=True, default=None,
                       help="refine each lattice choice to a continuous foothold (both walkers)")
+    walk.add_argument("--kernel", choices=["xla", "pallas"], default=None,
+                      help="FootCost in both walkers' selector: xla (default) or pallas, the fused kernel (GPU)")
     walk.add_argument("--set", action="append", default=None, metavar="NAME=VALUE",
                       help="a robot leaf of the choice for every family, e.g. metrics.support_limit=0.003 "
                            "(repeatable; names: ijoy_jax.robots.SELECTOR_LEAVES)")
@@ -238,7 +240,7 @@ def _run(args) -> int:
 
 
 _WALK_OPTIONS = ("families", "batch", "steps", "commands", "resolution", "forward", "chunk", "seed", "refine",
-                 "set", "plot")
+                 "kernel", "set", "plot")
 
 
 def _bench_walk(args) -> list[dict]:
@@ -256,7 +258,7 @@ def _bench_walk(args) -> list[dict]:
                           steps=given(args.steps, 6 if args.quick else 30), commands=kinds,
                           resolution=given(args.resolution, bench_walk.RESOLUTION), seed=given(args.seed, 0),
                           chunk=args.chunk, forward=given(args.forward, bench_walk.FORWARD),
-                          refine=given(args.refine, False),
+                          refine=given(args.refine, False), kernel=given(args.kernel, "xla"),
                           robot_leaves=number_assignments(args.set, robots.SELECTOR_LEAVES,
                                                           "metrics.support_limit=0.003"),
                           emit=lambda row: print(json.dumps(row), flush=True))
