@@ -49,7 +49,7 @@ from ijoy_jax import refine as refine_mod
 from ijoy_jax._struct import as_array, check_numeric, is_traced, pytree_dataclass, static_field
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
 from ijoy_jax.footcost import validate as validate_foot_cost
-from ijoy_jax.footcost.xla import plane_metrics, sole_tilt
+from ijoy_jax.footcost.xla import footprint_blocked, plane_metrics, sole_tilt
 from ijoy_jax.robots import Robot, dist, mirror, side_actions, side_p0, side_sign
 from ijoy_jax.terrain import Terrain
 
@@ -257,13 +257,25 @@ def on_obstacle(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | N
     naive joystick steps onto obstacles, the selector never does. ``margin``
     (m, default 0): the footprint grown by that much instead, e.g. whether an
     obstacle lies within 4 cm of the foot (``Trajectory.near_obstacle``); it must
-    fit the robot's static window (``max_margin``). ``index``: the terrain's
-    prebuilt index (:func:`prepare`), built inside when None.
+    fit the robot's static window (``max_margin``); a traced margin that is
+    negative or NaN reads True. ``index``: the terrain's prebuilt index
+    (:func:`prepare`), built inside when None. Only the footprint's cells are
+    looked up (FootCost's obstacle test, :func:`ijoy_jax.footcost.xla.footprint_blocked`).
     """
-    grown = robot.replace(margin=jnp.zeros_like(robot.margin) + jnp.asarray(margin, robot.margin.dtype))
+    pose = as_array("pose", pose)
+    if np.shape(pose) != (3,):
+        raise ValueError(f"pose must have shape (3,) (x, y, yaw), got {np.shape(pose)}")
+    check_numeric("margin", margin)
+    if not is_traced(margin) and not (np.shape(margin) == () and float(margin) >= 0.0):
+        raise ValueError(f"margin must be a number >= 0 (m), got {margin!r}")
+    validate_foot_cost(terrain, robot, pose, 1, pose[None], index=index)  # types, a finite pose, the map's frame
+    if index is None:
+        index = index_terrain(terrain, robot)
     pose = jnp.asarray(pose, jnp.float32)
-    terms = foot_cost_terms(terrain, grown, pose, 1, pose[None], action_index=jnp.zeros(1, jnp.int32), index=index)
-    return terms.obstacle[0] > 0
+    pose = jnp.where(jnp.all(jnp.isfinite(pose)), pose, 0.0)  # as FootCost takes a traced non-finite step
+    grow = jnp.asarray(margin, jnp.float32)
+    hl, hw = 0.5 * robot.foot_length + grow, 0.5 * robot.foot_width + grow
+    return footprint_blocked(terrain, index, pose, hl, hw)[1] | ~(grow >= 0.0)
 
 
 def foothold(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None = None) -> jax.Array:

@@ -283,6 +283,60 @@ def test_on_obstacle_is_the_bare_footprint_against_the_map():
     assert np.isinf(float(ij.foot_cost(t, ROBOT, [0.3, 0.6, 0.0], -1, [clear], action_index=[0])[0]))
 
 
+def test_on_obstacle_is_footcosts_obstacle_term_and_the_cells_the_footprint_covers():
+    """On a map of scattered obstacle cells, for random poses (some leaving the map) and margins: True exactly
+    where FootCost's obstacle term of the footprint grown by the margin is +inf, and where a float64 brute force
+    over every cell (the rectangle against each cell's interior) finds an obstacle or a cell off the map. Poses
+    within 0.1 mm of a cell boundary, where float32 and float64 may round apart, are left to the first check."""
+    rng = np.random.default_rng(7)
+    free = rng.random(SHAPE) > 0.006
+    t = ij.terrain.from_arrays(None, free, RES)
+    index = select.prepare(t, ROBOT).index
+    n = 300
+    poses = np.stack([rng.uniform(-0.05, SHAPE[0] * RES + 0.05, n), rng.uniform(-0.05, SHAPE[1] * RES + 0.05, n),
+                      rng.uniform(-np.pi, np.pi, n)], axis=1).astype(np.float32)
+    for margin in (0.0, 0.04):
+        got = np.asarray(jax.jit(jax.vmap(lambda p, m=margin: select.on_obstacle(t, ROBOT, p, index=index,
+                                                                                 margin=m)))(poses))
+        grown = ROBOT.replace(margin=jnp.float32(margin))
+        terms = jax.vmap(lambda p, g=grown: ij.foot_cost_terms(t, g, p, 1, p[None], action_index=jnp.zeros(1, int),
+                                                              index=index).obstacle[0])(poses)
+        np.testing.assert_array_equal(got, np.isinf(np.asarray(terms)))
+        hl, hw = 0.5 * float(ROBOT.foot_length) + margin, 0.5 * float(ROBOT.foot_width) + margin
+        compared = 0
+        for pose, hit in zip(poses.astype(np.float64), got, strict=True):
+            ref = []
+            for eps in (-1e-4, 1e-4):
+                big = np.pad(rect_touches_cells(*pose, hl + eps, hw + eps, RES, (SHAPE[0] + 40, SHAPE[1] + 40),
+                                                origin=(-20 * RES, -20 * RES)), 0)
+                inner = big[20:-20, 20:-20]
+                off_map = big.sum() > inner.sum()
+                centre_off = not (0 < pose[0] < SHAPE[0] * RES and 0 < pose[1] < SHAPE[1] * RES)
+                ref.append(bool(np.any(inner & ~free) or off_map or centre_off))
+            if ref[0] == ref[1]:
+                compared += 1
+                assert hit == ref[0], (pose, margin)
+        assert compared > 0.9 * n
+        assert 0.1 * n < got.sum() < 0.9 * n  # both answers are common
+
+
+def test_on_obstacle_refuses_bad_input_and_flags_a_bad_traced_margin():
+    t = ij.terrain.flat(SHAPE, RES)
+    with pytest.raises(ValueError, match=r"pose must have shape \(3,\)"):
+        select.on_obstacle(t, ROBOT, [0.5, 0.5])
+    with pytest.raises(ValueError, match="finite"):
+        select.on_obstacle(t, ROBOT, [0.5, np.nan, 0.0])
+    for bad in (-0.01, float("nan")):
+        with pytest.raises(ValueError, match="margin must be a number >= 0"):
+            select.on_obstacle(t, ROBOT, [0.5, 0.5, 0.0], margin=bad)
+    with pytest.raises(TypeError, match="margin must be numbers"):
+        select.on_obstacle(t, ROBOT, [0.5, 0.5, 0.0], margin="2 cm")
+    with pytest.raises(TypeError, match="robot"):
+        select.on_obstacle(t, None, [0.5, 0.5, 0.0])
+    at = jax.jit(lambda m: select.on_obstacle(t, ROBOT, jnp.array([0.5, 0.5, 0.0]), margin=m))
+    assert not bool(at(0.02)) and bool(at(-0.01)) and bool(at(jnp.nan))
+
+
 def test_bad_input_at_the_boundary():
     t = ij.terrain.flat(SHAPE, RES)
     with pytest.raises(ValueError, match="method"):

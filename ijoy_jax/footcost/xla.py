@@ -436,23 +436,38 @@ def _inf_if(flag):
     return jnp.where(flag, jnp.inf, 0.0).astype(jnp.float32)
 
 
+def footprint_blocked(terrain: Terrain, index: TerrainIndex, pose: jax.Array, half_length,
+                      half_width) -> tuple[geometry.ColumnSpans, jax.Array]:
+    """FootCost's obstacle test of one footprint: a rectangle of half sizes ``half_length`` x ``half_width`` (m;
+    a margin already added) at world ``pose`` (3,) (x, y, yaw; finite).
+
+    Returns its exact column spans in the index's window (``index.pad`` columns) and a () bool: the rectangle
+    overlaps an obstacle cell, leaves the map, or has its centre off the map (the ``obstacle`` term is +inf
+    where True). Spans that ``overflow`` the window are incomplete; the caller decides what that means.
+    """
+    res = terrain.resolution
+    origin = jnp.asarray(terrain.origin, jnp.float32)  # float32 also under x64 (an origin may be float64)
+    cx = pose[0] - origin[0]
+    cy = pose[1] - origin[1]
+    spans = geometry.rect_column_spans(cx, cy, pose[2], half_length, half_width, res, index.pad)
+    blocked = jnp.any(column_has_obstacle(index, spans, terrain.shape)) | centre_off_map(cx, cy, terrain.shape, res)
+    return spans, blocked
+
+
 def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_from, step,
                 action_index) -> FootCostTerms:
     """FootCost terms of one candidate step (world pose (3,)) executing ``action_index`` from ``stance`` (3,)."""
     res = terrain.resolution
-    k = index.pad
     finite = jnp.all(jnp.isfinite(step))
     step = jnp.where(finite, step, 0.0)
     origin = jnp.asarray(terrain.origin, jnp.float32)  # float32 also under x64 (an origin may be float64)
     cx = step[0] - origin[0]
     cy = step[1] - origin[1]
-    hl = 0.5 * robot.foot_length + robot.margin
-    hw = 0.5 * robot.foot_width + robot.margin
-    grown = geometry.rect_column_spans(cx, cy, step[2], hl, hw, res, k)
+    grown, blocked = footprint_blocked(terrain, index, step, 0.5 * robot.foot_length + robot.margin,
+                                       0.5 * robot.foot_width + robot.margin)
     # The robot's and terrain's values (query_supported: a footprint beyond max_radius among them) and this
     # candidate's own: its grown footprint, swing corridor or plane fit beyond what the windows or float32 hold.
     too_big = grown.overflow | ~query_supported(terrain, robot)
-    blocked = jnp.any(column_has_obstacle(index, grown, terrain.shape)) | centre_off_map(cx, cy, terrain.shape, res)
     metrics = robot.metrics
     zero = jnp.float32(0.0)
     neg_inf = jnp.float32(-jnp.inf)
