@@ -215,9 +215,9 @@ def test_sensors_read_after_quiet_steps_are_the_sensors_every_step_computes(sims
         d = W.init_state(sim, world, robot, ij.robots.start_stance(robot, 0.3, 0.25), 1).data
         d = d.replace(qvel=d.qvel.at[0].set(0.3).at[4].set(-0.5), ctrl=d.ctrl + 0.05)
         plain = lax.fori_loop(0, 5, lambda _, d: mjx.step(world.m, d), d)
-        quiet = lax.fori_loop(0, 4, lambda _, d: mjx.step(W.without_sensors(world.m), d), d)
-        start = W.step_start(quiet)
-        quiet = mjx.step(W.without_sensors(world.m), quiet)
+        # as the walker's tick: each quiet step carries the state it started from, for the sensors after the last
+        quiet, start = lax.fori_loop(0, 5, lambda _, c: (mjx.step(W.without_sensors(world.m), c[0]),
+                                                          W.step_start(c[0])), (d, W.step_start(d)))
         return plain, quiet, W.read_sensors(world.m, quiet, start)
 
     plain, quiet, read = both()
