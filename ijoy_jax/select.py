@@ -50,7 +50,7 @@ from ijoy_jax._struct import as_array, check_numeric, is_traced, pytree_dataclas
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
 from ijoy_jax.footcost import validate as validate_foot_cost
 from ijoy_jax.footcost.xla import footprint_blocked, plane_metrics, sole_tilt
-from ijoy_jax.robots import Robot, dist, mirror, side_actions, side_p0, side_sign
+from ijoy_jax.robots import Robot, check_robot, dist, mirror, side_actions, side_p0, side_sign
 from ijoy_jax.terrain import Terrain
 
 METHODS = ("exhaustive", "ordered", "naive", "lookahead")
@@ -269,6 +269,8 @@ def on_obstacle(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | N
     if not is_traced(margin) and not (np.shape(margin) == () and float(margin) >= 0.0):
         raise ValueError(f"margin must be a number >= 0 (m), got {margin!r}")
     validate_foot_cost(terrain, robot, pose, 1, pose[None], index=index)  # types, a finite pose, the map's frame
+    # the footprint grown by the margin within the robot's static window, the rule FootCost's robot check holds
+    check_robot(robot.replace(margin=jnp.zeros_like(robot.margin) + jnp.asarray(margin, robot.margin.dtype)))
     if index is None:
         index = index_terrain(terrain, robot)
     pose = jnp.asarray(pose, jnp.float32)

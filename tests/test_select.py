@@ -331,6 +331,8 @@ def test_on_obstacle_refuses_bad_input_and_flags_a_bad_traced_margin():
             select.on_obstacle(t, ROBOT, [0.5, 0.5, 0.0], margin=bad)
     with pytest.raises(TypeError, match="margin must be numbers"):
         select.on_obstacle(t, ROBOT, [0.5, 0.5, 0.0], margin="2 cm")
+    with pytest.raises(ValueError, match="does not fit its static window"):  # the footprint's window: max_margin
+        select.on_obstacle(t, ROBOT, [0.5, 0.5, 0.0], margin=0.3)
     with pytest.raises(TypeError, match="robot"):
         select.on_obstacle(t, None, [0.5, 0.5, 0.0])
     at = jax.jit(lambda m: select.on_obstacle(t, ROBOT, jnp.array([0.5, 0.5, 0.0]), margin=m))
