@@ -608,7 +608,10 @@ def _check_reach(reach) -> None:
                          f"got {reach!r}")
 
 
-_HRP2_BODY = {"foot_length": 0.242, "foot_width": 0.13, "step_time": 0.8, "p0": (0.0, 0.19, 0.0)}
+HRP2_P0 = (0.0, 0.19, 0.0)
+"""HRP-2's step in place (m, m, rad): the swing foot beside the stance foot. A host constant, so checks of
+sweep files need no device (nothing may start a JAX backend before ``jax.distributed.initialize``)."""
+_HRP2_BODY = {"foot_length": 0.242, "foot_width": 0.13, "step_time": 0.8, "p0": HRP2_P0}
 _HRP2_DY = (0.19, 0.33)  # m: HRP-2's lateral range of the swing foot from the stance foot
 
 
@@ -677,8 +680,18 @@ def hrp2(margin: float = 0.02, density: float = 1.0, *, reach: float = PAPER_REA
         raise ValueError(f"reach={reach!r} m puts the farthest action ({reach}, {_HRP2_DY[1]}) {farthest:.3f} m from "
                          f"the stance foot, beyond max_sole_distance = {float(limit)} m: its steps would always be "
                          "refused")
-    actions = lattice_actions(density_counts(density, reach), dx_range=(-reach, reach), dy_range=_HRP2_DY)
-    return make_robot(actions, **kwargs)
+    return make_robot(hrp2_actions(density, reach), **kwargs)
+
+
+def hrp2_actions(density: float = 1.0, reach: float = PAPER_REACH) -> np.ndarray:
+    """(M, 3) float64 host array of :func:`hrp2`'s actions (dx, dy, dtheta in m, m, rad) at ``density`` and
+    ``reach``, without building a robot (no device array: checks of sweep files run before any backend starts).
+
+    Example:
+      >>> hrp2_actions().shape, hrp2_actions(2.0).shape
+      ((496, 3), (3307, 3))
+    """
+    return lattice_actions(density_counts(density, reach), dx_range=(-reach, reach), dy_range=_HRP2_DY)
 
 
 def start_stance(robot: Robot, x, y, theta=0.0, *, width=None) -> jax.Array:

@@ -199,6 +199,34 @@ def test_layout_from_flags_and_environment():
     assert lay.multi and lay.num_processes is None and lay.coordinator is None
 
 
+NO_BACKEND_SCRIPT = """
+import importlib, pkgutil, sys
+from pathlib import Path
+import jax
+import ijoy_jax
+from ijoy_jax import sweep
+for m in pkgutil.walk_packages(ijoy_jax.__path__, "ijoy_jax."):
+    importlib.import_module(m.name)
+files = sorted(Path(sys.argv[1]).glob("*.toml"))
+assert len(files) >= 9 and any(sweep.load_config(f).walker == "mjx" for f in files), files
+# jax.distributed must start before any JAX backend: it refuses (RuntimeError) once one exists.
+jax.distributed.initialize(f"localhost:{sys.argv[2]}", 1, 0)
+print("ok")
+"""
+
+
+def test_importing_the_package_and_reading_sweep_files_start_no_backend():
+    """``ijoy sweep run`` starts jax.distributed before anything else touches JAX, but a module constant built
+    with jnp, or a sweep-file check that builds a robot on the device, starts a backend on import or when the
+    file is read, and jax.distributed.initialize then refuses: a physics sweep's file check (a robot built for
+    its step-in-place width) did, and multi-process physics sweeps failed on the GPU."""
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    sweeps_dir = Path(__file__).parents[1] / "sweeps"
+    proc = subprocess.run([sys.executable, "-c", NO_BACKEND_SCRIPT, str(sweeps_dir), str(_free_port())], env=env,
+                          capture_output=True, text=True, timeout=PROC_TIMEOUT)
+    assert proc.returncode == 0 and proc.stdout.strip().endswith("ok"), proc.stderr[-2000:]
+
+
 ACCESSOR_SCRIPT = """
 import sys
 import jax

@@ -313,10 +313,11 @@ def _sweep(args) -> int:
     from ijoy_jax import sweep
 
     if args.sweep_command == "run":
-        cfg = sweep.load_config(args.file)  # validated before any compute
-        # the layout is checked before jax.distributed starts and before any compute
+        # The layout is checked first (no compute, no network), then jax.distributed starts, before anything
+        # can start a JAX backend; then the sweep file is validated, before any compute.
         lay = sweep.distributed.layout(args.num_processes, args.process_id, args.coordinator, args.distributed)
         sweep.distributed.initialize(lay)
+        cfg = sweep.load_config(args.file)
         stats = sweep.run(cfg, args.out, chunk_size=args.chunk, max_scenarios=args.max_scenarios,
                           devices=args.devices)
         row = {"out": str(stats.out), "scenarios": stats.scenarios, "computed": stats.computed,

@@ -47,6 +47,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ijoy_jax import geometry
 from ijoy_jax._struct import check_real, check_whole
@@ -309,7 +310,7 @@ def swing_phase(cfg: WalkConfig, t) -> jax.Array:
     return jnp.clip((t - cfg.ds_time) / (cfg.step_time - cfg.ds_time), 0.0, 1.0)
 
 
-_XYZ_YAW = jnp.array([0, 1, 2, 5])
+_XYZ_YAW = np.array([0, 1, 2, 5])  # NumPy: a module constant must not start a JAX backend at import
 _GRAVITY = 9.81  # m/s^2, MuJoCo's default
 
 

@@ -826,7 +826,7 @@ def _check_start_fits(chk: _Checker, cfg: SweepConfig, start_x: float, start_y: 
     +x) must stand on the map: MuJoCo's height field ends at its edges."""
     length = cfg.robot.get("foot_length", ROBOT_DEFAULTS["foot_length"])
     width = cfg.robot.get("foot_width", ROBOT_DEFAULTS["foot_width"])
-    apart = float(robots.hrp2().p0[1])  # the step in place, HRP-2's at every footprint and density
+    apart = robots.HRP2_P0[1]  # the step in place, HRP-2's at every footprint and density
     ext_x, ext_y = cfg.shape[0] * cfg.resolution, cfg.shape[1] * cfg.resolution
     x, y = start_x * ext_x, start_y * ext_y
     half_x, half_y = length / 2, apart / 2 + width / 2
@@ -915,7 +915,7 @@ def _check_selector(chk: _Checker, cfg: SweepConfig) -> None:
         chk.fail(where, f'a horizon above 1 needs [sweep] method = "lookahead", got method = {cfg.method!r}')
     if cfg.beam is not None and cfg.method != "lookahead":
         chk.fail("sweep.beam", f'the beam is an option of method = "lookahead", got method = {cfg.method!r}')
-    if cfg.beam is not None and cfg.beam > robots.hrp2(density=max(_density_values(cfg))).num_actions:
+    if cfg.beam is not None and cfg.beam > len(robots.hrp2_actions(max(_density_values(cfg)))):
         chk.fail("sweep.beam", f"must be at most the action set's size, got {cfg.beam}")
     refines = _selector_values(cfg, "refine")
     if any(refines) and cfg.method == "naive":
