@@ -93,6 +93,25 @@ def kill_after_first_part(sweep_file: Path, out: Path, *, chunk: int, hold_s: fl
         child.wait()
 
 
+SPY_ON_DEVICES = """
+from ijoy_jax.sweep import execute
+seen = []  # per chunk: the device of each slice's outputs
+_call = execute._OnDevices.__call__
+def spy(self, run, static, shared, batch):
+    where = []
+    def run_and_note(*args):
+        out = run(*args)
+        where.append(next(iter(out.values())).devices())
+        return out
+    summary = _call(self, run_and_note, static, shared, batch)
+    seen.append(sorted(str(d) for ds in where for d in ds))
+    return summary
+execute._OnDevices.__call__ = spy
+"""
+"""Child-script code that spies on the sweep's per-device runner: ``seen`` lists, per chunk, the device that
+computed each slice (its outputs' device)."""
+
+
 def run_on_four_cpu_devices(script: str, *args: str, timeout_s: float) -> None:
     """Run the Python ``script`` (``python -c script *args``) in a child process whose CPU backend has 4 devices
     (``--xla_force_host_platform_device_count=4`` added to ``XLA_FLAGS``); fail with its stderr's tail unless it

@@ -7,7 +7,7 @@ Public names::
   MAX_SCENARIOS / HOST_MEMORY_FRACTION / table_bytes             sizes checked before any allocation
   MAX_NUM_STEPS / MAX_DENSITY / MIN_RESOLUTION / MAX_MAP_CELLS /  bounds of the sizes that set memory and
   MAX_OBJECT_SLOTS                                               static shapes
-  run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks sharded over local
+  run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks split over local
                                                                  devices, parquet parts, resume
   scenario / Scenario                                            one scenario's terrain, robot, start and
                                                                  command by id (``ijoy drive --scenario``)

@@ -36,7 +36,7 @@ through :func:`ijoy_jax.sim.walker.rollout_batch` itself (the Sim's MJX models
 are traced arguments, shared and replicated like the targets; its program
 is the one any caller of those shapes uses), and a vmap of
 :func:`ijoy_jax.sim.walker.summary` and the family metrics. Everything else
-(plan, chunk sizes, sharding, parts, resume, processes, aggregates) is the
+(plan, chunk sizes, devices, parts, resume, processes, aggregates) is the
 same as for the perfect robot.
 
 Compiles (measured by :func:`trace_count`, tested): parameter values never
@@ -51,19 +51,19 @@ and L_i are built once per density outside the jit and shared by every
 scenario; when it is, each scenario sorts its own
 (``|F|`` x N entries), a different compiled function.
 
-Devices. A chunk's scenario batch is sharded over the local devices (all of
-them by default, or the first ``devices``): a 1-D
-:class:`jax.sharding.Mesh` with axis ``"scenarios"`` (default, Auto axis
-type), the per-scenario inputs (seeds, robot and terrain values, commands)
-placed with ``NamedSharding(mesh, PartitionSpec("scenarios"))``, the shared
-ones (base robot, targets, key) replicated; jit propagates the sharding, each
-device runs its slice of the ``vmap`` and the summaries are gathered to the
-host. The chunk size is rounded up to a multiple of the device count (the
-plan's ``chunk_size``) and a padded chunk is padded to a multiple of it too.
-Each session in the manifest records ``devices`` and ``sharding``. Scenarios
-are independent, so the results are those of one device (bit-identical with 4
-forced CPU devices, tested). With one device nothing is placed: arrays go to
-the default device as before.
+Devices. A chunk's rows are split evenly over the local devices (all of them
+by default, or the first ``devices``), and each device runs the one-device
+program on its slice (:class:`_OnDevices`): the shared inputs (base robot,
+targets, key, MJX model) are copied to every device, each device's call is
+made from its own thread (a new program compiles side by side; the calls
+return once dispatched, so the devices compute at the same time), and the
+summaries are gathered to the host. No program spans devices and nothing is
+exchanged between them, so a device's rows come out exactly as one device
+alone computes them, and a one-device program compiled once serves every
+device of the model through the persistent compilation cache. The chunk size
+is rounded up to a multiple of the device count (the plan's ``chunk_size``)
+and a padded chunk is padded to a multiple of it too. Each session in the
+manifest records ``devices`` and ``sharding`` (how rows were split).
 
 Chunk size. Given, or (``chunk_size=None``) the manifest's when resuming, else
 :func:`default_chunk_size`: :data:`DEFAULT_CHUNK` on CPU; on an accelerator
@@ -113,6 +113,7 @@ import platform
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from importlib import metadata
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -120,7 +121,6 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ijoy_jax import robots
 from ijoy_jax.control import rollout
@@ -145,7 +145,8 @@ DEFAULT_CHUNK = 32
 MEMORY_FRACTION = 0.5
 """Share of an accelerator's memory a default-sized chunk may fill (the rest: XLA workspace, fragmentation)."""
 MAX_AUTO_CHUNK = 4096
-"""Largest chunk :func:`auto_chunk_size` picks: large enough to amortise dispatch, small enough to resume often."""
+"""Largest chunk per device :func:`auto_chunk_size` picks: large enough to amortise dispatch and fill a GPU
+(the MJX walker's physics steps/s still grow from 1024 to 4096 robots), small enough to resume often."""
 
 _PART = "part-{:05d}.parquet"
 _PROC = "process-{:05d}.json"
@@ -293,6 +294,48 @@ def _chunk_runner(static: _Static):
     return _run_chunk if static.walker == "perfect" else _physics_chunk
 
 
+
+class _OnDevices:
+    """A chunk's rows split evenly over ``devices``, each slice run by the one-device program on its own device.
+
+    The shared inputs are copied to every device once per density. Each device's call is made from its own
+    thread: a new program traces and compiles side by side (a second device of a GPU model loads the first's
+    program from the persistent compilation cache), and the calls return as soon as their work is dispatched,
+    so the devices compute at the same time. Nothing is exchanged between devices, and a device computes
+    exactly what one device alone computes on those rows. Handing the whole batch to jit with a sharding
+    instead, the partitioner gathered whole batches where it has no per-row rule (the rough terrain's FFT, a
+    Pallas kernel's custom call) and reduced vmapped while loops' predicates over all devices at every
+    iteration (the selector's search, MJX's solver): on two H200s a perfect-robot sweep ran at a sixth of one
+    GPU's rate and the physics sweep's walks differed from one GPU's.
+    """
+
+    def __init__(self, devices: list):
+        self.devices = list(devices)
+        self._pool = ThreadPoolExecutor(len(self.devices)) if len(self.devices) > 1 else None
+
+    def put_shared(self, shared) -> list:
+        """``shared`` committed to each device (one copy per device)."""
+        return [jax.device_put(shared, d) for d in self.devices]
+
+    def __call__(self, run, static: _Static, shared: list, batch) -> dict:
+        """``run(static, *shared[i], *rows_i)`` on device i for the i-th of equal slices of the host ``batch``
+        (its leading axis a multiple of the device count); the summaries concatenated on the host."""
+        k = len(self.devices)
+        m = len(batch[0]) // k
+
+        def one(i):
+            rows = jax.tree.map(lambda x: x[i * m:(i + 1) * m], batch)
+            return run(static, *shared[i], *jax.device_put(rows, self.devices[i]))
+
+        outs = [one(0)] if self._pool is None else list(self._pool.map(one, range(k)))
+        outs = jax.device_get(outs)
+        return {name: np.concatenate([np.asarray(o[name]) for o in outs]) for name in outs[0]}
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+
+
 def trace_count() -> int:
     """How many chunk programs have been traced (compiled) in this process: the perfect robot's chunk function,
     plus each physics chunk shape's preparation (its rollouts are :func:`ijoy_jax.sim.walker.rollout_batch`'s
@@ -310,7 +353,7 @@ class RunStats:
       scenarios: scenarios in the plan; computed: scenarios computed by this
         call (skipped chunks excluded); chunks, skipped: chunk counts.
       compiles: traces of the chunk function during this call.
-      devices: devices the scenario batch is sharded over; chunk_size: the
+      devices: devices the rows of a chunk are split over; chunk_size: the
         plan's chunk size (the requested one rounded up to a multiple of devices).
       first_chunk_s: per density (and selector horizon and refinement, when the sweep varies them: see
         the group's label), wall time of its first chunk (includes compile).
@@ -694,8 +737,8 @@ def auto_chunk_size(bytes_per_scenario: int, device_bytes: int, num_devices: int
     """The chunk size that fills ``fraction`` of each device's memory, as a power of two per device.
 
     ``per_device = 2 ** floor(log2((fraction * device_bytes - shared_bytes) / bytes_per_scenario))``
-    (at least 1; ``shared_bytes`` is held once per device), times ``num_devices``, at most
-    ``max_chunk`` (rounded down to a multiple of ``num_devices``). Powers of two keep the plan (and so
+    (at least 1; ``shared_bytes`` is held once per device), at most ``max_chunk``, times ``num_devices``:
+    each device runs the batch it would run alone. Powers of two keep the plan (and so
     resume) stable when the estimate moves a little.
 
     Example:
@@ -709,8 +752,7 @@ def auto_chunk_size(bytes_per_scenario: int, device_bytes: int, num_devices: int
                          f"device_bytes={device_bytes}, num_devices={num_devices}, shared_bytes={shared_bytes}")
     fit = int((fraction * device_bytes - shared_bytes) // bytes_per_scenario)
     per_device = 1 << (fit.bit_length() - 1) if fit >= 1 else 1
-    cap = max(num_devices, max_chunk // num_devices * num_devices)
-    return min(per_device * num_devices, cap)
+    return min(per_device, max_chunk) * num_devices
 
 
 def balanced_chunk_size(cap: int, total: int, num_devices: int = 1) -> int:
@@ -778,8 +820,8 @@ def run(
         device memory on an accelerator; process 0 decides for all).
       max_scenarios: run only the first this many scenarios (smoke tests).
       progress: print a progress line (scenarios/s, ETA) to stderr.
-      devices: shard each chunk over the first this many local devices
-        (default None: all of them); 1 runs unsharded on the default device.
+      devices: split each chunk over the first this many local devices
+        (default None: all of them); 1 runs on the first local device.
       process_id, num_processes: run only the chunks with ``chunk_id % num_processes == process_id``
         (default: ``jax.process_index()`` and ``jax.process_count()``, i.e. the whole sweep
         unless ``jax.distributed`` is initialized). Give both or neither.
@@ -840,11 +882,6 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
         chunk_size = distributed.agree(f"ijoy_sweep/chunk_size/{cfg.name}/{max_scenarios}",
                                        lambda: prev or default_chunk_size(cfg, table, bases, devs, sim), pid)
     chunk_size = -(-chunk_size // ndev) * ndev  # a multiple of the device count
-    if ndev > 1:
-        mesh = Mesh(np.array(devs), ("scenarios",))
-        batched, replicated = NamedSharding(mesh, PartitionSpec("scenarios")), NamedSharding(mesh, PartitionSpec())
-    else:
-        batched = replicated = None
     plan = _plan(cfg, table, chunk_size)
     plan_key = {"chunk_size": chunk_size, "max_scenarios": max_scenarios, "scenarios": len(table),
                 "chunks": len(plan)}
@@ -886,7 +923,9 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
                                "host": platform.node(),
                                "device": str(devs[0]), "backend": jax.default_backend(),
                                "device_count": jax.device_count(), "devices": ndev, "chunk_size": chunk_size,
-                               "sharding": None if batched is None else str(batched)}
+                               "sharding": None if ndev == 1 else f"rows split evenly over {ndev} devices "
+                                                                  f"({', '.join(str(d) for d in devs)}), the "
+                                                                  "one-device program on each"}
     manifest["sessions"].append(session)
     _write_json(record, manifest)
 
@@ -894,6 +933,7 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
                      physics_steps=_physics_steps(sim, cfg.num_steps))
     static = _static(cfg)
     run_chunk = _chunk_runner(static)
+    on_devices = _OnDevices(devs)
     key = jax.random.key(cfg.seed)
     robot_cols, terrain_cols, sim_cols = _cols(table)
     # Scenarios per group, counted once (per chunk, a pass over the whole table cost ~20 ms at 2e7 rows).
@@ -915,20 +955,14 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
         static_g = static._replace(horizon=group[1], refine=group[2])
         label = _group_label(cfg, group)
         t0 = time.perf_counter()
-        if density not in shared_of:
-            # Shared by every scenario: replicated on every device of the mesh.
-            shared = (*_shared(table, bases[density]), key, sim, _scene(cfg))
-            shared_of[density] = shared if replicated is None else jax.device_put(shared, replicated)
-        base_d, targets, key_d, sim_d, scene_d = shared_of[density]
+        if density not in shared_of:  # shared by every scenario: a copy on every device
+            shared_of[density] = on_devices.put_shared((*_shared(table, bases[density]), key, sim, _scene(cfg)))
         rows = by_id.loc[ids]
         n = len(rows)
         size = min(chunk_size, per_group[group])
         size = -(-size // ndev) * ndev  # every device gets the same number of rows
         batch = _batch(rows, size, robot_cols, terrain_cols, sim_cols, cfg=cfg)
-        # Per-scenario inputs: split along the scenario axis over the mesh (one device: default device).
-        batch = jax.tree.map(jnp.asarray, batch) if batched is None else jax.device_put(batch, batched)
-        summary = run_chunk(static_g, base_d, targets, key_d, sim_d, scene_d, *batch)
-        summary = jax.device_get(jax.block_until_ready(summary))
+        summary = on_devices(run_chunk, static_g, shared_of[density], batch)
         result = rows.reset_index(drop=True).copy()
         for k, v in summary.items():
             result[k] = np.asarray(v)[:n]
@@ -947,6 +981,7 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
             # Rate over compiled chunks only (the first chunk of a density includes its compile).
             rate = steady_n / steady_s if steady_n else n / dt
             _progress(done_before + computed, total, rate, chunk_id + 1, len(plan), who, stats.physics_steps)
+    on_devices.close()
     stats.computed = computed
     stats.rate = steady_n / steady_s if steady_n else 0.0
     stats.compiles = trace_count() - traces0
