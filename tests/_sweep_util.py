@@ -73,17 +73,17 @@ sys.exit(cli.main(sys.argv[2:]))
 
 
 def kill_after_first_part(sweep_file: Path, out: Path, *, chunk: int, hold_s: float, timeout_s: float,
-                          poll_s: float) -> None:
-    """Run ``ijoy sweep run sweep_file --out out --chunk chunk`` in a child process that sleeps ``hold_s`` after
-    writing each part, and SIGKILL it as soon as the first part exists (polling every ``poll_s``). Fails if the
-    child ends before writing a part, or writes none within ``timeout_s``."""
+                          poll_s: float, extra: tuple[str, ...] = (), part: str = "part-*.parquet") -> None:
+    """Run ``ijoy sweep run sweep_file --out out --chunk chunk *extra`` in a child process that sleeps ``hold_s``
+    after writing each part, and SIGKILL it as soon as a part matching ``part`` exists (polling every ``poll_s``).
+    Fails if the child ends before writing one, or writes none within ``timeout_s``."""
     parts = out / "parts"
     child = subprocess.Popen([sys.executable, "-c", _SLOW_CHILD, str(hold_s), "sweep", "run", str(sweep_file),
-                              "--out", str(out), "--chunk", str(chunk)],
+                              "--out", str(out), "--chunk", str(chunk), *extra],
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + timeout_s
-        while not list(parts.glob("part-*.parquet")) if parts.exists() else True:
+        while not list(parts.glob(part)) if parts.exists() else True:
             assert child.poll() is None, "the sweep ended before any chunk was written"
             assert time.monotonic() < deadline, f"no chunk written in {timeout_s:g} s"
             time.sleep(poll_s)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from _sweep_util import kill_after_first_part  # tests/ is on sys.path (pytest rootdir import)
 
 from ijoy_jax import sweep
 from ijoy_jax.apps import cli
@@ -104,7 +105,7 @@ def test_two_processes_give_the_one_process_result(tiny, single, tmp_path):
     stats = [json.loads(stdout) for _, stdout, _ in results]
     assert [s["computed"] for s in stats] == [4, 4]  # each ran its half
     assert "[ijoy sweep 1/2]" in results[1][2]
-    assert not any("barrier" in stderr for _, _, stderr in results)  # both reached the final barrier
+    assert not any("not reached by every process" in stderr for _, _, stderr in results)  # both reached the barrier
     got, want = sweep.load(out), sweep.load(single)
     assert got["chunk"].tolist() == want["chunk"].tolist() == [0, 0, 1, 1, 2, 2, 3, 3]
     pd.testing.assert_frame_equal(got, want)  # exactly: same chunks, same compiled function
@@ -116,6 +117,37 @@ def test_two_processes_give_the_one_process_result(tiny, single, tmp_path):
     assert (s1["process_id"], s1["num_processes"], s1["chunks_assigned"]) == (1, 2, 2)
     assert not (out / "processes" / "process-00000.json").exists()  # process 0's sessions are in the manifest
     # After the final barrier process 0 wrote the aggregates of the whole sweep.
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "aggregates.parquet"), sweep.load_aggregates(single))
+
+
+def test_a_killed_process_relaunched_rejoins_the_run(tiny, single, tmp_path):
+    """Process 1 is SIGKILLed after its first part while process 0 runs on. JAX's default would end process 0
+    too (SIGABRT, once the peer's heartbeats stop or it reconnects); the recoverable service lets process 0
+    finish, and process 1, relaunched with its same command, rejoins, computes its missing chunk and passes the
+    final barrier, after which process 0 writes the aggregates."""
+    out = tmp_path / "killed"
+    port = _free_port()
+    p0 = _launch(tiny, out, 0, port)
+    try:
+        kill_after_first_part(tiny, out, chunk=CHUNK, hold_s=600, timeout_s=PROC_TIMEOUT, poll_s=0.05,
+                              extra=("--num-processes", "2", "--process-id", "1", "--coordinator", f"localhost:{port}"),
+                              part="part-00001.parquet")
+        assert not (out / "parts" / "part-00003.parquet").exists()  # process 1's second chunk: not computed
+        p1 = _launch(tiny, out, 1, port)  # the same command again
+        try:
+            results = [p.communicate(timeout=PROC_TIMEOUT) + (p.returncode,) for p in (p0, p1)]
+        finally:
+            p1.kill()
+    finally:
+        p0.kill()
+    for _, stderr, rc in results:
+        assert rc == 0, stderr[-3000:]
+    waited = [line for line in results[0][1].splitlines() if "waiting up to" in line]
+    assert all("for process(es) 1 (relaunch" in line for line in waited), waited  # names the missing process
+    stats = [json.loads(stdout) for stdout, _, _ in results]
+    assert [s["computed"] for s in stats] == [4, 2] and stats[1]["skipped_chunks"] == 1
+    assert not any("not reached by every process" in stderr for _, stderr, _ in results)
+    pd.testing.assert_frame_equal(sweep.load(out), sweep.load(single))
     pd.testing.assert_frame_equal(pd.read_parquet(out / "aggregates.parquet"), sweep.load_aggregates(single))
 
 

@@ -2,7 +2,7 @@
 
 A sweep's chunk plan is a pure function of the sweep file, the chunk size and
 ``max_scenarios``, so processes need no collectives: process ``I`` of ``N``
-runs the chunks with ``chunk_id % N == I`` on its own local devices (sharded
+runs the chunks with ``chunk_id % N == I`` on its own local devices (split
 over them as in one process) and writes its parquet parts into the shared
 output folder. The coordination service started by
 :func:`jax.distributed.initialize` is used only for two small things, both
@@ -124,10 +124,16 @@ def initialize(lay: Layout) -> tuple[int, int]:
 
     A single-process layout starts nothing and returns ``(0, 1)``. Call it
     before anything touches a device (the CLI does so right after parsing).
+
+    The service is started recoverable (JAX's ``jax_enable_recoverability``): by default JAX ends every
+    process (SIGABRT) once one of them dies or is relaunched, although a sweep's processes share no
+    computation. Recoverable, the others finish their chunks, and the dead process, relaunched with the
+    same command, rejoins the run, computes its missing chunks and passes the final barrier with them.
     """
     if not lay.multi:
         return 0, 1
     if not jax.distributed.is_initialized():
+        jax.config.update("jax_enable_recoverability", True)
         jax.distributed.initialize(lay.coordinator, lay.num_processes, lay.process_id)
     return jax.process_index(), jax.process_count()
 

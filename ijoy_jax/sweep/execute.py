@@ -988,6 +988,10 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     stats.run_s = time.perf_counter() - t_start
 
     if nproc > 1:  # no device collective: the coordination service's barrier (skipped without jax.distributed)
+        missing = sorted({p[0] % nproc for p in plan if not (parts / _PART.format(p[0])).exists()})
+        if progress and missing and distributed.client() is not None:
+            print(f"[ijoy sweep{who}] this process is done; waiting up to {barrier_timeout_s:g} s for process(es) "
+                  f"{', '.join(map(str, missing))} (relaunch one that died with its same command)", file=sys.stderr)
         distributed.barrier(f"ijoy_sweep/done/{cfg.name}/{max_scenarios}", barrier_timeout_s)
     complete = all((parts / _PART.format(p[0])).exists() for p in plan)
     if complete and pid == 0:
