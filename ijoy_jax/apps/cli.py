@@ -122,7 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     srun.add_argument("--max-scenarios", type=int, default=None,
                       help="run only the first N scenarios (smoke tests; part of the resume plan)")
     srun.add_argument("--devices", type=int, default=None,
-                      help="shard each chunk over the first N local devices (default: all of them)")
+                      help="split each chunk over the first N local devices, each running the one-device "
+                           "program (default: all of them)")
     srun.add_argument("--num-processes", type=int, default=None,
                       help="several processes/hosts: how many run this sweep into the same shared --out "
                            "(env IJOY_NUM_PROCESSES; default 1); each runs chunks with chunk %% N == its id")
