@@ -298,15 +298,18 @@ def _chunk_runner(static: _Static):
 class _OnDevices:
     """A chunk's rows split evenly over ``devices``, each slice run by the one-device program on its own device.
 
-    The shared inputs are copied to every device once per density. Each device's call is made from its own
-    thread: a new program traces and compiles side by side (a second device of a GPU model loads the first's
-    program from the persistent compilation cache), and the calls return as soon as their work is dispatched,
-    so the devices compute at the same time. Nothing is exchanged between devices, and a device computes
-    exactly what one device alone computes on those rows. Handing the whole batch to jit with a sharding
-    instead, the partitioner gathered whole batches where it has no per-row rule (the rough terrain's FFT, a
-    Pallas kernel's custom call) and reduced vmapped while loops' predicates over all devices at every
-    iteration (the selector's search, MJX's solver): on two H200s a perfect-robot sweep ran at a sixth of one
-    GPU's rate and the physics sweep's walks differed from one GPU's.
+    With one device nothing is placed: the arrays go to the default device uncommitted, as other callers pass
+    them, so a sweep shares the program they compiled (e.g. :func:`ijoy_jax.sim.walker.rollout_batch`'s).
+    With several, the shared inputs are copied to every device once per density, and each device's call is
+    made from its own thread: a new program traces and compiles side by side (a second device of a GPU model
+    loads the first's program from the persistent compilation cache), and the calls return as soon as their
+    work is dispatched, so the devices compute at the same time. Nothing is exchanged between devices, and a
+    device computes exactly what one device alone computes on those rows. Handing the whole batch to jit
+    with a sharding instead, the partitioner gathered whole batches where it has no per-row rule (the rough
+    terrain's FFT, a Pallas kernel's custom call) and reduced vmapped while loops' predicates over all
+    devices at every iteration (the selector's search, MJX's solver): on two H200s a perfect-robot sweep ran
+    at a sixth of one GPU's rate. A ``shard_map`` over the rows fixed that, but a physics sweep's program
+    crashed XLA's GPU compiler (SIGSEGV).
     """
 
     def __init__(self, devices: list):
@@ -314,7 +317,9 @@ class _OnDevices:
         self._pool = ThreadPoolExecutor(len(self.devices)) if len(self.devices) > 1 else None
 
     def put_shared(self, shared) -> list:
-        """``shared`` committed to each device (one copy per device)."""
+        """``shared`` committed to each device (one copy per device); as it is with one device."""
+        if self._pool is None:
+            return [shared]
         return [jax.device_put(shared, d) for d in self.devices]
 
     def __call__(self, run, static: _Static, shared: list, batch) -> dict:
@@ -325,6 +330,9 @@ class _OnDevices:
 
         def one(i):
             rows = jax.tree.map(lambda x: x[i * m:(i + 1) * m], batch)
+            if self._pool is None:
+                # uncommitted, on the default device: the program other callers of these shapes compiled
+                return run(static, *shared[i], *jax.tree.map(jnp.asarray, rows))
             return run(static, *shared[i], *jax.device_put(rows, self.devices[i]))
 
         outs = [one(0)] if self._pool is None else list(self._pool.map(one, range(k)))
@@ -821,7 +829,7 @@ def run(
       max_scenarios: run only the first this many scenarios (smoke tests).
       progress: print a progress line (scenarios/s, ETA) to stderr.
       devices: split each chunk over the first this many local devices
-        (default None: all of them); 1 runs on the first local device.
+        (default None: all of them); 1 runs on the default device.
       process_id, num_processes: run only the chunks with ``chunk_id % num_processes == process_id``
         (default: ``jax.process_index()`` and ``jax.process_count()``, i.e. the whole sweep
         unless ``jax.distributed`` is initialized). Give both or neither.
