@@ -60,7 +60,8 @@ return once dispatched, so the devices compute at the same time), and the
 summaries are gathered to the host. No program spans devices and nothing is
 exchanged between them, so a device's rows come out exactly as one device
 alone computes them, and a one-device program compiled once serves every
-device of the model through the persistent compilation cache. The chunk size
+device of the model through JAX's persistent compilation cache (which ``ijoy``
+turns on). The chunk size
 is rounded up to a multiple of the device count (the plan's ``chunk_size``)
 and a padded chunk is padded to a multiple of it too. Each session in the
 manifest records ``devices`` and ``sharding`` (how rows were split).
@@ -294,7 +295,6 @@ def _chunk_runner(static: _Static):
     return _run_chunk if static.walker == "perfect" else _physics_chunk
 
 
-
 class _OnDevices:
     """A chunk's rows split evenly over ``devices``, each slice run by the one-device program on its own device.
 
@@ -314,11 +314,10 @@ class _OnDevices:
 
     def __init__(self, devices: list):
         self.devices = list(devices)
-        self._pool = ThreadPoolExecutor(len(self.devices)) if len(self.devices) > 1 else None
 
     def put_shared(self, shared) -> list:
         """``shared`` committed to each device (one copy per device); as it is with one device."""
-        if self._pool is None:
+        if len(self.devices) == 1:
             return [shared]
         return [jax.device_put(shared, d) for d in self.devices]
 
@@ -330,18 +329,17 @@ class _OnDevices:
 
         def one(i):
             rows = jax.tree.map(lambda x: x[i * m:(i + 1) * m], batch)
-            if self._pool is None:
-                # uncommitted, on the default device: the program other callers of these shapes compiled
+            if k == 1:  # uncommitted, on the default device: the program other callers of these shapes compiled
                 return run(static, *shared[i], *jax.tree.map(jnp.asarray, rows))
             return run(static, *shared[i], *jax.device_put(rows, self.devices[i]))
 
-        outs = [one(0)] if self._pool is None else list(self._pool.map(one, range(k)))
+        if k == 1:
+            outs = [one(0)]
+        else:
+            with ThreadPoolExecutor(k) as pool:  # a thread per device; they return once dispatched
+                outs = list(pool.map(one, range(k)))
         outs = jax.device_get(outs)
         return {name: np.concatenate([np.asarray(o[name]) for o in outs]) for name in outs[0]}
-
-    def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown()
 
 
 def trace_count() -> int:
@@ -989,7 +987,6 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
             # Rate over compiled chunks only (the first chunk of a density includes its compile).
             rate = steady_n / steady_s if steady_n else n / dt
             _progress(done_before + computed, total, rate, chunk_id + 1, len(plan), who, stats.physics_steps)
-    on_devices.close()
     stats.computed = computed
     stats.rate = steady_n / steady_s if steady_n else 0.0
     stats.compiles = trace_count() - traces0
