@@ -259,6 +259,35 @@ def test_importing_the_package_and_reading_sweep_files_start_no_backend():
     assert proc.returncode == 0 and proc.stdout.strip().endswith("ok"), proc.stderr[-2000:]
 
 
+LOCAL_MODEL_SCRIPT = """
+import sys
+import jax
+from ijoy_jax.sim import walker
+jax.distributed.initialize(f"localhost:{sys.argv[1]}", 2, int(sys.argv[2]))
+sim = walker.make_sim((40, 30), 0.05)
+leaves = [x for x in jax.tree.leaves((sim.mjx_model, sim.mjx_free)) if isinstance(x, jax.Array)]
+assert len(leaves) > 50 and all(x.is_fully_addressable for x in leaves), {str(x.devices()) for x in leaves}
+assert {d for x in leaves for d in x.devices()} == {jax.local_devices()[0]}
+print("ok")
+"""
+
+
+def test_each_process_puts_the_mjx_models_on_its_own_device():
+    """MJX's default device is ``jax.devices()[0]``, process 0's in a jax.distributed job: process 1 of a physics
+    sweep had its models there and failed fetching its first chunk ("spans non-addressable devices")."""
+    port = _free_port()
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    procs = [subprocess.Popen([sys.executable, "-c", LOCAL_MODEL_SCRIPT, str(port), str(i)], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in (0, 1)]
+    try:
+        results = [p.communicate(timeout=PROC_TIMEOUT) + (p.returncode,) for p in procs]
+    finally:
+        for p in procs:
+            p.kill()
+    for stdout, stderr, rc in results:
+        assert rc == 0 and stdout.strip().endswith("ok"), stderr[-2000:]
+
+
 ACCESSOR_SCRIPT = """
 import sys
 import jax

@@ -23,6 +23,8 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from ijoy_jax.sim import model
+
 
 def no_contact_model(mj_model: mujoco.MjModel) -> mjx.Model:
     """The MJX model with constraints (contacts, joint limits) disabled, for inverse dynamics of free motion.
@@ -45,7 +47,7 @@ def no_contact_model(mj_model: mujoco.MjModel) -> mjx.Model:
                          f"{', '.join(leaves_out)}")
     m = copy.copy(mj_model)
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT) | int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
-    return mjx.put_model(m)
+    return model.put_model(m)
 
 
 def _quat_mul(a, b):

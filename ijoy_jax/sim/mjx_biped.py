@@ -168,7 +168,7 @@ class MjxBiped(SteppedBiped):
         k = as_key(0 if key is None else key)
         if k.shape != ():
             raise ValueError(f"key must be one PRNG key or int seed, got keys of shape {k.shape}")
-        self.device = jax.devices()[0] if device is None else device
+        self.device = jax.local_devices()[0] if device is None else device
         put = lambda x: jax.device_put(x, self.device)  # noqa: E731
         self.sim, self.cfg, self.robot = put(sim), sim.cfg, robot
         self.terrain = terrain

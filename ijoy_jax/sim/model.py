@@ -38,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
+from mujoco import mjx
 
 from ijoy_jax._struct import check_real, check_whole
 from ijoy_jax.sim import kinematics
@@ -54,6 +55,7 @@ __all__ = [
     "hfield_data",
     "model_index",
     "physical_heights",
+    "put_model",
     "put_terrain",
     "put_terrains",
     "sole_points",
@@ -433,6 +435,15 @@ def build_model(params: BipedParams, terrain, *, edit=None) -> mujoco.MjModel:
     m = spec.compile()
     m.hfield_data[:] = np.asarray(hfield_data(params, terrain), np.float32)
     return m
+
+
+def put_model(mj_model: mujoco.MjModel):
+    """``mjx.put_model`` on this process's first local device.
+
+    MJX's default device is ``jax.devices()[0]``: in a multi-process JAX job (``jax.distributed``) that is
+    process 0's device, which another process can neither compute on nor read.
+    """
+    return mjx.put_model(mj_model, device=jax.local_devices()[0])
 
 
 def put_terrain(mjx_model, params: BipedParams, terrain):

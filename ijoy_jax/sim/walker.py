@@ -152,7 +152,7 @@ def make_sim(shape, resolution: float, params: model.BipedParams | None = None, 
     # Pelvis moved by 0.04 m over fixed soles: the CoM moves by (1 - b) 0.04.
     b = float(np.clip(1.0 - (com1[0] - com0[0]) / 0.04, 0.0, 0.9))
     cfg = dataclasses.replace(cfg, com_height=float(com0[2]), com_offset=float(com0[0]), leg_share=b)
-    return Sim(params, cfg, mj_model, mjx.put_model(mj_model), dynamics.no_contact_model(mj_model), idx, shape,
+    return Sim(params, cfg, mj_model, model.put_model(mj_model), dynamics.no_contact_model(mj_model), idx, shape,
                float(resolution),
                fall_height=0.5 * cfg.pelvis_height, fall_tilt=0.7)
 
