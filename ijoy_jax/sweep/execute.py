@@ -59,9 +59,9 @@ made from its own thread (a new program compiles side by side; the calls
 return once dispatched, so the devices compute at the same time), and the
 summaries are gathered to the host. No program spans devices and nothing is
 exchanged between them, so a device's rows come out exactly as one device
-alone computes them, and a one-device program compiled once serves every
-device of the model through JAX's persistent compilation cache (which ``ijoy``
-turns on). The chunk size
+alone computes them; each device's program is the one-device program, compiled
+for the devices side by side (a later run loads it from JAX's persistent
+compilation cache, which ``ijoy`` turns on). The chunk size
 is rounded up to a multiple of the device count (the plan's ``chunk_size``)
 and a padded chunk is padded to a multiple of it too. Each session in the
 manifest records ``devices`` and ``sharding`` (how rows were split).
@@ -301,10 +301,10 @@ class _OnDevices:
     With one device nothing is placed: the arrays go to the default device uncommitted, as other callers pass
     them, so a sweep shares the program they compiled (e.g. :func:`ijoy_jax.sim.walker.rollout_batch`'s).
     With several, the shared inputs are copied to every device once per density, and each device's call is
-    made from its own thread: a new program traces and compiles side by side (a second device of a GPU model
-    loads the first's program from the persistent compilation cache), and the calls return as soon as their
-    work is dispatched, so the devices compute at the same time. Nothing is exchanged between devices, and a
-    device computes exactly what one device alone computes on those rows. Handing the whole batch to jit
+    made from its own thread: a new program traces and compiles for the devices side by side (one compile's
+    wall time on two H200s), and the calls return as soon as their work is dispatched, so the devices
+    compute at the same time. Nothing is exchanged between devices, and a device computes exactly what one
+    device alone computes on those rows. Handing the whole batch to jit
     with a sharding instead, the partitioner gathered whole batches where it has no per-row rule (the rough
     terrain's FFT, a Pallas kernel's custom call) and reduced vmapped while loops' predicates over all
     devices at every iteration (the selector's search, MJX's solver): on two H200s a perfect-robot sweep ran
