@@ -56,7 +56,7 @@ def mjx_physics(batch: int, steps: int, params: model.BipedParams | None = None,
     """Compile time and physics steps/s of ``batch`` robots for ``steps`` MJX steps."""
     params = model.biped_params() if params is None else params
     mj_model, qpos = _setup(params)
-    m = mjx.put_model(mj_model)
+    m = model.put_model(mj_model)
     batched, axes = model.put_terrains(m, params, _terrains(jax.random.key(seed), batch))
     d0 = mjx.make_data(m).replace(qpos=jnp.asarray(qpos, jnp.float32), ctrl=jnp.asarray(qpos[7:], jnp.float32))
     data = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (batch, *x.shape)), d0)
