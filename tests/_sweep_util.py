@@ -96,17 +96,17 @@ def kill_after_first_part(sweep_file: Path, out: Path, *, chunk: int, hold_s: fl
 SPY_ON_DEVICES = """
 from ijoy_jax.sweep import execute
 seen = []  # per chunk: the device of each slice's outputs
-_call = execute._OnDevices.__call__
+_dispatch = execute._OnDevices.dispatch
 def spy(self, run, static, shared, batch):
     where = []
     def run_and_note(*args):
         out = run(*args)
         where.append(next(iter(out.values())).devices())
         return out
-    summary = _call(self, run_and_note, static, shared, batch)
+    outs = _dispatch(self, run_and_note, static, shared, batch)
     seen.append(sorted(str(d) for ds in where for d in ds))
-    return summary
-execute._OnDevices.__call__ = spy
+    return outs
+execute._OnDevices.dispatch = spy
 """
 """Child-script code that spies on the sweep's per-device runner: ``seen`` lists, per chunk, the device that
 computed each slice (its outputs' device)."""

@@ -255,7 +255,25 @@ def test_parameter_values_do_not_recompile(reference, tmp_path):
     assert compiled_count(execute._run_chunk) == cache
 
 
-def test_density_compiles_once_per_size(tmp_path):
+def _log_chunk_events(monkeypatch) -> list:
+    """Record the sweep's chunk loop as ("dispatch", rows) and ("write", chunk id) events."""
+    events = []
+    dispatch, write_part = execute._OnDevices.dispatch, execute._write_part
+
+    def logged_dispatch(self, run, static, shared, batch):
+        events.append(("dispatch", len(batch[0])))  # the rows dispatched
+        return dispatch(self, run, static, shared, batch)
+
+    def logged_write(df, path, plan_record):
+        events.append(("write", int(df["chunk"].iloc[0])))
+        write_part(df, path, plan_record)
+
+    monkeypatch.setattr(execute._OnDevices, "dispatch", logged_dispatch)
+    monkeypatch.setattr(execute, "_write_part", logged_write)
+    return events
+
+
+def test_density_compiles_once_per_size_and_the_host_writes_while_the_devices_compute(tmp_path, monkeypatch):
     text = BASE.replace("[robot]\ndensity = 0.25\n", "").replace(
         '"robot.margin" = [0.0, 0.05]', '"robot.density" = [0.25, 0.5]').replace("scenarios_per_cell = 3",
                                                                               "scenarios_per_cell = 4")
@@ -263,7 +281,17 @@ def test_density_compiles_once_per_size(tmp_path):
     df = sweep.load(tmp_path / "o")
     assert s.chunks == 8 and len(df) == 16
     assert s.compiles <= 2 and set(s.first_chunk_s) == {0.25, 0.5}  # 0.25 may be cached already
-    assert sweep.run(write(tmp_path, text), tmp_path / "o2", chunk_size=CHUNK, progress=False).compiles == 0
+    events = _log_chunk_events(monkeypatch)
+    again = sweep.run(write(tmp_path, text), tmp_path / "o2", chunk_size=CHUNK, progress=False)
+    assert again.compiles == 0
+    pd.testing.assert_frame_equal(sweep.load(tmp_path / "o2"), df)
+    # Chunks 0-3 are density 0.25, 4-7 density 0.5 (a new program): within a density, chunk k+1 is dispatched
+    # before chunk k is written; the first chunk of a density waits until the chunk before it is written.
+    kinds = [k for k, _ in events]
+    writes = [c for k, c in events if k == "write"]
+    assert writes == list(range(8))
+    assert kinds == ["dispatch", "dispatch", "write", "dispatch", "write", "dispatch", "write",
+                     "write", "dispatch", "dispatch", "write", "dispatch", "write", "dispatch", "write", "write"]
 
 
 def test_selector_options_sweep_match_direct_rollouts_and_compile_once_per_horizon(tmp_path):
@@ -345,6 +373,29 @@ def test_resume_after_sigkill(reference, base_file, tmp_path):
     again = sweep.run(base_file, out, chunk_size=CHUNK, progress=False)
     assert again.computed == 0 and again.skipped == 6
     pd.testing.assert_frame_equal(sweep.load(out), want)
+
+
+def test_a_chunk_dispatched_before_an_error_is_still_written(reference, base_file, tmp_path, monkeypatch):
+    ref_out, _ = reference
+    events = _log_chunk_events(monkeypatch)
+    logged = execute._OnDevices.dispatch
+
+    def fail_fourth(self, *args):
+        if sum(k == "dispatch" for k, _ in events) == 3:
+            raise RuntimeError("device lost")
+        return logged(self, *args)
+
+    monkeypatch.setattr(execute._OnDevices, "dispatch", fail_fourth)
+    out = tmp_path / "broken"
+    with pytest.raises(RuntimeError, match="device lost"):
+        sweep.run(base_file, out, chunk_size=CHUNK, progress=False)
+    # Chunk 2 was in flight when chunk 3's dispatch failed: its results are kept, and a resume skips it.
+    assert sorted(p.name for p in (out / "parts").glob("part-*.parquet")) == [
+        f"part-{i:05d}.parquet" for i in range(3)]
+    monkeypatch.undo()
+    stats = sweep.run(base_file, out, chunk_size=CHUNK, progress=False)
+    assert stats.skipped == 3 and stats.computed == 12 - 3 * CHUNK
+    pd.testing.assert_frame_equal(sweep.load(out), sweep.load(ref_out))
 
 
 def test_resume_refuses_a_different_plan(reference, base_file):

@@ -321,23 +321,26 @@ class _OnDevices:
             return [shared]
         return [jax.device_put(shared, d) for d in self.devices]
 
-    def __call__(self, run, static: _Static, shared: list, batch) -> dict:
+    def dispatch(self, run, static: _Static, shared: list, batch) -> list:
         """``run(static, *shared[i], *rows_i)`` on device i for the i-th of equal slices of the host ``batch``
-        (its leading axis a multiple of the device count); the summaries concatenated on the host."""
+        (its leading axis a multiple of the device count). Returns each device's outputs once its work is
+        dispatched (a new program is traced and compiled first); :meth:`collect` waits for them."""
         k = len(self.devices)
         m = len(batch[0]) // k
 
         def one(i):
             rows = jax.tree.map(lambda x: x[i * m:(i + 1) * m], batch)
-            if k == 1:  # uncommitted, on the default device: the program other callers of these shapes compiled
-                return run(static, *shared[i], *jax.tree.map(jnp.asarray, rows))
-            return run(static, *shared[i], *jax.device_put(rows, self.devices[i]))
+            # With one device: uncommitted, on the default device (the program other callers compiled).
+            return run(static, *shared[i], *jax.device_put(rows, self.devices[i] if k > 1 else None))
 
         if k == 1:
-            outs = [one(0)]
-        else:
-            with ThreadPoolExecutor(k) as pool:  # a thread per device; they return once dispatched
-                outs = list(pool.map(one, range(k)))
+            return [one(0)]
+        with ThreadPoolExecutor(k) as pool:  # a thread per device; they return once dispatched
+            return list(pool.map(one, range(k)))
+
+    @staticmethod
+    def collect(outs: list) -> dict:
+        """The devices' summaries (from :meth:`dispatch`) on the host, concatenated in device order."""
         outs = jax.device_get(outs)
         return {name: np.concatenate([np.asarray(o[name]) for o in outs]) for name in outs[0]}
 
@@ -956,19 +959,14 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     shared_of: dict[float, Any] = {}  # per density: (base robot, targets, key, sim, scene), placed
     computed = steady_n = 0
     steady_s = 0.0
-    for chunk_id, group, ids in todo:
-        density = group[0]
-        static_g = static._replace(horizon=group[1], refine=group[2])
-        label = _group_label(cfg, group)
-        t0 = time.perf_counter()
-        if density not in shared_of:  # shared by every scenario: a copy on every device
-            shared_of[density] = on_devices.put_shared((*_shared(table, bases[density]), key, sim, _scene(cfg)))
-        rows = by_id.loc[ids]
+    t_last = None  # when the last chunk was written
+
+    def finish(p) -> None:
+        """Wait for a dispatched chunk's summaries, write its part and count it."""
+        nonlocal computed, steady_n, steady_s, t_last
+        chunk_id, label, rows, outs, t0 = p
+        summary = _OnDevices.collect(outs)
         n = len(rows)
-        size = min(chunk_size, per_group[group])
-        size = -(-size // ndev) * ndev  # every device gets the same number of rows
-        batch = _batch(rows, size, robot_cols, terrain_cols, sim_cols, cfg=cfg)
-        summary = on_devices(run_chunk, static_g, shared_of[density], batch)
         result = rows.reset_index(drop=True).copy()
         for k, v in summary.items():
             result[k] = np.asarray(v)[:n]
@@ -977,7 +975,10 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
         tmp = path.with_name(f"{path.name}.{_WHO}.tmp")  # per process: members never share a temp file
         _write_part(result, tmp, plan_record)
         os.replace(tmp, path)
-        dt = time.perf_counter() - t0
+        now = time.perf_counter()
+        # A chunk's time: from its start, or from the last write when it ran behind the chunk before it.
+        dt = now - (t0 if t_last is None else max(t0, t_last))
+        t_last = now
         if label not in stats.first_chunk_s:
             stats.first_chunk_s[label] = dt  # includes the compile
         else:
@@ -987,6 +988,38 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
             # Rate over compiled chunks only (the first chunk of a density includes its compile).
             rate = steady_n / steady_s if steady_n else n / dt
             _progress(done_before + computed, total, rate, chunk_id + 1, len(plan), who, stats.physics_steps)
+
+    # One chunk in flight behind the host: chunk k+1 is built and dispatched before chunk k's summaries are
+    # fetched and written, so the devices compute while the host writes. A chunk that compiles (the first of
+    # its group) waits until the one before is written, so no compile time is counted in a steady chunk.
+    pending = None
+    try:
+        for chunk_id, group, ids in todo:
+            density = group[0]
+            static_g = static._replace(horizon=group[1], refine=group[2])
+            label = _group_label(cfg, group)
+            if pending is not None and label not in stats.first_chunk_s and label != pending[1]:
+                done, pending = pending, None
+                finish(done)
+            t0 = time.perf_counter()
+            if density not in shared_of:  # shared by every scenario: a copy on every device
+                shared_of[density] = on_devices.put_shared((*_shared(table, bases[density]), key, sim, _scene(cfg)))
+            rows = by_id.loc[ids]
+            size = -(-min(chunk_size, per_group[group]) // ndev) * ndev  # every device gets the same rows
+            batch = _batch(rows, size, robot_cols, terrain_cols, sim_cols, cfg=cfg)
+            outs = on_devices.dispatch(run_chunk, static_g, shared_of[density], batch)
+            done, pending = pending, (chunk_id, label, rows, outs, t0)
+            if done is not None:
+                finish(done)
+        done, pending = pending, None
+        if done is not None:
+            finish(done)
+    finally:
+        if pending is not None:  # an error or interrupt after a chunk was dispatched: keep its results
+            try:
+                finish(pending)
+            except Exception:  # noqa: BLE001 - the error that got here is the one to report
+                pass
     stats.computed = computed
     stats.rate = steady_n / steady_s if steady_n else 0.0
     stats.compiles = trace_count() - traces0
