@@ -77,12 +77,19 @@ def single(tiny, tmp_path_factory) -> Path:
     return out
 
 
-def _launch(tiny: Path, out: Path, pid: int, port: int, extra_env=None) -> subprocess.Popen:
+# `ijoy` (the CLI's main), then a pause before the interpreter exits.
+_CLI_THEN_WAIT = "import sys, time; from ijoy_jax.apps import cli; rc = cli.main(sys.argv[2:]); " \
+                 "time.sleep(float(sys.argv[1])); sys.exit(rc)"
+
+
+def _launch(tiny: Path, out: Path, pid: int, port: int, extra_env=None, exit_delay_s: float = 0.0
+            ) -> subprocess.Popen:
     # The recipe of sweeps/README.md: one command per process, the same --out, file and coordinator.
     env = dict(os.environ, JAX_PLATFORMS="cpu", **(extra_env or {}))
-    cmd = [sys.executable, "-m", "ijoy_jax.apps.cli", "sweep", "run", str(tiny), "--out", str(out),
-           "--chunk", str(CHUNK), "--num-processes", "2", "--process-id", str(pid),
-           "--coordinator", f"localhost:{port}"]
+    args = ["sweep", "run", str(tiny), "--out", str(out), "--chunk", str(CHUNK), "--num-processes", "2",
+            "--process-id", str(pid), "--coordinator", f"localhost:{port}"]
+    cmd = ([sys.executable, "-c", _CLI_THEN_WAIT, str(exit_delay_s)] if exit_delay_s
+           else [sys.executable, "-m", "ijoy_jax.apps.cli"]) + args
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -90,7 +97,9 @@ def test_two_processes_give_the_one_process_result(tiny, single, tmp_path):
     out = tmp_path / "shared"
     port = _free_port()
     t0 = time.monotonic()
-    procs = [_launch(tiny, out, pid, port) for pid in (0, 1)]
+    # Process 1 exits 3 s after process 0 (it has no aggregates to write, so it would usually leave first):
+    # it must not be aborted by process 0's coordination service going away (it was, on four GPUs).
+    procs = [_launch(tiny, out, pid, port, exit_delay_s=3.0 * pid) for pid in (0, 1)]
     results = []
     try:
         for p in procs:

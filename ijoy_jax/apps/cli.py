@@ -328,7 +328,8 @@ def _sweep(args) -> int:
                "scenarios_per_s": round(stats.rate, 3) if stats.rate > 0 else None}
         if stats.physics_steps:
             row["physics_steps_per_s"] = round(stats.rate * stats.physics_steps) if stats.rate > 0 else None
-        print(json.dumps(row, indent=2))
+        print(json.dumps(row, indent=2), flush=True)
+        sweep.distributed.shutdown()  # the others leave first, then process 0's service
         return 0
     import pandas as pd
 

@@ -32,11 +32,13 @@ from __future__ import annotations
 import dataclasses
 import os
 import sys
+import threading
+import time
 from collections.abc import Mapping
 
 import jax
 
-__all__ = ["ENV", "Layout", "agree", "barrier", "client", "initialize", "layout"]
+__all__ = ["ENV", "Layout", "agree", "barrier", "client", "initialize", "layout", "shutdown"]
 
 ENV = {"num_processes": "IJOY_NUM_PROCESSES", "process_id": "IJOY_PROCESS_ID", "coordinator": "IJOY_COORDINATOR",
        "distributed": "IJOY_DISTRIBUTED"}
@@ -136,6 +138,42 @@ def initialize(lay: Layout) -> tuple[int, int]:
         jax.config.update("jax_enable_recoverability", True)
         jax.distributed.initialize(lay.coordinator, lay.num_processes, lay.process_id)
     return jax.process_index(), jax.process_count()
+
+
+def shutdown(timeout_s: float = 120.0) -> None:
+    """Leave ``jax.distributed`` so that no process is aborted on its way out (call it once work is done).
+
+    Process 0 hosts the coordination service. A recoverable service (:func:`initialize`) does not hold it
+    at JAX's exit barrier, so a process 0 that exits first takes the service down while the others are
+    still disconnecting, and they abort (SIGABRT, "Failed to disconnect from coordination service"): two of
+    four processes of a sweep did so on four H200s, after their results were written. So here the others
+    disconnect at once, and process 0 waits until they have (the service's live tasks are process 0
+    alone), for at most ``timeout_s``, before it shuts the service down. Without ``jax.distributed``
+    nothing happens.
+    """
+    c = client()
+    if c is None:
+        return
+    if jax.process_index() != 0:
+        jax.distributed.shutdown()
+        return
+    everyone = list(range(jax.process_count()))
+
+    def wait_alone() -> None:
+        # The service answers once every live task in the list has asked or left: a dead task is not live.
+        try:
+            while set(c.get_live_nodes(everyone)) != {0}:
+                time.sleep(0.05)
+        except Exception:  # noqa: BLE001 - a service error: nothing to wait for any more
+            pass
+
+    waiter = threading.Thread(target=wait_alone, daemon=True)
+    waiter.start()
+    waiter.join(timeout_s)
+    if waiter.is_alive():
+        print(f"[ijoy sweep] other processes still connected after {timeout_s:g} s; shutting the coordination "
+              "service down anyway", file=sys.stderr)
+    jax.distributed.shutdown()
 
 
 def client():
