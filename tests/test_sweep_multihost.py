@@ -305,10 +305,14 @@ assert distributed.client() is None  # before initialize: no client, agree and b
 assert distributed.agree("solo", lambda: 3, 0) == 3 and distributed.barrier("solo", 1.0) is False
 jax.distributed.initialize(f"localhost:{sys.argv[1]}", 1, 0)
 c = distributed.client()
-assert c is not None and all(hasattr(c, f) for f in ("key_value_set", "blocking_key_value_get", "wait_at_barrier"))
+assert c is not None and all(hasattr(c, f) for f in ("key_value_set", "blocking_key_value_get", "wait_at_barrier",
+                                                     "get_live_nodes"))
 assert distributed.agree("answer", lambda: 42, 0) == 42  # through the key-value store
 assert int(c.blocking_key_value_get("answer", 1000)) == 42
 assert distributed.barrier("all_here", 10.0) is True
+assert set(c.get_live_nodes([0])) == {0}  # what distributed.shutdown waits for
+distributed.shutdown(timeout_s=10.0)
+assert not jax.distributed.is_initialized() and distributed.client() is None
 print("ok")
 """
 

@@ -9,7 +9,8 @@ output folder. The coordination service started by
 optional: process 0's automatic chunk size is handed to the others through its
 key-value store (so every process cuts the same plan), and a final barrier lets
 process 0 write ``aggregates.parquet`` once every process is done. Neither is
-a device collective, so the CPU backend needs no gloo/MPI collectives.
+a device collective, so the CPU backend needs no gloo/MPI collectives. At the
+end, :func:`shutdown` lets the others leave the service before process 0 stops it.
 
 Layout sources, first match wins per field::
 
@@ -180,7 +181,7 @@ def client():
     """The coordination-service client of ``jax.distributed`` (None when it is not initialized).
 
     The one reach into JAX's private ``jax._src.distributed`` (the public API
-    exposes no key-value store or barrier); a test pins it to the JAX versions
+    exposes no key-value store, barrier or live-task query); a test pins it to the JAX versions
     we run (0.10 and 0.11).
     """
     if not jax.distributed.is_initialized():

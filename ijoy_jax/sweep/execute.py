@@ -25,6 +25,10 @@ scenario's commands, one per step: its held command repeated, or the
 program either way, returning
 :meth:`ijoy_jax.Trajectory.summary` plus the family's extra metrics
 (:meth:`ijoy_jax.terrain.family.Family.metrics`; bars: whether the robot got past them).
+One chunk is in flight behind the host: chunk k+1 is built and dispatched before chunk k's
+summaries are fetched and its part written (the first chunk of a group, which compiles, waits until
+the chunk before it is written, so steady rates hold no compile time); a chunk dispatched before an
+error or interrupt is still written.
 
 Physics (``walker = "mjx"``). The MJX biped (:func:`ijoy_jax.sim.walker.make_sim`
 for the sweep's grid and footprint, built once per run) walks instead of the
