@@ -82,12 +82,12 @@ _CLI_THEN_WAIT = "import sys, time; from ijoy_jax.apps import cli; rc = cli.main
                  "time.sleep(float(sys.argv[1])); sys.exit(rc)"
 
 
-def _launch(tiny: Path, out: Path, pid: int, port: int, extra_env=None, exit_delay_s: float = 0.0
-            ) -> subprocess.Popen:
+def _launch(tiny: Path, out: Path, pid: int, port: int, extra_env=None, exit_delay_s: float = 0.0,
+            extra_args: tuple[str, ...] = ()) -> subprocess.Popen:
     # The recipe of sweeps/README.md: one command per process, the same --out, file and coordinator.
     env = dict(os.environ, JAX_PLATFORMS="cpu", **(extra_env or {}))
     args = ["sweep", "run", str(tiny), "--out", str(out), "--chunk", str(CHUNK), "--num-processes", "2",
-            "--process-id", str(pid), "--coordinator", f"localhost:{port}"]
+            "--process-id", str(pid), "--coordinator", f"localhost:{port}", *extra_args]
     cmd = ([sys.executable, "-c", _CLI_THEN_WAIT, str(exit_delay_s)] if exit_delay_s
            else [sys.executable, "-m", "ijoy_jax.apps.cli"]) + args
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -160,6 +160,32 @@ def test_a_killed_process_relaunched_rejoins_the_run(tiny, single, tmp_path):
     pd.testing.assert_frame_equal(pd.read_parquet(out / "aggregates.parquet"), sweep.load_aggregates(single))
 
 
+def test_a_process_that_never_comes_back_ends_the_wait_at_the_barrier_timeout(tiny, tmp_path):
+    """Process 1 is SIGKILLed after its first part and not relaunched: process 0 finishes its chunks, waits
+    ``--barrier-timeout`` seconds for it, says so, and exits 0 without aggregates (not after an hour, and not
+    after the dead peer's heartbeats time out)."""
+    out = tmp_path / "dead"
+    port = _free_port()
+    p0 = _launch(tiny, out, 0, port, extra_args=("--barrier-timeout", "2"))
+    try:
+        kill_after_first_part(tiny, out, chunk=CHUNK, hold_s=600, timeout_s=PROC_TIMEOUT, poll_s=0.05,
+                              extra=("--num-processes", "2", "--process-id", "1", "--coordinator", f"localhost:{port}"),
+                              part="part-00001.parquet")
+        t_kill = time.monotonic()
+        stdout, stderr = p0.communicate(timeout=PROC_TIMEOUT)
+        waited = time.monotonic() - t_kill
+    finally:
+        p0.kill()
+    assert p0.returncode == 0, stderr[-3000:]
+    row = json.loads(stdout)
+    assert row["computed"] == 4 and row["complete"] is False
+    assert "waiting up to 2 s for process(es) 1" in stderr and "not reached by every process" in stderr
+    assert waited < 60, f"process 0 took {waited:.0f} s after the kill"  # its chunks, 2 s, 5 s at shutdown
+    assert not (out / "aggregates.parquet").exists()
+    with pytest.raises(sweep.IncompleteSweepError, match=r"chunks? 3\b"):
+        sweep.load(out)
+
+
 def test_a_missing_process_is_named_and_its_rerun_completes_the_sweep(tiny, single, tmp_path, capsys):
     # Process 1 never ran (or was killed): the layout without jax.distributed, as sweep.run arguments.
     out = tmp_path / "half"
@@ -205,6 +231,8 @@ BAD_FLAGS = [
     ([], {"IJOY_NUM_PROCESSES": "2", "IJOY_PROCESS_ID": "5", "IJOY_COORDINATOR": "localhost:1"},
      "IJOY_PROCESS_ID: process id 5 out of range"),
     ([], {"IJOY_NUM_PROCESSES": "two"}, "IJOY_NUM_PROCESSES must be an integer"),
+    (["--barrier-timeout", "0"], {}, "--barrier-timeout must be a positive number of seconds, got 0"),
+    (["--barrier-timeout", "nan"], {}, "--barrier-timeout must be a positive number of seconds, got nan"),
 ]
 
 
@@ -224,6 +252,13 @@ def test_run_checks_the_layout(tiny, tmp_path):
     for pid, n in ((2, 2), (-1, 2), (0, 0), (0, None), (True, 2)):
         with pytest.raises(ValueError, match="process"):
             sweep.run(tiny, tmp_path / "o", process_id=pid, num_processes=n, progress=False)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("timeout", [0, -1.0, float("inf"), float("nan"), True, "60"])
+def test_run_refuses_a_bad_barrier_timeout(tiny, tmp_path, timeout):
+    with pytest.raises(ValueError, match="barrier_timeout_s must be a positive number of seconds"):
+        sweep.run(tiny, tmp_path / "o", barrier_timeout_s=timeout, progress=False)
     assert not (tmp_path / "o").exists()
 
 

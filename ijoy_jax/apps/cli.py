@@ -132,6 +132,10 @@ def main(argv: list[str] | None = None) -> int:
     srun.add_argument("--coordinator", default=None,
                       help="HOST:PORT of process 0's jax.distributed coordinator, reachable from every process "
                            "(env IJOY_COORDINATOR)")
+    srun.add_argument("--barrier-timeout", type=float, default=3600.0, metavar="S",
+                      help="several processes: how long a finished process waits for the others before process 0 "
+                           "writes the aggregates (seconds; default 3600); a dead process relaunched within it "
+                           "rejoins the run")
     srun.add_argument("--distributed", action="store_true",
                       help="call jax.distributed.initialize and let JAX detect unset values from the cluster "
                            "(SLURM, Open MPI, ...; env IJOY_DISTRIBUTED=1); see sweeps/README.md")
@@ -316,20 +320,25 @@ def _sweep(args) -> int:
     if args.sweep_command == "run":
         # The layout is checked first (no compute, no network), then jax.distributed starts, before anything
         # can start a JAX backend; then the sweep file is validated, before any compute.
+        if not 0 < args.barrier_timeout < float("inf"):
+            raise ValueError(f"--barrier-timeout must be a positive number of seconds, got {args.barrier_timeout:g}")
         lay = sweep.distributed.layout(args.num_processes, args.process_id, args.coordinator, args.distributed)
         sweep.distributed.initialize(lay)
         cfg = sweep.load_config(args.file)
         stats = sweep.run(cfg, args.out, chunk_size=args.chunk, max_scenarios=args.max_scenarios,
-                          devices=args.devices)
+                          devices=args.devices, barrier_timeout_s=args.barrier_timeout)
         row = {"out": str(stats.out), "scenarios": stats.scenarios, "computed": stats.computed,
                "chunks": stats.chunks, "skipped_chunks": stats.skipped, "compiles": stats.compiles,
                "chunk_size": stats.chunk_size, "first_chunk_s": stats.first_chunk_s, "run_s": round(stats.run_s, 3),
+               "complete": stats.complete,
                # null when every chunk was its density's first (its time includes the compile)
                "scenarios_per_s": round(stats.rate, 3) if stats.rate > 0 else None}
         if stats.physics_steps:
             row["physics_steps_per_s"] = round(stats.rate * stats.physics_steps) if stats.rate > 0 else None
         print(json.dumps(row, indent=2), flush=True)
-        sweep.distributed.shutdown()  # the others leave first, then process 0's service
+        # The others leave first, then process 0's service; a process missing at the end (dead, or stuck
+        # past the barrier) counts as live until its heartbeats time out, so then process 0 does not wait.
+        sweep.distributed.shutdown(timeout_s=120.0 if stats.complete else 5.0)
         return 0
     import pandas as pd
 

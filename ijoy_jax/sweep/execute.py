@@ -113,6 +113,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import math
 import os
 import platform
 import subprocess
@@ -375,6 +376,8 @@ class RunStats:
       physics_steps: physics steps per scenario (``walker = "mjx"``: the steps and the robot's one standing
         step, times the control ticks per step and the physics steps per tick; 0 for the perfect robot), so
         ``rate * physics_steps`` is the physics steps/s.
+      complete: every chunk of the plan has its part in the folder at the end of the call (with several
+        processes: after the final barrier, or its timeout).
     """
 
     out: Path
@@ -389,6 +392,7 @@ class RunStats:
     run_s: float = 0.0
     rate: float = 0.0
     physics_steps: int = 0
+    complete: bool = False
 
 
 def _base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
@@ -864,6 +868,9 @@ def run(
         raise ValueError(f"chunk_size must be a positive int or None, got {chunk_size!r}")
     if max_scenarios is not None and (not isinstance(max_scenarios, int) or max_scenarios < 1):
         raise ValueError(f"max_scenarios must be a positive int, got {max_scenarios!r}")
+    if isinstance(barrier_timeout_s, bool) or not isinstance(barrier_timeout_s, (int, float)) or not (
+            0 < barrier_timeout_s < math.inf):
+        raise ValueError(f"barrier_timeout_s must be a positive number of seconds, got {barrier_timeout_s!r}")
     pid, nproc = _process_layout(process_id, num_processes)
     devs = _local_devices(devices)
     out = Path(out) if out is not None else Path("results") / cfg.name
@@ -1035,7 +1042,7 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
             print(f"[ijoy sweep{who}] this process is done; waiting up to {barrier_timeout_s:g} s for process(es) "
                   f"{', '.join(map(str, missing))} (relaunch one that died with its same command)", file=sys.stderr)
         distributed.barrier(f"ijoy_sweep/done/{cfg.name}/{max_scenarios}", barrier_timeout_s)
-    complete = all((parts / _PART.format(p[0])).exists() for p in plan)
+    complete = stats.complete = all((parts / _PART.format(p[0])).exists() for p in plan)
     if complete and pid == 0:
         from ijoy_jax.sweep.results import aggregate, load
 
