@@ -186,6 +186,69 @@ def test_a_process_that_never_comes_back_ends_the_wait_at_the_barrier_timeout(ti
         sweep.load(out)
 
 
+# `ijoy`, except that process 1 dies (exit code 3) right after writing its first part.
+_DIES_AFTER_ITS_FIRST_PART = """
+import os, sys
+from ijoy_jax.apps import cli
+if sys.argv[sys.argv.index("--process-id") + 1] == "1":
+    _replace = os.replace
+    def replace_then_die(src, dst):
+        _replace(src, dst)
+        if str(dst).endswith(".parquet"):
+            os._exit(3)
+    os.replace = replace_then_die
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+def test_local_processes_stop_when_one_fails_and_the_same_command_resumes(tiny, single, tmp_path, capsys,
+                                                                          monkeypatch):
+    """``--local-processes 2``: two children, one GPU each. When process 1 dies, the parent interrupts process 0
+    (which would wait an hour for it at the barrier) and returns process 1's exit code; every written part stays,
+    and the same command finishes the sweep, equal to one process's."""
+    out = tmp_path / "local"
+    monkeypatch.setenv("JAX_PLATFORMS", "cpu")
+    args = [str(tiny), "--out", str(out), "--chunk", str(CHUNK)]
+    t0 = time.monotonic()
+    # Process 0 may already wait at the final barrier, where an interrupt waits too: 5 s end that wait.
+    rc, rows = sweep.local.run([*args, "--barrier-timeout", "5"], 2,
+                               command=[sys.executable, "-c", _DIES_AFTER_ITS_FIRST_PART])
+    assert rc == 3 and rows[1] is None and time.monotonic() - t0 < PROC_TIMEOUT
+    done = sorted(p.name for p in (out / "parts").glob("part-*.parquet"))
+    assert "part-00001.parquet" in done and "part-00003.parquet" not in done
+    assert cli.main(["sweep", "run", *args, "--local-processes", "2"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["complete"] is True and len(summary["processes"]) == 2
+    assert sum(r["computed"] for r in summary["processes"]) == 2 * (4 - len(done))
+    pd.testing.assert_frame_equal(sweep.load(out), sweep.load(single))
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "aggregates.parquet"), sweep.load_aggregates(single))
+
+
+@pytest.mark.parametrize("flags, env, message", [
+    (["--local-processes", "0"], {}, "--local-processes must be a positive int, got 0"),
+    (["--local-processes", "2", "--devices", "1"], {}, "--devices cannot be combined with --local-processes"),
+    (["--local-processes", "2", "--num-processes", "2"], {}, "--num-processes cannot be combined"),
+    (["--local-processes", "3"], {"CUDA_VISIBLE_DEVICES": "0,1"}, "CUDA_VISIBLE_DEVICES lists 2"),
+])
+def test_bad_local_processes_fail_before_any_process_starts(tiny, tmp_path, capsys, monkeypatch, flags, env, message):
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    out = tmp_path / "o"
+    assert cli.main(["sweep", "run", str(tiny), "--out", str(out), *flags]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_local_processes_get_one_gpu_each():
+    assert sweep.local.gpus_for(3, {}) == ["0", "1", "2"]
+    assert sweep.local.gpus_for(2, {"CUDA_VISIBLE_DEVICES": "GPU-a, GPU-b,GPU-c"}) == ["GPU-a", "GPU-b"]
+    for n in (0, -1, True, 1.5):
+        with pytest.raises(ValueError, match="--local-processes must be a positive int"):
+            sweep.local.gpus_for(n, {})
+    with pytest.raises(ValueError, match="--coordinator cannot be combined"):
+        sweep.local.run(["f.toml", "--coordinator=localhost:1"], 1)
+
+
 def test_a_missing_process_is_named_and_its_rerun_completes_the_sweep(tiny, single, tmp_path, capsys):
     # Process 1 never ran (or was killed): the layout without jax.distributed, as sweep.run arguments.
     out = tmp_path / "half"

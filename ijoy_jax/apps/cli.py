@@ -136,6 +136,10 @@ def main(argv: list[str] | None = None) -> int:
                       help="several processes: how long a finished process waits for the others before process 0 "
                            "writes the aggregates (seconds; default 3600); a dead process relaunched within it "
                            "rejoins the run")
+    srun.add_argument("--local-processes", type=int, default=None, metavar="N",
+                      help="run as N processes on this machine, one GPU each (the first N of CUDA_VISIBLE_DEVICES, "
+                           "else 0..N-1), coordinated on localhost; for several GPUs of one host, the faster "
+                           "layout for short chunks (sweeps/README.md)")
     srun.add_argument("--distributed", action="store_true",
                       help="call jax.distributed.initialize and let JAX detect unset values from the cluster "
                            "(SLURM, Open MPI, ...; env IJOY_DISTRIBUTED=1); see sweeps/README.md")
@@ -311,12 +315,42 @@ def _sim(args) -> int:
     return 0
 
 
+def _sweep_local(args) -> int:
+    """``ijoy sweep run FILE --local-processes N``: N child processes, one GPU each (no JAX backend here)."""
+    import os
+
+    from ijoy_jax.sweep import local
+
+    given = [flag for flag, v in (("--num-processes", args.num_processes), ("--process-id", args.process_id),
+                                  ("--coordinator", args.coordinator), ("--distributed", args.distributed or None),
+                                  ("--devices", args.devices)) if v is not None]
+    if given:
+        raise ValueError(f"{given[0]} cannot be combined with --local-processes (it sets each process's layout: "
+                         "one GPU each, coordinated on localhost)")
+    sweep_args = [args.file]
+    for flag, v in (("--out", args.out), ("--chunk", args.chunk), ("--max-scenarios", args.max_scenarios),
+                    ("--barrier-timeout", args.barrier_timeout)):
+        if v is not None:
+            sweep_args += [flag, str(v)]
+    env = dict(os.environ, **({"IJOY_COMPILE_CACHE": "0"} if args.no_compile_cache else {}))
+    rc, rows = local.run(sweep_args, args.local_processes, env=env)
+    done = [r for r in rows if r is not None]
+    summary = {"processes": rows, "complete": len(done) == len(rows) and all(r.get("complete") for r in done)}
+    for key in ("scenarios_per_s", "physics_steps_per_s"):
+        if done and all(r.get(key) for r in done):
+            summary[key] = round(sum(r[key] for r in done), 3)
+    print(json.dumps(summary, indent=2))
+    return rc
+
+
 def _sweep(args) -> int:
     """``ijoy sweep run`` / ``ijoy sweep summarize`` (bad sweep files raise SweepConfigError, a ValueError)."""
     from pathlib import Path
 
     from ijoy_jax import sweep
 
+    if args.sweep_command == "run" and args.local_processes is not None:
+        return _sweep_local(args)
     if args.sweep_command == "run":
         # The layout is checked first (no compute, no network), then jax.distributed starts, before anything
         # can start a JAX backend; then the sweep file is validated, before any compute.

@@ -17,6 +17,7 @@ Public names::
   default_chunk_size / auto_chunk_size / scenario_bytes /        chunks sized to device memory (physics:
   balanced_chunk_size                                            balanced, no padded chunk)
   distributed                                                    several processes/hosts (jax.distributed)
+  local                                                          N local processes, one GPU each, in one call
   load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table (union of processes), 95% CIs, plot
   paired_differences                                             cell minus baseline, replicate by replicate
   PLOT_METRICS / PHYSICS_PLOT_METRICS / SELECTOR_PLOT_METRICS    the plot's default panels
@@ -39,7 +40,7 @@ Example:
 Command line: ``ijoy sweep run FILE`` and ``ijoy sweep summarize DIR``.
 """
 
-from ijoy_jax.sweep import distributed, recorded
+from ijoy_jax.sweep import distributed, local, recorded
 from ijoy_jax.sweep.config import (
     COMMAND_KEYS,
     HOST_MEMORY_FRACTION,
@@ -135,6 +136,7 @@ __all__ = [
     "cells",
     "default_chunk_size",
     "distributed",
+    "local",
     "recorded",
     "load",
     "load_aggregates",
