@@ -224,21 +224,6 @@ def test_local_processes_stop_when_one_fails_and_the_same_command_resumes(tiny, 
     pd.testing.assert_frame_equal(pd.read_parquet(out / "aggregates.parquet"), sweep.load_aggregates(single))
 
 
-@pytest.mark.parametrize("flags, env, message", [
-    (["--local-processes", "0"], {}, "--local-processes must be a positive int, got 0"),
-    (["--local-processes", "2", "--devices", "1"], {}, "--devices cannot be combined with --local-processes"),
-    (["--local-processes", "2", "--num-processes", "2"], {}, "--num-processes cannot be combined"),
-    (["--local-processes", "3"], {"CUDA_VISIBLE_DEVICES": "0,1"}, "CUDA_VISIBLE_DEVICES lists 2"),
-])
-def test_bad_local_processes_fail_before_any_process_starts(tiny, tmp_path, capsys, monkeypatch, flags, env, message):
-    for k, v in env.items():
-        monkeypatch.setenv(k, v)
-    out = tmp_path / "o"
-    assert cli.main(["sweep", "run", str(tiny), "--out", str(out), *flags]) == 2
-    assert message in capsys.readouterr().err
-    assert not out.exists()
-
-
 def test_local_processes_get_one_gpu_each():
     assert sweep.local.gpus_for(3, {}) == ["0", "1", "2"]
     assert sweep.local.gpus_for(2, {"CUDA_VISIBLE_DEVICES": "GPU-a, GPU-b,GPU-c"}) == ["GPU-a", "GPU-b"]
@@ -296,6 +281,10 @@ BAD_FLAGS = [
     ([], {"IJOY_NUM_PROCESSES": "two"}, "IJOY_NUM_PROCESSES must be an integer"),
     (["--barrier-timeout", "0"], {}, "--barrier-timeout must be a positive number of seconds, got 0"),
     (["--barrier-timeout", "nan"], {}, "--barrier-timeout must be a positive number of seconds, got nan"),
+    (["--local-processes", "0"], {}, "--local-processes must be a positive int, got 0"),
+    (["--local-processes", "2", "--devices", "1"], {}, "--devices cannot be combined with --local-processes"),
+    (["--local-processes", "2", "--num-processes", "2"], {}, "--num-processes cannot be combined"),
+    (["--local-processes", "3"], {"CUDA_VISIBLE_DEVICES": "0,1"}, "CUDA_VISIBLE_DEVICES lists 2"),
 ]
 
 
