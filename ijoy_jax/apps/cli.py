@@ -321,15 +321,11 @@ def _sweep_local(args) -> int:
 
     from ijoy_jax.sweep import local
 
-    given = [flag for flag, v in (("--num-processes", args.num_processes), ("--process-id", args.process_id),
-                                  ("--coordinator", args.coordinator), ("--distributed", args.distributed or None),
-                                  ("--devices", args.devices)) if v is not None]
-    if given:
-        raise ValueError(f"{given[0]} cannot be combined with --local-processes (it sets each process's layout: "
-                         "one GPU each, coordinated on localhost)")
-    sweep_args = [args.file]
+    sweep_args = [args.file] + (["--distributed"] if args.distributed else [])  # local.run refuses layout flags
     for flag, v in (("--out", args.out), ("--chunk", args.chunk), ("--max-scenarios", args.max_scenarios),
-                    ("--barrier-timeout", args.barrier_timeout)):
+                    ("--barrier-timeout", args.barrier_timeout), ("--num-processes", args.num_processes),
+                    ("--process-id", args.process_id), ("--coordinator", args.coordinator),
+                    ("--devices", args.devices)):
         if v is not None:
             sweep_args += [flag, str(v)]
     env = dict(os.environ, **({"IJOY_COMPILE_CACHE": "0"} if args.no_compile_cache else {}))

@@ -1004,14 +1004,21 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     # fetched and written, so the devices compute while the host writes. A chunk that compiles (the first of
     # its group) waits until the one before is written, so no compile time is counted in a steady chunk.
     pending = None
+
+    def finish_pending(new=None) -> None:
+        """Finish the chunk in flight, if any; ``new`` (a dispatched chunk, or None) is in flight after."""
+        nonlocal pending
+        done, pending = pending, new
+        if done is not None:
+            finish(done)
+
     try:
         for chunk_id, group, ids in todo:
             density = group[0]
             static_g = static._replace(horizon=group[1], refine=group[2])
             label = _group_label(cfg, group)
             if pending is not None and label not in stats.first_chunk_s and label != pending[1]:
-                done, pending = pending, None
-                finish(done)
+                finish_pending()
             t0 = time.perf_counter()
             if density not in shared_of:  # shared by every scenario: a copy on every device
                 shared_of[density] = on_devices.put_shared((*_shared(table, bases[density]), key, sim, _scene(cfg)))
@@ -1019,12 +1026,8 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
             size = -(-min(chunk_size, per_group[group]) // ndev) * ndev  # every device gets the same rows
             batch = _batch(rows, size, robot_cols, terrain_cols, sim_cols, cfg=cfg)
             outs = on_devices.dispatch(run_chunk, static_g, shared_of[density], batch)
-            done, pending = pending, (chunk_id, label, rows, outs, t0)
-            if done is not None:
-                finish(done)
-        done, pending = pending, None
-        if done is not None:
-            finish(done)
+            finish_pending((chunk_id, label, rows, outs, t0))
+        finish_pending()
     finally:
         if pending is not None:  # an error or interrupt after a chunk was dispatched: keep its results
             try:

@@ -80,12 +80,12 @@ def run(sweep_args: Sequence[str], num_processes: int, *, port: int | None = Non
     Raises:
       ValueError: a bad ``num_processes``, too few GPUs, or a layout flag in ``sweep_args``.
     """
-    env = dict(os.environ if env is None else env)
-    gpus = gpus_for(num_processes, env)
     for a in sweep_args:
         if a.split("=")[0] in LAYOUT_FLAGS:
             raise ValueError(f"{a.split('=')[0]} cannot be combined with --local-processes (it sets each "
                              "process's layout: one GPU each, coordinated on localhost)")
+    env = dict(os.environ if env is None else env)
+    gpus = gpus_for(num_processes, env)
     coordinator = f"localhost:{port or _free_port()}"
     children: list[subprocess.Popen] = []
     failed = None  # the child that failed first: its exit code is the launch's
