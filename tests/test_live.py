@@ -273,14 +273,25 @@ def test_decisions_overlap_the_step_and_wait_when_late(trace):
     assert len(res.latencies) == 3 and np.all(res.latencies >= 0.3)
     assert np.all(res.slacks < 0) and res.summary()["late"] == 3
     body = live.PerfectBody(robot, start, control_dt=0.05)
-    frozen = []  # Python's garbage collector leaves what existed before the clock alone during the drive
+    frozen, offsets = [], []  # the garbage collector's frozen objects; each tick's wall time less its drive time
+
+    def on_tick(event):
+        offsets.append(time.perf_counter() - event["t"])
+        frozen.append(gc.get_freeze_count())
+
     res = live.drive(terrain, robot, body, live.ScriptInput(trace), live.LocalDecider(terrain, robot), realtime=True,
-                     num_steps=2, on_tick=lambda _: frozen.append(gc.get_freeze_count()))
+                     num_steps=2, on_tick=on_tick)
+    # Python's garbage collector leaves what existed before the clock alone during the drive
     assert min(frozen) > 0 and gc.get_freeze_count() == 0
     assert res.summary()["late"] == 0 and np.all(res.slacks > 0)
-    # The warm-up and two steps, paced to the wall clock: never ahead of it, and behind it only by the lag the
-    # loop measured and reports (a loaded 2-core machine stalled this thread 0.6 s once, in a full cold run).
-    assert 3 * 0.8 - 0.02 <= res.wall_s <= 3 * 0.8 + res.tick_lag_max + 0.1, (res.wall_s, res.tick_lag_max)
+    # The warm-up and two steps (48 ticks, every one seen: view_every is the tick), paced to the wall clock: the
+    # drive never ends ahead of it, and each tick is behind the schedule t0 + k * dt only by the lag the loop
+    # measured and reports (the lag a person would be told of). (A loaded 2-core machine stalled this thread 0.6 s and
+    # 1.3 s in full cold runs; the unpaced end of a drive, after its last tick, once took 0.12 s there, so the
+    # drive's whole wall time is no measure of its pacing.)
+    assert len(offsets) == 3 * 16
+    assert res.wall_s >= 3 * 0.8 - 0.02, res.wall_s
+    assert max(offsets) - min(offsets) <= res.tick_lag_max + 0.02, (np.ptp(offsets), res.tick_lag_max)
 
 
 def test_no_valid_step_stands_and_decides_again():

@@ -229,7 +229,7 @@ def _report(summary: dict, args, extra=None) -> None:
           f"{ms(summary['latency_p50_s'])}, p99 {ms(summary['latency_p99_s'])}, max {ms(summary['latency_max_s'])}, "
           f"late {summary['late']}"
           + (f", ticks behind the wall clock by up to {ms(summary['tick_lag_max_s'])}"
-             if summary.get("tick_lag_max_s", 0) > 0 else "")
+             if summary.get("tick_lag_max_s", 0) >= 0.001 else "")  # a sleep's usual wake-up delay is less
           + (f"; recorded to {summary['record']}" if summary.get("record") else ""))
 
 

@@ -63,7 +63,8 @@ class DriveResult:
       states: one dict per executed step period (``/ijoy/state``), the warm-up first.
       latencies: (n,) s, each decision's latency (command read to decision ready).
       slacks: (n,) s, decision ready to the end of the step it had to be ready by (< 0: late).
-      tick_lag_max: s, the largest lag of a tick behind the wall clock (realtime only; 0 headless).
+      tick_lag_max: s, the largest lag of a tick behind the wall clock, after its sleep (realtime only; 0 when
+        not paced).
       wall_s: s, the drive's wall time.
       stopped_by: "duration", "steps" or "stop" (the stop event or Ctrl-C).
       warmup_s: s, the warm-up before the clock started (the first calls' compiles).
@@ -320,11 +321,12 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
                 k += 1
                 tick_count += 1
                 if realtime:
-                    ahead = wall0 + tick_count * dt - time.perf_counter()
+                    due = wall0 + tick_count * dt
+                    ahead = due - time.perf_counter()
                     if ahead > 0:
                         time.sleep(ahead)
-                    else:
-                        lag_max = max(lag_max, -ahead)
+                    # measured after the sleep: a thread woken late (a loaded machine) is behind the clock too
+                    lag_max = max(lag_max, time.perf_counter() - due)
                 if on_tick is not None and (tick_count % view_ticks == 0 or not more):
                     with outlook.lock:
                         view = dict(outlook.view)
