@@ -294,6 +294,29 @@ def test_decisions_overlap_the_step_and_wait_when_late(trace):
     assert max(offsets) - min(offsets) <= res.tick_lag_max + 0.02, (np.ptp(offsets), res.tick_lag_max)
 
 
+def test_a_tick_woken_late_counts_as_behind_the_clock(trace, monkeypatch):
+    """A loaded machine can wake the loop's thread late from its sleep: that tick is behind the wall clock, and
+    the reported lag says so (a lag measured only before the sleep missed it by up to a tick)."""
+    import time
+
+    from ijoy_jax.live import loop
+
+    terrain, robot, start = live.open_terrain(TERRAIN)
+    real_sleep, calls = time.sleep, []
+
+    def late_once(s):
+        calls.append(s)
+        real_sleep(s + (0.2 if len(calls) == 5 else 0.0))
+
+    monkeypatch.setattr(loop.time, "sleep", late_once)
+    offsets = []
+    res = live.drive(terrain, robot, live.PerfectBody(robot, start, control_dt=0.05), live.ScriptInput(trace),
+                     live.LocalDecider(terrain, robot), realtime=True, num_steps=1,
+                     on_tick=lambda e: offsets.append(time.perf_counter() - e["t"]))
+    assert len(calls) >= 5 and res.tick_lag_max >= 0.2, (len(calls), res.tick_lag_max)
+    assert max(offsets) - min(offsets) <= res.tick_lag_max + 0.02
+
+
 def test_no_valid_step_stands_and_decides_again():
     """Walled in ahead: the robot stands (StopWalking) while the stick pushes forward, and walks again when the
     person turns the stick sideways (Algorithm 1 live; the scanned rollout would stop for good)."""
