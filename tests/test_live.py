@@ -291,7 +291,9 @@ def test_decisions_overlap_the_step_and_wait_when_late(trace):
     # drive's whole wall time is no measure of its pacing.)
     assert len(offsets) == 3 * 16
     assert res.wall_s >= 3 * 0.8 - 0.02, res.wall_s
-    assert max(offsets) - min(offsets) <= res.tick_lag_max + 0.02, (np.ptp(offsets), res.tick_lag_max)
+    # + 0.05 s (a tick): from the lag's measure to on_tick's clock read, the event's fields are built with the GIL
+    # shared with the decision thread
+    assert max(offsets) - min(offsets) <= res.tick_lag_max + 0.05, (np.ptp(offsets), res.tick_lag_max)
 
 
 def test_a_tick_woken_late_counts_as_behind_the_clock(trace, monkeypatch):
@@ -314,7 +316,7 @@ def test_a_tick_woken_late_counts_as_behind_the_clock(trace, monkeypatch):
                      live.LocalDecider(terrain, robot), realtime=True, num_steps=1,
                      on_tick=lambda e: offsets.append(time.perf_counter() - e["t"]))
     assert len(calls) >= 5 and res.tick_lag_max >= 0.2, (len(calls), res.tick_lag_max)
-    assert max(offsets) - min(offsets) <= res.tick_lag_max + 0.02
+    assert max(offsets) - min(offsets) <= res.tick_lag_max + 0.05  # as in the test above
 
 
 def test_no_valid_step_stands_and_decides_again():
