@@ -131,8 +131,9 @@ def _interrupt(children: list[subprocess.Popen], timeout_s: float = 30.0) -> Non
     for c in reversed(children):
         if c.poll() is None:
             c.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + timeout_s  # one wait for them all, not timeout_s for each in turn
     for c in children:
         try:
-            c.wait(timeout_s)
+            c.wait(max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
             pass
