@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -222,6 +223,36 @@ def test_local_processes_stop_when_one_fails_and_the_same_command_resumes(tiny, 
     assert sum(r["computed"] for r in summary["processes"]) == 2 * (4 - len(done))
     pd.testing.assert_frame_equal(sweep.load(out), sweep.load(single))
     pd.testing.assert_frame_equal(pd.read_parquet(out / "aggregates.parquet"), sweep.load_aggregates(single))
+
+
+def test_local_processes_forward_every_sweep_run_option(tmp_path, monkeypatch, capsys):
+    """``--local-processes`` hands the children each ``sweep run`` option as given: the CLI lists them by hand,
+    so an option added to ``sweep run`` fails here until it is forwarded (or its refusal is, for the layout's)."""
+    with pytest.raises(SystemExit):
+        cli.main(["sweep", "run", "--help"])
+    options = set(re.findall(r"(--[a-z][a-z-]*)", capsys.readouterr().out)) - {"--help", "--local-processes"}
+    given = {"--out": str(tmp_path / "o"), "--chunk": "7", "--max-scenarios": "9", "--devices": "1",
+             "--num-processes": "2", "--process-id": "1", "--coordinator": "localhost:1234",
+             "--barrier-timeout": "5.5", "--distributed": None}
+    assert options == set(given), f"sweep run's options changed: forward {sorted(options - set(given))} in " \
+        "cli._sweep_local and list them here"
+    seen = {}
+
+    def fake_run(sweep_args, num_processes, *, env=None, **_):
+        seen.update(args=list(sweep_args), n=num_processes, cache=env.get("IJOY_COMPILE_CACHE"))
+        return 0, [{"complete": True}, {"complete": True}]
+
+    monkeypatch.setattr(sweep.local, "run", fake_run)
+    argv = ["--no-compile-cache", "sweep", "run", "s.toml", "--local-processes", "2"]
+    for flag, value in given.items():
+        argv += [flag] + ([] if value is None else [value])
+    assert cli.main(argv) == 0
+    assert seen["n"] == 2 and seen["cache"] == "0" and seen["args"][0] == "s.toml"
+    rest = seen["args"][1:]
+    for flag, value in given.items():
+        assert flag in rest, flag
+        if value is not None:
+            assert rest[rest.index(flag) + 1] == value, flag
 
 
 def test_local_processes_get_one_gpu_each():
