@@ -331,8 +331,9 @@ def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive"
     def record(info, command, choice, go, stopped, before, after):
         swing_row = jnp.where(info.stance_side > 0, 1, 0)
         landed = after[swing_row]
-        on_obs = select.on_obstacle(terrain, robot, landed, index=index)
-        near = select.on_obstacle(terrain, robot, landed, index=index, margin=NEAR_OBSTACLE)
+        # the bare footprint and the one grown by NEAR_OBSTACLE as one batched lookup (one copy in the program)
+        on_obs, near = jax.vmap(lambda m: select.on_obstacle(terrain, robot, landed, index=index, margin=m))(
+            jnp.array([0.0, NEAR_OBSTACLE], jnp.float32))
         # Command-following metrics in the stance foot's frame at decision time.
         p_next, _ = select.ideal_step(robot, info.stance_side, command)
         achieved = geometry.relative(info.stance, landed)
