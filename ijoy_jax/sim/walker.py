@@ -373,6 +373,11 @@ def init_state(sim: Sim, world: World, robot: Robot, start, first_swing, key=Non
     as the selector's), the pelvis ``cfg.pelvis_height`` above the lower one. ``key`` (PRNG key or int seed,
     default 0) draws the stance noise and pushes to come; ``frames_per_step`` (static) sizes ``StepLog.qpos``.
     The first step after it stands (:attr:`SimState.fresh`: the Walker's warm-up).
+
+    Its data holds no sensor readings (``sensordata`` zeros: no physics step has run, so no contact force
+    exists yet); :func:`tick` fills them after its physics steps. The first tick reads the zeros, harmlessly:
+    the controller uses the sensors only in the ankles' damping control (:func:`ijoy_jax.sim.controller.comply`),
+    which a measured load of zero turns off, so that tick runs open loop.
     """
     params, cfg = sim.params, sim.cfg
     keep = frame_ticks(sim, frames_per_step)
