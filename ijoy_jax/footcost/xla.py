@@ -557,13 +557,13 @@ def _foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, act
         action_index = nearest_actions(robot, stance, stance_side, steps)
     action_index = jnp.broadcast_to(jnp.asarray(action_index, jnp.int32), steps.shape[:1])
     stance_plane = start_plane = None
-    if swing_from is not None:
-        swing_from = jnp.asarray(swing_from, jnp.float32)
     if terrain.has_height and swing_from is None:
         stance_plane = plane_metrics(terrain, index, robot, stance)
     elif terrain.has_height:  # both feet's planes as one batched fit: one copy of it in the program, not two
+        swing_from = jnp.asarray(swing_from, jnp.float32)
         planes = jax.vmap(lambda pose: plane_metrics(terrain, index, robot, pose))(jnp.stack([stance, swing_from]))
-        stance_plane, start_plane = (jax.tree_util.tree_map(lambda x, i=i: x[i], planes) for i in (0, 1))
+        stance_plane = jax.tree_util.tree_map(lambda x: x[0], planes)
+        start_plane = jax.tree_util.tree_map(lambda x: x[1], planes)
 
     def one(step, a):
         return _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_from, step, a)
