@@ -10,9 +10,11 @@ import json
 import os
 import re
 import shutil
+import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -185,6 +187,41 @@ def test_a_process_that_never_comes_back_ends_the_wait_at_the_barrier_timeout(ti
     assert not (out / "aggregates.parquet").exists()
     with pytest.raises(sweep.IncompleteSweepError, match=r"chunks? 3\b"):
         sweep.load(out)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_ctrl_c_and_sigterm_stop_a_process_waiting_at_the_final_barrier(tiny, tmp_path, sig):
+    """Process 1 is SIGKILLed after its first part: process 0 finishes its chunks and waits up to an hour for it
+    at the final barrier. Ctrl-C (SIGINT) or SIGTERM there stops it within seconds. Before, neither did: the
+    native wait kept the main thread from running Python's signal handler, and ``jax.distributed``'s
+    preemption notifier takes SIGTERM for itself (so ``kill`` stopped no multi-process sweep, anywhere)."""
+    out = tmp_path / "interrupted"
+    port = _free_port()
+    p0 = _launch(tiny, out, 0, port)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(p0.stderr), daemon=True)
+    reader.start()
+    try:
+        kill_after_first_part(tiny, out, chunk=CHUNK, hold_s=600, timeout_s=PROC_TIMEOUT, poll_s=0.05,
+                              extra=("--num-processes", "2", "--process-id", "1", "--coordinator", f"localhost:{port}"),
+                              part="part-00001.parquet")
+        deadline = time.monotonic() + PROC_TIMEOUT
+        while not any("waiting up to 3600 s for process(es) 1" in line for line in lines):
+            assert p0.poll() is None and time.monotonic() < deadline, "".join(lines)[-3000:]
+            time.sleep(0.1)
+        time.sleep(1.0)  # inside the barrier's wait
+        t_int = time.monotonic()
+        p0.send_signal(sig)
+        p0.wait(timeout=60)
+        stopped = time.monotonic() - t_int
+    finally:
+        p0.kill()
+        p0.wait()
+    reader.join(5)
+    # Ctrl-C: Python's KeyboardInterrupt, which ends the process by SIGINT; SIGTERM: the CLI's exit code 143
+    assert p0.returncode == (-signal.SIGINT if sig == signal.SIGINT else 143), "".join(lines)[-3000:]
+    assert stopped < 15, f"process 0 took {stopped:.0f} s to stop after {sig.name}"
+    assert not (out / "aggregates.parquet").exists()
 
 
 # `ijoy`, except that process 1 dies (exit code 3) right after writing its first part.

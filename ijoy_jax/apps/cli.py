@@ -339,6 +339,19 @@ def _sweep_local(args) -> int:
     return rc
 
 
+def _stop_on_sigterm() -> None:
+    """SIGTERM ends the process (exit code 143, ``finally`` blocks run) as it did before ``jax.distributed``
+    started: its preemption notifier takes SIGTERM for itself and only notes it, so ``kill`` (or a batch
+    scheduler's stop) left a sweep process running. The sweep does not use that notice: a stopped process's
+    written parts stay, and the same command resumes."""
+    import signal
+
+    def stop(signum, _frame):
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, stop)
+
+
 def _sweep(args) -> int:
     """``ijoy sweep run`` / ``ijoy sweep summarize`` (bad sweep files raise SweepConfigError, a ValueError)."""
     from pathlib import Path
@@ -354,6 +367,8 @@ def _sweep(args) -> int:
             raise ValueError(f"--barrier-timeout must be a positive number of seconds, got {args.barrier_timeout:g}")
         lay = sweep.distributed.layout(args.num_processes, args.process_id, args.coordinator, args.distributed)
         sweep.distributed.initialize(lay)
+        if sweep.distributed.client() is not None:
+            _stop_on_sigterm()
         cfg = sweep.load_config(args.file)
         stats = sweep.run(cfg, args.out, chunk_size=args.chunk, max_scenarios=args.max_scenarios,
                           devices=args.devices, barrier_timeout_s=args.barrier_timeout)

@@ -203,7 +203,7 @@ def agree(name: str, value_fn, process_id: int, timeout_s: float = 600.0) -> int
         value = int(value_fn())
         c.key_value_set(name, str(value), allow_overwrite=True)
         return value
-    return int(c.blocking_key_value_get(name, int(timeout_s * 1000)))
+    return int(_beside(lambda: c.blocking_key_value_get(name, int(timeout_s * 1000))))
 
 
 def barrier(name: str, timeout_s: float) -> bool:
@@ -215,9 +215,35 @@ def barrier(name: str, timeout_s: float) -> bool:
     if c is None:
         return False
     try:
-        c.wait_at_barrier(name, int(timeout_s * 1000))
+        _beside(lambda: c.wait_at_barrier(name, int(timeout_s * 1000)))
     except Exception as e:  # noqa: BLE001 - JaxRuntimeError (deadline, peer failure): not fatal here
         print(f"[ijoy sweep] barrier {name!r} not reached by every process ({str(e).splitlines()[0]}); "
               "continuing without it", file=sys.stderr)
         return False
     return True
+
+
+def _beside(call):
+    """``call()``, a blocking wait of the coordination service, run in a helper thread; its result, or its
+    exception raised here.
+
+    The native wait blocks whichever thread calls it, and Python runs signal handlers in the main thread
+    only: waited for there, Ctrl-C (and the CLI's SIGTERM handler) would not act until the wait ends, up to
+    an hour later at the final barrier. Here the calling thread joins the helper in short slices, free to take
+    the signal (tests/test_sweep_multihost.py); the helper, a daemon, ends with the process.
+    """
+    out: dict = {}
+
+    def run() -> None:
+        try:
+            out["value"] = call()
+        except BaseException as e:  # noqa: BLE001 - handed to the caller as it is
+            out["error"] = e
+
+    helper = threading.Thread(target=run, name="ijoy sweep: coordination wait", daemon=True)
+    helper.start()
+    while helper.is_alive():
+        helper.join(0.2)
+    if "error" in out:
+        raise out["error"]
+    return out["value"]

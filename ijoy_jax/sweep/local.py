@@ -126,8 +126,7 @@ def run(sweep_args: Sequence[str], num_processes: int, *, port: int | None = Non
 
 def _interrupt(children: list[subprocess.Popen], timeout_s: float = 30.0) -> None:
     """SIGINT to the running children (each writes the chunk it has in flight; a rerun resumes), the
-    coordinator's process last; wait up to ``timeout_s`` for them (the caller kills what is left: a process
-    waiting at the final barrier does not see the interrupt, and has nothing left to write)."""
+    coordinator's process last; wait up to ``timeout_s`` for them all (the caller kills what is left)."""
     for c in reversed(children):
         if c.poll() is None:
             c.send_signal(signal.SIGINT)
