@@ -96,6 +96,13 @@ def _launch(tiny: Path, out: Path, pid: int, port: int, extra_env=None, exit_del
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
+def _kill_process_1_after_its_first_part(tiny: Path, out: Path, port: int) -> None:
+    """Process 1 of the two-process layout, SIGKILLed as soon as its first part (chunk 1) is written."""
+    kill_after_first_part(tiny, out, chunk=CHUNK, hold_s=600, timeout_s=PROC_TIMEOUT, poll_s=0.05,
+                          extra=("--num-processes", "2", "--process-id", "1", "--coordinator", f"localhost:{port}"),
+                          part="part-00001.parquet")
+
+
 def test_two_processes_give_the_one_process_result(tiny, single, tmp_path):
     out = tmp_path / "shared"
     port = _free_port()
@@ -141,9 +148,7 @@ def test_a_killed_process_relaunched_rejoins_the_run(tiny, single, tmp_path):
     port = _free_port()
     p0 = _launch(tiny, out, 0, port)
     try:
-        kill_after_first_part(tiny, out, chunk=CHUNK, hold_s=600, timeout_s=PROC_TIMEOUT, poll_s=0.05,
-                              extra=("--num-processes", "2", "--process-id", "1", "--coordinator", f"localhost:{port}"),
-                              part="part-00001.parquet")
+        _kill_process_1_after_its_first_part(tiny, out, port)
         assert not (out / "parts" / "part-00003.parquet").exists()  # process 1's second chunk: not computed
         p1 = _launch(tiny, out, 1, port)  # the same command again
         try:
@@ -171,9 +176,7 @@ def test_a_process_that_never_comes_back_ends_the_wait_at_the_barrier_timeout(ti
     port = _free_port()
     p0 = _launch(tiny, out, 0, port, extra_args=("--barrier-timeout", "2"))
     try:
-        kill_after_first_part(tiny, out, chunk=CHUNK, hold_s=600, timeout_s=PROC_TIMEOUT, poll_s=0.05,
-                              extra=("--num-processes", "2", "--process-id", "1", "--coordinator", f"localhost:{port}"),
-                              part="part-00001.parquet")
+        _kill_process_1_after_its_first_part(tiny, out, port)
         t_kill = time.monotonic()
         stdout, stderr = p0.communicate(timeout=PROC_TIMEOUT)
         waited = time.monotonic() - t_kill
@@ -202,9 +205,7 @@ def test_ctrl_c_and_sigterm_stop_a_process_waiting_at_the_final_barrier(tiny, tm
     reader = threading.Thread(target=lambda: lines.extend(p0.stderr), daemon=True)
     reader.start()
     try:
-        kill_after_first_part(tiny, out, chunk=CHUNK, hold_s=600, timeout_s=PROC_TIMEOUT, poll_s=0.05,
-                              extra=("--num-processes", "2", "--process-id", "1", "--coordinator", f"localhost:{port}"),
-                              part="part-00001.parquet")
+        _kill_process_1_after_its_first_part(tiny, out, port)
         deadline = time.monotonic() + PROC_TIMEOUT
         while not any("waiting up to 3600 s for process(es) 1" in line for line in lines):
             assert p0.poll() is None and time.monotonic() < deadline, "".join(lines)[-3000:]
