@@ -225,6 +225,39 @@ def test_ctrl_c_and_sigterm_stop_a_process_waiting_at_the_final_barrier(tiny, tm
     assert not (out / "aggregates.parquet").exists()
 
 
+# A process that waits for process 0's chunk size (``distributed.agree``) which never comes: a one-process
+# service, read from as process 1, the coordination service's native wait (for an hour).
+_WAITS_FOR_AGREE = """
+import sys
+import jax
+from ijoy_jax.sweep import distributed
+jax.distributed.initialize(sys.argv[1], 1, 0)  # (distributed.initialize starts nothing for one process)
+print("waiting", flush=True)
+distributed.agree("ijoy_sweep/never_set", lambda: 1, process_id=1, timeout_s=3600)
+"""
+
+
+def test_ctrl_c_stops_a_process_waiting_for_the_agreed_chunk_size():
+    """Processes other than 0 read the chunk size from the coordination service: Ctrl-C stops that wait at once
+    (it runs beside the main thread, as the final barrier's does)."""
+    p = subprocess.Popen([sys.executable, "-c", _WAITS_FOR_AGREE, f"localhost:{_free_port()}"],
+                         env=dict(os.environ, JAX_PLATFORMS="cpu"), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    try:
+        assert p.stdout.readline() == "waiting\n", p.stderr.read()
+        time.sleep(1.0)  # inside the native wait
+        t_int = time.monotonic()
+        p.send_signal(signal.SIGINT)
+        p.wait(timeout=60)
+        stopped = time.monotonic() - t_int
+    finally:
+        p.kill()
+        p.wait()
+    err = p.stderr.read()
+    assert p.returncode == -signal.SIGINT and "KeyboardInterrupt" in err, err[-3000:]
+    assert stopped < 15, f"the process took {stopped:.0f} s to stop after SIGINT"
+
+
 # `ijoy`, except that process 1 dies (exit code 3) right after writing its first part.
 _DIES_AFTER_ITS_FIRST_PART = """
 import os, sys
