@@ -236,16 +236,26 @@ print("waiting", flush=True)
 distributed.agree("ijoy_sweep/never_set", lambda: 1, process_id=1, timeout_s=3600)
 """
 
+# Process 1 of two, started without a process 0: it waits in ``distributed.initialize`` for the coordinator.
+_WAITS_FOR_THE_COORDINATOR = """
+import sys
+from ijoy_jax.sweep import distributed
+print("waiting", flush=True)
+distributed.initialize(distributed.layout(num_processes=2, process_id=1, coordinator=sys.argv[1]))
+"""
 
-def test_ctrl_c_stops_a_process_waiting_for_the_agreed_chunk_size():
-    """Processes other than 0 read the chunk size from the coordination service: Ctrl-C stops that wait at once
-    (it runs beside the main thread, as the final barrier's does)."""
-    p = subprocess.Popen([sys.executable, "-c", _WAITS_FOR_AGREE, f"localhost:{_free_port()}"],
+
+@pytest.mark.parametrize("script", [_WAITS_FOR_THE_COORDINATOR, _WAITS_FOR_AGREE], ids=["coordinator", "agree"])
+def test_ctrl_c_stops_a_process_waiting_for_process_0(script):
+    """Processes other than 0 wait for process 0 twice before their chunks: for the coordinator to come up (up to
+    5 minutes), and for the chunk size it agrees. Ctrl-C stops either wait at once (they run beside the main
+    thread, as the final barrier's does); before, the first did not stop, the second only at its end."""
+    p = subprocess.Popen([sys.executable, "-c", script, f"localhost:{_free_port()}"],
                          env=dict(os.environ, JAX_PLATFORMS="cpu"), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                          text=True)
     try:
         assert p.stdout.readline() == "waiting\n", p.stderr.read()
-        time.sleep(1.0)  # inside the native wait
+        time.sleep(2.0)  # inside the native wait (after the imports)
         t_int = time.monotonic()
         p.send_signal(signal.SIGINT)
         p.wait(timeout=60)

@@ -132,12 +132,17 @@ def initialize(lay: Layout) -> tuple[int, int]:
     process (SIGABRT) once one of them dies or is relaunched, although a sweep's processes share no
     computation. Recoverable, the others finish their chunks, and the dead process, relaunched with the
     same command, rejoins the run, computes its missing chunks and passes the final barrier with them.
+
+    A process started before process 0 waits for it here (JAX's ``initialization_timeout``, 5 minutes);
+    Ctrl-C stops that wait.
     """
     if not lay.multi:
         return 0, 1
     if not jax.distributed.is_initialized():
         jax.config.update("jax_enable_recoverability", True)
-        jax.distributed.initialize(lay.coordinator, lay.num_processes, lay.process_id)
+        # A process waits here for the coordinator (process 0) for up to 5 minutes: beside the main thread, so
+        # that Ctrl-C stops it (see _beside)
+        _beside(lambda: jax.distributed.initialize(lay.coordinator, lay.num_processes, lay.process_id))
     return jax.process_index(), jax.process_count()
 
 
