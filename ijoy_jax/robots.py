@@ -769,12 +769,14 @@ def _signature_defaults(fn) -> dict:
 
 
 def hrp2_defaults() -> dict[str, float]:
-    """name -> value of every :data:`SCALAR_LEAVES` leaf of ``hrp2()``, and its ``density``, without building it.
+    """name -> value of every :data:`SCALAR_LEAVES` leaf of ``hrp2()``, and its ``density`` and ``reach``, without
+    building it.
 
     Read from the one source of each number: :func:`hrp2`'s arguments and body,
     :func:`make_robot`'s and :func:`default_metrics`' keyword defaults. The
-    robot at the paper's reach (``reach`` changes the action set, a shape, and
-    ``max_step_height``, a per-action leaf: neither is a scalar leaf).
+    robot at the paper's reach (``density`` and ``reach`` shape the action set,
+    and ``reach`` sets ``max_step_height``, a per-action leaf: none is a scalar
+    leaf).
 
     Example:
       >>> from ijoy_jax import robots
@@ -786,6 +788,7 @@ def hrp2_defaults() -> dict[str, float]:
     metrics = _signature_defaults(default_metrics)
     out = {n: float(metrics[n.partition(".")[2]] if n.startswith("metrics.") else top[n]) for n in SCALAR_LEAVES}
     out["density"] = float(top["density"])
+    out["reach"] = float(top["reach"])
     return out
 
 

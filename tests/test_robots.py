@@ -133,10 +133,11 @@ def test_scalar_leaf_table_names_every_scalar_leaf():
 def test_hrp2_defaults_are_hrp2s_leaves():
     d = robots.hrp2_defaults()
     r = ij.robots.hrp2()
-    assert set(d) == set(robots.SCALAR_LEAVES) | {"density"}
+    assert set(d) == set(robots.SCALAR_LEAVES) | {"density", "reach"}
     for name in robots.SCALAR_LEAVES:
         assert float(robots.get_leaf(r, name)) == pytest.approx(d[name], rel=1e-6), name
-    assert r.num_actions == ij.robots.hrp2(density=d["density"]).num_actions == 496
+    assert r.num_actions == ij.robots.hrp2(density=d["density"], reach=d["reach"]).num_actions == 496
+    assert np.max(np.asarray(r.actions)[:, 0]) == pytest.approx(d["reach"])
 
 
 def test_set_leaves_sets_every_named_leaf_under_jit():

@@ -107,6 +107,16 @@ BAD = [
     ('[grid]\n"selector.refine" = [1, 0]\n', "grid.selector.refine[0]", "must be true or false"),
     ("[sweep]\ndiscount = -1\n", "sweep.discount", "must be >= 0"),
     ('[grid]\n"selector.beam" = [1, 2]\n', "grid.selector.beam", "unknown parameter"),
+    ('[grid]\n"robot.reach" = [0.2, 0.3]\n', "grid.robot.reach", "fixed per sweep"),
+    ('[sweep]\nrandom_samples = 2\n[random]\n"robot.reach" = [0.2, 0.3]\n', "random.robot.reach",
+     "fixed per sweep"),
+    ("[robot]\nreach = 0\n", "robot.reach", "must be > 0"),
+    # hypot(0.45, 0.33) = 0.558 m > the default max_sole_distance 0.5 m; with a longer limit it is accepted
+    ("[robot]\nreach = 0.45\n", "robot.reach", "0.558 m from the stance foot, beyond robot.max_sole_distance = 0.5"),
+    ('[robot]\nreach = 0.45\n[grid]\n"robot.max_sole_distance" = [0.6, 0.55]\n', "robot.reach",
+     "beyond robot.max_sole_distance = 0.55"),
+    ("[robot]\nreach = 0.3\ndensity = 2.0\n", "robot.reach", "4867 actions at density 2, more than 3307"),
+    ("[robot]\nreach = 1e30\n", "robot.reach", "more than 3307"),  # refused before the lattice is built
     ('[sweep]\nwalker = "mjx"\nmethod = "lookahead"\n', "sweep.method", 'walker = "mjx" runs the one-step'),
     ("[sweep\n", "<toml>", ""),
 ]
@@ -144,6 +154,9 @@ def test_robot_defaults_are_hrp2s():
     for name, value in sweep.ROBOT_DEFAULTS.items():
         if name == "density":
             assert robot.num_actions == 496
+            continue
+        if name == "reach":
+            assert np.max(np.asarray(robot.actions)[:, 0]) == pytest.approx(value)
             continue
         obj = robot.metrics if name.startswith("metrics.") else robot
         assert float(getattr(obj, name.partition(".")[2] or name)) == pytest.approx(value, rel=1e-6), name
@@ -348,6 +361,39 @@ def test_rotation_weight_and_metrics_sweep_match_direct_rollout(tmp_path):
         assert row[k] == pytest.approx(float(v), abs=FLOAT_TOL), k
 
 
+def test_reach_sweep_matches_direct_rollouts_of_the_longer_reach(tmp_path):
+    """``[robot] reach = 0.30`` (issue #20's stairs option, ``robots.hrp2(reach=0.30)``): every scenario equals
+    ``ij.rollout`` with that robot, and not with the paper's reach; the aggregates keep the reach, and the
+    action counts follow it."""
+    text = (tiny_sweep(margins=False).replace("density = 0.25", "density = 0.25\nreach = 0.30")
+            .replace("vx = [0.1, 0.3]", "vx = 0.375").replace("vy = [-0.05, 0.05]", "vy = 0.0"))
+    cfg = sweep.load_config(write(tmp_path, text))
+    sweep.run(cfg, tmp_path / "o", chunk_size=CHUNK, progress=False)
+    df = sweep.load(tmp_path / "o")
+    assert len(df) == 6 and (df["robot.reach"] == 0.30).all()
+    assert float(np.max(np.asarray(sweep.scenario(cfg, 0).robot.actions)[:, 0])) == pytest.approx(0.30)
+    differs = 0
+    for i in range(len(df)):
+        row = df.iloc[i]
+        params = generators.ObstacleParams(count=6)
+        key = jax.random.fold_in(jax.random.key(cfg.seed), int(row["replicate"]))
+        terrain = generators.generate("obstacles", key, params, shape=(60, 50), resolution=0.04, max_count=8)
+        c = np.asarray(generators.start_point(params, shape=(60, 50), resolution=0.04))
+        start = np.array([[c[0], c[1] + 0.095, 0.0], [c[0], c[1] - 0.095, 0.0]])
+        command = row[["command.vx", "command.vy", "command.wz"]].to_numpy(np.float64)
+        runs = {reach: ij.rollout(terrain, ij.robots.hrp2(density=0.25, reach=reach, w=float(row["robot.w"])), start,
+                                  command, num_steps=6).summary() for reach in (0.30, ij.robots.PAPER_REACH)}
+        for k, v in runs[0.30].items():
+            assert row[k] == pytest.approx(float(v), abs=FLOAT_TOL), (i, k)
+        differs += float(runs[ij.robots.PAPER_REACH]["distance_along"]) != pytest.approx(row["distance_along"])
+    assert differs >= 1
+    # the longer steps were taken: 6 steps of at most 0.20 m cannot carry the robot 1.2 m (here 1.65 m)
+    assert df["distance_along"].max() > 6 * ij.robots.PAPER_REACH
+    agg = sweep.aggregate(df)
+    assert (agg["robot.reach"] == 0.30).all()
+    assert sweep.action_counts([0.25, 1.0], reach=0.30).tolist() == [37, 720]
+
+
 def test_padding_rows_are_dropped(tmp_path, base_file):
     # 12 scenarios in chunks of 5: the last chunk has 2 rows padded to 5 (a new shape: one compile).
     s = sweep.run(base_file, tmp_path / "o", chunk_size=5, progress=False)
@@ -453,6 +499,14 @@ def test_cli_run_and_summarize(base_file, tmp_path, capsys):
     assert "robot.w" in printed and "distance_along (m)" in printed
     png = out / "summary.png"
     assert png.exists() and png.stat().st_size > 10_000
+    # the panels a user picks, and one line naming a metric the sweep does not have
+    picked = tmp_path / "picked.png"
+    assert cli.main(["sweep", "summarize", str(out), "--png", str(picked), "--metrics", "stopped, distance_along"]) == 0
+    assert picked.exists() and picked.stat().st_size > 10_000
+    capsys.readouterr()
+    assert cli.main(["sweep", "summarize", str(out), "--metrics", "fell"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--metrics: 'fell' is not a metric of this sweep" in err, err
 
 
 def test_cli_bad_file_exits_2(tmp_path, capsys):
@@ -613,6 +667,12 @@ def test_density_axis_is_drawn_in_action_counts_with_the_papers_496(tmp_path, mo
         marks = [ln for ln in ax.lines if "496" in str(ln.get_label())]
         assert len(marks) == 1 and marks[0].get_xdata()[0] == sweep.PAPER_ACTIONS
         assert "496" in [t.get_text() for t in ax.get_xticklabels()]
+    # A sweep at a longer reach (its aggregates keep robot.reach): the same densities are larger action sets
+    figs.clear()
+    sweep.plot(agg.assign(**{"robot.reach": 0.30}), tmp_path / "reach.png", metrics=("distance_along",))
+    want = sweep.action_counts(dens, reach=0.30).tolist()
+    assert want[3] == 720 and figs[0].axes[0].lines[0].get_xdata().tolist() == want
+    assert figs[0].axes[0].containers[0].get_label() == "reach = 0.3"  # the line says which reach
 
 
 def test_summary_plot_is_a_grid_of_distinct_panels(tmp_path, monkeypatch):

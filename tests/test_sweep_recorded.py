@@ -171,6 +171,12 @@ def test_a_trace_gives_the_commands_a_drive_of_it_decides_with(files):
     late = sweep.parse_config('[robot]\ndensity = 0.25\n[command]\nfile = "trace.csv"\ndecide_at = 0.5\n'
                               "deadzone = 0.6\n", str(files / "s.toml"))  # read at 0.4 and 1.2 s (2.0: the end)
     np.testing.assert_allclose(late.command_steps, np.asarray([[hi[0], 0, 0], [0, 0, 0]], np.float32))  # |0.5| < 0.6
+    # The sweep's reach is its robot's: full stick forward is a 0.30 m step per 0.8 s, not 0.20 m
+    far = sweep.parse_config('[robot]\ndensity = 0.25\nreach = 0.30\n[command]\nfile = "trace.csv"\n',
+                             str(files / "s.toml"))
+    _, hi_far = ij.robots.command_range(ij.robots.hrp2(density=0.25, reach=0.30))
+    assert hi_far[0] == pytest.approx(hi[0] * 1.5) and hi_far[1] == pytest.approx(hi[1])
+    np.testing.assert_allclose(far.command_steps, np.asarray(want, np.float32) * [[1.5, 1, 1]], rtol=1e-6)
 
 
 def test_a_dead_end_in_the_recording_is_said(files, tmp_path):

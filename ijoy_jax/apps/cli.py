@@ -147,6 +147,9 @@ def main(argv: list[str] | None = None) -> int:
     ssum.add_argument("dir", help="a sweep's output folder")
     ssum.add_argument("--png", default=None, help="plot to write (default: DIR/summary.png)")
     ssum.add_argument("--x", default=None, help="parameter on the plot's x axis (default: the most varied)")
+    ssum.add_argument("--metrics", default=None,
+                      help="comma-separated metrics, one panel each (default: the sweep kind's, e.g. collisions "
+                           "and falls for a physics sweep)")
     simp = sub.add_parser("sim", help="the MJX biped: a rendered rollout (physics sweeps: 'ijoy sweep run' with "
                                       "walker = \"mjx\", e.g. sweeps/margin_physics.toml)")
     sim_sub = simp.add_subparsers(dest="sim_command", required=True)
@@ -401,7 +404,14 @@ def _sweep(args) -> int:
         print(table.to_string(index=False))
     png = args.png or str(Path(args.dir) / "summary.png")
     name = json.loads((Path(args.dir) / "manifest.json").read_text()).get("name", "")
-    sweep.plot(agg, png, x=args.x, title=name)
+    metrics = None
+    if args.metrics is not None:
+        metrics = tuple(m.strip() for m in args.metrics.split(","))
+        known = [c[: -len(".mean")] for c in agg.columns if c.endswith(".mean")]
+        for m in metrics:
+            if m not in known:
+                raise ValueError(f"--metrics: {m!r} is not a metric of this sweep; known: {', '.join(known)}")
+    sweep.plot(agg, png, x=args.x, metrics=metrics, title=name)
     print(f"plot: {png}")
     return 0
 

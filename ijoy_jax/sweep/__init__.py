@@ -6,7 +6,7 @@ Public names::
   cells / scenarios                                              the expansion into cells and scenarios
   MAX_SCENARIOS / HOST_MEMORY_FRACTION / table_bytes             sizes checked before any allocation
   MAX_NUM_STEPS / MAX_DENSITY / MIN_RESOLUTION / MAX_MAP_CELLS /  bounds of the sizes that set memory and
-  MAX_OBJECT_SLOTS                                               static shapes
+  MAX_OBJECT_SLOTS / MAX_ACTIONS                                 static shapes
   run / RunStats / DEFAULT_CHUNK / trace_count                   jit + vmap in chunks split over local
                                                                  devices, parquet parts, resume
   scenario / Scenario                                            one scenario's terrain, robot, start and
@@ -44,6 +44,7 @@ from ijoy_jax.sweep import distributed, local, recorded
 from ijoy_jax.sweep.config import (
     COMMAND_KEYS,
     HOST_MEMORY_FRACTION,
+    MAX_ACTIONS,
     MAX_DENSITY,
     MAX_MAP_CELLS,
     MAX_NUM_STEPS,
@@ -105,6 +106,7 @@ __all__ = [
     "EXTRA_METRICS",
     "HOST_MEMORY_FRACTION",
     "MAX_AUTO_CHUNK",
+    "MAX_ACTIONS",
     "MAX_DENSITY",
     "MAX_MAP_CELLS",
     "MAX_NUM_STEPS",

@@ -61,7 +61,9 @@ A sweep file has these tables (every key optional unless noted; units in bracket
 
 Parameter names are ``robot.<name>`` (``w``, ``rotation_weight``, ``margin``,
 ``step_time``, ``foot_length``, ``foot_width``, ``max_sole_pitch``,
-``max_sole_roll``, ``max_sole_distance``, ``density``,
+``max_sole_roll``, ``max_sole_distance``, ``density``, ``reach`` (the largest
+forward/backward step of :func:`ijoy_jax.robots.hrp2`, m: fixed in ``[robot]``,
+one per sweep; ``reach = 0.30`` for stairs),
 ``metrics.<TerrainMetrics field>``), ``terrain.<field of the family's
 parameter class>``, ``selector.<name>`` (the selector's options:
 ``selector.horizon`` and ``selector.refine`` in ``[grid]`` only, they are
@@ -102,7 +104,7 @@ raises :class:`SweepConfigError` naming the file, the key and the reason.
 Numbers must be finite and within float32's range (the robot, the terrain's
 parameters and the commands are float32 on the device), integers within TOML's
 64 bits; the sizes that set memory or static shapes have documented bounds:
-:data:`MAX_NUM_STEPS`, :data:`MAX_DENSITY`, :data:`MIN_RESOLUTION`,
+:data:`MAX_NUM_STEPS`, :data:`MAX_DENSITY`, :data:`MAX_ACTIONS`, :data:`MIN_RESOLUTION`,
 :data:`MAX_MAP_CELLS`, :data:`MAX_OBJECT_SLOTS`, a map within
 :data:`~ijoy_jax.footcost.MAX_COORDINATE`, foot sizes within
 :data:`~ijoy_jax.robots.MAX_SIZE`.
@@ -148,6 +150,7 @@ __all__ = [
     "SIM_MIN_RESOLUTION",
     "WALKERS",
     "HOST_MEMORY_FRACTION",
+    "MAX_ACTIONS",
     "MAX_DENSITY",
     "MAX_MAP_CELLS",
     "MAX_NUM_STEPS",
@@ -160,21 +163,27 @@ __all__ = [
     "cells",
     "load_config",
     "parse_config",
+    "reach_of",
     "scenarios",
     "table_bytes",
 ]
 
 def _robot_defaults() -> dict[str, float]:
-    d = robots.hrp2_defaults()  # the one source of HRP-2's numbers; order: body and selector, density, metrics
-    body = {k: v for k, v in d.items() if k != "density" and not k.startswith("metrics.")}
-    return {**body, "density": d["density"], **{k: v for k, v in d.items() if k.startswith("metrics.")}}
+    d = robots.hrp2_defaults()  # the one source of HRP-2's numbers; order: body and selector, the action set, metrics
+    body = {k: v for k, v in d.items() if k not in _ACTION_SET and not k.startswith("metrics.")}
+    return {**body, **{k: d[k] for k in _ACTION_SET}, **{k: v for k, v in d.items() if k.startswith("metrics.")}}
+
+
+_ACTION_SET = ("density", "reach")
+# What shapes HRP-2's action set (robots.hrp2's arguments, not leaves of the Robot): density is a compile group
+# of its own; reach is one per sweep.
 
 
 ROBOT_DEFAULTS: Mapping[str, float] = MappingProxyType(_robot_defaults())
 """Every sweepable robot parameter and its default (m, s, rad, cost units)."""
 
 # Lower bounds: (bound, strict). Every robot parameter is >= 0; sizes and times > 0.
-_POSITIVE = {n for n, spec in robots.SCALAR_LEAVES.items() if spec.positive} | {"density"}
+_POSITIVE = {n for n, spec in robots.SCALAR_LEAVES.items() if spec.positive} | set(_ACTION_SET)
 # Largest margin the sweep accepts (m): the static footprint window grows with it.
 _MAX_MARGIN = 0.5
 # Largest magnitude of any number (a float32 robot leaf or command; beyond it float32 holds inf).
@@ -186,6 +195,9 @@ MAX_NUM_STEPS = 100_000
 MAX_DENSITY = 2.0
 """Largest action-set density (``robot.density``, 3307 actions): the targets table F x N grows as its sixth power
 (~1 GB at 2, ~8 GB at 3)."""
+MAX_ACTIONS = 3307
+"""Most actions per foot (HRP-2's at :data:`MAX_DENSITY` and the paper's reach): a longer ``robot.reach`` makes
+more actions at a density, and the same bound on the targets table holds."""
 MIN_RESOLUTION = 0.005
 """Finest map resolution (m): FootCost's windows hold the footprint in cells, ~(footprint / resolution)**2 per
 candidate (~110 x 110 for HRP-2 at 5 mm)."""
@@ -581,13 +593,14 @@ def _command_file(chk: _Checker, command: dict, kw: dict, folder: Path, swept: t
     robot = None
     if not recorded.is_recording(path):
         # A trace's commands are the stick through the robot's command range, read once per step time.
-        for k in ("robot.step_time", "robot.density"):
+        for k in ("robot.step_time", "robot.density"):  # (robot.reach is never swept)
             if k in swept:
                 where = "grid" if k in kw["grid"] else "random"
                 chk.fail(f"{where}.{k}", "a trace file's commands depend on the robot's step time and action set "
                                          "(its command range and decision times): fix it in [robot]")
         try:
             robot = robots.hrp2(density=kw["robot"].get("density", ROBOT_DEFAULTS["density"]),
+                                reach=kw["robot"].get("reach", ROBOT_DEFAULTS["reach"]),
                                 step_time=kw["robot"].get("step_time", ROBOT_DEFAULTS["step_time"]))
         except ValueError as e:
             chk.fail("robot", f"the trace's robot cannot be built: {e}")
@@ -744,6 +757,8 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     out_grid = {}
     for k, values in grid.items():
         check_name("grid", k)
+        if k == "robot.reach":
+            chk.fail(f"grid.{k}", _REACH_FIXED)
         if not isinstance(values, list) or not values:
             chk.fail(f"grid.{k}", f"must be a non-empty list of values, got {values!r}")
         vals = tuple(param(k, f"grid.{k}[{i}]", v) for i, v in enumerate(values))
@@ -760,6 +775,8 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
             chk.fail(f"random.{k}", "also in [grid]; sweep it in one place")
         if k == "robot.density":
             chk.fail(f"random.{k}", "density changes array shapes (one compile per value): sweep it in [grid]")
+        if k == "robot.reach":
+            chk.fail(f"random.{k}", _REACH_FIXED)
         if k.startswith("terrain.") and fam.rules[k.partition(".")[2]].integer:
             chk.fail(f"random.{k}", "counts are integers: sweep them in [grid]")
         lo, hi = chk.range(f"random.{k}", rng)
@@ -773,6 +790,7 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     if "file" in command:
         _command_file(chk, command, kw, folder, (*out_grid, *out_rand))
     cfg = SweepConfig(**kw)
+    _check_reach(chk, cfg)
     _check_selector(chk, cfg)
     _check_size(chk, cfg)  # before cells() or scenarios() allocate anything
     if mjx:
@@ -915,7 +933,7 @@ def _check_selector(chk: _Checker, cfg: SweepConfig) -> None:
         chk.fail(where, f'a horizon above 1 needs [sweep] method = "lookahead", got method = {cfg.method!r}')
     if cfg.beam is not None and cfg.method != "lookahead":
         chk.fail("sweep.beam", f'the beam is an option of method = "lookahead", got method = {cfg.method!r}')
-    if cfg.beam is not None and cfg.beam > len(robots.hrp2_actions(max(_density_values(cfg)))):
+    if cfg.beam is not None and cfg.beam > len(robots.hrp2_actions(max(_density_values(cfg)), reach_of(cfg))):
         chk.fail("sweep.beam", f"must be at most the action set's size, got {cfg.beam}")
     refines = _selector_values(cfg, "refine")
     if any(refines) and cfg.method == "naive":
@@ -928,6 +946,37 @@ def _check_selector(chk: _Checker, cfg: SweepConfig) -> None:
 
 def _density_values(cfg: SweepConfig) -> tuple:
     return cfg.grid.get("robot.density", (cfg.robot.get("density", ROBOT_DEFAULTS["density"]),))
+
+
+def reach_of(cfg: SweepConfig) -> float:
+    """The sweep's ``robot.reach`` (m): HRP-2's largest forward/backward step, one per sweep (default the paper's)."""
+    return float(cfg.robot.get("reach", ROBOT_DEFAULTS["reach"]))
+
+
+_REACH_FIXED = ("reach shapes the action set and is fixed per sweep: set it in [robot] (one sweep per reach)")
+
+
+def _check_reach(chk: _Checker, cfg: SweepConfig) -> None:
+    """``robot.reach``: at most :data:`MAX_ACTIONS` per density, every action within ``max_sole_distance``."""
+    if "reach" not in cfg.robot:
+        return
+    reach = reach_of(cfg)
+    limits = (*cfg.grid.get("robot.max_sole_distance", ()), *cfg.random.get("robot.max_sole_distance", ()))
+    limit = min(limits or (cfg.robot.get("max_sole_distance", ROBOT_DEFAULTS["max_sole_distance"]),))
+    for density in _density_values(cfg):
+        counts = robots.density_counts(density, reach)
+        if math.prod(counts) > 2 * MAX_ACTIONS:  # (refused before the lattice is built: reach may be huge)
+            size = f"about {math.prod(counts):.3g}"
+        else:
+            actions = robots.hrp2_actions(density, reach)
+            size = len(actions)
+            farthest = float(np.max(np.hypot(actions[:, 0], actions[:, 1])))
+            if farthest > limit:
+                chk.fail("robot.reach", f"{reach:g} m puts an action {farthest:.3f} m from the stance foot, beyond "
+                                        f"robot.max_sole_distance = {limit:g} m: its steps would always be refused")
+        if isinstance(size, str) or size > MAX_ACTIONS:
+            chk.fail("robot.reach", f"{reach:g} m makes {size} actions at density {density:g}, more than "
+                                    f"{MAX_ACTIONS} (sweep.config.MAX_ACTIONS: the targets table's bound)")
 
 
 def _host_memory() -> int | None:

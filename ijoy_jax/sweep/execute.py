@@ -138,6 +138,7 @@ from ijoy_jax.sweep.config import (
     SweepConfig,
     SweepConfigError,
     load_config,
+    reach_of,
     scenarios,
 )
 from ijoy_jax.sweep.results import PLAN_KEY, IncompleteSweepError, check_plans, describe_plan, plan_hash
@@ -396,18 +397,25 @@ class RunStats:
 
 
 def _base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
-    """The density's robot with static windows covering the sweep's largest footprint and margin.
+    """The density's robot (at the sweep's reach) with static windows covering the sweep's largest footprint and
+    margin.
 
     Raises SweepConfigError when the largest footprint makes an action overlap the stance foot.
     """
     fl = float(table["robot.foot_length"].max())
     fw = float(table["robot.foot_width"].max())
     mm = max(float(table["robot.margin"].max()), 0.10)
+    reach = reach_of(cfg)
+    # hrp2 refuses a reach beyond max_sole_distance; the scenarios' own values replace this one, and load_config
+    # checked a sweep's reach against each (a shorter limit at the paper's reach only refuses the far steps)
+    msd = max(float(table["robot.max_sole_distance"].max()), ROBOT_DEFAULTS["max_sole_distance"])
     try:
-        return robots.hrp2(margin=0.0, density=density, foot_length=fl, foot_width=fw, max_margin=mm)
+        return robots.hrp2(margin=0.0, density=density, reach=reach, foot_length=fl, foot_width=fw, max_margin=mm,
+                           max_sole_distance=msd)
     except ValueError as e:
         raise SweepConfigError(f"{cfg.source}: robot.foot_length/robot.foot_width: a {fl} x {fw} m footprint "
-                               f"does not fit HRP-2's action set at density {density}: {e}") from None
+                               f"does not fit HRP-2's action set at density {density} and reach {reach} m: {e}"
+                               ) from None
 
 
 class Scenario(NamedTuple):
@@ -677,7 +685,7 @@ def _shared(table, base):
 
 def _cols(table):
     # The lookahead's discount travels with the robot values (traced per scenario, like them).
-    robot_cols = [f"robot.{k}" for k in ROBOT_DEFAULTS if k != "density"] + ["selector.discount"]
+    robot_cols = [f"robot.{k}" for k in ROBOT_DEFAULTS if k not in ("density", "reach")] + ["selector.discount"]
     return (robot_cols, [c for c in table.columns if c.startswith("terrain.")],
             [c for c in table.columns if c.startswith("sim.")])
 

@@ -53,7 +53,8 @@ UNITS = {
     "robot.rotation_weight": "cost units per rad",
     "robot.margin": "m", "robot.step_time": "s", "robot.foot_length": "m", "robot.foot_width": "m",
     "robot.max_sole_pitch": "rad", "robot.max_sole_roll": "rad", "robot.max_sole_distance": "m",
-    "robot.density": "x HRP-2's 496 actions", "command.vx": "m/s", "command.vy": "m/s", "command.wz": "rad/s",
+    "robot.density": "x HRP-2's 496 actions", "robot.reach": "m", "terrain.rise": "m", "terrain.run": "m",
+    "command.vx": "m/s", "command.vy": "m/s", "command.wz": "rad/s",
     "bars_crossed": "bars", "crossed": "fraction", "terrain.width": "m",
     "fell": "fraction", "collided": "fraction", "obstacle_contacts": "steps", "placement_error_mean": "m",
     "placement_error_p95": "m", "yaw_error_mean": "rad", "tilt_error_p95": "rad", "dynamics_invalid": "fraction",
@@ -246,7 +247,8 @@ def aggregate(df, by=None):
     Args:
       df: a per-scenario table (:func:`load`).
       by: parameter columns to keep alongside ``cell`` (default: every
-        ``robot.*``/``terrain.*``/``sim.*``/``selector.*`` column that varies).
+        ``robot.*``/``terrain.*``/``sim.*``/``selector.*`` column that varies, and
+        ``robot.reach`` when it is not the paper's).
 
     Returns:
       pandas.DataFrame, one row per cell: ``cell``, the ``by`` columns, and
@@ -256,6 +258,8 @@ def aggregate(df, by=None):
 
     if by is None:
         by = [c for c in df.columns if c.startswith(_PARAMS) and df[c].nunique() > 1]
+        if "robot.reach" in df.columns and (df["robot.reach"] != ROBOT_DEFAULTS["reach"]).any():
+            by.append("robot.reach")  # fixed per sweep, but what its action set means (action_counts)
     rows = []
     for cell, g in df.groupby("cell", sort=True):
         row = {"cell": cell, **{c: g[c].iloc[0] for c in by}, "n": len(g)}
@@ -338,18 +342,22 @@ PAPER_ACTIONS = 496
 """Actions per foot in the paper's HRP-2 action set (``ijoy_jax.robots.hrp2(density=1.0)``)."""
 
 
-def action_counts(densities) -> np.ndarray:
+def action_counts(densities, reach=None) -> np.ndarray:
     """Actions per foot of HRP-2's action set at each density (:func:`ijoy_jax.robots.hrp2`), as float64.
 
+    ``reach`` (m): a number, or one per density (a sweep's ``robot.reach`` column); None: the paper's 0.20.
+
     Example:
-      >>> action_counts([0.4, 1.0, 2.0]).tolist()
-      [52.0, 496.0, 3307.0]
+      >>> action_counts([0.4, 1.0, 2.0]).tolist(), action_counts([1.0], reach=0.30).tolist()
+      ([52.0, 496.0, 3307.0], [720.0])
     """
     from ijoy_jax import robots
 
     d = np.asarray(densities, np.float64)
-    sizes = {v: robots.hrp2(density=v).num_actions for v in np.unique(d).tolist()}
-    return np.array([sizes[v] for v in d.tolist()], np.float64).reshape(d.shape)
+    r = np.broadcast_to(np.asarray(robots.PAPER_REACH if reach is None else reach, np.float64), d.shape)
+    pairs = list(zip(d.ravel().tolist(), r.ravel().tolist(), strict=True))
+    sizes = {p: len(robots.hrp2_actions(*p)) for p in dict.fromkeys(pairs)}
+    return np.array([sizes[p] for p in pairs], np.float64).reshape(d.shape)
 
 
 PLOT_METRICS = ("distance_along", "mean_deviation", "mean_foot_cost", "steps_in_place", "steps_stationary",
@@ -417,7 +425,9 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
         ax.remove()
     groups = agg.groupby(others, sort=True) if others else [((), agg)]
     # Density is drawn as what it means: the number of actions in the set (HRP-2's lattice), 496 the paper's.
-    xv = action_counts if x == "robot.density" else (lambda v: np.asarray(v, np.float64))
+    reach = (lambda g: g["robot.reach"]) if "robot.reach" in agg.columns else (lambda g: None)
+    xv = ((lambda g: action_counts(g[x], reach(g))) if x == "robot.density"
+          else (lambda g: np.asarray(g[x], np.float64)))
     for ax, m in zip(axes.ravel(), metrics, strict=False):
         for key, g in groups:
             g = g.sort_values(x)
@@ -427,11 +437,11 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
             # a rate's interval stays within [0, 1]
             lo, hi = (np.clip(mean - ci, 0, 1), np.clip(mean + ci, 0, 1)) if UNITS.get(m) == "fraction" else (
                 mean - ci, mean + ci)
-            ax.errorbar(xv(g[x]), mean, yerr=[mean - lo, hi - mean], marker="o", capsize=3, label=label or None)
+            ax.errorbar(xv(g), mean, yerr=[mean - lo, hi - mean], marker="o", capsize=3, label=label or None)
         if x == "robot.density":
             ax.axvline(PAPER_ACTIONS, color="0.4", ls="--", lw=1, label=f"paper's {PAPER_ACTIONS} actions (HRP-2)")
             ax.set_xscale("log")
-            ticks = sorted(set(action_counts(agg[x]).astype(int).tolist()) | {PAPER_ACTIONS})
+            ticks = sorted(set(action_counts(agg[x], reach(agg)).astype(int).tolist()) | {PAPER_ACTIONS})
             ax.set_xticks(ticks, [str(t) for t in ticks], rotation=45, fontsize=7)
             ax.minorticks_off()
             ax.set_xlabel("actions in the set S, per foot (count)")
@@ -449,7 +459,7 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
                 ax.set_xscale("symlog", linthresh=float(pos.min()), linscale=0.5)
                 ax.set_xlim(min(0.0, float(agg[x].min())) - 0.3 * float(pos.min()), 1.5 * float(agg[x].max()))
             ax.set_xlabel(f"{x.partition('.')[2] or x} ({UNITS.get(x, '-')})")
-            ticks = np.unique(xv(agg[x])) if x in agg else np.array([])
+            ticks = np.unique(xv(agg)) if x in agg else np.array([])
             if 0 < len(ticks) <= 12 and np.allclose(ticks, np.round(ticks)):
                 ax.set_xticks(ticks)  # a count (the lookahead's horizon): no ticks between its values
         ax.set_ylabel(f"mean ({UNITS[m]})")
