@@ -3,6 +3,7 @@ and run: a tiny slice of each perfect-robot sweep through ``sweep.run`` gives th
 sweeps (``walker = "mjx"``) are validated and their tables built here; running one compiles MJX for its 200 x 100
 map (about a minute on a CPU), so the physics path is run at tiny shapes in tests/test_sweep_physics.py."""
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,11 @@ EXPECTED = {
               "sim.stance_noise": (0.0, 0.01, 0.02, 0.04)}, family="obstacles", has_height=True,
         shape=(200, 100), resolution=0.02, scenarios_per_cell=128, num_steps=16, method="ordered",
         num_scenarios=9 * 4 * 128, extra_metrics=(), walker="mjx"),
+    "stairs_physics.toml": dict(
+        grid={"terrain.rise": (-0.15, -0.125, -0.10, -0.075, -0.05, 0.05, 0.075, 0.10, 0.125, 0.15),
+              "terrain.run": (0.30, 0.40), "sim.stance_noise": (0.0, 0.005, 0.01)},
+        family="stairs", has_height=True, shape=(300, 100), resolution=0.02, scenarios_per_cell=64, num_steps=16,
+        method="ordered", num_scenarios=10 * 2 * 3 * 64, extra_metrics=(), walker="mjx"),
 }
 _SELECTORS = {"selector.horizon": (1, 2, 3), "selector.refine": (False, True)}
 for _fam, _family in (("stones", "stone_path"), ("corridor", "corridor"), ("clutter", "obstacles"),
@@ -50,7 +56,7 @@ for _fam, _family in (("stones", "stone_path"), ("corridor", "corridor"), ("clut
         scenarios_per_cell=64, num_steps=16, method="lookahead", num_scenarios=6 * 64, extra_metrics=(),
         run=_fam == "stones")
 PERFECT = sorted(n for n, e in EXPECTED.items() if e.get("walker", "perfect") == "perfect" and e.get("run", True))
-PHYSICS = sorted(n for n, e in EXPECTED.items() if e.get("walker") == "mjx")
+PHYSICS = sorted(n for n, e in EXPECTED.items() if e.get("walker") == "mjx" and "robot.margin" in e["grid"])
 
 
 def test_every_shipped_sweep_is_described_here_and_in_the_readme():
@@ -111,6 +117,28 @@ def test_physics_sweeps_cross_the_margin_with_the_simulated_robots_errors(name):
     first, last = table.iloc[:per_cell], table.iloc[-per_cell:]
     for c in ("command.vx", "command.vy", "command.wz", "replicate"):
         assert first[c].tolist() == last[c].tolist(), c
+
+
+def test_stairs_sweep_walks_the_longer_reach_past_the_top_riser_and_within_the_map():
+    """What stairs_physics.toml's comments say: HRP-2 at reach 0.30 (720 actions, 15 cm risers), refined, held
+    forward at one 0.30 m step per 0.8 s; 16 steps carry it past the top riser of every stair (two steps per
+    0.40 m tread), and its front foot stays clear of the map's far end; treads jittered per replicate (64
+    different stairs per cell)."""
+    cfg = sweep.load_config(DIR / "stairs_physics.toml")
+    assert cfg.robot == {"reach": 0.30} and cfg.refine and cfg.terrain_params["run_jitter"] == 0.01
+    robot = sweep.scenario(cfg, 0).robot
+    assert robot.num_actions == 720 and float(np.max(robot.max_step_height)) == pytest.approx(0.15)
+    assert cfg.command["vx"] == (0.375, 0.375) and 0.375 * 0.8 == pytest.approx(0.30)
+    start = cfg.terrain_params["start_x"] * cfg.shape[0] * cfg.resolution
+    p = cfg.terrain_params
+    last_riser = p["first"] + (p["num_steps"] - 1) * (max(cfg.grid["terrain.run"]) + p["run_jitter"])
+    farthest = cfg.num_steps * 0.30 + robot.foot_length / 2  # the front of a foot after 12 of the longest steps
+    # before the first riser at most 0.30 m a step, then two steps per 0.40 m tread, and one onto the top
+    steps_needed = math.ceil(p["first"] / 0.30) + 2 * p["num_steps"] + 1
+    assert steps_needed <= cfg.num_steps and last_riser < cfg.num_steps * 0.30
+    assert start + farthest < cfg.shape[0] * cfg.resolution - 0.35
+    # 15 cm x 6 risers stay inside the simulated height field
+    assert max(cfg.grid["terrain.rise"]) * p["num_steps"] <= ij.sim.model.BipedParams.z_hi
 
 
 @pytest.mark.parametrize("name", PERFECT)
