@@ -177,6 +177,12 @@ def test_a_trace_gives_the_commands_a_drive_of_it_decides_with(files):
     _, hi_far = ij.robots.command_range(ij.robots.hrp2(density=0.25, reach=0.30))
     assert hi_far[0] == pytest.approx(hi[0] * 1.5) and hi_far[1] == pytest.approx(hi[1])
     np.testing.assert_allclose(far.command_steps, np.asarray(want, np.float32) * [[1.5, 1, 1]], rtol=1e-6)
+    # A reach beyond the default max_sole_distance with a longer one set; a huge one refused before any lattice
+    farther = sweep.parse_config('[robot]\nreach = 0.45\nmax_sole_distance = 0.6\n[command]\nfile = "trace.csv"\n',
+                                 str(files / "s.toml"))
+    assert farther.command_steps[0, 0] == pytest.approx(0.45 / 0.8)
+    with pytest.raises(sweep.SweepConfigError, match=r"robot\.reach: 1e\+30 m makes about .* actions"):
+        sweep.parse_config('[robot]\nreach = 1e30\n[command]\nfile = "trace.csv"\n', str(files / "s.toml"))
 
 
 def test_a_dead_end_in_the_recording_is_said(files, tmp_path):

@@ -598,9 +598,13 @@ def _command_file(chk: _Checker, command: dict, kw: dict, folder: Path, swept: t
                 where = "grid" if k in kw["grid"] else "random"
                 chk.fail(f"{where}.{k}", "a trace file's commands depend on the robot's step time and action set "
                                          "(its command range and decision times): fix it in [robot]")
+        # (the command range needs the action set alone: the longest max_sole_distance lets hrp2 build the reach,
+        # which _check_reach has checked against the shortest)
+        msd = max((kw["robot"].get("max_sole_distance", ROBOT_DEFAULTS["max_sole_distance"]),
+                   *kw["grid"].get("robot.max_sole_distance", ()), *kw["random"].get("robot.max_sole_distance", ())))
         try:
             robot = robots.hrp2(density=kw["robot"].get("density", ROBOT_DEFAULTS["density"]),
-                                reach=kw["robot"].get("reach", ROBOT_DEFAULTS["reach"]),
+                                reach=kw["robot"].get("reach", ROBOT_DEFAULTS["reach"]), max_sole_distance=msd,
                                 step_time=kw["robot"].get("step_time", ROBOT_DEFAULTS["step_time"]))
         except ValueError as e:
             chk.fail("robot", f"the trace's robot cannot be built: {e}")
@@ -787,10 +791,10 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     if not out_rand and kw.get("random_samples", 0) > 0:
         chk.fail("sweep.random_samples", "is set but [random] is empty")
 
+    _check_reach(chk, kw["robot"], out_grid, out_rand)  # before a trace file's robot is built with it
     if "file" in command:
         _command_file(chk, command, kw, folder, (*out_grid, *out_rand))
     cfg = SweepConfig(**kw)
-    _check_reach(chk, cfg)
     _check_selector(chk, cfg)
     _check_size(chk, cfg)  # before cells() or scenarios() allocate anything
     if mjx:
@@ -956,14 +960,15 @@ def reach_of(cfg: SweepConfig) -> float:
 _REACH_FIXED = ("reach shapes the action set and is fixed per sweep: set it in [robot] (one sweep per reach)")
 
 
-def _check_reach(chk: _Checker, cfg: SweepConfig) -> None:
-    """``robot.reach``: at most :data:`MAX_ACTIONS` per density, every action within ``max_sole_distance``."""
-    if "reach" not in cfg.robot:
+def _check_reach(chk: _Checker, robot: dict, grid: dict, rand: dict) -> None:
+    """``[robot] reach`` (with the file's fixed ``robot`` values, ``grid`` axes and ``random`` ranges): at most
+    :data:`MAX_ACTIONS` per density, every action within ``max_sole_distance``."""
+    if "reach" not in robot:
         return
-    reach = reach_of(cfg)
-    limits = (*cfg.grid.get("robot.max_sole_distance", ()), *cfg.random.get("robot.max_sole_distance", ()))
-    limit = min(limits or (cfg.robot.get("max_sole_distance", ROBOT_DEFAULTS["max_sole_distance"]),))
-    for density in _density_values(cfg):
+    reach = robot["reach"]
+    limits = (*grid.get("robot.max_sole_distance", ()), *rand.get("robot.max_sole_distance", ()))
+    limit = min(limits or (robot.get("max_sole_distance", ROBOT_DEFAULTS["max_sole_distance"]),))
+    for density in grid.get("robot.density", (robot.get("density", ROBOT_DEFAULTS["density"]),)):
         counts = robots.density_counts(density, reach)
         if math.prod(counts) > 2 * MAX_ACTIONS:  # (refused before the lattice is built: reach may be huge)
             size = f"about {math.prod(counts):.3g}"
