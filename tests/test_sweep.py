@@ -505,8 +505,10 @@ def test_cli_run_and_summarize(base_file, tmp_path, capsys):
     assert picked.exists() and picked.stat().st_size > 10_000
     capsys.readouterr()
     assert cli.main(["sweep", "summarize", str(out), "--metrics", "fell"]) == 2
-    err = capsys.readouterr().err.strip()
+    printed = capsys.readouterr()
+    err = printed.err.strip()
     assert len(err.splitlines()) == 1 and "--metrics: 'fell' is not a metric of this sweep" in err, err
+    assert printed.out == ""  # refused before the table is printed
 
 
 def test_cli_bad_file_exits_2(tmp_path, capsys):

@@ -391,6 +391,13 @@ def _sweep(args) -> int:
     import pandas as pd
 
     agg = sweep.load_aggregates(args.dir)  # FileNotFoundError, or IncompleteSweepError (a ValueError)
+    metrics = None
+    if args.metrics is not None:  # checked before anything is printed
+        metrics = tuple(m.strip() for m in args.metrics.split(","))
+        known = [c[: -len(".mean")] for c in agg.columns if c.endswith(".mean")]
+        for m in metrics:
+            if m not in known:
+                raise ValueError(f"--metrics: {m!r} is not a metric of this sweep; known: {', '.join(known)}")
     show = [c for c in agg.columns if c.startswith(("robot.", "terrain.", "sim.", "selector.")) or c == "n"]
     table = agg[show].copy()
     physics = ("collided", "fell", "placement_error_mean") if "fell.mean" in agg else ()
@@ -404,13 +411,6 @@ def _sweep(args) -> int:
         print(table.to_string(index=False))
     png = args.png or str(Path(args.dir) / "summary.png")
     name = json.loads((Path(args.dir) / "manifest.json").read_text()).get("name", "")
-    metrics = None
-    if args.metrics is not None:
-        metrics = tuple(m.strip() for m in args.metrics.split(","))
-        known = [c[: -len(".mean")] for c in agg.columns if c.endswith(".mean")]
-        for m in metrics:
-            if m not in known:
-                raise ValueError(f"--metrics: {m!r} is not a metric of this sweep; known: {', '.join(known)}")
     sweep.plot(agg, png, x=args.x, metrics=metrics, title=name)
     print(f"plot: {png}")
     return 0
