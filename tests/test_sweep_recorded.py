@@ -181,6 +181,10 @@ def test_a_trace_gives_the_commands_a_drive_of_it_decides_with(files):
     farther = sweep.parse_config('[robot]\nreach = 0.45\nmax_sole_distance = 0.6\n[command]\nfile = "trace.csv"\n',
                                  str(files / "s.toml"))
     assert farther.command_steps[0, 0] == pytest.approx(0.45 / 0.8)
+    # a shorter max_sole_distance at the paper's reach refuses far steps in the rollouts, not the trace's robot
+    short = sweep.parse_config('[robot]\ndensity = 0.25\nmax_sole_distance = 0.3\n[command]\nfile = "trace.csv"\n',
+                               str(files / "s.toml"))
+    np.testing.assert_allclose(short.command_steps, cfg.command_steps)
     with pytest.raises(sweep.SweepConfigError, match=r"robot\.reach: 1e\+30 m makes about .* actions"):
         sweep.parse_config('[robot]\nreach = 1e30\n[command]\nfile = "trace.csv"\n', str(files / "s.toml"))
 

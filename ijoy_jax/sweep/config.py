@@ -598,10 +598,11 @@ def _command_file(chk: _Checker, command: dict, kw: dict, folder: Path, swept: t
                 where = "grid" if k in kw["grid"] else "random"
                 chk.fail(f"{where}.{k}", "a trace file's commands depend on the robot's step time and action set "
                                          "(its command range and decision times): fix it in [robot]")
-        # (the command range needs the action set alone: the longest max_sole_distance lets hrp2 build the reach,
-        # which _check_reach has checked against the shortest)
-        msd = max((kw["robot"].get("max_sole_distance", ROBOT_DEFAULTS["max_sole_distance"]),
-                   *kw["grid"].get("robot.max_sole_distance", ()), *kw["random"].get("robot.max_sole_distance", ())))
+        # (the command range needs the action set alone: as for the sweep's base robot, the default or the
+        # longest max_sole_distance the file sets lets hrp2 build the reach, which _check_reach has checked
+        # against the shortest)
+        msd = max(ROBOT_DEFAULTS["max_sole_distance"],
+                  *_file_values(kw["robot"], kw["grid"], kw["random"], "max_sole_distance"))
         try:
             robot = robots.hrp2(density=kw["robot"].get("density", ROBOT_DEFAULTS["density"]),
                                 reach=kw["robot"].get("reach", ROBOT_DEFAULTS["reach"]), max_sole_distance=msd,
@@ -937,7 +938,8 @@ def _check_selector(chk: _Checker, cfg: SweepConfig) -> None:
         chk.fail(where, f'a horizon above 1 needs [sweep] method = "lookahead", got method = {cfg.method!r}')
     if cfg.beam is not None and cfg.method != "lookahead":
         chk.fail("sweep.beam", f'the beam is an option of method = "lookahead", got method = {cfg.method!r}')
-    if cfg.beam is not None and cfg.beam > len(robots.hrp2_actions(max(_density_values(cfg)), reach_of(cfg))):
+    largest = max(_file_values(cfg.robot, cfg.grid, cfg.random, "density"))
+    if cfg.beam is not None and cfg.beam > len(robots.hrp2_actions(largest, reach_of(cfg))):
         chk.fail("sweep.beam", f"must be at most the action set's size, got {cfg.beam}")
     refines = _selector_values(cfg, "refine")
     if any(refines) and cfg.method == "naive":
@@ -948,8 +950,11 @@ def _check_selector(chk: _Checker, cfg: SweepConfig) -> None:
                  'with or without refinement')
 
 
-def _density_values(cfg: SweepConfig) -> tuple:
-    return cfg.grid.get("robot.density", (cfg.robot.get("density", ROBOT_DEFAULTS["density"]),))
+def _file_values(robot: dict, grid: dict, rand: dict, name: str) -> tuple:
+    """Every value a sweep file gives robot parameter ``name``: its ``[grid]`` values and ``[random]`` bounds, or
+    else its fixed ``[robot]`` value (or default)."""
+    swept = (*grid.get(f"robot.{name}", ()), *rand.get(f"robot.{name}", ()))
+    return swept or (robot.get(name, ROBOT_DEFAULTS[name]),)
 
 
 def reach_of(cfg: SweepConfig) -> float:
@@ -966,9 +971,8 @@ def _check_reach(chk: _Checker, robot: dict, grid: dict, rand: dict) -> None:
     if "reach" not in robot:
         return
     reach = robot["reach"]
-    limits = (*grid.get("robot.max_sole_distance", ()), *rand.get("robot.max_sole_distance", ()))
-    limit = min(limits or (robot.get("max_sole_distance", ROBOT_DEFAULTS["max_sole_distance"]),))
-    for density in grid.get("robot.density", (robot.get("density", ROBOT_DEFAULTS["density"]),)):
+    limit = min(_file_values(robot, grid, rand, "max_sole_distance"))
+    for density in _file_values(robot, grid, rand, "density"):
         counts = robots.density_counts(density, reach)
         if math.prod(counts) > 2 * MAX_ACTIONS:  # (refused before the lattice is built: reach may be huge)
             size = f"about {math.prod(counts):.3g}"
