@@ -441,7 +441,7 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
         if x == "robot.density":
             ax.axvline(PAPER_ACTIONS, color="0.4", ls="--", lw=1, label=f"paper's {PAPER_ACTIONS} actions (HRP-2)")
             ax.set_xscale("log")
-            ticks = sorted(set(action_counts(agg[x], reach(agg)).astype(int).tolist()) | {PAPER_ACTIONS})
+            ticks = sorted(set(xv(agg).astype(int).tolist()) | {PAPER_ACTIONS})
             ax.set_xticks(ticks, [str(t) for t in ticks], rotation=45, fontsize=7)
             ax.minorticks_off()
             ax.set_xlabel("actions in the set S, per foot (count)")
