@@ -141,6 +141,39 @@ def pytest_xdist_make_scheduler(config, log):
     return Scheduling(config, log)
 
 
+# The two tiers (pyproject's addopts and its ``slow`` marker): test files mark their slow tests themselves; the
+# notebooks (collected by nbmake) are marked here: each runs end to end in its own kernel and compiles every
+# program it shows (20 s to 2 minutes each on 2 cores; simulated_walking compiles the MJX biped's rollout).
+
+
+@pytest.hookimpl(tryfirst=True)  # before the mark plugin deselects by -m
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.suffix == ".ipynb":
+            item.add_marker(pytest.mark.slow)
+
+
+class _WorkerTime:
+    """The sum of every test's setup, call and teardown durations (seconds), over all xdist workers: the
+    worker-minutes a run costs, whatever the wall time (the controller receives every worker's reports)."""
+
+    total = 0.0
+
+
+def pytest_runtest_logreport(report):
+    _WorkerTime.total += report.duration
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    if hasattr(config, "workerinput"):  # an xdist worker: the controller reports
+        return
+    terminalreporter.write_line(f"worker time: {_WorkerTime.total / 60:.1f} worker-minutes "
+                                "(the sum of every test's setup, call and teardown)")
+    if config.getoption("markexpr") == "not slow":
+        terminalreporter.write_line("this was the fast tier: `python -m pytest -m slow` runs the slow tier, "
+                                    "`-m \"slow or not slow\"` both")
+
+
 @pytest.fixture(scope="session")
 def footstep_server():
     """One real ``ijoy serve`` process on 127.0.0.1 (a free port) for the session, warmed up for MAP's shape and
