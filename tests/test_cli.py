@@ -1,9 +1,14 @@
 """The ``ijoy`` command line: every subcommand turns bad input into one line on stderr and exit status 2.
 
-Each case runs the real command in a subprocess (``python -m ijoy_jax.apps.cli``, what the ``ijoy`` script
-calls), with an input that the library refuses before any compute.
+Each case runs the real command, with an input that the library refuses before any compute. The cases run in
+one child process (``CHILD`` below), one after the other, each in a folder of its own and with the
+interpreter's exit hook: what ``python -m ijoy_jax.apps.cli ARGS`` does, ``sys.exit(main(ARGS))``, its status,
+stdout and stderr captured per case. One process, not one per case: each process spends about 2 s importing
+JAX and the package, which is all the time these refusals take. ``test_the_ijoy_command_runs_as_a_program``
+runs the command itself in a subprocess.
 """
 
+import json
 import os
 import re
 import subprocess
@@ -47,20 +52,63 @@ CASES = [
 ]
 
 
+def _env():
+    return dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+
+
 def run_cli(args, cwd):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    return subprocess.run([sys.executable, "-m", "ijoy_jax.apps.cli", *args], cwd=cwd, env=env,
+    return subprocess.run([sys.executable, "-m", "ijoy_jax.apps.cli", *args], cwd=cwd, env=_env(),
                           capture_output=True, text=True, timeout=300)
 
 
-@pytest.mark.parametrize("args, message", CASES, ids=[" ".join(a[:2]) + f" {i}" for i, (a, _) in enumerate(CASES)])
-def test_bad_input_is_one_clean_line_and_status_2(args, message, tmp_path):
-    p = run_cli(args, tmp_path)
-    assert p.returncode == 2, p.stderr
-    lines = p.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("ijoy: error: ") and message in lines[0], p.stderr
-    assert "Traceback" not in p.stderr and p.stdout == ""
-    assert list(tmp_path.iterdir()) == []  # refused before writing anything
+CHILD = """
+import contextlib, io, json, os, sys, traceback
+from ijoy_jax.apps import cli
+out = []
+for args, cwd in json.loads(sys.argv[1]):
+    os.chdir(cwd)
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        try:
+            status = cli.main(args)
+        except SystemExit as e:  # argparse's errors, and what sys.exit(main()) would do
+            status = e.code
+        except BaseException:  # what the interpreter prints for an uncaught exception, and its status
+            traceback.print_exc()
+            status = 1
+    out.append({"status": status, "stdout": stdout.getvalue(), "stderr": stderr.getvalue()})
+print(json.dumps(out))
+"""
+
+
+@pytest.fixture(scope="module")
+def refused(tmp_path_factory):
+    """Per case of CASES: (exit status, stdout, stderr, folder it ran in), all run by one child process."""
+    dirs = [tmp_path_factory.mktemp("case") for _ in CASES]
+    jobs = [[args, str(d)] for (args, _), d in zip(CASES, dirs, strict=True)]
+    p = subprocess.run([sys.executable, "-c", CHILD, json.dumps(jobs)], cwd=dirs[0], env=_env(),
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    results = json.loads(p.stdout.strip().splitlines()[-1])
+    return [(r["status"], r["stdout"], r["stderr"], d) for r, d in zip(results, dirs, strict=True)]
+
+
+@pytest.mark.parametrize("case", range(len(CASES)), ids=[" ".join(a[:2]) + f" {i}" for i, (a, _) in enumerate(CASES)])
+def test_bad_input_is_one_clean_line_and_status_2(case, refused):
+    _, message = CASES[case]
+    status, stdout, stderr, folder = refused[case]
+    assert status == 2, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ijoy: error: ") and message in lines[0], stderr
+    assert "Traceback" not in stderr and stdout == ""
+    assert list(folder.iterdir()) == []  # refused before writing anything
+
+
+def test_the_ijoy_command_runs_as_a_program(tmp_path):
+    """The real command in a process of its own: the module's entry point, its exit status and its one line."""
+    p = run_cli(["demo", "--steps", "0"], tmp_path)
+    assert p.returncode == 2 and p.stdout == "" and list(tmp_path.iterdir()) == []
+    assert p.stderr.strip().splitlines() == ["ijoy: error: num_steps must be at least 1, got 0"], p.stderr
 
 
 def test_every_subcommand_has_a_bad_input_case(tmp_path):
