@@ -22,6 +22,7 @@ import subprocess
 import sys
 from types import SimpleNamespace
 
+import _tiny_walk  # tests/ is on sys.path (pytest rootdir import)
 import jax
 import jax.numpy as jnp
 import mujoco
@@ -49,6 +50,37 @@ def _batch(scs):
     return terrains, robots, starts, commands
 
 
+# ------------------------------------------------------------------ the fast tier: the README's small walk
+# One MJX program (tests/_tiny_walk.py: the README's example, two robots, three steps on a 1.6 m map) checks
+# the walker end to end in a contributor's quick run; everything below it is the slow tier's.
+
+
+def test_the_readmes_small_walk_steps_where_it_was_sent():
+    traj = _tiny_walk.walk()
+    assert traj.footsteps.shape == (2, _tiny_walk.STEPS, 3)
+    assert traj.taken.all() and not traj.log.fallen.any() and not traj.stopped.any()
+    assert not traj.log.obstacle_contact.any()
+    assert traj.log.placement_error.max() < PLACEMENT_TOL, traj.log.placement_error
+    np.testing.assert_allclose(traj.footsteps[..., :2], traj.commanded[..., :2], atol=PLACEMENT_TOL)
+    # The robots walked: every step lands ahead of the start feet, the first robot straight on.
+    assert (traj.footsteps[:, -1, 0] > _tiny_walk.START[0, 0] + 0.1).all()
+    assert abs(traj.footsteps[0, -1, 2]) < 0.05 and traj.footsteps[1, -1, 2] > 0.02  # the second turns left
+    assert traj.log.qpos.shape[:3] == (2, _tiny_walk.STEPS, _tiny_walk.FRAMES)
+    s = {k: np.asarray(v) for k, v in W.summary(traj).items()}
+    assert not s["fell"].any() and (s["steps_taken"] == _tiny_walk.STEPS).all()
+    assert all(np.isfinite(v).all() for v in s.values())
+
+
+def test_the_readmes_small_walk_takes_new_physics_values_without_compiling():
+    first = _tiny_walk.walk()
+    before = W.compiled_programs()
+    other = _tiny_walk.rollout(friction=(0.8, 1.0), stance_noise=(0.0, 0.0))
+    assert W.compiled_programs() == before
+    assert not other.log.fallen.any()
+    # the second robot no longer lands off by a 1 cm stance error: its steps move
+    assert np.abs(other.footsteps[1] - first.footsteps[1]).max() > 1e-4
+
+
 @pytest.fixture(scope="module")
 def sim():
     return W.make_sim(SHAPE_2D, RES, robot=ij.robots.hrp2())
@@ -64,6 +96,7 @@ def runs(sim):
     return {k: (sc, jax.tree_util.tree_map(lambda a, i=i: a[i], traj)) for i, (k, sc) in enumerate(scs.items())}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_no_fall_no_obstacle_touched(runs, name):
     _, traj = runs[name]
@@ -72,6 +105,7 @@ def test_no_fall_no_obstacle_touched(runs, name):
     assert traj.log.placement_error.max() < PLACEMENT_TOL, traj.log.placement_error
 
 
+@pytest.mark.slow
 def test_wall_approach_then_step_in_place(runs):
     sc, traj = runs["wall-m0.05-x1.44"]
     front = traj.footsteps[:, 0] + HL  # the feet face +x (no turning command)
@@ -92,12 +126,14 @@ def test_wall_approach_then_step_in_place(runs):
     assert abs(x[-2:].mean() - x[:2].mean()) < 0.05 + PLACEMENT_TOL
 
 
+@pytest.mark.slow
 def test_steps_over_the_obstacle(runs):
     sc, traj = runs["over-m0.02-b0.04-x1.0"]
     x1 = sc.info["obstacle"][1]
     assert traj.feet[:, 0].min() > x1 + HL  # both feet beyond the obstacle's far edge at the end
 
 
+@pytest.mark.slow
 def test_turns_on_the_spot(runs):
     sc, traj = runs["turn-1"]
     heading = np.unwrap(traj.footsteps[:, 2])
@@ -105,6 +141,7 @@ def test_turns_on_the_spot(runs):
     assert np.ptp(traj.footsteps[:, :2], axis=0).max() < 0.5  # on the spot: the feet stay within half a metre
 
 
+@pytest.mark.slow
 def test_steps_in_place_then_walks_forward(runs):
     _, traj = runs["flat-forward"]
     assert traj.valid.all() and not traj.stopped.any()
@@ -113,6 +150,7 @@ def test_steps_in_place_then_walks_forward(runs):
     assert traj.footsteps[-1, 0] - traj.footsteps[0, 0] > 0.2 * (STEPS_2D - 3) - 3 * PLACEMENT_TOL
 
 
+@pytest.mark.slow
 def test_footsteps_are_the_measured_touch_downs(runs):
     _, traj = runs["flat-forward"]
     np.testing.assert_allclose(traj.footsteps, traj.log.landed[:, [0, 1, 5]], atol=1e-6)
@@ -121,6 +159,7 @@ def test_footsteps_are_the_measured_touch_downs(runs):
     assert traj.sides.tolist() == [1, -1] * (STEPS_2D // 2)
 
 
+@pytest.mark.slow
 def test_summary(runs):
     _, traj = runs["flat-forward"]
     s = {k: np.asarray(v) for k, v in W.summary(traj).items()}
@@ -128,6 +167,7 @@ def test_summary(runs):
     assert np.isfinite(s["placement_error_p95"]) and s["placement_error_p95"] < PLACEMENT_TOL
 
 
+@pytest.mark.slow
 def test_recorded_states_end_at_the_touch_downs(runs, sim):
     """The last state kept of each step is the one whose sole gave ``log.landed`` (host forward kinematics).
 
@@ -145,6 +185,7 @@ def test_recorded_states_end_at_the_touch_downs(runs, sim):
         np.testing.assert_allclose(data.site_xpos[sim.index.sole_site[row], :2], traj.log.landed[k, :2], atol=1e-3)
 
 
+@pytest.mark.slow
 def test_renders_the_robot_where_it_walks(runs, sim):
     sc, traj = runs["flat-forward"]
     q = render.states(traj)
@@ -176,6 +217,7 @@ def test_headless_rendering_without_egl_says_what_to_set():
     assert out.returncode != 0 and "MUJOCO_GL=egl" in out.stderr
 
 
+@pytest.mark.slow
 def test_margins_in_clutter_reuse_the_compiled_rollout(runs, sim):
     """Margins 0 and 10 cm on two clutter maps (sweeps/margin_physics.toml's clutter), the same maps and commands
     at each: 4 rollouts of the scenarios' shapes, so the same program (no new compile)."""
@@ -267,6 +309,7 @@ def test_gif_and_filmstrip(tmp_path):
         render.write_gif(tmp_path / "b.gif", frames.astype(np.float32))
 
 
+@pytest.mark.slow
 def test_refine_reaches_the_simulated_walker(sim):
     """``refine=True`` puts the continuous refinement (:mod:`ijoy_jax.refine`, tested with the perfect robot in
     tests/test_refine.py) into the MJX rollout's decisions: traced, not compiled (a compile costs ~75 s here),
