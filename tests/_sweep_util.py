@@ -1,5 +1,5 @@
 """The tests' tiny sweep, shared by tests/test_sweep.py and tests/test_sweep_folders.py, and the child processes
-(a killed sweep, a sweep on 4 forced CPU devices) of tests/test_sweep.py and tests/test_sweep_physics.py.
+(a killed sweep, a sweep on several forced CPU devices) of tests/test_sweep.py and tests/test_sweep_physics.py.
 
 One static configuration (2D 60 x 50 map at 4 cm, 19 actions at density 0.25, 6 steps, exhaustive search)
 for both, so each module compiles the chunk function once; they differ only in the cells of the grid.
@@ -112,12 +112,12 @@ execute._OnDevices.dispatch = spy
 computed each slice (its outputs' device)."""
 
 
-def run_on_four_cpu_devices(script: str, *args: str, timeout_s: float) -> None:
-    """Run the Python ``script`` (``python -c script *args``) in a child process whose CPU backend has 4 devices
-    (``--xla_force_host_platform_device_count=4`` added to ``XLA_FLAGS``); fail with its stderr's tail unless it
-    exits 0 within ``timeout_s``."""
-    env = dict(os.environ, JAX_PLATFORMS="cpu",
-               XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=4").strip())
+def run_on_cpu_devices(script: str, *args: str, devices: int, timeout_s: float) -> None:
+    """Run the Python ``script`` (``python -c script *args``) in a child process whose CPU backend has ``devices``
+    devices (``--xla_force_host_platform_device_count`` added to ``XLA_FLAGS``); fail with its stderr's tail
+    unless it exits 0 within ``timeout_s``."""
+    flag = f" --xla_force_host_platform_device_count={devices}"
+    env = dict(os.environ, JAX_PLATFORMS="cpu", XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + flag).strip())
     r = subprocess.run([sys.executable, "-c", script, *args], env=env, capture_output=True, text=True,
                        timeout=timeout_s)
     assert r.returncode == 0, r.stderr[-3000:]

@@ -21,7 +21,7 @@ import scipy.stats
 from _sweep_util import (  # tests/ is on sys.path (pytest rootdir import)
     SPY_ON_DEVICES,
     kill_after_first_part,
-    run_on_four_cpu_devices,
+    run_on_cpu_devices,
     tiny_sweep,
     write,
 )
@@ -235,6 +235,7 @@ def test_results_equal_direct_rollouts(reference, base_file):
     assert df["distance_along"].max() > 0.2
 
 
+@pytest.mark.slow
 def test_pallas_kernel_gives_the_same_results(reference, tmp_path, monkeypatch):
     """``kernel = "pallas"`` (the fused FootCost kernel, interpreted on this CPU) walks the same steps: the
     same results as the XLA path's for the plan's first 4 scenarios (2 chunks: interpreting is slow)."""
@@ -286,6 +287,7 @@ def _log_chunk_events(monkeypatch) -> list:
     return events
 
 
+@pytest.mark.slow
 def test_density_compiles_once_per_size_and_the_host_writes_while_the_devices_compute(tmp_path, monkeypatch):
     text = BASE.replace("[robot]\ndensity = 0.25\n", "").replace(
         '"robot.margin" = [0.0, 0.05]', '"robot.density" = [0.25, 0.5]').replace("scenarios_per_cell = 3",
@@ -307,6 +309,7 @@ def test_density_compiles_once_per_size_and_the_host_writes_while_the_devices_co
                      "write", "dispatch", "dispatch", "write", "dispatch", "write", "dispatch", "write", "write"]
 
 
+@pytest.mark.slow
 def test_selector_options_sweep_match_direct_rollouts_and_compile_once_per_horizon(tmp_path):
     """``selector.horizon`` is static (one compile per value), ``selector.discount`` traced (none per value);
     each scenario equals ``ij.rollout`` with its options (refinement's are tests/test_refine.py's)."""
@@ -361,6 +364,7 @@ def test_rotation_weight_and_metrics_sweep_match_direct_rollout(tmp_path):
         assert row[k] == pytest.approx(float(v), abs=FLOAT_TOL), k
 
 
+@pytest.mark.slow
 def test_reach_sweep_matches_direct_rollouts_of_the_longer_reach(tmp_path):
     """``[robot] reach = 0.30`` (issue #20's stairs option, ``robots.hrp2(reach=0.30)``): every scenario equals
     ``ij.rollout`` with that robot, and not with the paper's reach; the aggregates keep the reach, and the
@@ -539,12 +543,13 @@ assert seen == [four] * 3, seen  # every chunk: one slice on each device
 """
 
 
+@pytest.mark.slow
 def test_four_cpu_devices_give_the_single_device_result(reference, base_file, tmp_path):
     # chunk_size 3 is rounded up to 4 (one scenario per device); 10 scenarios make chunks of 4, 4 and 2,
     # the last padded to 4. Compared with the in-process single-device reference (chunks of 2).
     ref_out, _ = reference
     out = tmp_path / "four"
-    run_on_four_cpu_devices(_SHARDED_CHILD, str(base_file), str(out), timeout_s=120)
+    run_on_cpu_devices(_SHARDED_CHILD, str(base_file), str(out), devices=4, timeout_s=120)
     man = json.loads((out / "manifest.json").read_text())["sessions"][-1]
     assert man["devices"] == 4 and man["device_count"] == 4 and man["chunk_size"] == 4 and man["complete"]
     assert man["sharding"].startswith("rows split evenly over 4 devices"), man["sharding"]
