@@ -58,6 +58,7 @@ def test_grid_shape_and_refusals():
             B.grid_shape(bad)
 
 
+@pytest.mark.slow
 def test_every_family_builds_the_shared_grid(maps):
     """One grid shape, resolution, origin and tree structure for all: the MJX rollout compiles once for them."""
     structures = {jax.tree_util.tree_structure(t) for t in maps.values()}
@@ -73,12 +74,14 @@ def test_every_family_builds_the_shared_grid(maps):
         assert name == "flat" or not np.array_equal(h[0], h[1]), name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["stones", "image", "platforms"])
 def test_same_key_same_maps(maps, name):
     again = B.FAMILIES[name].make(jax.random.key(7), BATCH, shape=SHAPE, resolution=RES)
     np.testing.assert_array_equal(np.asarray(again.height), np.asarray(maps[name].height))
 
 
+@pytest.mark.slow
 def test_the_jitted_maps_are_the_op_by_op_maps_and_a_new_key_reuses_the_program(maps):
     """WalkFamily.maps (what ``ijoy bench walk`` draws its maps with): every family traces under jit and gives
     make's maps to float32 rounding (heights within 1e-6 m of values under 0.6 m, the same free cells); a new
@@ -94,6 +97,7 @@ def test_the_jitted_maps_are_the_op_by_op_maps_and_a_new_key_reuses_the_program(
     assert not np.array_equal(np.asarray(again.height), np.asarray(maps["rough"].height))
 
 
+@pytest.mark.slow
 def test_the_start_feet_are_valid_footholds_on_every_map(maps):
     robot = robots.hrp2()
     feet = np.asarray(B.start_stances(robot, 1)[0])
@@ -105,6 +109,7 @@ def test_the_start_feet_are_valid_footholds_on_every_map(maps):
                 assert np.isfinite(float(total[0])), (name, b, side)
 
 
+@pytest.mark.slow
 def test_flat_and_clutter(maps):
     assert np.all(np.asarray(maps["flat"].height) == 0) and np.all(np.asarray(maps["flat"].free))
     t = maps["clutter2d"]
@@ -116,6 +121,7 @@ def test_flat_and_clutter(maps):
     assert np.all(free[:, start_distance() <= B.START_RADIUS])
 
 
+@pytest.mark.slow
 def test_clutter2d_choices_are_those_on_the_2d_maps():
     """The 2.5D clutter maps make the perfect robot take exactly the steps it takes on the same 2D maps."""
     robot = robots.hrp2()
@@ -215,6 +221,7 @@ def test_stones_rows_are_staggered(maps):
     assert abs(abs(phases[0] - phases[1]) - 0.5 * p) <= CELL or abs(abs(phases[0] - phases[1]) - 0.5 * p) >= p - CELL
 
 
+@pytest.mark.slow
 def test_stones_reachable_by_the_lattice_from_the_start(maps):
     """Brute force over HRP-2's 496 actions: from the start, a valid left step then a valid right step puts the
     right foot's grown footprint wholly on a stone ahead of the start pad, on every map."""
@@ -276,6 +283,7 @@ def test_image_windows_are_the_png(tmp_path):
     assert len({tuple(o) for o in offsets.tolist()}) == 3
 
 
+@pytest.mark.slow
 def test_the_perfect_robot_climbs_and_descends_the_stairs():
     """The stairs' robot is ``robots.hrp2(reach=0.30)`` with the held :data:`STAIR_FORWARD` (the longest step): on
     every map of both stair families (treads of 30 and 40 cm) the perfect robot walks past the last riser onto the
@@ -313,6 +321,7 @@ def numpy_reference(traj, start) -> dict[str, Any]:
     return out
 
 
+@pytest.mark.slow
 def test_aggregate_perfect_robot_equals_numpy():
     robot = robots.hrp2()
     key = jax.random.key(1)
@@ -327,6 +336,7 @@ def test_aggregate_perfect_robot_equals_numpy():
     assert got["fell"] == 0 and got["placement_error_p95_m"] is None and got["tilt_error_p95_rad"] is None
 
 
+@pytest.mark.slow
 def test_aggregate_forward_on_flat_is_the_closed_form_and_does_not_recompile():
     """Held forward at the fastest command on flat ground: the first step (from feet side by side) moves the
     midpoint 0.1 m, each later one 0.2 m; and a second batch of maps and commands reuses the program."""
@@ -396,6 +406,7 @@ def test_aggregate_simulated_by_hand():
     assert got["tilt_error_p95_rad"] == pytest.approx(4.8e-3)  # pooled over the steps made, like the placement
 
 
+@pytest.mark.slow
 def test_touchdown_feet_of_the_perfect_robot_are_its_final_feet():
     robot = robots.hrp2()
     starts = B.start_stances(robot, BATCH)
@@ -429,6 +440,7 @@ def test_run_refuses_bad_options_before_any_compute(kwargs, message):
         B.run(**kwargs)
 
 
+@pytest.mark.slow
 def test_the_fused_kernel_reaches_the_selector_chooses_as_xla_and_is_recorded():
     """``kernel="pallas"`` (``ijoy bench walk --kernel pallas``) puts the fused FootCost kernel (interpreted on
     the CPU) in the perfect robot's selector, and every row names it. Its choices are XLA's on rough maps up to
@@ -455,6 +467,7 @@ def test_the_fused_kernel_reaches_the_selector_chooses_as_xla_and_is_recorded():
     assert [r["kernel"] for r in rows] == ["pallas", "pallas"]
 
 
+@pytest.mark.slow
 def test_robot_leaves_reach_the_choice_and_are_recorded(maps):
     """``robot_leaves`` (``ijoy bench walk --set``) walk the robot the selector would get from set_leaves: the
     same trajectory as a direct rollout with that robot, different from the preset's on rough ground (a zero
@@ -478,6 +491,7 @@ def test_robot_leaves_reach_the_choice_and_are_recorded(maps):
     assert direct["steps_made_mean"] == row["steps_made_mean"] and direct["stops"] == row["stops"]
 
 
+@pytest.mark.slow
 def test_a_family_walks_the_same_maps_and_commands_whichever_families_run_beside_it():
     """Seeds follow the registry, not the selection: rough ground alone and after flat ground gives the same
     row (random commands, so a different command stream would move the robots elsewhere)."""
@@ -528,6 +542,7 @@ def test_plot_png(tmp_path):
 # --------------------------------------------------------------------------------------------- the MJX smoke run
 
 
+@pytest.mark.slow
 def test_run_both_walkers_compiles_the_mjx_rollout_once():
     """Two families x two command kinds: the first simulated call compiles, the other three reuse it."""
     rows = B.run(["flat", "clutter2d"], batch=2, steps=2, seed=3)

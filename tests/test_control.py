@@ -70,6 +70,7 @@ def test_nan_command_is_flagged_and_treated_as_no_command():
     assert np.all(np.isfinite(np.asarray(traj.footsteps)))
 
 
+@pytest.mark.slow
 def test_vmaps_over_terrains_commands_starts_and_robot_parameters():
     rng = np.random.default_rng(0)
     n = 4
@@ -146,6 +147,7 @@ def test_the_loop_runs_any_selector_stops_for_good_and_hands_each_step_its_key()
     np.testing.assert_allclose(walker.feet(state)[:, 0], [0.4, 0.5], atol=1e-6)
 
 
+@pytest.mark.slow
 def test_the_walker_gets_the_full_foothold_and_the_trajectory_records_it():
     """On a 6 deg ramp along x, turning left: the walker is passed (x, y, z, roll, pitch, yaw) of each chosen step,
     the trajectory records what it was passed, and z, roll and pitch are the ramp's at each foothold (closed form
@@ -182,6 +184,7 @@ def test_the_walker_gets_the_full_foothold_and_the_trajectory_records_it():
     np.testing.assert_array_equal(fh2[:, 2:5], 0.0)
 
 
+@pytest.mark.slow
 def test_walker_warmup_iterations_settle_without_being_recorded():
     """warmup=2: two extra executes with go=False come first; the trajectory holds only the real steps."""
     base = control.perfect_walker()
@@ -228,6 +231,7 @@ def test_the_same_checks_run_inside_a_users_jit_and_vmap():
         jax.jit(lambda s: ij.rollout(t, ROBOT, s, jnp.zeros(3), 3, kernel="cuda"))(START)
 
 
+@pytest.mark.slow
 def test_python_lists_of_traced_values_work_inside_a_users_jit():
     """A command or stance written as a list of traced scalars (as a user's jitted code builds them) is taken
     like the array it stands for, by rollout and select_step alike; a ragged list is refused by name."""

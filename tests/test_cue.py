@@ -345,6 +345,7 @@ def test_rotating_the_world_by_quarter_turns_leaves_the_force_unchanged():
             np.testing.assert_allclose(out, base[1], atol=1e-6)
 
 
+@pytest.mark.slow
 @settings(max_examples=3)
 @given(st.floats(-math.pi, math.pi))
 def test_rotating_the_world_by_any_angle_leaves_the_force_unchanged(angle):
@@ -390,6 +391,7 @@ def test_left_and_right_stance_feet_mirror():
     assert np.any(a != 0)
 
 
+@pytest.mark.slow
 def test_batched_over_thousands_of_stances_and_commands_matches_one_at_a_time():
     terrain = _clutter(2)
     rng = np.random.default_rng(11)
@@ -411,6 +413,7 @@ def test_batched_over_thousands_of_stances_and_commands_matches_one_at_a_time():
         np.testing.assert_allclose(float(single.depth), float(batched.depth[k]), atol=1e-6)
 
 
+@pytest.mark.slow
 def test_gradients_match_finite_differences_in_float64():
     f32 = _wall_feasible()
     with jax.enable_x64(True):

@@ -58,6 +58,7 @@ def test_scenarios_keep_start_and_goal_clear_and_families_apart():
         study.make_scenarios(0, 0)
 
 
+@pytest.mark.slow
 def test_the_drive_is_the_control_loop_fed_the_operators_commands():
     """Replaying the drive's commands through ij.rollout (the project's Algorithm 1) gives its footsteps."""
     sc = _scenarios()
@@ -135,6 +136,7 @@ def _facing_a_wall():
     return jax.tree_util.tree_map(lambda x: jnp.stack([x, x]), one).replace(goal=jnp.array([[1.5, 1.2], [1.5, 1.5]]))
 
 
+@pytest.mark.slow
 def test_tuning_runs_the_projects_loop_and_keeps_the_best_parameters():
     sc = _facing_a_wall()
     cfg = study.StudyConfig(num_steps=5, ticks=2)
@@ -164,6 +166,7 @@ def test_bad_operator_and_steps_are_refused():
         study.tune_cue(_scenarios(), ROBOT, steps=0)
 
 
+@pytest.mark.slow
 def test_drawings(tmp_path):
     from ijoy_jax.cue import plot
 

@@ -17,6 +17,8 @@ sys.path.insert(0, str(REPO / "docs" / "_ext"))
 
 import ijoy_api  # noqa: E402
 
+pytestmark = pytest.mark.slow  # the Sphinx build runs in a subprocess (about a minute)
+
 BUILD_TIMEOUT_S = 600  # about 45 s on the 2-core CI machine; the margin is for a loaded machine
 
 

@@ -406,6 +406,8 @@ def _repeats(traj, last=4):
 
 
 METHODS = ("exhaustive", "ordered")
+# The paper's ordered search in the fast tier, its exhaustive twin in the slow one (the wall, w's tradeoff).
+ORDERED_FAST = (pytest.param("exhaustive", marks=pytest.mark.slow), "ordered")
 
 
 def test_preset_has_the_papers_geometry():
@@ -433,7 +435,7 @@ def _names(prefix):
 
 
 @pytest.mark.parametrize("name", WALLS)
-@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("method", ORDERED_FAST)
 def test_walks_up_to_a_wall_as_close_as_the_margin_allows_then_steps_in_place(method, name):
     sc, traj = scenarios_2d()[name], runs_2d(method)[name]
     m, wall = sc.margin, sc.info["wall_x"]
@@ -601,6 +603,7 @@ def _assert_25d_safe(name, sc, traj):
     assert traj.on_obstacle.sum() == 0, name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["lane-0.05", "lane-0.08", "full-0.02-m0.02-w2.0"])
 @pytest.mark.parametrize("method", METHODS)
 def test_low_platforms_are_stepped_onto(method, name):
@@ -617,6 +620,7 @@ def test_low_platforms_are_stepped_onto(method, name):
     assert traj.feet[:, 0].min() > edge + 0.5  # and it walked on along the platform
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["lane-0.12", "lane-0.15"])
 @pytest.mark.parametrize("method", METHODS)
 def test_platforms_above_the_step_height_limit_are_refused(method, name):
@@ -641,6 +645,7 @@ def test_platforms_above_the_step_height_limit_are_refused(method, name):
     assert all(np.isfinite(float(o[0])) for o in others)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["full-0.05-m0.02-w2.0", "full-0.05-m0.0-w2.0"])
 @pytest.mark.parametrize("method", METHODS)
 def test_a_full_width_step_above_the_band_limit_is_never_climbed(method, name):
@@ -656,7 +661,7 @@ def test_a_full_width_step_above_the_band_limit_is_never_climbed(method, name):
     assert np.all(sc.info["edge_x"] - (traj.feet[:, 0] + HL) < sc.margin + TOL)
 
 
-@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("method", ORDERED_FAST)
 def test_w_trades_terrain_cost_against_following_the_command(method):
     """A 2 cm step across both lanes can be straddled (valid, but rough): with w = 1 stepping in
     place (w x 0.2 m) is cheaper than the straddle's FootCost, with w = 2 it is not."""
@@ -672,6 +677,7 @@ def test_w_trades_terrain_cost_against_following_the_command(method):
     assert 1.0 * L_MAX < cost < 2.0 * L_MAX, cost
 
 
+@pytest.mark.slow
 def test_the_default_support_refuses_the_straddle_the_papers_metrics_allow():
     """The straddle of test_w_trades_terrain_cost_against_following_the_command (a sole across the 2 cm edge) is
     valid under the paper's metrics; a rigid sole there rests on its upper half and rocks, and the default
@@ -851,6 +857,7 @@ BLOCKING_RISERS = ((0.013, 0.3, STAIR_X), (0.02, 0.3, STAIR_X), (0.02, 0.3, STAI
                    (-0.15, 0.3, STAIR_X), (0.013, 0.3, STAIR_X + 0.03))
 
 
+@pytest.mark.slow
 def test_the_papers_reach_marks_time_before_a_full_width_riser():
     """The 20 cm limit and its geometry. An action lands the swing foot at most L = 0.20 m ahead of the stance
     foot, so the stance foot's toe (+0.121) is always ahead of the swing foot's heel (L - 0.121 = 0.079), and
@@ -878,6 +885,7 @@ def test_the_papers_reach_marks_time_before_a_full_width_riser():
 STAIR_CASES = tuple((sign * rise, run) for sign in (1.0, -1.0) for rise in (0.05, 0.10, 0.15) for run in (0.30, 0.40))
 
 
+@pytest.mark.slow
 def test_a_longer_reach_climbs_and_descends_stairs():
     """hrp2(reach=0.30): a step lands up to 0.30 m ahead, beyond foot_length + 2 margin = 0.282 m, so a foot
     passes a riser while the stance foot stands before it. The perfect robot climbs and descends three risers of 5,

@@ -74,6 +74,7 @@ def test_off_map_counts_as_obstacle():
 HUGE = [1e4, 1e7, 3.3e9, 1e30, 3.4e38]  # 3.3e9: past int32 cells at 2 cm; 3.4e38: float32's largest
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("has_height", [False, True])
 def test_off_map_is_an_obstacle_at_every_magnitude(has_height):
     """A footprint beyond the map is an obstacle however far it is: float32 keeps no footprint width at 1e7 m
@@ -92,6 +93,7 @@ def test_off_map_is_an_obstacle_at_every_magnitude(has_height):
     assert np.all(np.isinf(np.asarray(terms.unsupported))) and np.all(np.isinf(np.asarray(terms.total)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("x", [1e7, -1e7, 1e30])
 def test_a_stance_far_off_the_map_has_no_valid_step_and_the_rollout_stops(x):
     t = ij.terrain.flat((40, 40), RES)
@@ -102,6 +104,7 @@ def test_a_stance_far_off_the_map_has_no_valid_step_and_the_rollout_stops(x):
     assert not np.any(np.asarray(traj.taken)) and bool(np.all(traj.stopped))
 
 
+@pytest.mark.slow
 def test_a_world_frame_float32_cannot_resolve_is_refused_or_flagged():
     """A map at UTM scale (origin 5e5, 5.2e6 m): float32 rounds y there to 0.5 m, so FootCost would score the
     wrong cells. Refused at the boundary with the fix named; inside a jit (traced origin) flagged unsupported."""
@@ -161,6 +164,7 @@ def _rough_terrain(seed, has_height=True, shape=(50, 60)):
     return ij.terrain.from_arrays(h if has_height else None, free, RES, (0.3, -0.2))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("has_height", [False, True])
 def test_invariant_under_rotation_by_90_degrees(has_height):
     t = _rough_terrain(1, has_height)
@@ -391,6 +395,7 @@ def test_action_cost_is_added_and_nearest_action_is_used():
     np.testing.assert_allclose(np.asarray(c), np.linspace(0, 1, 496)[::37], rtol=1e-6)
 
 
+@pytest.mark.slow
 @given(st.integers(0, 2**31 - 1), st.floats(0.0, 0.1))
 def test_never_negative_and_inf_means_invalid(seed, margin):
     rng = np.random.default_rng(seed)
@@ -420,6 +425,7 @@ def test_unsupported_margin_and_nan_pose_are_flagged_inside_jit():
     assert np.isinf(b.unsupported).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("has_height", [False, True])
 def test_windows_sized_exactly_for_the_margin_give_the_same_costs(has_height):
     """max_margin == margin: the footprint fills the static window exactly (float64 sizes, float32 poses).
@@ -473,6 +479,7 @@ def test_no_recompile_when_parameters_or_terrain_values_change():
     assert compiled_count(footcost.xla._foot_cost_terms_jit) == n
 
 
+@pytest.mark.slow
 def test_vmaps_over_terrains_and_robot_parameters():
     ts = [_rough_terrain(s) for s in range(3)]
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *ts)
@@ -495,6 +502,7 @@ def test_vmaps_over_terrains_and_robot_parameters():
     assert (inf[0] <= inf[1]).all() and (inf[1] <= inf[2]).all() and inf[2].sum() > inf[0].sum()
 
 
+@pytest.mark.slow
 def test_plane_metrics_are_differentiable_in_the_terrain_heights():
     """The plane fit (fused reductions) keeps JAX's derivatives, forward and reverse, w.r.t. the heights."""
     x, y = np.meshgrid(np.arange(50) * RES, np.arange(60) * RES, indexing="ij")
@@ -532,6 +540,7 @@ def test_fused_reductions_have_the_plain_reductions_derivatives(name):
     np.testing.assert_allclose(np.array(g1), np.array(g2), rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.slow
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 2**16), altitude=st.sampled_from([0.0, 50.0, -300.0]), block=st.sampled_from([4, 8, 32]))
 def test_block_sums_against_float64_sums(seed, altitude, block):

@@ -74,10 +74,10 @@ def _assert_same(xla, fused):
 
 
 @pytest.mark.parametrize("kind, margin, max_margin, with_swing", [
-    ("2d", 0.02, 0.1, False),
-    ("25d", 0.02, 0.1, True),   # default windows: most columns span <= 16 rows
-    ("25d", 0.1, 0.1, True),    # 10 cm margin: columns of up to ~28 rows
-    ("25d", 0.0, 0.02, False),  # no margin (no safety band), tight windows, no swing corridor
+    ("2d", 0.02, 0.1, False),  # the fast tier's check of the kernel; the 2.5D kernel is the slow tier's
+    pytest.param("25d", 0.02, 0.1, True, marks=pytest.mark.slow),  # default windows: columns span <= 16 rows
+    pytest.param("25d", 0.1, 0.1, True, marks=pytest.mark.slow),  # 10 cm margin: columns of up to ~28 rows
+    pytest.param("25d", 0.0, 0.02, False, marks=pytest.mark.slow),  # no margin, tight windows, no corridor
 ])
 def test_totals_match_the_xla_footcost(kind, margin, max_margin, with_swing):
     robot = ij.robots.hrp2(margin=margin, max_margin=max_margin)
@@ -94,6 +94,7 @@ def test_totals_match_the_xla_footcost(kind, margin, max_margin, with_swing):
 
 
 
+@pytest.mark.slow
 def test_the_lean_term_rejects_the_same_steps_on_both_paths():
     """The lean (bilinear ground at the sole's six contact points) is the only term that rejects a share of the
     steps here; the kernel's reads of the padded map reject exactly those, and its finite totals agree."""
@@ -113,6 +114,7 @@ def test_the_lean_term_rejects_the_same_steps_on_both_paths():
     assert np.isinf(fused[lean_only]).all()
 
 
+@pytest.mark.slow
 def test_plane_fit_keeps_its_precision_at_altitude_and_across_relief():
     """The kernel fits planes from block prefix sums of heights less each block's first height, the XLA path
     from heights less each foot's own: at 50 m altitude (float32 ulp 4e-6 m) on a 20 % ramp they still agree
@@ -129,6 +131,7 @@ def test_plane_fit_keeps_its_precision_at_altitude_and_across_relief():
     assert np.isfinite(xla).sum() >= 50
 
 
+@pytest.mark.slow
 def test_off_map_oversized_and_non_finite_steps_are_inf():
     robot = ij.robots.hrp2(margin=0.02)
     terrain = ij.terrain.from_arrays(np.zeros(SHAPE, np.float32), np.ones(SHAPE, bool), RES)
@@ -144,6 +147,7 @@ def test_off_map_oversized_and_non_finite_steps_are_inf():
     assert np.isinf(xla).all() and np.isinf(fused).all()
 
 
+@pytest.mark.slow
 def test_steps_far_off_the_map_are_inf_at_every_magnitude():
     """As in the XLA path (test_footcost.test_off_map_is_an_obstacle_at_every_magnitude): float32 keeps no
     footprint width at 1e7 m, yet such a step is off the map."""
@@ -156,6 +160,7 @@ def test_steps_far_off_the_map_are_inf_at_every_magnitude():
     assert np.isfinite(fused[0, 0]) and np.all(np.isinf(fused[0, 1:]))
 
 
+@pytest.mark.slow
 def test_one_rule_for_limits_a_metric_at_its_limit_is_decided_alike_on_both_paths():
     """Limits are set to the XLA path's own metrics, shifted by less than float32 rounding, by half the
     tolerance and by three times it: at the limit (to rounding) and within LIMIT_TOL above it, both paths accept;
@@ -202,6 +207,7 @@ def test_one_rule_for_limits_a_metric_at_its_limit_is_decided_alike_on_both_path
             assert np.isfinite(xla[0, i]) == np.isfinite(fused[0, i]) == accept, (leaf, d, xla[0, i], fused[0, i])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["2d", "25d"])
 def test_ankle_and_reach_terms_match_the_xla_path(kind):
     """The sole's tilt on the fitted plane against max_sole_pitch / max_sole_roll, and the soles' 3D distance
@@ -235,6 +241,7 @@ def test_ankle_and_reach_terms_match_the_xla_path(kind):
         assert not ankle.any()  # level soles on a 2D map
 
 
+@pytest.mark.slow
 @settings(max_examples=15)  # each example is ~500 interpreted candidates on 2.5D; the CI has 2 cores
 @given(seed=st.integers(0, 2**16), margin=st.sampled_from([0.0, 0.01, 0.03, 0.06]))
 def test_property_fused_equals_xla_on_random_maps(seed, margin):
@@ -245,6 +252,7 @@ def test_property_fused_equals_xla_on_random_maps(seed, margin):
     _assert_same(xla, fused)
 
 
+@pytest.mark.slow
 def test_vmap_over_terrains_shares_nothing_between_them():
     robot = ij.robots.hrp2(margin=0.02)
     terrains = [_terrain("25d", seed=s) for s in (4, 5)]
@@ -262,6 +270,7 @@ def test_vmap_over_terrains_shares_nothing_between_them():
         _assert_same(xla[0], both[b])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["exhaustive", "ordered"])
 def test_select_step_with_the_kernel_chooses_the_same_steps(method):
     robot = ij.robots.hrp2(margin=0.02)
@@ -287,6 +296,7 @@ def test_select_step_with_the_kernel_chooses_the_same_steps(method):
     np.testing.assert_allclose(np.asarray(cb)[np.asarray(va)], np.asarray(ca)[np.asarray(va)], rtol=RTOL, atol=ATOL)
 
 
+@pytest.mark.slow
 def test_public_select_step_kernel_option_and_no_recompile():
     robot = ij.robots.hrp2(margin=0.02)
     terrain = _terrain("2d", seed=9)
@@ -310,6 +320,7 @@ def test_block_must_be_a_power_of_two():
         foot_cost_fused(terrain, robot, jnp.zeros(3), -1, jnp.zeros((4, 3)), index=index, block=48)
 
 
+@pytest.mark.slow
 def test_rollout_with_the_kernel_walks_the_same_steps():
     robot = ij.robots.hrp2(margin=0.02)
     terrain = _terrain("25d", seed=10)
@@ -324,6 +335,7 @@ def test_rollout_with_the_kernel_walks_the_same_steps():
         ij.rollout(terrain, robot, start, kernel="triton", **kw)
 
 
+@pytest.mark.slow
 def test_kernel_column_spans_equal_the_geometry_module():
     """The kernel's chain-based spans equal geometry.rect_column_spans at random, axis-aligned, nearly
     axis-aligned, grid-aligned and zero-length rectangles (the swing corridor of a step in place)."""
@@ -365,6 +377,7 @@ def _corridors(cx, cy, sx, sy, half_width):
     return jax.vmap(lambda x, y: footcost.swing_corridor(sx, sy, x, y, half_width, RES, 64)[0])(cx, cy)
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**16))
 def test_corridor_box_holds_every_corridor_cell_and_box_top_is_its_highest_cell(seed):
@@ -398,6 +411,7 @@ def test_corridor_box_holds_every_corridor_cell_and_box_top_is_its_highest_cell(
     assert top == want
 
 
+@pytest.mark.slow
 def test_corridor_broad_phase_keeps_every_swing_path_rejection():
     """On flat ground the broad phase proves every corridor clear; across a 15 cm wall (above the 10 cm
     clearance) between the swing start and the steps it cannot, and the exact walk must reject the steps whose
@@ -486,6 +500,7 @@ ROBOT_FIELDS = ["margin", "foot_length", "foot_width", "w", "rotation_weight", "
                 "clearance", "max_step_height"]
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
 @given(field=st.sampled_from([*ROBOT_FIELDS, "origin", "height"]), v=st.sampled_from(HOSTILE),
        cell=st.tuples(st.integers(0, SHAPE[0] - 1), st.integers(0, SHAPE[1] - 1)))
@@ -504,6 +519,7 @@ def test_both_paths_flag_hostile_traced_robot_and_terrain_values_alike(field, v,
     _assert_flagged_alike(terrain, robot)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf])
 @pytest.mark.parametrize("where", ["under the stance foot", "under a step", "in a swing corridor", "far away"])
 def test_non_finite_heights_inside_jit_flag_every_step_on_both_paths(value, where):
@@ -530,6 +546,7 @@ def _select_traced(terrain, robot):
                               targets=ij.make_targets(SMALL), method="exhaustive")
 
 
+@pytest.mark.slow
 def test_a_plane_fit_beyond_float32_is_flagged_not_a_flat_valid_step():
     """Heights too large for the plane fit's float32 sums (finite, so the boundary accepts them) gave a NaN fit
     that both paths replaced by a flat plane: the step was valid with zero metrics. Now the steps whose fit
@@ -591,6 +608,7 @@ def _metric_both(terrain, robot, stance):
 BAND_ALTITUDES = (0.0, 50.0, -60.0)
 
 
+@pytest.mark.slow
 @settings(max_examples=12, deadline=None)
 @given(seed=st.integers(0, 2**16), altitude=st.sampled_from(BAND_ALTITUDES),
        slope_deg=st.sampled_from([20.0, 0.0, 5.0]) | st.floats(0.0, 45.0),

@@ -446,6 +446,7 @@ RMS_RTOL = 0.05
 ACF_ATOL = 0.1
 
 
+@pytest.mark.slow
 def test_rough_statistics():
     amp, ell = 0.04, 0.06
     p = gen.RoughParams(amplitude=amp, correlation_length=ell, start_radius=0.0)

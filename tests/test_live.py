@@ -169,6 +169,7 @@ def _rollout_reference(rec):
     return traj
 
 
+@pytest.mark.slow
 def test_scripted_drive_through_a_real_server_replays_identically(trace, recorded, footstep_server, tmp_path):
     """The whole stack headless: `ijoy drive --script --headless --record` (its own process) deciding on a real
     `ijoy serve` process over localhost sockets; the recording replays in-process and through the CLI with
@@ -222,6 +223,7 @@ def test_scripted_drive_through_a_real_server_replays_identically(trace, recorde
     assert cli.main(["drive", "--replay", str(out)]) == 0
 
 
+@pytest.mark.slow
 def test_replay_detects_a_changed_recording(recorded, tmp_path):
     """A recording whose footsteps were tampered with does not replay identically (the check can fail)."""
     from mcap.reader import make_reader
@@ -345,6 +347,7 @@ def test_no_valid_step_stands_and_decides_again():
     assert feet[:, 1].mean() > 0.85  # went left along it
 
 
+@pytest.mark.slow
 def test_native_robot_drives_and_replays(trace, tmp_path):
     """The MuJoCo biped on native MuJoCo, driven by the scripted stick: it walks without falling, lands where
     it was sent, and its replay is identical (MuJoCo and the compiled controller are deterministic); exported as
@@ -366,6 +369,7 @@ def test_native_robot_drives_and_replays(trace, tmp_path):
     assert cfg.walker == "mjx" and cfg.family == "flat" and cfg.num_steps == 3
 
 
+@pytest.mark.slow
 def test_mjx_robot_drives_through_the_cli_and_replays(trace, tmp_path, capsys):
     """``ijoy drive --robot mjx`` (the command line, in this process): the MuJoCo biped on MJX, headless and
     scripted, on the 2.5D flat map tests/test_sim_mjx_biped.py walks (its compiled programs); it walks without
@@ -439,6 +443,7 @@ def _along_across(result):
     return along, across
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("terrain", live.session.SWEEP_TERRAINS)
 def test_a_recorded_drive_exported_to_a_sweep_takes_its_footsteps(exports, recorded, terrain):
     """`ijoy drive --replay --export-sweep`: the sweep's scenario 0 is the drive (its map, robot, start and
@@ -472,6 +477,7 @@ def test_a_recorded_drive_exported_to_a_sweep_takes_its_footsteps(exports, recor
     assert other["steps_taken"] > 0  # the same commands, another robot
 
 
+@pytest.mark.slow
 def test_the_drives_trace_file_as_a_sweeps_commands_is_the_same_sweep(exports, recorded, trace, tmp_path):
     """The drive's own trace file as the sweep's command file gives the recorded commands bit for bit
     (ijoy_jax.live.loop.scripted_commands: the loop's schedule, not a drive), so the same table: a scripted stick
@@ -549,6 +555,7 @@ int main(void) {
 """
 
 
+@pytest.mark.slow
 def test_effects_are_the_kernels_structures(tmp_path):
     """A cue force and ALDURO's centring spring encoded as evdev ff structures are, byte for byte, the
     struct ff_effect that linux/input.h lays out for the same fields (compiled with the system's C compiler),

@@ -14,6 +14,8 @@ from _server_util import RES, SHAPE  # tests/ is on sys.path (pytest rootdir imp
 from ijoy_jax import live
 from ijoy_jax.live.view import ViewServer
 
+pytestmark = pytest.mark.slow  # drives Debian's Chromium, a system package .ci/run installs
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 

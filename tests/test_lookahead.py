@@ -83,6 +83,7 @@ def _check_against_brute_force(terrain, robot, stance, side, command, swing_from
     return v, c
 
 
+@pytest.mark.slow
 @EXAMPLES
 @given(seed=st.integers(0, 2**31 - 1), has_height=st.booleans(), discount=st.sampled_from([0.0, 0.5, 1.0, 1.5]))
 def test_exact_horizon_two_is_the_numpy_brute_force_over_all_pairs(seed, has_height, discount):
@@ -91,6 +92,7 @@ def test_exact_horizon_two_is_the_numpy_brute_force_over_all_pairs(seed, has_hei
                                swing_from if has_height else None, 2, discount)
 
 
+@pytest.mark.slow
 def test_exact_horizon_three_is_the_numpy_brute_force_over_all_triples():
     seed = 3  # one 2D decision (1110 NumPy FootCosts; the pairs' test covers 2.5D and swing paths)
     stance, side, command, _ = _decision(seed)
@@ -98,6 +100,7 @@ def test_exact_horizon_three_is_the_numpy_brute_force_over_all_triples():
     assert np.isfinite(v).any()
 
 
+@pytest.mark.slow
 def test_beam_of_the_whole_action_set_is_exact_at_horizon_two():
     n = SMALL.num_actions
     for seed in range(4):
@@ -110,6 +113,7 @@ def test_beam_of_the_whole_action_set_is_exact_at_horizon_two():
         np.testing.assert_array_equal(np.asarray(beam.pose), np.asarray(exact.pose))
 
 
+@pytest.mark.slow
 def test_horizon_one_is_the_exhaustive_selector_exactly():
     for seed in (1, 2, 3):
         stance, side, command, swing_from = _decision(seed)
@@ -135,6 +139,7 @@ def _dead_end_map():
     return ij.terrain.from_arrays(None, free, RES), np.stack([f0, s0]), np.asarray(steps, np.float64)
 
 
+@pytest.mark.slow
 def test_on_the_dead_end_map_one_step_walks_in_and_stops_and_lookahead_does_not():
     terrain, start, (a, b) = _dead_end_map()
     command = [0.25, 0.0, 0.436]  # forward and turning left at the largest rate

@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 README = Path(__file__).parents[1] / "README.md"
 BLOCK = re.compile(r"^```python\n(.*?)^```$", re.S | re.M)
@@ -22,6 +23,7 @@ def test_block_extraction():
     assert python_blocks(text) == ["x = 1\n", "y = x + 1\n"]
 
 
+@pytest.mark.slow
 def test_readme_examples_run(tmp_path, monkeypatch):
     blocks = python_blocks(README.read_text())
     assert len(blocks) >= 4  # use, batching, haptics, simulation

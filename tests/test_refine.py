@@ -67,6 +67,7 @@ def _cost_against_p_next(terrain, robot, stance, side, command, pose, action, sw
     return fc + float(robot.w) * d, fc, rel
 
 
+@pytest.mark.slow
 @EXAMPLES
 @given(seed=st.integers(0, 2**31 - 1))
 def test_refinement_is_never_costlier_than_its_lattice_step_and_always_valid(seed):
@@ -104,6 +105,7 @@ def test_refinement_is_never_costlier_than_its_lattice_step_and_always_valid(see
     assert np.all(np.abs(rel - acts[int(fine.index)]) <= spacing + POSE_TOL)
 
 
+@pytest.mark.slow
 def test_a_step_between_lattice_points_up_to_a_wall():
     free = np.ones((80, 80), bool)  # the island map's grid: the same compiled programs
     free[55:, :] = False  # a wall at x = 1.1 m: the grown foot's front may reach it
@@ -129,6 +131,7 @@ def _island_map():
     return ij.terrain.from_arrays(None, free, RES), s0, f0
 
 
+@pytest.mark.slow
 def test_a_foothold_no_lattice_step_reaches_is_found():
     terrain, s0, f0 = _island_map()
     command = [0.25, 0.0, 0.0]  # p_next: 0.2 m ahead
@@ -160,6 +163,7 @@ def test_refine_options_are_traced_and_never_recompile():
     assert compiled_count(select._select_jit) == before
 
 
+@pytest.mark.slow
 def test_traced_invalid_refine_options_are_flagged():
     terrain = _map(2, False)
     stance, side, command, _ = _decision(2)
@@ -171,6 +175,7 @@ def test_traced_invalid_refine_options_are_flagged():
     assert bool(f(jnp.float32(1.0)).valid)
 
 
+@pytest.mark.slow
 def test_refinement_under_vmap_inside_a_users_jit_is_each_decision_alone():
     terrains = [_map(s, False) for s in (3, 4)]
     stance, side, command, _ = _decision(3)

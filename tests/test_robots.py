@@ -427,6 +427,7 @@ def _stances_realisable(actions, roll, pitch, tilted_row):
     return np.asarray(jax.jit(jax.vmap(one))(jnp.asarray(actions, jnp.float32)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("reach", [0.20, 0.30])
 def test_hrp2_ankle_limits_are_realisable_by_the_biped(reach):
     """make_robot's defaults (HRP-2's ankles) against the MJX biped's leg IK and joint ranges, in the controller's

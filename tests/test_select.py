@@ -80,6 +80,7 @@ def _agree(a, b):
     return differ.mean()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("has_height", [False, True])
 def test_ordered_equals_exhaustive_on_thousands_of_random_queries(has_height):
     n_t, n_q = (32, 64) if not has_height else (32, 32)  # 2048 (2D) + 1024 (2.5D) decisions
@@ -96,7 +97,7 @@ def test_ordered_equals_exhaustive_on_thousands_of_random_queries(has_height):
     assert np.all(np.asarray(ex.evaluated) == ROBOT.num_actions)
 
 
-@pytest.mark.parametrize("has_height", [False, True])
+@pytest.mark.parametrize("has_height", [False, pytest.param(True, marks=pytest.mark.slow)])
 def test_matches_numpy_reference_of_the_papers_algorithm(has_height):
     terrains = _random_terrains(7 + has_height, 6, has_height)
     stance, side, command, swing_from = _random_queries(9, 60)
@@ -114,6 +115,7 @@ def test_matches_numpy_reference_of_the_papers_algorithm(has_height):
             assert int(got.index[q]) == ref_i or abs(float(got.cost[q]) - ref_c) < 1e-4, q
 
 
+@pytest.mark.slow
 def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost_and_of_action_foot_costs():
     terrains = _random_terrains(11, 1, True)
     t = jax.tree_util.tree_map(lambda x: x[0], terrains)
@@ -142,6 +144,7 @@ def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost_and_of_action_
         assert float(ch.foot_cost) == pytest.approx(fc[int(ch.index)], rel=1e-5, abs=1e-6)
 
 
+@pytest.mark.slow
 def test_a_shifted_world_frame_gives_the_same_steps_shifted_and_a_utm_frame_is_refused():
     h = np.asarray(_random_terrains(21, 1, True).height[0])
     stance, side, command, swing_from = (np.asarray(a[0], np.float64) for a in _random_queries(22, 1))
@@ -160,6 +163,7 @@ def test_a_shifted_world_frame_gives_the_same_steps_shifted_and_a_utm_frame_is_r
         ij.rollout(utm, ROBOT, np.stack([far, far + [0.0, 0.19, 0.0]]), [0.2, 0.0, 0.0], 2)
 
 
+@pytest.mark.slow
 def test_no_valid_step_is_explicit_and_finite():
     t = ij.terrain.from_arrays(None, np.zeros(SHAPE, bool), RES)  # all obstacle
     for method in select.METHODS:
@@ -251,6 +255,7 @@ def test_no_recompile_across_parameters_and_commands():
     assert compiled_count(select._select_jit) == n
 
 
+@pytest.mark.slow
 def test_prepared_tables_give_the_same_choice_and_checks_run_inside_jit():
     """``prepare`` builds what select_step builds by itself; the checks also run when select_step is traced."""
     t = jax.tree_util.tree_map(lambda x: x[0], _random_terrains(6, 1, True))
@@ -283,6 +288,7 @@ def test_on_obstacle_is_the_bare_footprint_against_the_map():
     assert np.isinf(float(ij.foot_cost(t, ROBOT, [0.3, 0.6, 0.0], -1, [clear], action_index=[0])[0]))
 
 
+@pytest.mark.slow
 def test_on_obstacle_is_footcosts_obstacle_term_and_the_cells_the_footprint_covers():
     """On a map of scattered obstacle cells, for random poses (some leaving the map) and margins: True exactly
     where FootCost's obstacle term of the footprint grown by the margin is +inf, and where a float64 brute force
@@ -473,6 +479,7 @@ def test_foothold_is_the_pose_with_zero_height_and_tilt_on_2d_maps_under_vmap():
     np.testing.assert_array_equal(fh[:, 2:5], 0.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["ordered", "naive"])
 def test_foothold_of_every_method_is_that_of_its_pose(method):
     """Whatever pose a method reports (a step, the naive action, the step in place), the foothold is its plane's."""
@@ -485,6 +492,7 @@ def test_foothold_of_every_method_is_that_of_its_pose(method):
         np.testing.assert_allclose(np.asarray(ch.foothold), np.asarray(want), atol=1e-6)
 
 
+@pytest.mark.slow
 def test_on_a_plane_the_slope_weight_moves_every_cost_alike_and_no_choice():
     """On ground of one plane every candidate pays the same slope cost, so ``metrics.slope_weight`` shifts every
     valid candidate's cost by (weight change) x (plane angle) and leaves the choice alone: the reason the slope

@@ -130,7 +130,7 @@ def test_hello_and_info_report_the_protocol_robot_and_limits(client):
     assert info["terms"] == list(ij.FootCostTerms._fields)
 
 
-@pytest.mark.parametrize("has_height", [False, True], ids=["2d", "2.5d"])
+@pytest.mark.parametrize("has_height", [False, pytest.param(True, marks=pytest.mark.slow)], ids=["2d", "2.5d"])
 def test_replies_equal_select_step_bit_for_bit(client, has_height):
     terrain = _terrain(has_height, seed=int(has_height))
     name = f"equal_{int(has_height)}"
@@ -154,6 +154,7 @@ def test_replies_equal_select_step_bit_for_bit(client, has_height):
     assert raw["cost"] == "Infinity" and raw["index"] == -1
 
 
+@pytest.mark.slow
 def test_window_updates_equal_a_whole_new_map(client):
     terrain = _terrain(True, seed=7)
     name = "window"

@@ -137,6 +137,7 @@ def test_steps_in_place(sim):
     assert max(errs) < PLACEMENT_TOL, errs
 
 
+@pytest.mark.slow
 def test_walks_random_action_set_steps(sim):
     """Ten random steps of the HRP-2 action set (forward, back, sideways, turning) without falling."""
     walk = _Native(sim)
@@ -149,6 +150,7 @@ def test_walks_random_action_set_steps(sim):
     assert max(errs) < WALK_TOL, errs
 
 
+@pytest.mark.slow
 def test_walks_fast_backward_sidesteps_while_turning(sim):
     """The corner of the command space where the MJX robots fell (BENCHMARKS.md): full speed backward, a wide
     sidestep to the right and a turn to the left, held. At the old pelvis height (0.68 m) the legs straightened
@@ -164,6 +166,7 @@ def test_walks_fast_backward_sidesteps_while_turning(sim):
     assert walk.min_knee > 0.3, walk.min_knee  # measured 0.55 (0.0 at the old height)
 
 
+@pytest.mark.slow
 def test_walks_with_one_foot_on_a_raised_lane(sim):
     """Forward 0.2 m steps with the left foot climbing onto an 8 cm lane (the paper's low platform,
     in one lane as in tests/test_experiments.py) while the right foot stays on the ground. The pelvis
@@ -187,6 +190,7 @@ def test_walks_with_one_foot_on_a_raised_lane(sim):
 
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("direction", [1, -1])
 def test_climbs_and_descends_stairs_two_risers_per_swing(sim, direction):
     """Five 12 cm risers, 30 cm treads, one tread per 0.3 m step: each swing foot rises (or drops) two risers
@@ -216,6 +220,7 @@ def test_climbs_and_descends_stairs_two_risers_per_swing(sim, direction):
     np.testing.assert_allclose(walk.soles()[:, 2], 0.6 if direction > 0 else 0.0, atol=0.01)
     assert walk.soles()[:, 0].min() - 0.5 * sim.params.foot_length > risers[-1]  # both wholly past the last riser
 
+@pytest.mark.slow
 @pytest.mark.parametrize("drop", [0.0, 0.15, 0.3])
 def test_descent_drop_lowers_the_pelvis_on_steps_down_only(sim, drop):
     """``WalkConfig.descent_drop``: stepping down 14 cm onto the next tread and again, the pelvis stands
@@ -397,6 +402,7 @@ def test_stance_gain_holds_the_carrying_sole_partly_level(sim):
     assert np.abs(np.asarray(delta[6:])).max() > 0.02
 
 
+@pytest.mark.slow
 def test_stabiliser_rights_the_body_after_a_sideways_push(sim):
     """A 20 N sideways push on the pelvis for one whole step (16 Ns). Without the stabiliser the robot keeps
     rolling 3-6 degrees at every touch-down afterwards (each swing foot lands on its edge, tilted with the
@@ -449,6 +455,7 @@ def _stood_up(sim, stance, swing_from):
                                            cs, None, length=cfg.ticks_per_step)[0])(cs)
 
 
+@pytest.mark.slow
 def test_dynamics_filter_brings_the_patterns_zmp_to_its_reference(sim):
     """A forward 0.2 m step: the multibody ZMP of the corrected pattern is much closer to the reference."""
     cfg, params = sim.cfg, sim.params
@@ -474,6 +481,7 @@ def test_dynamics_filter_brings_the_patterns_zmp_to_its_reference(sim):
     assert after < 0.5 * before, (before, after)
 
 
+@pytest.mark.slow
 def test_dynamics_filter_stays_bounded_up_a_flight_of_stairs(sim):
     """Six steps up 12 cm risers, 0.3 m each, the filter warm-started from step to step as the walker runs it
     (the pattern played kinematically, no physics): the correction settles. Corrected also over the periods
@@ -583,6 +591,7 @@ def test_ankle_damping_turns_the_sole_toward_the_wanted_cop():
     np.testing.assert_allclose(out.ankle[1], leak * np.array([0.01, -0.02]), rtol=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("deg, axis", [(10.0, 0), (-10.0, 0), (6.0, 1), (-6.0, 1)])
 def test_walks_on_a_slope(sim, deg, axis):
     """Up and down a 10 degree slope, across a 6 degree one: the soles land parallel to the ground (the plane

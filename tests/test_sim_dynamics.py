@@ -41,6 +41,7 @@ def test_standing_still_puts_the_zmp_under_the_com(setup, zmp_fn):
     np.testing.assert_allclose(fz, mass * G, rtol=1e-3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("acc", [(1.0, 0.0), (0.0, -0.8), (0.5, 0.5)])
 def test_rigid_acceleration_shifts_the_zmp_by_the_cart_table_law(setup, zmp_fn, acc):
     """The whole robot translating rigidly with acceleration a: zmp = com - z_com a / g (no angular momentum)."""
@@ -56,6 +57,7 @@ def test_rigid_acceleration_shifts_the_zmp_by_the_cart_table_law(setup, zmp_fn, 
     np.testing.assert_allclose(fz, mass * G, rtol=1e-3)
 
 
+@pytest.mark.slow
 def test_turning_in_place_keeps_the_zmp_near_the_com(setup, zmp_fn):
     """Yaw accelerating at 2 rad/s^2 about the vertical through the pelvis: the ZMP stays within a centimetre."""
     m, qpos, com, mass = setup
@@ -67,6 +69,7 @@ def test_turning_in_place_keeps_the_zmp_near_the_com(setup, zmp_fn):
     np.testing.assert_allclose(zmp, np.tile(com[:2], (4, 1)), atol=0.01)
 
 
+@pytest.mark.slow
 def test_zmp_on_a_raised_support_plane(setup, zmp_fn):
     """The ZMP on the plane z = g: the free robot accelerating horizontally (a ramp of the pelvis position) has
     its ZMP moved by -(h - g) a / g_grav from the CoM; raising the plane by g moves it by g f_x / f_z."""
@@ -110,6 +113,7 @@ def _with_passive_forces(mj_model):
     return mj_model
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("passive", [False, True], ids=["as built", "free-joint damping and armature, hinge springs"])
 def test_the_zmp_matches_full_inverse_dynamics_on_a_swinging_turning_motion(setup, zmp_fn, passive):
     """Every joint swinging, the body translating, rolling and turning: motion_zmp's Newton-Euler pass gives

@@ -75,6 +75,7 @@ def walks(sim):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", MAPS)
 def test_steps_are_the_rollouts(walks, name):
     """Sent the footholds the scanned rollout chose, the robot stepped tick by tick lands where the rollout's did,
@@ -98,6 +99,7 @@ def test_steps_are_the_rollouts(walks, name):
     assert w["feet"][-1, :, 0].mean() - w["start"][:, 0].mean() > 0.15  # it walked forward (0.5 m on flat ground)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", MAPS)
 def test_decides_as_the_rollout(walks, name):
     """The robot's stance (what a drive's decision starts from) is the rollout's: select_step on it with the same
@@ -111,6 +113,7 @@ def test_decides_as_the_rollout(walks, name):
         _within(choice.foothold, w["traj"].footholds[k], SOLE_TOL, f"foothold {k}")
 
 
+@pytest.mark.slow
 def test_compiled_once_and_deterministic(walks, sim):
     """A second robot (another map, start, first foot, dynamics and key) and more steps compile nothing; two robots
     given the same inputs end in the same state, bit for bit (what a drive's replay relies on)."""
@@ -135,6 +138,7 @@ def test_compiled_once_and_deterministic(walks, sim):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
+@pytest.mark.slow
 def test_future_stance_is_the_foot_in_flight(walks, sim):
     """During a step the next decision's stance is the swinging foot where it was sent (ComputeStanceLocation);
     standing, or sent a non-finite foothold, it is the stance now."""
@@ -194,6 +198,7 @@ def test_bad_input_is_refused_before_compiling(sim, change, error, match):
     assert mjx_biped.compiled_programs() == before
 
 
+@pytest.mark.slow
 def test_steps_out_of_order_are_refused(walks, sim):
     w = walks["flat"]
     biped = mjx_biped.MjxBiped(sim, w["terrain"], w["robot"], w["start"])

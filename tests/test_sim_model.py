@@ -190,6 +190,7 @@ def test_ball_rests_on_2d_obstacle_and_robot_stands_cpu():
     np.testing.assert_allclose(d.qpos[:2], 0.0, atol=0.02)
 
 
+@pytest.mark.slow
 def test_mjx_put_terrains_ball_contact_and_standing():
     """One jit: a batch of two terrains (flat, obstacle block) in one mjx model; 2 s of standing."""
     from mujoco import mjx

@@ -199,6 +199,7 @@ def test_nominal_dynamics_are_the_sims_own(sims):
     assert set(np.asarray(a.mjx_model.actuator_biastype)) == {int(mujoco.mjtBias.mjBIAS_AFFINE)}
 
 
+@pytest.mark.slow
 def test_sensors_read_after_quiet_steps_are_the_sensors_every_step_computes(sims):
     """The walker's physics steps run without MuJoCo's sensor stage and read the sensors once per control tick
     (:func:`W.read_sensors`): the robot moves exactly as with sensors on, and the sensors read afterwards equal

@@ -141,6 +141,7 @@ sys.exit(cli.main(sys.argv[1:]))
 """
 
 
+@pytest.mark.slow
 def test_a_second_process_on_the_same_out_is_refused(tiny_file, tmp_path):
     """Two real processes on one --out: the second refuses at once with one line naming the holder."""
     out = tmp_path / "shared"

@@ -62,6 +62,7 @@ def test_bar_crossings_metric():
     assert bool(bar_crossings(empty, feet(0, 0), 0.242, 0.13)["crossed"])  # no bar: nothing to cross
 
 
+@pytest.mark.slow
 def test_short_bars_are_crossed_and_long_ones_are_not_at_a_2cm_margin(tmp_path):
     text = FILE.read_text()
     grid = '[grid]\n"terrain.width" = [0.02, 0.04, 0.12, 0.16]\n'

@@ -103,6 +103,7 @@ def _kill_process_1_after_its_first_part(tiny: Path, out: Path, port: int) -> No
                           part="part-00001.parquet")
 
 
+@pytest.mark.slow
 def test_two_processes_give_the_one_process_result(tiny, single, tmp_path):
     out = tmp_path / "shared"
     port = _free_port()
@@ -139,6 +140,7 @@ def test_two_processes_give_the_one_process_result(tiny, single, tmp_path):
     pd.testing.assert_frame_equal(pd.read_parquet(out / "aggregates.parquet"), sweep.load_aggregates(single))
 
 
+@pytest.mark.slow
 def test_a_killed_process_relaunched_rejoins_the_run(tiny, single, tmp_path):
     """Process 1 is SIGKILLed after its first part while process 0 runs on. JAX's default would end process 0
     too (SIGABRT, once the peer's heartbeats stop or it reconnects); the recoverable service lets process 0
@@ -168,6 +170,7 @@ def test_a_killed_process_relaunched_rejoins_the_run(tiny, single, tmp_path):
     pd.testing.assert_frame_equal(pd.read_parquet(out / "aggregates.parquet"), sweep.load_aggregates(single))
 
 
+@pytest.mark.slow
 def test_a_process_that_never_comes_back_ends_the_wait_at_the_barrier_timeout(tiny, tmp_path):
     """Process 1 is SIGKILLed after its first part and not relaunched: process 0 finishes its chunks, waits
     ``--barrier-timeout`` seconds for it, says so, and exits 0 without aggregates (not after an hour, and not
@@ -192,6 +195,7 @@ def test_a_process_that_never_comes_back_ends_the_wait_at_the_barrier_timeout(ti
         sweep.load(out)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_ctrl_c_and_sigterm_stop_a_process_waiting_at_the_final_barrier(tiny, tmp_path, sig):
     """Process 1 is SIGKILLed after its first part: process 0 finishes its chunks and waits up to an hour for it
@@ -283,6 +287,7 @@ sys.exit(cli.main(sys.argv[1:]))
 """
 
 
+@pytest.mark.slow
 def test_local_processes_stop_when_one_fails_and_the_same_command_resumes(tiny, single, tmp_path, capsys,
                                                                           monkeypatch):
     """``--local-processes 2``: two children, one GPU each. When process 1 dies, the parent interrupts process 0
@@ -346,6 +351,7 @@ def test_local_processes_get_one_gpu_each():
         sweep.local.run(["f.toml", "--coordinator=localhost:1"], 1)
 
 
+@pytest.mark.slow
 def test_a_missing_process_is_named_and_its_rerun_completes_the_sweep(tiny, single, tmp_path, capsys):
     # Process 1 never ran (or was killed): the layout without jax.distributed, as sweep.run arguments.
     out = tmp_path / "half"
@@ -480,6 +486,7 @@ print("ok")
 """
 
 
+@pytest.mark.slow
 def test_each_process_puts_the_mjx_models_on_its_own_device():
     """MJX's default device is ``jax.devices()[0]``, process 0's in a jax.distributed job: process 1 of a physics
     sweep had its models there and failed fetching its first chunk ("spans non-addressable devices")."""

@@ -23,6 +23,7 @@ def _float_leaves(tree, dtype):
     return jax.tree.map(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x, tree)
 
 
+@pytest.mark.slow
 def test_objective_gradient_matches_finite_differences_float64():
     cfg = forward.ForwardConfig(shape=(40, 40), density=0.1, has_height=True, batch_size=3, num_noise_samples=4,
                                 sharpness=5.0, tau=30.0)
@@ -72,6 +73,7 @@ def test_short_tuning_run_lowers_the_objective():
     assert np.all(np.isfinite(res.losses))
 
 
+@pytest.mark.slow
 def test_tune_forward_runs_batched_and_saves(tmp_path):
     robot = forward.paper_robot(TINY)
     fit = forward.tune_forward(robot, TINY, key=0, init={"margin": np.array([0.01, 0.05])}, num_runs=2,
@@ -118,6 +120,7 @@ def _numpy_counts(terrain, robot, decisions, cfg, index):
     return np.array(near), np.array(on), np.array(trans)
 
 
+@pytest.mark.slow
 def test_held_out_evaluation_matches_brute_force_numpy():
     cfg = forward.ForwardConfig(shape=(40, 40), density=0.1, num_noise_samples=6, noise_xy=0.03, distance=0.04)
     robot = ij.robots.hrp2(margin=0.005, density=0.1, max_margin=0.08)

@@ -33,6 +33,7 @@ def test_filter_objective_gradient_float64(f0_zeta):
             assert abs(fd - float(g @ d)) <= FD_RTOL64 * max(1.0, abs(fd)), (d, fd, float(g @ d))
 
 
+@pytest.mark.slow
 def test_tuned_filter_beats_default_on_held_out_signals():
     result = haptic.tune_filter(TRAIN_KEY, num_signals=2, num_samples=NUM_SAMPLES, steps=80)
     losses = np.asarray(result.losses)
@@ -46,6 +47,7 @@ def test_tuned_filter_beats_default_on_held_out_signals():
     assert tuned["loss"] < 0.9 * default["loss"]
 
 
+@pytest.mark.slow
 def test_repulsion_objective_gradient_float64():
     with jax.enable_x64(True):
         leg = alduro_leg(-1.0, dtype=jnp.float64)
@@ -64,6 +66,7 @@ def test_repulsion_objective_gradient_float64():
             assert abs(fd - float(g @ d)) <= FD_RTOL64 * max(1.0, abs(fd)), (d, fd, float(g @ d))
 
 
+@pytest.mark.slow
 def test_tuned_repulsion_beats_default_on_held_out_operators():
     kw = dict(num_steps=100)
     result = haptic.tune_repulsion(TRAIN_KEY, num_trajectories=16, steps=40, **kw)

@@ -65,6 +65,7 @@ HELD_OUT_RATE = 0.85
 PARAM_FACTOR = 1.5  # recovered values within this factor of the hidden ones (measured: <= 1.37)
 
 
+@pytest.mark.slow
 def test_inverse_problem_recovers_hidden_parameters():
     robot = ij.robots.hrp2(margin=0.02, density=0.5, max_margin=0.03)  # paper's w = 1, rotation_weight = 100
     hidden = robot.replace(**{k: jnp.float32(v) for k, v in HIDDEN.items()})

@@ -87,6 +87,7 @@ def _relaxed_all(terrain, robot, stance, command, sharpness, tau):
     return relax.relaxed_select(terrain, robot, stance, -1.0, command, sharpness=sharpness, tau=tau)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("has_height", [False, True])
 def test_relaxed_selector_converges_to_exact(robot, has_height):
     terrains, stances, commands = _batch(has_height)
@@ -133,6 +134,7 @@ def test_relaxed_cost_converges_to_exact_finite_costs(robot):
     assert errors[-1] < 0.02
 
 
+@pytest.mark.slow
 def test_relaxed_lean_converges_to_the_exact_lean(robot):
     """The soft lean (tents with rounded corners, soft maxima) tends to the exact metric (bilinear ground at six
     points) as the sharpness grows, on a map with leans of several millimetres."""
@@ -187,6 +189,7 @@ def _objective(terrain, robot, stance, command, sharpness, tau):
     return r.expected_cost + r.log_probs[3] + jnp.sum(r.expected_pose)
 
 
+@pytest.mark.slow
 def test_gradients_match_finite_differences_float64(robot):
     with jax.enable_x64(True):
         terrain = _terrain(5, True)
@@ -225,6 +228,7 @@ def test_gradients_match_finite_differences_float64(robot):
         print(f"float64 worst relative gradient error: {worst:.2e}")
 
 
+@pytest.mark.slow
 def test_gradients_float32_check_grads(robot):
     terrain = _terrain(6, True)
     stance, command = _query(6)
@@ -246,6 +250,7 @@ def test_gradients_float32_check_grads(robot):
 _value_and_grad = jax.jit(jax.value_and_grad(_objective, argnums=(1, 2, 3)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["zero_area", "cell_corner", "all_obstacle"])
 @pytest.mark.parametrize("has_height", [False, True])
 def test_no_nan_at_degenerate_inputs(robot, case, has_height):
@@ -314,6 +319,7 @@ def _exact_and_soft_paths(terrain, robot, stance, swing_from, sharpness):
     return e, s
 
 
+@pytest.mark.slow
 def test_swing_path_converges_to_exact(robot):
     agreement, height_err = [], []
     n_bad = 0
@@ -354,6 +360,7 @@ def _post_terrain(seed: int) -> ij.Terrain:
 NUM_POST_QUERIES = 8
 
 
+@pytest.mark.slow
 def test_relaxed_select_with_swing_from_matches_exact(robot):
     """The mode equals ``select_step(swing_from=...)``'s choice, and the swing check changes most choices.
 
@@ -395,6 +402,7 @@ def _swing_objective(terrain, robot, stance, swing_from, command, sharpness, tau
     return r.expected_cost + r.log_probs[3] + jnp.sum(r.expected_pose) + jnp.sum(r.terms.path_height_m)
 
 
+@pytest.mark.slow
 def test_swing_path_gradients_float64(small_robot):
     robot = small_robot
     with jax.enable_x64(True):
@@ -433,6 +441,7 @@ def test_swing_path_gradients_float64(small_robot):
         print(f"swing path float64 worst relative gradient error: {worst:.2e}")
 
 
+@pytest.mark.slow
 def test_swing_path_gradients_float32_check_grads(small_robot):
     robot = small_robot
     terrain = _bar_terrain(2)
@@ -452,6 +461,7 @@ def test_swing_path_gradients_float32_check_grads(small_robot):
     )
 
 
+@pytest.mark.slow
 def test_swing_path_zero_length_swing_is_finite(small_robot):
     robot = small_robot
     """A swing that ends where it starts (corridor of zero length) has finite values and gradients."""
@@ -466,6 +476,7 @@ def test_swing_path_zero_length_swing_is_finite(small_robot):
         assert np.all(np.isfinite(np.asarray(g)))
 
 
+@pytest.mark.slow
 def test_tall_cell_beside_the_band_does_not_leak_into_bump_or_band():
     """A 0.3 m column one cell outside the grown footprint: exact bump and band are 0, and the soft ones are
     under 1 cm at sharpness 30 (memberships scale the values; as log-sum-exp weights the column leaked 0.26 m

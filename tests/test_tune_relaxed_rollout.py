@@ -76,6 +76,7 @@ def _loss(terrain, robot, start, command):
     return relaxed_rollout.command_error(tr) + 0.01 * jnp.mean(tr.expected_cost) + jnp.sum(tr.feet)
 
 
+@pytest.mark.slow
 def test_rollout_gradients_match_finite_differences_float64(robot):
     with jax.enable_x64(True):
         terrain = _tiny_terrain()
@@ -113,6 +114,7 @@ def test_rollout_gradients_match_finite_differences_float64(robot):
         print(f"relaxed rollout float64 worst relative gradient error: {worst:.2e}")
 
 
+@pytest.mark.slow
 def test_remat_memory_grows_more_slowly():
     """XLA's compiled temp memory of the rollout gradient: remat stores the carry only, not each step's residuals."""
     terrain = ij.terrain.from_arrays(None, np.ones((40, 30), bool), RES)

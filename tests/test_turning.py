@@ -32,6 +32,7 @@ def test_the_rate_mode_overshoots_half_a_step_and_a_step_per_decision_of_latency
     np.testing.assert_allclose(r.overshoot, 0.5 * STEP_TURN + latency * STEP_TURN, atol=ANGLE_TOL)
 
 
+@pytest.mark.slow
 def test_heading_hold_settles_within_half_a_rotation_spacing_of_the_heading_shown():
     r = turning.overshoot_study(ROBOT, num=NUM, latency=1, mode="heading", rate_range=(0.5, 1.0))
     assert np.all(np.abs(r.overshoot) <= 0.5 * SPACING + ANGLE_TOL)
@@ -40,11 +41,13 @@ def test_heading_hold_settles_within_half_a_rotation_spacing_of_the_heading_show
     assert np.all(rate.overshoot > 0.5 * SPACING + ANGLE_TOL)  # each of which the rate mode overshot
 
 
+@pytest.mark.slow
 def test_heading_hold_refined_reaches_the_heading_shown():
     r = turning.overshoot_study(ROBOT, num=NUM, latency=0, mode="heading", rate_range=(0.5, 1.0), refine=True)
     assert np.all(np.abs(r.overshoot) <= 0.2)  # deg: the refinement's last step is 0.2 deg
 
 
+@pytest.mark.slow
 def test_heading_hold_in_a_rollout_only_changes_steps_after_the_release():
     terrain = ij.terrain.flat((100, 100), 0.02)
     start = ij.robots.start_stance(ROBOT, 1.0, 1.0)

@@ -13,6 +13,9 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+import pytest
+
+pytestmark = pytest.mark.slow  # reruns core tests in a subprocess under x64, compiling them again
 
 ROOT = Path(__file__).resolve().parent.parent
 SUBSET = " or ".join([
