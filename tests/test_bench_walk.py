@@ -136,6 +136,7 @@ def test_clutter2d_choices_are_those_on_the_2d_maps():
     np.testing.assert_allclose(np.asarray(a.footsteps), np.asarray(b.footsteps), atol=FLOAT_TOL)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, axis, sign", [("uphill", 0, 1), ("downhill", 0, -1), ("cross", 1, 0)])
 def test_slopes_angle_and_direction(maps, name, axis, sign):
     """A line fitted (np.polyfit) through the heights along the slope: its angle is in [2, 10] deg, rising

@@ -5,6 +5,7 @@ import json
 
 import matplotlib.pyplot as plt
 import numpy as np
+import pytest
 from PIL import Image
 
 from ijoy_jax.apps import cli, demo
@@ -13,6 +14,7 @@ STEPS = 8  # the naive joystick's 3rd and 6th footholds are on obstacles (demo_s
 COUNTS = ("steps_taken", "steps_in_place", "steps_stationary", "footholds_on_obstacles", "invalid_footholds")
 
 
+@pytest.mark.slow
 def test_demo_prints_plain_metrics_and_writes_the_figure(tmp_path, capsys, monkeypatch):
     figures = []
     close = plt.close

@@ -797,6 +797,7 @@ def test_naive_joystick_steps_on_obstacles_where_the_intelligent_one_does_not(me
         np.testing.assert_allclose(naive[name].footsteps, smart[name].footsteps, atol=EPS, err_msg=name)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["2d", "2.5d"])
 def test_exhaustive_and_ordered_walk_identical_trajectories(kind):
     runs = runs_2d if kind == "2d" else runs_25d

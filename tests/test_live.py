@@ -256,6 +256,7 @@ def test_replay_detects_a_changed_recording(recorded, tmp_path):
     assert cli.main(["drive", "--replay", str(bad)]) == 1
 
 
+@pytest.mark.slow
 def test_decisions_overlap_the_step_and_wait_when_late(trace):
     """Real time: a decider slower than a step makes the robot wait (slack < 0, counted), a fast one does not."""
     import time

@@ -119,6 +119,7 @@ class _Native:
         return float(log.placement_error), bool(log.fallen)
 
 
+@pytest.mark.slow
 def test_control_tick_does_not_recompile(sim):
     walk = _Native(sim)
     walk.step((0.0, 0.19, 0.0))  # the state's weak types settle after the standing step's first tick

@@ -212,6 +212,7 @@ def test_nested_tables_equal_dotted_keys():
 # --------------------------------------------------------------------------- execution and results
 
 
+@pytest.mark.slow
 def test_results_equal_direct_rollouts(reference, base_file):
     out, stats = reference
     df = sweep.load(out)
