@@ -67,7 +67,7 @@ class Walker(NamedTuple):
 
     ``foothold`` is the chosen step's full sole pose :attr:`ijoy_jax.select.StepChoice.foothold`:
     x, y, z (m), roll, pitch, yaw (rad), ``R = Rz(yaw) Ry(pitch) Rx(roll)``; z, roll and pitch
-    from the plane fitted under the foot (0 on a 2D terrain). A planar robot reads
+    those of the sole at rest on the ground (:mod:`ijoy_jax.footcost.sole`; 0 on a 2D terrain). A planar robot reads
     ``foothold[jnp.array([0, 1, 5])]``, the (x, y, yaw) pose.
     """
 

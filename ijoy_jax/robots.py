@@ -48,31 +48,33 @@ class TerrainMetrics:
       band       largest |deviation| from the plane in the safety band, the
                  cells touched by the footprint grown by the margin but not
                  by the footprint itself: catches edges and drop-offs (m),
-      support    how far a rigid sole set on the plane can rock: it rests on
-                 the cell highest above the plane, and each of its four
-                 corner regions (the cells beyond half its half length and
-                 half its half width from the centre) should hold a cell
-                 nearly as high; the largest shortfall (m). A dome under the
-                 foot's middle, or a twisted (saddle) surface that the sole
-                 meets on two diagonal corners, passes roughness and bump
-                 yet leaves a sole that rocks and pivots under load: the
-                 simulated biped fell on such footholds
-                 (:mod:`ijoy_jax.sim`, BENCHMARKS.md).
-      lean       how far a sole set on the plane leans to one side: the
-                 ground under its six contact points (toe, middle and heel
-                 of each long edge, ``lean_inset`` in from the edges; heights
-                 interpolated bilinearly between cell centres, as a height
-                 field's surface is) is compared side by side, each side by
-                 its point highest above the plane; the difference (m). The
-                 sole rests on its higher side and rolls toward the other by
-                 that gap over its width: on natural ground a ridge under one
-                 edge rolled the simulated biped's stance sole, and the
-                 robot with it, where the corner regions of ``support`` held
-                 high cells (docs/walk_families.md).
+      support    how much nearer the ankle the rested sole's contact polygon
+                 comes than the whole sole's (m). The sole touches the
+                 ground at six points (toe, middle and heel of each long
+                 edge, ``contact_inset`` in from the edges: the simulated
+                 biped's sole spheres; heights interpolated bilinearly
+                 between cell centres, as a height field's surface is) and
+                 rests on the plane through three of them that stays above
+                 the others and lies lowest under the ankle
+                 (:mod:`ijoy_jax.footcost.sole`); the points within
+                 ``contact_tol`` of it form its contact polygon, and the
+                 centre of pressure can move from the ankle to that
+                 polygon's nearest edge before the sole rocks. The metric is
+                 the whole sole's margin (``min(half length, half width) -
+                 contact_inset``) less the polygon's: 0 where the sole rests
+                 on all six points, on a plane of any tilt; the whole margin
+                 where it rests on two diagonal corners or on its front half
+                 (a dome under the middle, a twisted surface, a ridge under
+                 it: the footholds the simulated biped fell on). Partial
+                 footholds whose polygon holds the ankle with room to spare
+                 pass. The rested sole's tilt is the foothold's (the
+                 ``ankle`` limits apply to it) and its height the step's.
 
     A metric beyond its limit makes the cost +inf; otherwise its term is
     ``weight * metric``. Weights are cost units per radian or per metre.
-    ``lean_inset`` (m) is not a metric but where its points lie.
+    ``contact_inset`` and ``contact_tol`` (m) are not metrics: where the
+    sole's contact points lie, and how close to the rested sole a point
+    counts as touching.
     """
 
     slope_weight: jax.Array
@@ -86,9 +88,8 @@ class TerrainMetrics:
     band_limit: jax.Array
     support_weight: jax.Array
     support_limit: jax.Array
-    lean_weight: jax.Array
-    lean_limit: jax.Array
-    lean_inset: jax.Array
+    contact_inset: jax.Array
+    contact_tol: jax.Array
 
 
 def default_metrics(
@@ -101,11 +102,10 @@ def default_metrics(
     step_weight=1.0,
     band_weight=5.0,
     band_limit=0.03,
-    support_weight=10.0,
-    support_limit=0.005,
-    lean_weight=10.0,
-    lean_limit=0.0015,
-    lean_inset=0.009,
+    support_weight=5.0,
+    support_limit=0.025,
+    contact_inset=0.009,
+    contact_tol=0.003,
 ) -> TerrainMetrics:
     """Default metric weights and limits (float32 scalars); any may be overridden."""
     vals = dict(locals())
@@ -134,12 +134,12 @@ class Robot:
       max_step_height: (N,) allowed |height change| from the stance foothold.
       max_sole_pitch, max_sole_roll: the largest tilt of the sole from
         horizontal, about the foot's own y axis (pitch) and x axis (roll), that
-        the ankles can realise (rad): a foothold whose fitted plane tilts the
-        sole further is refused (FootCost's ``ankle`` term). See
+        the ankles can realise (rad): a foothold whose rested sole tilts
+        further is refused (FootCost's ``ankle`` term). See
         :func:`make_robot` for HRP-2's values and where they come from.
       max_sole_distance: the largest distance between the stance and swing
         sole centres in 3D (m; the horizontal step and the height change of
-        the two fitted planes): beyond it the legs cannot stand on both
+        the two rested soles): beyond it the legs cannot stand on both
         footholds (FootCost's ``reach`` term). See :func:`make_robot`.
       metrics: TerrainMetrics weights and limits.
       w: weight of dist against FootCost, cost(p) = FootCost + w dist(p, p_next).
@@ -284,9 +284,10 @@ def _in_window(xp, robot, length, width, margin):
     return 0.5 * xp.hypot(length + 2 * margin, width + 2 * margin) <= robot.max_radius + WINDOW_SLACK
 
 
-def _inset_inside(width, inset):
-    """The lean's points lie inside the sole, each on its own side: the inset is under half its width."""
-    return inset < 0.5 * width
+def _inset_inside(length, width, inset):
+    """The sole's contact points lie inside it, each on its own side of the centre: the inset is under half its
+    length and half its width."""
+    return (inset < 0.5 * length) & (inset < 0.5 * width)
 
 
 # (leaf names, what they must be, rule(xp, *values) -> bool). One list for both uses: check_robot raises on
@@ -314,7 +315,7 @@ def check_robot(robot) -> None:
     the margin at most :data:`MAX_SIZE`); margin, weights, costs, clearances and limits finite and >= 0;
     actions and p0 finite; the grown
     footprint within the static window ``max_radius`` (a larger margin or footprint needs a robot
-    built for it, ``make_robot(..., max_margin=...)``); the lean's inset under half the foot width; no
+    built for it, ``make_robot(..., max_margin=...)``); the contact inset under half the foot's width and length; no
     action making the footprints overlap. The public boundaries (:func:`ijoy_jax.foot_cost_terms`,
     :func:`ijoy_jax.select_step`, :func:`ijoy_jax.rollout`) call it; inside a trace the same rules are flagged instead
     (:func:`robot_supported`).
@@ -348,10 +349,11 @@ def check_robot(robot) -> None:
             f"{field}: robot's footprint {float(size[0])} x {float(size[1])} m grown by margin {float(size[2])} m "
             f"does not fit its static window (half-diagonal max_radius = {robot.max_radius:.4f} m): build the "
             f"robot with that margin or size (make_robot(..., max_margin=...), hrp2(margin=...)) instead of replace")
-    inset = values.get("metrics.lean_inset")
-    if all(v is not None for v in size[:2]) and inset is not None and not _inset_inside(size[1], inset):
-        raise ValueError(f"robot.metrics.lean_inset must be under half the foot width ({0.5 * float(size[1])} m): "
-                         f"the lean compares the sole's two long edges, got {float(inset)}")
+    inset = values.get("metrics.contact_inset")
+    if all(v is not None for v in size[:2]) and inset is not None and not _inset_inside(*size[:2], inset):
+        raise ValueError(f"robot.metrics.contact_inset must be under half the foot's width and length "
+                         f"({0.5 * float(min(size[:2]))} m): the sole's contact points lie on both sides of its "
+                         f"centre, got {float(inset)}")
     if all(v is not None for v in size[:2]) and "actions" in values:
         bad = footprints_overlap(values["actions"], float(size[0]), float(size[1]))
         if bad.any():
@@ -364,7 +366,7 @@ def robot_supported(robot: Robot) -> jax.Array:
     """() bool: the robot's values are ones FootCost and the selectors support (traceable).
 
     The rules of :func:`check_robot` that a traced value can break (a margin, weight or cost below 0, a
-    size <= 0, NaN/inf, a grown footprint beyond ``max_radius``, a lean inset of half the foot width or more),
+    size <= 0, NaN/inf, a grown footprint beyond ``max_radius``, a contact inset of half the foot width or more),
     as one flag: where it is False
     FootCost's ``unsupported`` term is +inf and :func:`ijoy_jax.select_step` reports no valid step, with
     ``unsupported`` set (never a negative cost or a silent stop). An action making the footprints overlap
@@ -372,7 +374,7 @@ def robot_supported(robot: Robot) -> jax.Array:
     """
     ok = [rule(jnp, get_leaf(robot, name)) for name, _, rule in _ROBOT_RULES]
     ok.append(_in_window(jnp, robot, robot.foot_length, robot.foot_width, robot.margin))
-    ok.append(_inset_inside(robot.foot_width, robot.metrics.lean_inset))
+    ok.append(_inset_inside(robot.foot_length, robot.foot_width, robot.metrics.contact_inset))
     # float32 corners: overlaps shallower than OVERLAP_TOL (rounding of touching feet) are not flagged
     ok.append(~jnp.any(_overlap(jnp, robot.actions, robot.foot_length, robot.foot_width, OVERLAP_TOL)))
     return jnp.all(jnp.stack(ok))
@@ -752,9 +754,8 @@ SCALAR_LEAVES: Mapping[str, LeafSpec] = MappingProxyType(
         "metrics.band_limit": LeafSpec("m", False, True),
         "metrics.support_weight": LeafSpec("cost/m", False, True),
         "metrics.support_limit": LeafSpec("m", False, True),
-        "metrics.lean_weight": LeafSpec("cost/m", False, True),
-        "metrics.lean_limit": LeafSpec("m", False, True),
-        "metrics.lean_inset": LeafSpec("m", False, True),
+        "metrics.contact_inset": LeafSpec("m", False, True),
+        "metrics.contact_tol": LeafSpec("m", False, True),
     }
 )
 """Every scalar Robot leaf a user may sweep or tune, by dotted name (:func:`get_leaf`), in a fixed order."""

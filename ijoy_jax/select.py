@@ -49,7 +49,7 @@ from ijoy_jax import refine as refine_mod
 from ijoy_jax._struct import as_array, check_numeric, is_traced, pytree_dataclass, static_field
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
 from ijoy_jax.footcost import validate as validate_foot_cost
-from ijoy_jax.footcost.xla import footprint_blocked, plane_metrics, sole_tilt
+from ijoy_jax.footcost.xla import footprint_blocked, plane_metrics
 from ijoy_jax.robots import Robot, check_robot, dist, mirror, side_actions, side_p0, side_sign
 from ijoy_jax.terrain import Terrain
 
@@ -135,10 +135,11 @@ class StepChoice(NamedTuple):
         when no step is valid, so it is never NaN).
       foothold: (6,) float32 full world pose of the sole at ``pose``:
         x, y (m), z (m), roll, pitch, yaw (rad). x, y and yaw are ``pose``'s;
-        z is the height at the foot centre of the plane fitted under the
-        footprint (the FootCost plane), roll and pitch orient a sole lying on
-        that plane with that yaw, ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (as
-        :func:`ijoy_jax.sim.kinematics.rpy_to_rot`; the sole's z axis is the
+        z, roll and pitch are the sole's at rest on the ground under its
+        contact points (:func:`foothold`, :mod:`ijoy_jax.footcost.sole`): its
+        height at the foot centre and its orientation with that yaw,
+        ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (as
+        :func:`ijoy_jax.sim.kinematics.rpy_to_rot`; the sole's z axis is its
         plane's upward normal: :func:`ijoy_jax.footcost.xla.sole_tilt`). z,
         roll and pitch are 0 on a 2D terrain. What a robot's footstep message
         carries; the control loop passes it to the walker.
@@ -283,12 +284,12 @@ def on_obstacle(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | N
 def foothold(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None = None) -> jax.Array:
     """(6,) float32 full world pose ``(x, y, z, roll, pitch, yaw)`` of a sole put down at ``pose`` (3,) (m, rad).
 
-    x, y and yaw are the pose's; z, roll and pitch come from the least-squares
-    plane FootCost fits under the footprint (:func:`ijoy_jax.footcost.xla.plane_metrics`):
-    its height at the foot centre and the orientation of a sole lying on it
-    (:func:`ijoy_jax.footcost.xla.sole_tilt`, ``R = Rz(yaw) Ry(pitch) Rx(roll)``).
+    x, y and yaw are the pose's; z, roll and pitch are the rested sole's
+    (:func:`ijoy_jax.footcost.xla.plane_metrics`, :mod:`ijoy_jax.footcost.sole`): the sole on the ground
+    under its contact points, its height at the foot centre and its orientation
+    (``R = Rz(yaw) Ry(pitch) Rx(roll)``, :func:`ijoy_jax.footcost.xla.sole_tilt`'s convention).
     Zeros on a 2D terrain; finite wherever the pose is (beyond the map's
-    edge its heights continue the edge's). Traceable (one plane fit):
+    edge its heights continue the edge's). Traceable (one FootCost plane):
     :func:`select_step` returns it as :attr:`StepChoice.foothold`.
     ``index``: the terrain's prebuilt index (:func:`prepare`), built inside when None.
     """
@@ -299,8 +300,8 @@ def foothold(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None
     if index is None:
         index = index_terrain(terrain, robot)
     plane = plane_metrics(terrain, index, robot, pose)
-    pitch, roll = sole_tilt(plane.grad_x, plane.grad_y, pose[2])
-    z, roll, pitch = (jnp.where(jnp.isfinite(v), v, zero).astype(jnp.float32) for v in (plane.height, roll, pitch))
+    z, roll, pitch = (jnp.where(jnp.isfinite(v), v, zero).astype(jnp.float32)
+                      for v in (plane.rest_height, plane.rest_roll, plane.rest_pitch))
     return jnp.stack([pose[0], pose[1], z, roll, pitch, pose[2]])
 
 

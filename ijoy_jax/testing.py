@@ -2,6 +2,8 @@
 
 Written apart from the JAX code: cell coverage by separating-axis tests (:func:`rect_touches_cells` over the
 whole grid, :class:`NumpyFootCost` over a bounding box), planes by ``numpy.linalg.lstsq`` (:func:`foot_metrics`),
+the rested sole by every triple of its contact points and its contact polygon by its support function
+(:func:`rested_sole`),
 a sole's orientation on a plane from its normal and heading (:func:`sole_frame`, :func:`sole_rpy`,
 :func:`foothold`), the paper's ordered list walked one action at a time with its stopping rule
 (:func:`ordered_select`). The
@@ -10,6 +12,7 @@ NumPy FootCost and search are also the baseline the benchmarks report their spee
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -63,8 +66,8 @@ class NumpyFootCost:
         self.metrics = {k: float(v) for k, v in vars(robot.metrics).items()}
 
     def plane(self, pose):
-        """(height at the centre, slope, roughness, bump, band, support, lean, (dz/dx, dz/dy)) of the footprint
-        at ``pose``."""
+        """(rested height at the centre, slope, roughness, bump, band, support, rested (dz/dx, dz/dy)) of the
+        footprint at ``pose``: the least-squares plane's metrics and the rested sole's (:func:`rest_metrics`)."""
         args = (self.res, self.origin, self.height.shape)
         fx, fy, _ = _touched(pose[0], pose[1], pose[2], self.L / 2, self.W / 2, *args)
         gx, gy, _ = _touched(pose[0], pose[1], pose[2], self.L / 2 + self.m, self.W / 2 + self.m, *args)
@@ -83,10 +86,10 @@ class NumpyFootCost:
             bv = self.origin[1] + (by + 0.5) * self.res - pose[1]
             band_dev = float(np.abs(self.height[bx, by] - coef[0] - coef[1] * bu - coef[2] * bv).max())
         slope = math.atan(math.hypot(coef[1], coef[2]))
-        support = support_gap(u, v, r, pose[2], self.L, self.W)
-        lean = lean_gap(self.height, self.res, self.origin, pose, coef, self.L, self.W, self.metrics["lean_inset"])
-        return (coef[0], slope, float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev, support, lean,
-                (coef[1], coef[2]))
+        rest = rest_metrics(self.height, self.res, self.origin, pose, self.L, self.W, self.metrics["contact_inset"],
+                            self.metrics["contact_tol"])
+        return (rest["height"], slope, float(np.abs(r).mean()), max(float(r.max()), 0.0), band_dev,
+                rest["support"], rest["grad"])
 
     def cost(self, stance, stance_h, start_h, swing_from, pose, a):
         """FootCost of the swing foot at ``pose`` executing action ``a`` from ``stance`` (+inf if invalid)."""
@@ -99,7 +102,7 @@ class NumpyFootCost:
         if not self.has_height:
             return total if reach <= self.max_distance + LIMIT_TOL else math.inf
         m = self.metrics
-        hgt, slope, rough, bump, band, support, lean, grad = self.plane(pose)
+        hgt, slope, rough, bump, band, support, grad = self.plane(pose)
         roll, pitch, _ = sole_rpy(*grad, pose[2])
         for val, lim in ((abs(pitch), self.max_pitch), (abs(roll), self.max_roll),
                          (math.hypot(reach, hgt - stance_h), self.max_distance)):
@@ -110,8 +113,7 @@ class NumpyFootCost:
                              (bump, m["bump_weight"], m["bump_limit"]),
                              (abs(hgt - stance_h), m["step_weight"], self.max_dh[a]),
                              (band, m["band_weight"], m["band_limit"]),
-                             (support, m["support_weight"], m["support_limit"]),
-                             (lean, m["lean_weight"], m["lean_limit"])):
+                             (support, m["support_weight"], m["support_limit"])):
             if val > lim + LIMIT_TOL:  # the library's one rule for limits (footcost.xla.exceeds)
                 return math.inf
             total += wt * val
@@ -268,28 +270,14 @@ def disc_touches_cells(x, y, r, res, shape, origin=(0.0, 0.0)):
     return dx**2 + dy**2 < r * r
 
 
-def support_gap(u, v, resid, yaw, foot_length, foot_width) -> float:
-    """The ``support`` metric (m) of cells at ``(u, v)`` (world offsets from the foot centre) with plane residuals
-    ``resid``: over the sole's four corner regions (cell centres at least a quarter of the foot's length from its
-    centre along it and a quarter of its width across it, in the sole's own frame), how far the highest residual
-    of the lowest region lies below the highest of all; regions without cells count 0."""
-    along = u * math.cos(yaw) + v * math.sin(yaw)
-    across = v * math.cos(yaw) - u * math.sin(yaw)
-    gaps = [max(resid.max(), 0.0) - resid[m].max() for sa in (1, -1) for sb in (1, -1)
-            if (m := (sa * along >= 0.25 * foot_length) & (sb * across >= 0.25 * foot_width)).any()]
-    return float(max(gaps, default=0.0))
-
-
-def lean_gap(height, res, origin, pose, coef, foot_length, foot_width, inset) -> float:
-    """The ``lean`` metric (m) of a sole at ``pose`` on the plane ``coef`` (height at the pose, dz/dx, dz/dy): the
-    ground at the toe, middle and heel of each long edge, ``inset`` in from the edges, interpolated bilinearly
-    between cell centres (indices clamped to the map: its edge extended), less the plane there; the difference
-    between the two edges' highest points."""
+def ground_under_points(height, res, origin, pose, foot_length, foot_width, inset):
+    """(6,) the ground (m) under a sole's contact points at ``pose``: toe, middle and heel of its left edge, then of
+    its right edge, ``inset`` in from the edges, interpolated bilinearly between cell centres (indices clamped to
+    the map: its edge extended). Returns (points (6, 2) in the sole's frame, heights (6,))."""
     nx, ny = height.shape
     c, s = math.cos(pose[2]), math.sin(pose[2])
-    side_tops = []
+    points, ground = [], []
     for across in (0.5 * foot_width - inset, inset - 0.5 * foot_width):
-        tops = []
         for along in (0.5 * foot_length - inset, 0.0, inset - 0.5 * foot_length):
             du, dv = along * c - across * s, along * s + across * c
             gx = (pose[0] + du - origin[0]) / res - 0.5
@@ -297,19 +285,66 @@ def lean_gap(height, res, origin, pose, coef, foot_length, foot_width, inset) ->
             i, j = math.floor(gx), math.floor(gy)
             tx, ty = gx - i, gy - j
             cell = lambda a, b: float(height[min(max(a, 0), nx - 1), min(max(b, 0), ny - 1)])  # noqa: E731
-            ground = ((1 - tx) * ((1 - ty) * cell(i, j) + ty * cell(i, j + 1))
-                      + tx * ((1 - ty) * cell(i + 1, j) + ty * cell(i + 1, j + 1)))
-            tops.append(ground - (coef[0] + coef[1] * du + coef[2] * dv))
-        side_tops.append(max(tops))
-    return abs(side_tops[0] - side_tops[1])
+            ground.append((1 - tx) * ((1 - ty) * cell(i, j) + ty * cell(i, j + 1))
+                          + tx * ((1 - ty) * cell(i + 1, j) + ty * cell(i + 1, j + 1)))
+            points.append((along, across))
+    return np.array(points), np.array(ground)
 
 
-def foot_metrics(height, res, origin, pose, foot_length, foot_width, margin, *, lean_inset=0.009):
-    """Plane fit and metrics of the footprint at ``pose`` (float64 brute force).
+def rested_sole(points, ground, tol):
+    """A rigid sole resting on the ground ``ground`` (P,) under its points ``points`` (P, 2) (sole frame, m), by
+    brute force in float64: every triple's plane, kept where it lies above every point; the rest is the one
+    lowest at the centre (where several are, the middle of their gradients' range). Its contact polygon (the
+    points within ``tol`` of it) is measured by its support function: the distance from the centre to the
+    polygon's nearest edge is ``min over unit n of max over contacts k of n . p_k``, taken over the normals of
+    every pair of contacts (negative outside; minus the distance to the line for collinear contacts).
 
-    Returns dict(height, slope, roughness, bump, band, support, lean, grad) where the
-    plane is the least-squares fit over the cells the footprint touches; ``lean_inset`` (m; the default
-    :func:`ijoy_jax.robots.default_metrics`') places the lean's points.
+    Returns dict(height, grad_along, grad_across, margin, contacts, gaps ((P,) m: the sole above each point's
+    ground))."""
+    planes = []
+    for t in itertools.combinations(range(len(points)), 3):
+        m = np.column_stack([np.ones(3), points[list(t)]])
+        if abs(np.linalg.det(m)) < 1e-12:
+            continue
+        coef = np.linalg.solve(m, ground[list(t)])
+        if np.all(coef[0] + points @ coef[1:] >= ground - 1e-9):
+            planes.append(coef)
+    planes = np.array(planes)
+    lowest = planes[planes[:, 0] <= planes[:, 0].min() + 1e-9]
+    # several lowest planes turn about an edge through the centre: the middle of their range
+    best = np.array([lowest[0, 0], *(0.5 * (lowest[:, 1:].min(axis=0) + lowest[:, 1:].max(axis=0)))])
+    gaps = best[0] + points @ best[1:] - ground
+    contact = points[gaps <= tol + 1e-9]
+    # the support function max_k n . p_k is piecewise linear in n's heading, lowest at an edge's normal: its
+    # minimum over every pair's two normals (a superset of the edges') is the exact distance
+    normals = [np.array([-e[1], e[0]]) / np.hypot(*e) * sign for i, j in itertools.combinations(range(len(contact)), 2)
+               if np.hypot(*(e := contact[j] - contact[i])) > 1e-12 for sign in (1.0, -1.0)]
+    margin = (float(min(np.max(contact @ n) for n in normals)) if normals
+              else -float(np.hypot(*contact[0])) if len(contact) else -np.inf)
+    return dict(height=float(best[0]), grad_along=float(best[1]), grad_across=float(best[2]), margin=margin,
+                contacts=int(len(contact)), gaps=gaps)
+
+
+def rest_metrics(height, res, origin, pose, foot_length, foot_width, inset, tol):
+    """The rested sole at ``pose`` on a height map (float64 brute force): dict(height (m, at the centre),
+    grad (dz/dx, dz/dy in world axes), support (the whole sole's margin less the contact polygon's, m), margin,
+    contacts, gaps)."""
+    pts, ground = ground_under_points(height, res, origin, pose, foot_length, foot_width, inset)
+    r = rested_sole(pts, ground, tol)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    grad = (r["grad_along"] * c - r["grad_across"] * s, r["grad_along"] * s + r["grad_across"] * c)
+    full = min(foot_length, foot_width) / 2 - inset
+    return dict(height=r["height"], grad=grad, support=max(full - r["margin"], 0.0), margin=r["margin"],
+                contacts=r["contacts"], gaps=r["gaps"])
+
+
+def foot_metrics(height, res, origin, pose, foot_length, foot_width, margin, *, contact_inset=0.009,
+                 contact_tol=0.003):
+    """Plane fit, metrics and rested sole of the footprint at ``pose`` (float64 brute force).
+
+    Returns dict(height, slope, roughness, bump, band, grad, rest) where the plane is the least-squares fit
+    over the cells the footprint touches and ``rest`` is :func:`rest_metrics` (``contact_inset`` and
+    ``contact_tol``, m: the defaults of :func:`ijoy_jax.robots.default_metrics`).
     """
     shape = height.shape
     foot = rect_touches_cells(pose[0], pose[1], pose[2], foot_length / 2, foot_width / 2, res, shape, origin)
@@ -332,9 +367,9 @@ def foot_metrics(height, res, origin, pose, foot_length, foot_width, margin, *, 
         roughness=np.mean(np.abs(resid)),
         bump=max(resid.max(), 0.0),
         band=np.abs(bres).max() if bres.size else 0.0,
-        support=support_gap(u, v, resid, pose[2], foot_length, foot_width),
-        lean=lean_gap(height, res, origin, pose, coef, foot_length, foot_width, lean_inset),
         grad=(coef[1], coef[2]),
+        rest=rest_metrics(height.astype(np.float64), res, origin, pose, foot_length, foot_width, contact_inset,
+                          contact_tol),
     )
 
 
@@ -358,10 +393,12 @@ def sole_rpy(grad_x, grad_y, yaw):
     return math.atan2(r[2, 1], r[2, 2]), -math.asin(r[2, 0]), math.atan2(r[1, 0], r[0, 0])
 
 
-def foothold(height, res, origin, pose, foot_length, foot_width):
+def foothold(height, res, origin, pose, foot_length, foot_width, contact_inset=0.009, contact_tol=0.003):
     """(6,) the full sole pose (x, y, z, roll, pitch, yaw) at ``pose`` on a height map (float64 brute force):
-    z the least-squares plane's height at the foot centre, roll and pitch those of :func:`sole_rpy`."""
-    ref = foot_metrics(height, res, origin, pose, foot_length, foot_width, 0.0)
+    the rested sole's (:func:`rest_metrics`) height at the foot centre, roll and pitch those of
+    :func:`sole_rpy` on its plane."""
+    ref = rest_metrics(np.asarray(height, np.float64), res, origin, pose, foot_length, foot_width, contact_inset,
+                       contact_tol)
     roll, pitch, _ = sole_rpy(*ref["grad"], pose[2])
     return np.array([pose[0], pose[1], ref["height"], roll, pitch, pose[2]])
 

@@ -276,13 +276,12 @@ def scenarios_25d():
 
 def paper_metrics(robot):
     """The robot scored by the paper's metrics alone (slope, roughness, bump, step height, band): its ``support``
-    and ``lean`` terms off. The experiments replicate the paper's planner, which lets a sole straddle a low edge;
-    the library's default also refuses a sole that would rock on such an edge (``support``, for the simulated
-    biped: test_the_default_support_refuses_the_straddle_the_papers_metrics_allow) or roll onto one of its long
-    edges (``lean``). Off is a limit no footprint reaches (1 m: limits must be finite) and no weight."""
-    return robot.replace(metrics=robot.metrics.replace(
-        support_weight=jnp.float32(0.0), support_limit=jnp.float32(1.0),
-        lean_weight=jnp.float32(0.0), lean_limit=jnp.float32(1.0)))
+    term off. The experiments replicate the paper's planner, which lets a sole straddle a low edge; the library's
+    default also refuses a sole whose contact polygon cannot carry it on such an edge (``support``, for the
+    simulated biped: test_the_default_support_refuses_the_straddle_the_papers_metrics_allow). Off is a limit no
+    footprint reaches (1 m: limits must be finite) and no weight."""
+    return robot.replace(metrics=robot.metrics.replace(support_weight=jnp.float32(0.0),
+                                                       support_limit=jnp.float32(1.0)))
 
 
 ROBOT = paper_metrics(ij.robots.hrp2(margin=0.02))
@@ -680,11 +679,10 @@ def test_w_trades_terrain_cost_against_following_the_command(method):
 @pytest.mark.slow
 def test_the_default_support_refuses_the_straddle_the_papers_metrics_allow():
     """The straddle of test_w_trades_terrain_cost_against_following_the_command (a sole across the 2 cm edge) is
-    valid under the paper's metrics; a rigid sole there rests on its upper half and rocks, and the default
-    robot's support term (the highest cell of each corner region within support_limit of the sole's resting
-    cell) refuses it: its support metric lies beyond that limit and below the edge's height (the plane fitted
-    across the edge tilts, so its corners fall short of the full 2 cm). The step in place on the level ground
-    before the edge stays valid."""
+    valid under the paper's metrics; a rigid sole there rests on its points on the upper side and rocks, and the
+    default robot's support term (footcost.sole: the contact polygon of the rested sole, against the whole sole's)
+    refuses it: its support metric lies beyond that limit, at most the whole sole's margin. The step in place on
+    the level ground before the edge stays valid."""
     sc1 = scenarios_25d()["full-0.02-m0.02-w1.0"]
     low_w = runs_25d("exhaustive")["full-0.02-m0.02-w1.0"]
     stance, swing = low_w.feet[1], low_w.feet[0]
@@ -694,7 +692,9 @@ def test_the_default_support_refuses_the_straddle_the_papers_metrics_allow():
     terms = ij.foot_cost_terms(sc1.terrain(), default, stance, -1, np.stack([want, level]), swing_from=swing)
     paper = ij.foot_cost_terms(sc1.terrain(), ROBOT, stance, -1, want[None], swing_from=swing)
     assert np.isfinite(float(paper.total[0]))
-    assert float(default.metrics.support_limit) < float(paper.support_m[0]) < 0.02
+    full = float(ij.footcost.sole.full_margin(0.5 * default.foot_length, 0.5 * default.foot_width,
+                                              default.metrics.contact_inset))
+    assert float(default.metrics.support_limit) < float(paper.support_m[0]) <= full + 1e-6
     assert np.isinf(float(terms.support[0])) and np.isinf(float(terms.total[0]))
     assert float(terms.support_m[1]) < 1e-6 and np.isfinite(float(terms.total[1]))
 

@@ -13,7 +13,7 @@ import ijoy_jax as ij
 from ijoy_jax import footcost, select
 from ijoy_jax.footcost.pallas import foot_cost_fused
 from ijoy_jax.jit_cache import compiled_count
-from ijoy_jax.testing import rect_touches_cells
+from ijoy_jax.testing import rest_metrics
 
 RES = 0.02
 SHAPE = (48, 48)
@@ -81,10 +81,9 @@ def _assert_same(xla, fused):
 ])
 def test_totals_match_the_xla_footcost(kind, margin, max_margin, with_swing):
     robot = ij.robots.hrp2(margin=margin, max_margin=max_margin)
-    # The map's 2 mm cell noise gives support gaps of 2-6 mm and leans of 1-4 mm: at a 6 mm support limit and a
-    # 3 mm lean limit every case keeps both valid steps and steps these terms reject.
-    robot = robot.replace(metrics=robot.metrics.replace(support_limit=jnp.float32(0.006),
-                                                        lean_limit=jnp.float32(0.003)))
+    # The map's 2 mm cell noise leaves soles on a few of their points: with a 1 mm contact tolerance every case
+    # keeps both valid steps and steps the support term rejects.
+    robot = robot.replace(metrics=robot.metrics.replace(contact_tol=jnp.float32(0.001)))
     terrain = _terrain(kind, seed=1)
     stance, swing = _queries(6, seed=2)
     xla, fused = _both(terrain, robot, stance, swing if with_swing else None)
@@ -95,11 +94,12 @@ def test_totals_match_the_xla_footcost(kind, margin, max_margin, with_swing):
 
 
 @pytest.mark.slow
-def test_the_lean_term_rejects_the_same_steps_on_both_paths():
-    """The lean (bilinear ground at the sole's six contact points) is the only term that rejects a share of the
-    steps here; the kernel's reads of the padded map reject exactly those, and its finite totals agree."""
+def test_the_support_term_rejects_the_same_steps_on_both_paths():
+    """The rested sole's support (bilinear ground at the sole's six contact points, footcost.sole) is the only term
+    that rejects a share of the steps here; the kernel's reads of the padded map reject exactly those, and its
+    finite totals agree."""
     robot = ij.robots.hrp2(margin=0.02)
-    robot = robot.replace(metrics=robot.metrics.replace(lean_limit=jnp.float32(0.003), support_limit=jnp.float32(1.0),
+    robot = robot.replace(metrics=robot.metrics.replace(contact_tol=jnp.float32(0.001),
                                                         roughness_limit=jnp.float32(1.0), bump_limit=jnp.float32(1.0)))
     terrain = _terrain("25d", seed=1)
     stance, swing = _queries(6, seed=2)
@@ -107,11 +107,11 @@ def test_the_lean_term_rejects_the_same_steps_on_both_paths():
     _assert_same(xla, fused)
     terms = jax.vmap(lambda s, w: footcost.foot_cost_terms(terrain, robot, s, -1, ij.action_steps(robot, s, -1),
                                                            swing_from=w))(stance, swing)
-    lean_only = np.isinf(np.asarray(terms.lean)) & np.all([np.isfinite(np.asarray(getattr(terms, t))) for t in (
-        "obstacle", "slope", "roughness", "bump", "step", "band", "support", "swing_path", "ankle", "reach",
+    support_only = np.isinf(np.asarray(terms.support)) & np.all([np.isfinite(np.asarray(getattr(terms, t))) for t in (
+        "obstacle", "slope", "roughness", "bump", "step", "band", "swing_path", "ankle", "reach",
         "unsupported")], axis=0)
-    assert lean_only.sum() >= 50 and np.isfinite(xla).sum() >= 50, (lean_only.sum(), np.isfinite(xla).sum())
-    assert np.isinf(fused[lean_only]).all()
+    assert support_only.sum() >= 50 and np.isfinite(xla).sum() >= 50, (support_only.sum(), np.isfinite(xla).sum())
+    assert np.isinf(fused[support_only]).all()
 
 
 @pytest.mark.slow
@@ -171,7 +171,7 @@ def test_one_rule_for_limits_a_metric_at_its_limit_is_decided_alike_on_both_path
     loose = ij.robots.hrp2(margin=0.02)
     loose = loose.replace(metrics=loose.metrics.replace(
         slope_limit=jnp.float32(1.5), roughness_limit=jnp.float32(1.0), bump_limit=jnp.float32(1.0),
-        band_limit=jnp.float32(1.0), support_limit=jnp.float32(1.0), lean_limit=jnp.float32(1.0)),
+        band_limit=jnp.float32(1.0), support_limit=jnp.float32(1.0)),
         max_step_height=jnp.full(loose.num_actions, 1.0, jnp.float32),
         max_sole_pitch=jnp.float32(1.5), max_sole_roll=jnp.float32(1.5), max_sole_distance=jnp.float32(1.0))
     stance = jnp.array([[0.45, 0.5, 0.3]], jnp.float32)
@@ -184,9 +184,9 @@ def test_one_rule_for_limits_a_metric_at_its_limit_is_decided_alike_on_both_path
     slope = np.asarray(terms.slope_angle)
     pitch, roll = np.asarray(terms.sole_pitch_rad), np.asarray(terms.sole_roll_rad)
     distance = np.asarray(terms.sole_distance_m)
-    support, lean = np.asarray(terms.support_m), np.asarray(terms.lean_m)
+    support = np.asarray(terms.support_m)
     i = int(np.flatnonzero(open_ & (slope > 0.05) & (np.abs(pitch) > 0.02) & (np.abs(roll) > 0.02)
-                           & (support > 1e-3) & (lean > 1e-3))[0])
+                           & (support > 1e-3))[0])
 
     def totals(robot):
         return _both(terrain, robot, stance, None, steps)  # steps given: action_index cycles over them
@@ -197,7 +197,7 @@ def test_one_rule_for_limits_a_metric_at_its_limit_is_decided_alike_on_both_path
         xla, fused = totals(loose.replace(max_step_height=jnp.asarray(limits)))
         np.testing.assert_array_equal(np.isfinite(xla[0]), np.isfinite(fused[0]))
         np.testing.assert_array_equal(np.isfinite(xla[0])[open_], np.full(open_.sum(), accept))
-        for name, metric in (("slope_limit", slope[i]), ("support_limit", support[i]), ("lean_limit", lean[i])):
+        for name, metric in (("slope_limit", slope[i]), ("support_limit", support[i])):
             xla, fused = totals(loose.replace(metrics=loose.metrics.replace(**{name: jnp.float32(metric - d)})))
             assert np.isfinite(xla[0, i]) == np.isfinite(fused[0, i]) == accept, (name, d, xla[0, i], fused[0, i])
         # The ankle's pitch and roll limits and the legs' reach, at the XLA path's own metrics of step i.
@@ -450,7 +450,7 @@ STANCE = jnp.array([0.45, 0.4, 0.0], jnp.float32)  # a right foot; the left one 
 SWING = jnp.array([0.45, 0.59, 0.0], jnp.float32)
 HOSTILE = [np.nan, np.inf, -np.inf, 1e30, -1e30, 1e-30, -1.0, 0.0, -0.0, 1e39, 0.5, 3.0]
 """Values a careless or hostile user sets by ``replace`` or vmap inside a jit (1e39 is inf in float32)."""
-COST_TERMS = ("action", "obstacle", "slope", "roughness", "bump", "step", "band", "support", "lean", "swing_path",
+COST_TERMS = ("action", "obstacle", "slope", "roughness", "bump", "step", "band", "support", "swing_path",
               "unsupported")
 
 
@@ -496,8 +496,8 @@ def _assert_flagged_alike(terrain, robot):
 
 
 ROBOT_FIELDS = ["margin", "foot_length", "foot_width", "w", "rotation_weight", "metrics.slope_weight",
-                "metrics.slope_limit", "metrics.band_limit", "metrics.lean_limit", "metrics.lean_inset", "action_cost",
-                "clearance", "max_step_height"]
+                "metrics.slope_limit", "metrics.band_limit", "metrics.contact_tol", "metrics.contact_inset",
+                "action_cost", "clearance", "max_step_height"]
 
 
 @pytest.mark.slow
@@ -563,21 +563,20 @@ def test_a_plane_fit_beyond_float32_is_flagged_not_a_flat_valid_step():
 # --------------------------------------------------------------------------- the band where the paths may differ
 
 BAND_METRICS = {"slope": "slope_angle", "roughness": "roughness_m", "bump": "bump_m", "step": "step_height_m",
-                "band": "band_m", "support": "support_m", "lean": "lean_m"}
+                "band": "band_m", "support": "support_m"}
 
 
-def _on_corner_edge(robot, stance, resolution):
-    """(N,) bool: a cell centre under action n's footprint lies within 1e-6 m of one of the support's corner
-    region edges (float64): there the two paths may class it differently (footcost.xla.plane_metrics)."""
+def _at_contact_tolerance(terrain, robot, stance):
+    """(N,) bool: one of the rested sole's points under action n lies within 1e-5 m of the contact tolerance, or
+    its lowest planes nearly tie (float64, testing.rest_metrics): there the two paths may class it differently."""
     steps = np.asarray(ij.action_steps(robot, stance, -1), np.float64)
-    hl, hw = 0.5 * float(robot.foot_length), 0.5 * float(robot.foot_width)
-    a0, b0 = footcost.xla.SUPPORT_CORNER * hl, footcost.xla.SUPPORT_CORNER * hw
+    h = np.asarray(terrain.height, np.float64)
+    m = robot.metrics
     out = np.zeros(len(steps), bool)
-    for n, (x, y, t) in enumerate(steps):
-        ix, iy = np.nonzero(rect_touches_cells(x, y, t, hl, hw, resolution, SHAPE))
-        du, dv = (ix + 0.5) * resolution - x, (iy + 0.5) * resolution - y
-        along, across = du * np.cos(t) + dv * np.sin(t), dv * np.cos(t) - du * np.sin(t)
-        out[n] = np.any(np.abs(np.abs(along) - a0) < 1e-6) or np.any(np.abs(np.abs(across) - b0) < 1e-6)
+    for n, pose in enumerate(steps):
+        r = rest_metrics(h, RES, (0.0, 0.0), pose, float(robot.foot_length), float(robot.foot_width),
+                         float(m.contact_inset), float(m.contact_tol))
+        out[n] = np.any(np.abs(r["gaps"] - float(m.contact_tol)) < 1e-5)
     return out
 
 
@@ -636,8 +635,8 @@ def test_the_paths_metrics_differ_by_less_than_limit_tol_on_hostile_near_limit_m
             xla = np.abs(xla)
         both = np.isfinite(fused)
         np.testing.assert_array_equal(both, np.isfinite(np.asarray(terms.total)))  # off the map on both, or neither
-        if metric == "support":  # a cell centre on a corner region's edge is classed to rounding: left out
-            edge = _on_corner_edge(robot, stance, RES)
+        if metric == "support":  # a point at the contact tolerance is classed to rounding: left out
+            edge = _at_contact_tolerance(terrain, robot, stance)
             assert edge.sum() <= 0.05 * len(edge), edge.sum()
             both &= ~edge
         assert both.sum() >= 100

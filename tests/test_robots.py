@@ -451,15 +451,16 @@ def test_hrp2_ankle_limits_are_realisable_by_the_biped(reach):
                 and _stances_realisable(straight, roll + math.radians(4.0), 0.0, 0).all())
 
 
-def test_the_lean_inset_must_leave_each_point_on_its_own_edge():
-    """The lean compares the sole's two long edges at points ``lean_inset`` in from them: an inset of half the
-    width or more (set directly, or a narrower foot under the default) is refused naming it, flagged when traced."""
+def test_the_contact_inset_must_leave_each_point_on_its_own_side():
+    """The sole's contact points lie ``contact_inset`` in from its edges, on both sides of its centre: an inset of
+    half the width (or length) or more (set directly, or a narrower foot under the default) is refused naming it,
+    flagged when traced."""
     robot = robots.hrp2()
-    inside = robots.set_leaf(robot, "metrics.lean_inset", 0.06)  # hrp2's sole is 13 cm wide
+    inside = robots.set_leaf(robot, "metrics.contact_inset", 0.06)  # hrp2's sole is 13 cm wide
     robots.check_robot(inside)
     assert bool(jax.jit(robots.robot_supported)(inside))
-    for bad in (robots.set_leaf(robot, "metrics.lean_inset", 0.065),
+    for bad in (robots.set_leaf(robot, "metrics.contact_inset", 0.065),
                 robot.replace(foot_width=jnp.float32(0.018))):  # half of it is the default 9 mm inset
-        with pytest.raises(ValueError, match="lean_inset must be under half the foot width"):
+        with pytest.raises(ValueError, match="contact_inset must be under half the foot's width and length"):
             robots.check_robot(bad)
         assert not bool(jax.jit(robots.robot_supported)(bad))

@@ -35,7 +35,7 @@ def _random_terrains(seed, n, has_height):
     if has_height:
         ramp = rng.uniform(-0.2, 0.2, (n, 1, 1)) * np.arange(SHAPE[0])[None, :, None] * RES
         steps = 0.03 * (np.arange(SHAPE[1])[None, None, :] > rng.integers(10, 40, (n, 1, 1)))
-        # 1 mm cell noise: at 2 mm the lean term (1.5 mm) rejected most steps, and few queries had a choice
+        # 1 mm cell noise: at 2 mm the former lean term (1.5 mm) rejected most steps, and few queries had a choice
         height = (ramp + steps + 0.001 * rng.standard_normal((n,) + SHAPE)).astype(np.float32)
     return ij.Terrain(jnp.asarray(height), jnp.asarray(free), jnp.zeros((n, 2)), RES, has_height)
 

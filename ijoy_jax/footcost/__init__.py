@@ -7,6 +7,7 @@ per-terrain tables of :mod:`~ijoy_jax.footcost.index`, built once per terrain.
 
 from ijoy_jax.footcost import index as index
 from ijoy_jax.footcost import pallas as pallas
+from ijoy_jax.footcost import sole as sole
 from ijoy_jax.footcost import xla as xla
 from ijoy_jax.footcost.index import TerrainIndex as TerrainIndex
 from ijoy_jax.footcost.index import block_sums as block_sums

@@ -17,11 +17,11 @@ broad phase: when the highest cell of a box holding all of a block's corridors
 is within every step's clearance (on most terrain), the exact walk is skipped.
 
 Same definitions as the XLA path, term by term (exact cell coverage, the
-least-squares plane and its metrics, step height, safety band, the sole's tilt
-on that plane against the ankles' limits, the reach, swing corridor,
-unsupported flags); sums run in a different order, so totals agree to float32
-rounding. Validity follows one rule for every limit on both paths
-(:func:`~ijoy_jax.footcost.xla.exceeds`: beyond the limit by more than
+least-squares plane and its metrics, safety band, the rested sole
+(:mod:`ijoy_jax.footcost.sole`: the same code), its support, tilt against the
+ankles' limits and step height, the reach, swing corridor, unsupported flags);
+sums run in a different order, so totals agree to float32 rounding. Validity
+follows one rule for every limit on both paths (:func:`~ijoy_jax.footcost.xla.exceeds`: beyond the limit by more than
 ``LIMIT_TOL``), so a metric at its limit to rounding is valid on both; only one
 within the measured band of limit + ``LIMIT_TOL`` (~8e-6 rad for slopes, ~1e-6 m
 for the height metrics, plus an ulp of the altitude for step heights:
@@ -42,17 +42,15 @@ from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
 from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max, window_cells
+from ijoy_jax.footcost.sole import contact_offsets, sole_on_ground
 from ijoy_jax.footcost.xla import (
     SLACK,
-    SUPPORT_CORNER,
     checked_query,
     exceeds,
-    lean_points,
     metric_term,
     plane_metrics,
     query_supported,
     sole_distance,
-    sole_tilt,
     solve3,
 )
 from ijoy_jax.robots import Robot, nearest_actions
@@ -61,8 +59,8 @@ from ijoy_jax.terrain import Terrain
 # Scalars of one decision, packed into one float32 vector (indices into ``par``).
 (_OX, _OY, _GHL, _GHW, _FHL, _FHW, _STANCE_H, _START_H, _SWX, _SWY, _SWING_MAX, _FW, _TOO_BIG,
  _SLOPE_W, _SLOPE_L, _ROUGH_W, _ROUGH_L, _BUMP_W, _BUMP_L, _STEP_W, _BAND_W, _BAND_L,
- _STX, _STY, _PITCH_L, _ROLL_L, _DIST_L, _SUPPORT_W, _SUPPORT_L, _LEAN_W, _LEAN_L, _LEAN_INSET) = range(32)
-_NUM_PAR = 32
+ _STX, _STY, _PITCH_L, _ROLL_L, _DIST_L, _SUPPORT_W, _SUPPORT_L, _CONTACT_INSET, _CONTACT_TOL) = range(31)
+_NUM_PAR = 31
 # Rows of the per-candidate block ``cand``.
 _X, _Y, _T, _COST, _STEP_LIMIT, _CLEARANCE = range(6)
 _NUM_CAND = 8
@@ -316,11 +314,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
         # the span's start + q, read at a flat address. These row bodies run ~180 times per candidate, so
         # they test one bound each and carry the plane down the column (relative to h_ref: in map heights it
         # would round to the terrain's altitude). The bump is max(largest residual, 0), so masked rows may
-        # count as 0 instead of -inf. The support's four corner regions (footcost.plane_metrics) are tested in
-        # the sole's own frame, along and across it, from the cell centre's offsets as plane_metrics forms them
-        # (not carried down the column: a centre on a region's edge should fall on the same side on both paths
-        # to within one rounding); their maxima start at -inf (a region without cells gives no gap).
-        a0, b0 = SUPPORT_CORNER * p[_FHL], SUPPORT_CORNER * p[_FHW]
+        # count as 0 instead of -inf.
 
         def resid_column(ix, spans, acc):
             u = (ix.astype(jnp.float32) + 0.5) * res - cx
@@ -333,43 +327,31 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
             plane0 = a + b * u + cc * ((g0.astype(jnp.float32) + 0.5) * res - cy)
 
             def row(q, acc):
-                abs_sum, top, band, corners, plane, rel = acc
+                abs_sum, top, band, plane, rel = acc
                 resid = (hp_ref[start + q] - h_ref) - plane
-                v = ((g0 + q).astype(jnp.float32) + 0.5) * res - cy
-                along, across = u * c + v * s, v * c - u * s
                 in_foot = rel.astype(jnp.uint32) < foot_rows  # 0 <= rel < foot rows, one unsigned compare
                 r_foot = jnp.where(in_foot, resid, 0.0)
                 r_band = jnp.where((rel < grown_end) & ~in_foot, resid, 0.0)
-                ahead, behind = along >= a0, -along >= a0
-                left, right = across >= b0, -across >= b0
-                corners = tuple(jnp.maximum(m, jnp.where(in_foot & fa & fb, resid, -jnp.inf))
-                                for m, fa, fb in zip(corners, (ahead, ahead, behind, behind),
-                                                     (left, right, left, right), strict=True))
                 return (abs_sum + jnp.abs(r_foot), jnp.maximum(top, r_foot), jnp.maximum(band, jnp.abs(r_band)),
-                        corners, plane + rise, rel + 1)
+                        plane + rise, rel + 1)
 
-            blocked = acc[4] | hits_obstacle(ix, g0, g1, g_touched)  # obstacles ride along this pass
-            abs_sum, top, band, corners, *_ = row_loop(rows_of(g0, g1, g_touched), row,
-                                                       (*acc[:4], plane0, g0 - j0))
-            return abs_sum, top, band, corners, blocked
+            blocked = acc[3] | hits_obstacle(ix, g0, g1, g_touched)  # obstacles ride along this pass
+            abs_sum, top, band, *_ = row_loop(rows_of(g0, g1, g_touched), row, (*acc[:3], plane0, g0 - j0))
+            return abs_sum, top, band, blocked
 
-        abs_sum, top, band, corners, blocked = _column_loop(
-            num_cols, ix0, (grown, foot), resid_column,
-            (zero_f, zero_f, zero_f, (zero_f - jnp.inf,) * 4, finite & False))
+        abs_sum, top, band, blocked = _column_loop(
+            num_cols, ix0, (grown, foot), resid_column, (zero_f, zero_f, zero_f, finite & False))
         total = total + jnp.where(blocked, jnp.inf, 0.0)
         ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(cc)
         too_big = too_big | ~ok  # a fit beyond float32's range (plane_metrics' ``fitted``)
-        height = jnp.where(ok, a + h_ref, h_ref)
         slope = jnp.where(ok, jnp.arctan(jnp.sqrt(b * b + cc * cc)), 0.0)
         rough = jnp.where(ok, abs_sum / n, 0.0)
         bump = jnp.where(ok, top, 0.0)
         band = jnp.where(ok, band, 0.0)
-        gaps = [jnp.where(corner > -jnp.inf, top - corner, 0.0) for corner in corners]
-        support = jnp.where(ok, jnp.maximum(jnp.maximum(gaps[0], gaps[1]), jnp.maximum(gaps[2], gaps[3])), 0.0)
 
-        def above(du, dv):
-            """(C,) the ground above the plane at offsets (du, dv) from the foot centre: bilinear between cell
-            centres, four reads of the padded map, as footcost.xla's lean (same clamps on the map)."""
+        def ground_at(du, dv):
+            """(C,) the ground at offsets (du, dv) from the foot centre, relative to h_ref: bilinear between cell
+            centres, four reads of the padded map, as footcost.xla.plane_metrics' (same clamps on the map)."""
             gx, gy = (cx + du) / res - 0.5, (cy + dv) / res - 0.5
             i0, j0 = _floor_i32(gx, native), _floor_i32(gy, native)
             tx, ty = gx - i0.astype(jnp.float32), gy - j0.astype(jnp.float32)
@@ -377,25 +359,25 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
             def at(di, dj):
                 return hp_ref[column_start(i0 + di, j0 + dj)] - h_ref
 
-            ground = (1.0 - tx) * ((1.0 - ty) * at(0, 0) + ty * at(0, 1)) + tx * ((1.0 - ty) * at(1, 0) + ty * at(1, 1))
-            return ground - (a + b * du + cc * dv)
+            return (1.0 - tx) * ((1.0 - ty) * at(0, 0) + ty * at(0, 1)) + tx * ((1.0 - ty) * at(1, 0) + ty * at(1, 1))
 
-        # The lean (footcost.xla.plane_metrics): each side of the sole by its contact point highest above the plane.
-        du, dv = lean_points(p[_FHL], p[_FHW], p[_LEAN_INSET], c, s)
-        left, right = (functools.reduce(jnp.maximum, [above(du[i], dv[i]) for i in side])
-                       for side in (range(3), range(3, 6)))
-        lean = jnp.abs(left - right)
-        lean = jnp.where(ok & jnp.isfinite(lean), lean, 0.0)
+        # The rested sole (footcost.sole, the same code as plane_metrics'): its height, tilt and support.
+        du, dv = contact_offsets(p[_FHL], p[_FHW], p[_CONTACT_INSET], c, s)
+        rest = sole_on_ground(tuple(ground_at(du[i], dv[i]) for i in range(6)), p[_FHL], p[_FHW],
+                              p[_CONTACT_INSET], p[_CONTACT_TOL])
+        rested = jnp.isfinite(rest.height)
+        too_big = too_big | ~rested
+        height = jnp.where(rested, rest.height + h_ref, h_ref)  # the rested sole's, as the step's height
+        support = jnp.where(rested, rest.support, 0.0)
         dh = height - p[_STANCE_H]
-        # The sole on the fitted plane (footcost.xla.sole_tilt) and the reach over the height change.
-        pitch, roll = sole_tilt(jnp.where(ok, b, 0.0), jnp.where(ok, cc, 0.0), t)
+        # The rested sole's tilt against the ankles' limits, and the reach over the height change.
+        pitch, roll = jnp.where(rested, rest.pitch, 0.0), jnp.where(rested, rest.roll, 0.0)
         ankle_bad = exceeds(jnp.abs(pitch), p[_PITCH_L]) | exceeds(jnp.abs(roll), p[_ROLL_L])
         total = (total + metric_term(p[_SLOPE_W], slope, p[_SLOPE_L])
                  + metric_term(p[_ROUGH_W], rough, p[_ROUGH_L]) + metric_term(p[_BUMP_W], bump, p[_BUMP_L])
                  + metric_term(p[_STEP_W], jnp.abs(dh), cand_ref[_STEP_LIMIT, :])
                  + metric_term(p[_BAND_W], band, p[_BAND_L])
                  + metric_term(p[_SUPPORT_W], support, p[_SUPPORT_L])
-                 + metric_term(p[_LEAN_W], lean, p[_LEAN_L])
                  + jnp.where(ankle_bad | out_of_reach(dh), jnp.inf, 0.0))
 
         if has_swing:
@@ -541,11 +523,11 @@ def foot_cost_fused(
     window = (window - 1) // 2  # rows per window step (>= k, the longest span)
     if has_height:
         stance_plane = plane_metrics(terrain, index, robot, stance)
-        stance_h, unsupported = stance_plane.height, unsupported | ~stance_plane.fitted
+        stance_h, unsupported = stance_plane.rest_height, unsupported | ~stance_plane.fitted
         if has_swing:
             swing_from = jnp.asarray(swing_from, jnp.float32)
             start_plane = plane_metrics(terrain, index, robot, swing_from)
-            start_h, unsupported = start_plane.height, unsupported | ~start_plane.fitted
+            start_h, unsupported = start_plane.rest_height, unsupported | ~start_plane.fitted
             swx, swy = swing_from[0] - terrain.origin[0], swing_from[1] - terrain.origin[1]
     ghl = 0.5 * robot.foot_length + robot.margin
     ghw = 0.5 * robot.foot_width + robot.margin
@@ -556,7 +538,7 @@ def foot_cost_fused(
            m.slope_weight, m.slope_limit, m.roughness_weight, m.roughness_limit, m.bump_weight, m.bump_limit,
            m.step_weight, m.band_weight, m.band_limit, stance[0], stance[1], robot.max_sole_pitch,
            robot.max_sole_roll, robot.max_sole_distance, m.support_weight, m.support_limit,
-           m.lean_weight, m.lean_limit, m.lean_inset]
+           m.contact_inset, m.contact_tol]
     par = jnp.stack([f32(q) for q in par] + [zero] * (_NUM_PAR - len(par)))
     padded = -(-num // block) * block
     order = None

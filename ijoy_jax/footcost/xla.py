@@ -10,10 +10,13 @@ action's cost, else +inf.
 the footprint touches, and slope, roughness, largest bump, step height from
 the stance foothold, and the safety band (cells touched only by the grown
 footprint) are scored against :class:`ijoy_jax.robots.TerrainMetrics`: beyond
-a limit the cost is +inf, below it ``weight * metric`` is added. A sole lying
-on the fitted plane must tilt no further than the ankles realise
-(``robot.max_sole_pitch`` along the foot, ``robot.max_sole_roll`` across it)
-and the reach counts the height change between the two planes. With
+a limit the cost is +inf, below it ``weight * metric`` is added. The sole
+rests on the ground under its contact points (:mod:`ijoy_jax.footcost.sole`:
+the plane through three of them above the others, lowest under the ankle);
+the ``support`` term asks its contact polygon to hold the ankle with room to
+spare, the rested sole must tilt no further than the ankles realise
+(``robot.max_sole_pitch`` along the foot, ``robot.max_sole_roll`` across it),
+and step height and reach count the height change between the rested soles. With
 ``swing_from`` given, terrain in the swing corridor (the foot-wide rectangle
 between the start and end foot centres) higher than the action's clearance
 above the higher of the two footholds invalidates the step.
@@ -52,6 +55,7 @@ from ijoy_jax.footcost.index import (
     swing_corridor,
     window_cells,
 )
+from ijoy_jax.footcost.sole import contact_offsets, sole_on_ground, tilt
 from ijoy_jax.robots import Robot, check_robot, nearest_actions, robot_supported, side_sign
 from ijoy_jax.terrain import Terrain, check_terrain, terrain_supported
 
@@ -117,12 +121,12 @@ class FootCostTerms(NamedTuple):
       action: the action's own cost.
       obstacle: 0, or +inf if the grown footprint touches an obstacle or
         leaves the map.
-      slope, roughness, bump, step, band, support, lean: ``weight * metric``,
+      slope, roughness, bump, step, band, support: ``weight * metric``,
         or +inf beyond the metric's limit (0 on 2D terrains).
       swing_path: 0, or +inf if the swing corridor is too high (or leaves the
         map) for the action's clearance.
-      ankle: 0, or +inf if a sole on the fitted plane would tilt beyond what
-        the ankles realise: ``|sole_pitch_rad|`` above ``robot.max_sole_pitch``
+      ankle: 0, or +inf if the rested sole would tilt beyond what the ankles
+        realise: ``|sole_pitch_rad|`` above ``robot.max_sole_pitch``
         or ``|sole_roll_rad|`` above ``robot.max_sole_roll`` (0 on 2D terrains).
       reach: 0, or +inf if the stance and swing sole centres are farther apart
         (``sole_distance_m``) than ``robot.max_sole_distance``.
@@ -139,11 +143,12 @@ class FootCostTerms(NamedTuple):
     Raw metrics (for plots and tests)::
 
       slope_angle (rad), roughness_m, bump_m, step_height_m (signed, up is
-      positive), band_m, support_m, lean_m, path_height_m (corridor height above the higher
-      foothold; -inf if no check), foot_height_m (plane height at the foot
-      centre), sole_pitch_rad and sole_roll_rad (the orientation of a sole on
-      the fitted plane with the step's heading, ``R = Rz(yaw) Ry(pitch)
-      Rx(roll)``: :func:`sole_tilt`; 0 on 2D terrains), sole_distance_m (3D
+      positive, between the rested soles), band_m, support_m, path_height_m
+      (corridor height above the higher foothold; -inf if no check),
+      foot_height_m (the rested sole's height at the foot centre),
+      sole_pitch_rad and sole_roll_rad (the rested sole's orientation with the
+      step's heading, ``R = Rz(yaw) Ry(pitch) Rx(roll)``: :func:`sole_tilt`'s
+      convention; 0 on 2D terrains), sole_distance_m (3D
       distance from the stance sole centre: the horizontal step and
       step_height_m), action_index (int32, the action whose cost/limits were
       used).
@@ -158,7 +163,6 @@ class FootCostTerms(NamedTuple):
     step: jax.Array
     band: jax.Array
     support: jax.Array
-    lean: jax.Array
     swing_path: jax.Array
     ankle: jax.Array
     reach: jax.Array
@@ -169,7 +173,6 @@ class FootCostTerms(NamedTuple):
     step_height_m: jax.Array
     band_m: jax.Array
     support_m: jax.Array
-    lean_m: jax.Array
     path_height_m: jax.Array
     foot_height_m: jax.Array
     sole_pitch_rad: jax.Array
@@ -185,7 +188,8 @@ last (the raw metrics after them are left out)."""
 
 
 class Plane(NamedTuple):
-    """The least-squares plane under a footprint and its metrics (:func:`plane_metrics`; () float32 each).
+    """The least-squares plane under a footprint, its metrics and the rested sole (:func:`plane_metrics`; ()
+    float32 each).
 
     The plane is ``z = height + grad_x (x - cx) + grad_y (y - cy)`` in world axes about the foot centre
     ``(cx, cy)``.
@@ -196,11 +200,13 @@ class Plane(NamedTuple):
     roughness: jax.Array  # mean |residual| under the foot (m)
     bump: jax.Array  # largest residual under the foot (m)
     band: jax.Array  # largest |residual| in the safety band (m)
-    support: jax.Array  # how far below the sole's resting cell the highest cell of its lowest corner lies (m)
-    lean: jax.Array  # how far the ground under the sole's lower side lies below its higher side's (m; lean_points)
+    support: jax.Array  # how much nearer the ankle the rested sole's contact polygon's edge is than the sole's (m)
     fitted: jax.Array  # () bool: the fit is finite (False: heights beyond float32's range; metrics then 0)
     grad_x: jax.Array  # dz/dx of the plane along world x (m/m)
     grad_y: jax.Array  # dz/dy of the plane along world y (m/m)
+    rest_height: jax.Array  # the rested sole's height at the foot centre (m; footcost.sole)
+    rest_pitch: jax.Array  # the rested sole's pitch and roll with the pose's yaw (rad; sole_tilt's convention)
+    rest_roll: jax.Array
 
 
 def sole_tilt(grad_x, grad_y, yaw):
@@ -220,9 +226,7 @@ def sole_tilt(grad_x, grad_y, yaw):
     shapes); jnp only, so both FootCost paths use it.
     """
     c, s = jnp.cos(yaw), jnp.sin(yaw)
-    gf = grad_x * c + grad_y * s
-    gl = grad_y * c - grad_x * s
-    return -jnp.arctan(gf), jnp.arctan2(gl, jnp.sqrt(1.0 + gf * gf))
+    return tilt(grad_x * c + grad_y * s, grad_y * c - grad_x * s)
 
 
 def sole_distance(dx, dy, dz):
@@ -285,11 +289,6 @@ def _sum_and_maxima(a, *bs):
                       (0, 1))
 
 
-SUPPORT_CORNER = 0.5
-"""The sole's four corner regions (:func:`plane_metrics`' support) are the cells whose centres lie at least this
-fraction of the half length from its centre along it and of the half width across it, on each side."""
-
-
 def far_frame(terrain: Terrain) -> jax.Array:
     """() bool: the map reaches beyond :data:`MAX_COORDINATE` or its origin is not finite (flagged
     ``unsupported`` inside a jit, where :func:`check_frame` cannot see the origin's value)."""
@@ -311,11 +310,15 @@ def query_supported(terrain: Terrain, robot: Robot) -> jax.Array:
 
 
 def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> Plane:
-    """Least-squares plane under the footprint at ``pose`` (3,) (world x, y, yaw) and the metrics around it.
+    """Least-squares plane under the footprint at ``pose`` (3,) (world x, y, yaw), the metrics around it, and the
+    rested sole.
 
     The fit is over the centres and heights of the cells the footprint touches; the safety band is the
     cells the footprint grown by the robot's margin touches besides. A degenerate fit (no cells: a pose
     far off the map) gives the height of the cell under the foot centre and zero gradient and metrics.
+    The rested sole (:mod:`ijoy_jax.footcost.sole`) stands on the ground under its contact points
+    (``robot.metrics.contact_inset``), interpolated bilinearly between cell centres as a height field's
+    surface is; its contact polygon holds the points within ``robot.metrics.contact_tol`` of it.
 
     Returns:
       :class:`Plane` of () float32 values.
@@ -361,28 +364,20 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
     a, b, c = solve3(n, su, sv, suu + ridge, suv, svv + ridge, sh, suh, svh)
     resid = hrel - (a + b * u[:, None] + c * v[None, :])
     slope = jnp.arctan(jnp.sqrt(b * b + c * c))
-    # The sole's corner regions, in its own frame (along a, across b): a rigid sole set on the plane rests on its
-    # highest cell; where a corner's highest cell lies lower, the sole can rock toward it by that gap.
-    cos, sin = jnp.cos(pose[2]), jnp.sin(pose[2])
-    along = u[:, None] * cos + v[None, :] * sin
-    across = v[None, :] * cos - u[:, None] * sin  # as the fused kernel forms them (footcost.pallas)
-    corners = [m_foot & (sa * along >= SUPPORT_CORNER * hl) & (sb * across >= SUPPORT_CORNER * hw)
-               for sa in (1.0, -1.0) for sb in (1.0, -1.0)]
-    abs_sum, top, band, *corner_top = _sum_and_maxima(
+    abs_sum, top, band = _sum_and_maxima(
         jnp.where(m_foot, jnp.abs(resid), 0.0), jnp.where(m_foot, resid, -jnp.inf),
-        jnp.where(m_band, jnp.abs(resid), 0.0), *(jnp.where(c, resid, -jnp.inf) for c in corners))
+        jnp.where(m_band, jnp.abs(resid), 0.0))
     roughness = abs_sum / n
     bump = jnp.maximum(top, 0.0)
-    # a corner region without cells (a grid coarser than the sole's quarter) tells nothing: gap 0
-    support = jnp.max(jnp.stack([jnp.where(jnp.isfinite(t), bump - t, 0.0) for t in corner_top]))
-    # The lean: the ground at the sole's contact points (lean_points), between cell centres as a height field
-    # meets a sphere or an edge, each side by its point highest above the plane.
-    du, dv = lean_points(hl, hw, robot.metrics.lean_inset, cos, sin)
-    du, dv = jnp.stack(du), jnp.stack(dv)
-    ground = bilinear_height(index.height_padded, k, cx + du, cy + dv, res, h_ref)
-    above = ground - (a + b * du + c * dv)
-    lean = jnp.abs(jnp.max(above[:3]) - jnp.max(above[3:]))
+    # The rested sole (footcost.sole): the ground under its contact points, between cell centres as a height
+    # field meets a sphere, relative to h_ref.
+    cos, sin = jnp.cos(pose[2]), jnp.sin(pose[2])
+    metrics = robot.metrics
+    du, dv = contact_offsets(hl, hw, metrics.contact_inset, cos, sin)
+    ground = bilinear_height(index.height_padded, k, cx + jnp.stack(du), cy + jnp.stack(dv), res, h_ref)
+    rest = sole_on_ground(tuple(ground), hl, hw, metrics.contact_inset, metrics.contact_tol)
     ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(c)
+    rested = jnp.isfinite(rest.height)
     z = jnp.float32(0.0)
     return Plane(
         height=jnp.where(ok, a + h_ref, h_ref),
@@ -390,21 +385,14 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
         roughness=jnp.where(ok, roughness, z),
         bump=jnp.where(ok, bump, z),
         band=jnp.where(ok, band, z),
-        support=jnp.where(ok, support, z),
-        lean=jnp.where(ok & jnp.isfinite(lean), lean, z),
-        fitted=ok,
+        support=jnp.where(rested, rest.support, z),
+        fitted=ok & rested,
         grad_x=jnp.where(ok, b, z),
         grad_y=jnp.where(ok, c, z),
+        rest_height=jnp.where(rested, rest.height + h_ref, h_ref),
+        rest_pitch=jnp.where(rested, rest.pitch, z),
+        rest_roll=jnp.where(rested, rest.roll, z),
     )
-
-
-def lean_points(half_length, half_width, inset, cos, sin):
-    """The sole's six contact points of the ``lean`` metric: toe, middle and heel of its left edge, then of its
-    right edge, ``inset`` (m) in from the edges, as offsets from the sole's centre in world axes (m) for a heading
-    of cosine ``cos`` and sine ``sin``. Returns (du, dv), tuples of six, broadcast from the inputs (NumPy or JAX)."""
-    a, b = half_length - inset, half_width - inset
-    points = [(sa * a, sb * b) for sb in (1.0, -1.0) for sa in (1.0, 0.0, -1.0)]
-    return tuple(p * cos - q * sin for p, q in points), tuple(p * sin + q * cos for p, q in points)
 
 
 def bilinear_height(padded, pad: int, x, y, res, ref):
@@ -473,20 +461,19 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
     neg_inf = jnp.float32(-jnp.inf)
     if terrain.has_height:
         plane = plane_metrics(terrain, index, robot, step)
-        dh = plane.height - stance_plane.height
+        dh = plane.rest_height - stance_plane.rest_height
         slope = metric_term(metrics.slope_weight, plane.slope, metrics.slope_limit)
         rough = metric_term(metrics.roughness_weight, plane.roughness, metrics.roughness_limit)
         bump = metric_term(metrics.bump_weight, plane.bump, metrics.bump_limit)
         stepc = metric_term(metrics.step_weight, jnp.abs(dh), robot.max_step_height[action_index])
         band = metric_term(metrics.band_weight, plane.band, metrics.band_limit)
         support = metric_term(metrics.support_weight, plane.support, metrics.support_limit)
-        lean = metric_term(metrics.lean_weight, plane.lean, metrics.lean_limit)
-        raw = (plane.slope, plane.roughness, plane.bump, dh, plane.band, plane.height, plane.support, plane.lean)
+        raw = (plane.slope, plane.roughness, plane.bump, dh, plane.band, plane.rest_height, plane.support)
         too_big = too_big | ~plane.fitted | ~stance_plane.fitted
-        pitch, roll = sole_tilt(plane.grad_x, plane.grad_y, step[2])
+        pitch, roll = plane.rest_pitch, plane.rest_roll
     else:
-        slope = rough = bump = stepc = band = support = lean = zero
-        raw = (zero,) * 8
+        slope = rough = bump = stepc = band = support = zero
+        raw = (zero,) * 7
         pitch = roll = zero
     ankle_bad = exceeds(jnp.abs(pitch), robot.max_sole_pitch) | exceeds(jnp.abs(roll), robot.max_sole_roll)
     distance = sole_distance(step[0] - stance[0], step[1] - stance[1], raw[3])
@@ -499,7 +486,7 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
         sy = swing_from[1] - origin[1]
         corridor, length = swing_corridor(sx, sy, cx, cy, 0.5 * robot.foot_width, res, kp)
         top, off_map = column_max_height(index, corridor, terrain.shape)
-        path_height = top - jnp.maximum(start_plane.height, raw[5])
+        path_height = top - jnp.maximum(start_plane.rest_height, raw[5])
         path_bad = off_map | exceeds(path_height, robot.clearance[action_index])
         too_big = (too_big | corridor.overflow | (length + robot.foot_width > robot.max_swing + SLACK)
                    | ~start_plane.fitted)
@@ -512,9 +499,9 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
     unsupported = _inf_if(flagged)
     # +inf where flagged, whatever the other terms hold; a term that an unsupported value (a NaN weight, cost
     # or limit) makes NaN cannot be evaluated, and reads +inf too: no cost term is ever NaN.
-    action, slope, rough, bump, stepc, band, support, lean = (
-        jnp.where(jnp.isnan(t), jnp.inf, t) for t in (action, slope, rough, bump, stepc, band, support, lean))
-    total = jnp.where(flagged, jnp.inf, action + obstacle + slope + rough + bump + stepc + band + support + lean
+    action, slope, rough, bump, stepc, band, support = (
+        jnp.where(jnp.isnan(t), jnp.inf, t) for t in (action, slope, rough, bump, stepc, band, support))
+    total = jnp.where(flagged, jnp.inf, action + obstacle + slope + rough + bump + stepc + band + support
                       + swing + ankle + reach)
     return FootCostTerms(
         total=total,
@@ -526,7 +513,6 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
         step=stepc,
         band=band,
         support=support,
-        lean=lean,
         swing_path=swing,
         ankle=ankle,
         reach=reach,
@@ -537,7 +523,6 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
         step_height_m=raw[3],
         band_m=raw[4],
         support_m=raw[6],
-        lean_m=raw[7],
         path_height_m=path_height,
         foot_height_m=raw[5],
         sole_pitch_rad=pitch,

@@ -369,8 +369,8 @@ def init_state(sim: Sim, world: World, robot: Robot, start, first_swing, key=Non
     """The biped standing on ``start`` (2, 3) (x, y, yaw of the feet, row 0 left; m, rad), ``first_swing`` (+1
     left) to swing first: the Walker's ``init``.
 
-    The soles rest on the footholds :func:`ijoy_jax.select.foothold` gives ``robot`` there (the same plane fit
-    as the selector's), the pelvis ``cfg.pelvis_height`` above the lower one. ``key`` (PRNG key or int seed,
+    The soles rest on the footholds :func:`ijoy_jax.select.foothold` gives ``robot`` there (the rested sole
+    of the selector's), the pelvis ``cfg.pelvis_height`` above the lower one. ``key`` (PRNG key or int seed,
     default 0) draws the stance noise and pushes to come; ``frames_per_step`` (static) sizes ``StepLog.qpos``.
     The first step after it stands (:attr:`SimState.fresh`: the Walker's warm-up).
 
@@ -567,7 +567,7 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
     """The Walker of the simulated biped on ``terrain`` (call inside jit; ``m`` = the model with its height field).
 
     ``execute`` takes the selector's foothold (6,) (:attr:`ijoy_jax.select.StepChoice.foothold`); the start
-    feet stand on the footholds :func:`ijoy_jax.select.foothold` gives ``robot`` there (the same plane fit).
+    feet stand on the footholds :func:`ijoy_jax.select.foothold` gives ``robot`` there (the rested sole).
 
     The terrain's heights as the robot feels them (2D obstacles raised to
     ``params.obstacle_height``) also place the footholds' heights and the

@@ -26,8 +26,13 @@ constant in every parameter, so its gradient is useless. This module replaces
   clearances are >= 0), and the clearance check is the softplus barrier above;
   corridor cells off the map count like obstacles, and a swing longer than the
   path window (``max_swing``) gets a softplus barrier.
-* the ankle-tilt and reach limits (the sole's pitch and roll on the soft
-  plane, the 3D distance of the soles) by the same softplus barriers;
+* the rested sole (:mod:`ijoy_jax.footcost.sole`) stands on the ground under
+  its contact points interpolated with rounded tents; its rest pose is exact
+  (continuous, piecewise linear in the heights) and its contact polygon's
+  margin an expectation over soft contacts
+  (:func:`ijoy_jax.footcost.sole.soft_sole_on_ground`);
+* the ankle-tilt and reach limits (the rested sole's pitch and roll, the 3D
+  distance of the soles) by the same softplus barriers;
 * the argmin by a Boltzmann distribution ``p_i ~ exp(-cost_i / tau)``.
 
 Every output is finite for finite inputs and differentiable with respect to
@@ -49,7 +54,7 @@ import jax.numpy as jnp
 
 from ijoy_jax import geometry
 from ijoy_jax.footcost import foot_cost_terms, window_cells
-from ijoy_jax.footcost.xla import SUPPORT_CORNER, lean_points, sole_tilt
+from ijoy_jax.footcost.sole import contact_offsets, soft_sole_on_ground
 from ijoy_jax.robots import Robot, dist, side_actions, side_p0, side_sign
 from ijoy_jax.select import Targets, make_targets
 from ijoy_jax.terrain import Terrain
@@ -121,19 +126,20 @@ class SoftFootCostTerms(NamedTuple):
 
     Cost terms (cost units; finite): total (their sum), action, obstacle
     (barrier on the soft obstacle mass), slope, roughness, bump, step, band,
-    support, lean (each ``weight * metric + barrier``; 0 on 2D terrains), swing_path
+    support (each ``weight * metric + barrier``; 0 on 2D terrains), swing_path
     (clearance barrier on the swing corridor plus its off-map and length
     barriers; 0 without ``swing_from`` or on 2D terrains), ankle (barriers on
-    the size of the sole's pitch and roll on the soft plane against the
+    the size of the rested sole's pitch and roll against the
     robot's ``max_sole_pitch`` and ``max_sole_roll``; 0 on 2D terrains), reach
     (barrier on the 3D distance of the soles against ``max_sole_distance``).
     Raw: obstacle_mass (cells, soft count of obstacle or off-map cells under
     the grown footprint), slope_angle (rad), roughness_m, bump_m,
-    step_height_m (signed), band_m, foot_height_m (m), support_m (m), lean_m (m; soft maxima of each side,
-    a smooth magnitude of their difference), path_height_m (m, soft
+    step_height_m (signed, between the rested soles), band_m, foot_height_m
+    (m, the rested sole's), support_m (m; the expected contact polygon's,
+    :func:`ijoy_jax.footcost.sole.soft_sole_on_ground`), path_height_m (m, soft
     ``max(0, corridor top - higher foothold)``; 0 when not checked),
-    sole_pitch_rad, sole_roll_rad (:func:`ijoy_jax.footcost.xla.sole_tilt` of
-    the soft plane), sole_distance_m (m).
+    sole_pitch_rad, sole_roll_rad (the rested sole's on the soft ground),
+    sole_distance_m (m).
     """
 
     total: jax.Array
@@ -145,7 +151,6 @@ class SoftFootCostTerms(NamedTuple):
     step: jax.Array
     band: jax.Array
     support: jax.Array
-    lean: jax.Array
     obstacle_mass: jax.Array
     slope_angle: jax.Array
     roughness_m: jax.Array
@@ -154,7 +159,6 @@ class SoftFootCostTerms(NamedTuple):
     band_m: jax.Array
     foot_height_m: jax.Array
     support_m: jax.Array
-    lean_m: jax.Array
     swing_path: jax.Array
     path_height_m: jax.Array
     ankle: jax.Array
@@ -200,7 +204,6 @@ class _SoftPlane(NamedTuple):
     roughness: jax.Array
     bump: jax.Array
     band: jax.Array
-    support: jax.Array  # soft FootCost support (m): the lowest corner region's soft top below the soft top of all
     grad_x: jax.Array  # dz/dx (m/m, world axes)
     grad_y: jax.Array  # dz/dy (m/m)
 
@@ -212,9 +215,8 @@ def _soft_max0(values, weights, temp):
     return temp * jax.nn.logsumexp(a, b=b)
 
 
-def _soft_plane(patch: _Patch, m_foot, m_grown, res: float, temp, corners=None) -> _SoftPlane:
-    """Membership-weighted least-squares plane and its metrics (coordinates in cells); ``corners`` (4, K, K), the
-    soft memberships of the sole's corner regions, gives the support metric (0 without)."""
+def _soft_plane(patch: _Patch, m_foot, m_grown, res: float, temp) -> _SoftPlane:
+    """Membership-weighted least-squares plane and its metrics (coordinates in cells)."""
     u = patch.du / res
     v = patch.dv / res
     k = u.shape[0]
@@ -248,20 +250,7 @@ def _soft_plane(patch: _Patch, m_foot, m_grown, res: float, temp, corners=None) 
     bump = _soft_max0(m_foot * resid, ones, temp)
     m_band = m_grown * (1.0 - m_foot)
     band = _soft_max0(m_band * _smooth_abs(resid, temp), ones, temp)
-    support = jnp.zeros_like(bump)
-    if corners is not None:
-        # soft maxima of the residual over the foot and over each corner region (weights as memberships: a
-        # region of under half a cell counts 0, as the exact metric's empty regions do; its weights are then
-        # replaced by the foot's, inside the where too, so that no -inf reaches a gradient)
-        top = temp * jax.nn.logsumexp(resid / temp, b=m_foot)
-        gaps = []
-        for w in corners:
-            filled = jnp.sum(w) > 0.5
-            gap = top - temp * jax.nn.logsumexp(resid / temp, b=jnp.where(filled, w, m_foot))
-            gaps.append(jnp.where(filled, gap, 0.0))
-        gaps = jnp.stack(gaps)
-        support = _soft_max0(gaps, jnp.ones_like(gaps), temp)
-    return _SoftPlane(height, slope, roughness, bump, band, support, b / res, c / res)
+    return _SoftPlane(height, slope, roughness, bump, band, b / res, c / res)
 
 
 def _memberships(patch: _Patch, robot: Robot, theta, res: float, sharpness):
@@ -270,18 +259,6 @@ def _memberships(patch: _Patch, robot: Robot, theta, res: float, sharpness):
     m_foot = soft_coverage(du, dv, theta, hl, hw, res, sharpness)
     m_grown = soft_coverage(du, dv, theta, hl + robot.margin, hw + robot.margin, res, sharpness)
     return m_foot, m_grown
-
-
-def _corners(patch: _Patch, robot: Robot, theta, m_foot, res: float, sharpness):
-    """(4, K, K) soft memberships of the sole's four corner regions (:data:`ijoy_jax.footcost.xla.SUPPORT_CORNER`
-    of its half length and half width out from its centre, in its own frame)."""
-    du, dv = patch.du[:, None], patch.dv[None, :]
-    along = du * jnp.cos(theta) + dv * jnp.sin(theta)
-    across = dv * jnp.cos(theta) - du * jnp.sin(theta)
-    k = sharpness / res
-    a0, b0 = SUPPORT_CORNER * 0.5 * robot.foot_length, SUPPORT_CORNER * 0.5 * robot.foot_width
-    return jnp.stack([m_foot * jax.nn.sigmoid(k * (sa * along - a0)) * jax.nn.sigmoid(k * (sb * across - b0))
-                      for sa in (1.0, -1.0) for sb in (1.0, -1.0)])
 
 
 _TENT_CELLS = 6  # cells per axis under a soft tent: the ones dropped as a point moves on weigh ~exp(-2 sharpness)
@@ -305,18 +282,16 @@ def _soft_ground(h_pad, k: int, x, y, res: float, ref, sharpness):
     return jnp.einsum("pi,pj,pij->p", wi, wj, h_pad[i[:, :, None], j[:, None, :]] - ref)
 
 
-def _soft_lean(h_pad, k: int, terrain: Terrain, robot: Robot, pose, plane: _SoftPlane, temp, sharpness):
-    """Soft FootCost lean (m): the exact metric's points (footcost.xla.plane_metrics) on the soft ground
-    (:func:`_soft_ground`), each side's highest point above the soft plane a soft maximum, the difference's
-    magnitude smooth."""
-    du, dv = lean_points(0.5 * robot.foot_length, 0.5 * robot.foot_width, robot.metrics.lean_inset,
-                         jnp.cos(pose[2]), jnp.sin(pose[2]))
+def _soft_rest(h_pad, k: int, terrain: Terrain, robot: Robot, pose, temp, sharpness):
+    """The soft rested sole (:func:`ijoy_jax.footcost.sole.soft_sole_on_ground`) at ``pose`` on the soft ground
+    (:func:`_soft_ground`) under its contact points: height (m), pitch, roll (rad) and support (m)."""
+    m = robot.metrics
+    hl, hw = 0.5 * robot.foot_length, 0.5 * robot.foot_width
+    du, dv = contact_offsets(hl, hw, m.contact_inset, jnp.cos(pose[2]), jnp.sin(pose[2]))
     du, dv = jnp.stack(du).astype(pose.dtype), jnp.stack(dv).astype(pose.dtype)
     ground = _soft_ground(h_pad, k, pose[0] - terrain.origin[0] + du, pose[1] - terrain.origin[1] + dv,
-                          terrain.resolution, plane.height, sharpness)
-    above = ground - (plane.grad_x * du + plane.grad_y * dv)
-    left, right = (temp * jax.nn.logsumexp(above[side] / temp) for side in (slice(0, 3), slice(3, 6)))
-    return _smooth_abs(left - right, temp)
+                          terrain.resolution, 0.0, sharpness)
+    return soft_sole_on_ground(tuple(ground), hl, hw, m.contact_inset, m.contact_tol, temp)
 
 
 def _barrier(metric, limit, sharpness, barrier_weight):
@@ -415,20 +390,16 @@ def soft_foot_cost_terms(
     free_pad, h_pad = _padded(terrain, k)
     temp = res / sharpness
     metrics = robot.metrics
-    stance_plane = None
+    stance_rest = None
     if terrain.has_height:
-        sp = _patch(terrain, free_pad, h_pad, k, stance)
-        sm_foot, sm_grown = _memberships(sp, robot, stance[2], res, sharpness)
-        stance_plane = _soft_plane(sp, sm_foot, sm_grown, res, temp)
+        stance_rest = _soft_rest(h_pad, k, terrain, robot, stance, temp, sharpness)
     check_path = terrain.has_height and swing_from is not None
     if check_path:
         swing_from = jnp.asarray(swing_from, dtype)
         kp = window_cells(0.5 * robot.max_swing, res) + 2 * _EXTRA_CELLS
         on_pad = jnp.pad(jnp.ones(terrain.shape, dtype), kp)
         hp_pad = jnp.pad(terrain.height.astype(dtype), kp, mode="edge")
-        fp = _patch(terrain, free_pad, h_pad, k, swing_from)
-        fm_foot, fm_grown = _memberships(fp, robot, swing_from[2], res, sharpness)
-        start_height = _soft_plane(fp, fm_foot, fm_grown, res, temp).height
+        start_height = _soft_rest(h_pad, k, terrain, robot, swing_from, temp, sharpness).height
 
     def one(step, a):
         patch = _patch(terrain, free_pad, h_pad, k, step)
@@ -438,9 +409,9 @@ def soft_foot_cost_terms(
         zero = jnp.zeros((), dtype)
         action = robot.action_cost[a].astype(dtype)
         if terrain.has_height:
-            pl = _soft_plane(patch, m_foot, m_grown, res, temp,
-                             _corners(patch, robot, step[2], m_foot, res, sharpness))
-            dh = pl.height - stance_plane.height
+            pl = _soft_plane(patch, m_foot, m_grown, res, temp)
+            rest = _soft_rest(h_pad, k, terrain, robot, step, temp, sharpness)
+            dh = rest.height - stance_rest.height
             adh = _smooth_abs(dh, temp)
 
             def term(weight, metric, limit):
@@ -451,17 +422,15 @@ def soft_foot_cost_terms(
             bump = term(metrics.bump_weight, pl.bump, metrics.bump_limit)
             stepc = term(metrics.step_weight, adh, robot.max_step_height[a])
             band = term(metrics.band_weight, pl.band, metrics.band_limit)
-            support = term(metrics.support_weight, pl.support, metrics.support_limit)
-            lean_m = _soft_lean(h_pad, k, terrain, robot, step, pl, temp, sharpness)
-            lean = term(metrics.lean_weight, lean_m, metrics.lean_limit)
-            raw = (pl.slope, pl.roughness, pl.bump, dh, pl.band, pl.height, pl.support, lean_m)
-            pitch, roll = sole_tilt(pl.grad_x, pl.grad_y, step[2])
+            support = term(metrics.support_weight, rest.support, metrics.support_limit)
+            raw = (pl.slope, pl.roughness, pl.bump, dh, pl.band, rest.height, rest.support)
+            pitch, roll = rest.pitch, rest.roll
             angle_eps = temp / res  # rad: 1 / sharpness
             ankle = (_barrier(_smooth_abs(pitch, angle_eps), robot.max_sole_pitch, sharpness, barrier_weight)
                      + _barrier(_smooth_abs(roll, angle_eps), robot.max_sole_roll, sharpness, barrier_weight))
         else:
-            slope = rough = bump = stepc = band = support = lean = ankle = zero
-            raw = (zero,) * 8
+            slope = rough = bump = stepc = band = support = ankle = zero
+            raw = (zero,) * 7
             pitch = roll = zero
         distance = geometry.safe_norm(geometry.safe_norm(step[0] - stance[0], step[1] - stance[1]), raw[3])
         reach = _barrier(distance, robot.max_sole_distance, sharpness, barrier_weight)
@@ -471,9 +440,9 @@ def soft_foot_cost_terms(
             swing, path_height = _swing_path(
                 terrain, robot, on_pad, hp_pad, kp, swing_from, step, h_ref, a, sharpness, barrier_weight, temp
             )
-        total = action + obstacle + slope + rough + bump + stepc + band + support + lean + swing + ankle + reach
+        total = action + obstacle + slope + rough + bump + stepc + band + support + swing + ankle + reach
         return SoftFootCostTerms(
-            total, action, obstacle, slope, rough, bump, stepc, band, support, lean, mass, *raw, swing, path_height,
+            total, action, obstacle, slope, rough, bump, stepc, band, support, mass, *raw, swing, path_height,
             ankle, reach, pitch, roll, distance
         )
 
