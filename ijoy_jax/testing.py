@@ -291,6 +291,23 @@ def ground_under_points(height, res, origin, pose, foot_length, foot_width, inse
     return np.array(points), np.array(ground)
 
 
+def lowest_planes(points, ground, tie=1e-9):
+    """(K, 3) every plane (height at the centre, gradient along, across) through three of the points ``points``
+    (P, 2) (sole frame, m) that lies above the ground ``ground`` (P,) at every point and lowest at the centre,
+    within ``tie`` (m): a float64 loop over the triples. More than one gradient: the lowest planes turn about an
+    edge through the centre."""
+    planes = []
+    for t in itertools.combinations(range(len(points)), 3):
+        m = np.column_stack([np.ones(3), points[list(t)]])
+        if abs(np.linalg.det(m)) < 1e-12:
+            continue
+        coef = np.linalg.solve(m, ground[list(t)])
+        if np.all(coef[0] + points @ coef[1:] >= ground - 1e-12):
+            planes.append(coef)
+    planes = np.array(planes)
+    return planes[planes[:, 0] <= planes[:, 0].min() + tie]
+
+
 def rested_sole(points, ground, tol):
     """A rigid sole resting on the ground ``ground`` (P,) under its points ``points`` (P, 2) (sole frame, m), by
     brute force in float64: every triple's plane, kept where it lies above every point; the rest is the one
@@ -301,16 +318,7 @@ def rested_sole(points, ground, tol):
 
     Returns dict(height, grad_along, grad_across, margin, contacts, gaps ((P,) m: the sole above each point's
     ground))."""
-    planes = []
-    for t in itertools.combinations(range(len(points)), 3):
-        m = np.column_stack([np.ones(3), points[list(t)]])
-        if abs(np.linalg.det(m)) < 1e-12:
-            continue
-        coef = np.linalg.solve(m, ground[list(t)])
-        if np.all(coef[0] + points @ coef[1:] >= ground - 1e-9):
-            planes.append(coef)
-    planes = np.array(planes)
-    lowest = planes[planes[:, 0] <= planes[:, 0].min() + 1e-9]
+    lowest = lowest_planes(points, ground)
     # several lowest planes turn about an edge through the centre: the middle of their range
     best = np.array([lowest[0, 0], *(0.5 * (lowest[:, 1:].min(axis=0) + lowest[:, 1:].max(axis=0)))])
     gaps = best[0] + points @ best[1:] - ground

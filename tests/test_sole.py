@@ -1,7 +1,6 @@
 """The rested sole (ijoy_jax.footcost.sole) against SciPy's linear program and convex hull, closed forms and
 invariants."""
 
-import itertools
 
 import jax
 import jax.numpy as jnp
@@ -13,6 +12,7 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull
 
 from ijoy_jax.footcost import sole
+from ijoy_jax.testing import lowest_planes
 
 HL, HW, INSET = 0.121, 0.065, 0.009  # HRP-2's sole (robots.hrp2) and its sphere inset
 XS, YS = sole.contact_points(HL, HW, INSET)
@@ -37,19 +37,10 @@ def _lp(z):
 
 
 def _optima(z):
-    """Every optimal plane (float64, by brute force over the triples): (h, gx, gy) rows within 1e-9 m of the
-    lowest valid centre height. More than one distinct gradient: the sole rests on an edge through its centre
-    (the middle points' line or a diagonal) and can rock about it."""
-    planes = []
-    for t in itertools.combinations(range(6), 3):
-        m = np.column_stack([np.ones(3), P[list(t)]])
-        if abs(np.linalg.det(m)) < 1e-12:
-            continue
-        coef = np.linalg.solve(m, z[list(t)])
-        if np.all(coef[0] + P @ coef[1:] >= z - 1e-12):
-            planes.append(coef)
-    planes = np.array(planes)
-    return planes[planes[:, 0] <= planes[:, 0].min() + 1e-9]
+    """Every optimal plane (float64, by brute force over the triples: testing.lowest_planes): (h, gx, gy) rows.
+    More than one distinct gradient: the sole rests on an edge through its centre (the middle points' line or a
+    diagonal) and can turn about it."""
+    return lowest_planes(P, np.asarray(z, np.float64))
 
 
 def _unique(optima):
@@ -205,17 +196,9 @@ def test_hostile_heights_give_a_finite_rest_above_the_ground(z, tol):
 
 def test_every_triple_is_checked_as_brute_force_does():
     """The rested height is the lowest centre height over the triples whose plane lies above all six points
-    (an independent float64 loop over the 20 triples)."""
+    (testing.lowest_planes: an independent float64 loop over the 20 triples)."""
     rng = np.random.default_rng(5)
     z = rng.normal(0.0, 0.02, (200, 6))
     r = _rest(z)
     for i in range(len(z)):
-        best = np.inf
-        for t in itertools.combinations(range(6), 3):
-            m = np.column_stack([np.ones(3), P[list(t)]])
-            if abs(np.linalg.det(m)) < 1e-12:
-                continue
-            coef = np.linalg.solve(m, z[i, list(t)])
-            if np.all(coef[0] + P @ coef[1:] >= z[i] - 1e-12):
-                best = min(best, coef[0])
-        assert float(r.height[i]) == pytest.approx(best, abs=1e-6)
+        assert float(r.height[i]) == pytest.approx(_optima(z[i])[0, 0], abs=1e-6)
