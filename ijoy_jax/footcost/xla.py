@@ -375,7 +375,11 @@ def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax
     metrics = robot.metrics
     du, dv = contact_offsets(hl, hw, metrics.contact_inset, cos, sin)
     ground = bilinear_height(index.height_padded, k, cx + jnp.stack(du), cy + jnp.stack(dv), res, h_ref)
-    rest = sole_on_ground(tuple(ground), hl, hw, metrics.contact_inset, metrics.contact_tol)
+    # Fenced off from the program around it: XLA fused the rest's arithmetic with its neighbours differently in
+    # different programs (select_step and foot_cost_terms in one jit, as the footstep server runs them, against
+    # foot_cost_terms alone), and the sole's roll came out an ulp apart; fenced, it is the same in every program.
+    ground, inset, tol = lax.optimization_barrier((ground, metrics.contact_inset, metrics.contact_tol))
+    rest = lax.optimization_barrier(sole_on_ground(tuple(ground), hl, hw, inset, tol))
     ok = jnp.isfinite(a) & jnp.isfinite(b) & jnp.isfinite(c)
     rested = jnp.isfinite(rest.height)
     z = jnp.float32(0.0)
