@@ -81,9 +81,9 @@ def _assert_same(xla, fused):
 ])
 def test_totals_match_the_xla_footcost(kind, margin, max_margin, with_swing):
     robot = ij.robots.hrp2(margin=margin, max_margin=max_margin)
-    # The map's 2 mm cell noise leaves soles on a few of their points: with a 1 mm contact tolerance every case
-    # keeps both valid steps and steps the support term rejects.
-    robot = robot.replace(metrics=robot.metrics.replace(contact_tol=jnp.float32(0.001)))
+    # The map's 2 mm cell noise leaves soles on a few of their points: with a 2 mm contact tolerance every case
+    # keeps both valid steps (59 or more of 2976 at the 10 cm margin) and steps the support term rejects.
+    robot = robot.replace(metrics=robot.metrics.replace(contact_tol=jnp.float32(0.002)))
     terrain = _terrain(kind, seed=1)
     stance, swing = _queries(6, seed=2)
     xla, fused = _both(terrain, robot, stance, swing if with_swing else None)
