@@ -471,8 +471,9 @@ def test_the_fused_kernel_reaches_the_selector_chooses_as_xla_and_is_recorded():
 @pytest.mark.slow
 def test_robot_leaves_reach_the_choice_and_are_recorded(maps):
     """``robot_leaves`` (``ijoy bench walk --set``) walk the robot the selector would get from set_leaves: the
-    same trajectory as a direct rollout with that robot, different from the preset's on rough ground (a zero
-    support limit refuses every foothold whose corners do not all touch), and in every row."""
+    same trajectory as a direct rollout with that robot, a different one from the preset's on rough ground (a zero
+    support limit refuses every foothold whose contact polygon is smaller than the sole, so other footholds are
+    chosen: farther or shorter, as the greedy choice goes on), and in every row."""
     leaves = {"metrics.support_limit": 0.0, "w": 2}
     rows = B.run(["rough"], batch=BATCH, steps=4, commands=("forward",), walkers=("perfect",), seed=5,
                  robot_leaves=leaves)
@@ -480,7 +481,7 @@ def test_robot_leaves_reach_the_choice_and_are_recorded(maps):
     row, row0 = rows[0], base[0]
     assert row["robot_leaves"] == {"metrics.support_limit": 0.0, "w": 2.0} and row0["robot_leaves"] == {}
     assert rows[-1]["robot_leaves"] == row["robot_leaves"]
-    assert row["progress_mean_m"] < row0["progress_mean_m"]
+    assert row["progress_mean_m"] != row0["progress_mean_m"]
     robot = robots.set_leaves(robots.hrp2(), leaves)
     k_map, k_cmd = jax.random.split(jax.random.fold_in(jax.random.key(5), list(B.FAMILIES).index("rough")))
     terr = B.FAMILIES["rough"].maps(k_map, BATCH, shape=SHAPE, resolution=RES)  # as run draws them
