@@ -19,6 +19,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ijoy_jax import geometry
+
 T = TypeVar("T")
 
 
@@ -88,6 +90,25 @@ def as_array(name: str, value):
             return jnp.asarray(value, jnp.float32)
     except (TypeError, ValueError) as e:
         raise ValueError(f"{name} must be an array of numbers, got {value!r}") from e
+
+
+def as_pose(name: str, value):
+    """A pose argument (``(..., 3)``: x, y, theta) as :func:`as_array` gives it, except that a concrete one whose
+    heading lies beyond :data:`ijoy_jax.geometry.MAX_ANGLE` is first reduced by whole turns in float64
+    (:func:`ijoy_jax.geometry.reduce_turns`): ``2 pi 1e7`` becomes 0, not a float32 whose spacing is 4 rad."""
+    if value is None or is_traced(value):
+        return as_array(name, value)
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):
+            poses = np.asarray(value, np.float64)
+    except (TypeError, ValueError):  # a list of tracers, strings: as_array and the checks name what is wrong
+        return as_array(name, value)
+    if poses.ndim == 0 or poses.shape[-1] != 3:
+        return as_array(name, value)
+    reduced = geometry.reduce_turns(poses)
+    if np.array_equal(reduced, poses, equal_nan=True):
+        return as_array(name, value)
+    return reduced
 
 
 def check_numeric(name: str, value) -> None:

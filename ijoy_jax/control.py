@@ -29,7 +29,7 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry, select
-from ijoy_jax._struct import as_array, check_numeric, is_traced
+from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced
 from ijoy_jax.robots import LEFT, Robot, footprints_overlap, side_actions
 from ijoy_jax.select import Targets
 from ijoy_jax.terrain import Terrain
@@ -308,20 +308,23 @@ class Trajectory(NamedTuple):
 def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive", swing_path: bool = True,
                    quantize: bool = True, targets: Targets | None = None, kernel: str = "xla",
                    index=None, horizon: int | None = None, beam: int | None = None, discount=1.0,
-                   refine=False) -> Selector:
+                   refine=False, supported=True) -> Selector:
     """The paper's GetNextStep as a :class:`Selector`: :func:`ijoy_jax.select.select_step` (its full foothold
     sent; sendable when valid, always for ``"naive"``), recording the :class:`Trajectory` fields per step.
 
     Options as in :func:`rollout`; ``index`` and ``targets``: the terrain's index and the targets, built by
-    :func:`ijoy_jax.select.prepare` once per rollout (call it inside jit).
+    :func:`ijoy_jax.select.prepare` once per rollout (call it inside jit). ``supported`` (() bool, traced)
+    False flags every decision ``unsupported`` (no step valid), as a non-finite stance is: what
+    :func:`rollout` does with a traced start it cannot use.
     """
     opts = select.search_options(method, robot, horizon=horizon, beam=beam, discount=discount, refine=refine)
     if index is None or targets is None:
         index, targets = select.prepare(terrain, robot, index=index, targets=targets)
 
     def choose(info, command, key):
+        stance = jnp.where(supported, info.stance, jnp.nan)  # refused as any non-finite stance is
         choice = select.select_step(
-            terrain, robot, info.stance, info.stance_side, command, method=method,
+            terrain, robot, stance, info.stance_side, command, method=method,
             swing_from=info.swing_from if swing_path else None, quantize=quantize, targets=targets, index=index,
             kernel=kernel, horizon=opts.horizon, beam=opts.beam, discount=opts.discount,
             refine=False if opts.refine is None else opts.refine,
@@ -385,10 +388,15 @@ def _rollout(terrain, robot, start, commands, first_swing, targets, discount, re
     commands = jnp.asarray(commands, jnp.float32)
     if commands.ndim == 1:
         commands = jnp.broadcast_to(commands, (num_steps, 3))
+    # A traced start that is not finite (or turns beyond geometry.MAX_ANGLE): every decision flagged
+    # unsupported, the feet kept at finite stand-ins, so no NaN reaches the trajectory.
+    start = jnp.asarray(start, jnp.float32)
+    start_ok = geometry.pose_supported(start)
+    start = jnp.where(start_ok, start, 0.0)
     selector = exact_selector(terrain, robot, method=method, swing_path=swing_path, quantize=quantize,
                               targets=targets, kernel=kernel, index=index, horizon=horizon, beam=beam,
-                              discount=discount, refine=False if refine is None else refine)
-    state, rec = loop(walker, selector, jnp.asarray(start, jnp.float32), jnp.asarray(first_swing, jnp.float32),
+                              discount=discount, refine=False if refine is None else refine, supported=start_ok)
+    state, rec = loop(walker, selector, start, jnp.asarray(first_swing, jnp.float32),
                       commands[:num_steps],
                       command_filter=None if command_filter is None else command_filter.build(robot))
     return Trajectory(feet=walker.feet(state), **rec)
@@ -495,7 +503,7 @@ def rollout(
       >>> round(float(traj.summary()["distance_along"]), 2)   # 0.1 + 5 * 0.2 m
       1.1
     """
-    start, commands = as_array("start", start), as_array("commands", commands)
+    start, commands = as_pose("start", start), as_array("commands", commands)
     select.validate(terrain, robot, np.zeros(3), 1, np.zeros(3), method=method, targets=targets, kernel=kernel)
     opts = select.search_options(method, robot, horizon=horizon, beam=beam, discount=discount, refine=refine)
     if command_filter is not None and not callable(getattr(command_filter, "build", None)):

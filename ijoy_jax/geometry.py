@@ -18,11 +18,36 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
+
+MAX_ANGLE = 1024.0
+"""rad: the largest heading a pose may have inside a jit. Poses are float32 there, whose spacing at 2**10 rad is
+1.2e-4 rad (0.007 deg); at 2 pi 1e7 it is 4 rad, and a step's turn vanishes in the sum. Concrete poses beyond it
+are reduced by whole turns in float64 at the public functions' boundary (:func:`reduce_turns`); traced ones
+beyond it are flagged (:func:`pose_supported`)."""
 
 
 def wrap_angle(theta: jax.Array) -> jax.Array:
     """Wrap angles (radians) to ``[-pi, pi)``."""
     return (theta + jnp.pi) % (2.0 * jnp.pi) - jnp.pi
+
+
+def reduce_turns(poses) -> np.ndarray:
+    """Concrete ``(..., 3)`` poses in float64 with every heading beyond :data:`MAX_ANGLE` reduced by whole turns
+    to ``[-pi, pi]`` (the same direction, one float64 operation); headings within it are kept as given."""
+    out = np.array(poses, np.float64)
+    yaw = out[..., 2]
+    with np.errstate(invalid="ignore"):  # NaN and inf stay as they are (the finite check names them)
+        far = np.isfinite(yaw) & (np.abs(yaw) > MAX_ANGLE)
+    out[..., 2] = np.where(far, yaw - 2.0 * np.pi * np.round(yaw / (2.0 * np.pi)), yaw)
+    return out
+
+
+def pose_supported(pose) -> jax.Array:
+    """() bool: every ``(..., 3)`` pose is finite with ``|theta| <= MAX_ANGLE`` (traceable; the in-jit rule the
+    boundary's checks and :func:`reduce_turns` apply to concrete poses)."""
+    pose = jnp.asarray(pose)
+    return jnp.all(jnp.isfinite(pose)) & jnp.all(jnp.abs(pose[..., 2]) <= MAX_ANGLE)
 
 
 def safe_norm(x: jax.Array, y: jax.Array) -> jax.Array:

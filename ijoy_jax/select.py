@@ -46,10 +46,10 @@ from jax import lax
 
 from ijoy_jax import geometry, lookahead
 from ijoy_jax import refine as refine_mod
-from ijoy_jax._struct import as_array, check_numeric, is_traced, pytree_dataclass, static_field
+from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced, pytree_dataclass, static_field
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
 from ijoy_jax.footcost import validate as validate_foot_cost
-from ijoy_jax.footcost.xla import footprint_blocked, plane_metrics
+from ijoy_jax.footcost.xla import footprint_blocked, plane_metrics, poses_supported, safe_poses
 from ijoy_jax.robots import Robot, check_robot, dist, mirror, side_actions, side_p0, side_sign
 from ijoy_jax.terrain import Terrain
 
@@ -155,7 +155,12 @@ class StepChoice(NamedTuple):
         ``replace`` or vmap inside a trace) are outside what FootCost supports:
         a margin or footprint beyond the static windows, a negative margin,
         weight or cost, NaN/inf, a non-finite origin or height, a map beyond
-        ``MAX_COORDINATE`` (:func:`~ijoy_jax.footcost.xla.query_supported`).
+        ``MAX_COORDINATE`` (:func:`~ijoy_jax.footcost.xla.query_supported`);
+        or when the query's own traced values are: a stance or swing pose
+        that is not finite or turns beyond
+        :data:`~ijoy_jax.geometry.MAX_ANGLE`, a stance side other than +1 or
+        -1 (:func:`~ijoy_jax.footcost.xla.poses_supported`; ``pose``,
+        ``foothold`` and ``target`` then come from finite stand-ins).
         Then no step is valid
         (``valid`` False, ``cost`` +inf): the reason a robot stops.
     """
@@ -421,12 +426,13 @@ def action_foot_costs(terrain: Terrain, robot: Robot, stance, stance_side, *, sw
     """
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
-    stance = jnp.asarray(as_array("stance", stance), jnp.float32)
-    swing_from = None if swing_from is None else jnp.asarray(as_array("swing_from", swing_from), jnp.float32)
+    stance, swing_from = as_pose("stance", stance), as_pose("swing_from", swing_from)
+    ok = poses_supported(stance, stance_side, swing_from)  # the raw side: side_sign would make 7 a valid +1
+    stance, swing_from = safe_poses(stance, swing_from)
     side = side_sign(stance_side)
     steps = geometry.compose(stance, side_actions(robot, -side))
     idx = jnp.arange(robot.num_actions, dtype=jnp.int32)
-    return _costs_of(terrain, robot, stance, side, steps, idx, swing_from, index, kernel)
+    return jnp.where(ok, _costs_of(terrain, robot, stance, side, steps, idx, swing_from, index, kernel), jnp.inf)
 
 
 def _select(terrain, robot, stance, stance_side, command, swing_from, targets, index, foot_costs, discount, refine,
@@ -434,8 +440,10 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     """The body of :func:`select_step` (always run through :data:`_select_jit`)."""
     if index is None:
         index = index_terrain(terrain, robot)
-    stance = jnp.asarray(stance, jnp.float32)
-    swing_from = None if swing_from is None else jnp.asarray(swing_from, jnp.float32)
+    # A traced stance or swing pose that is not finite (or turns beyond MAX_ANGLE), or a side other than +-1:
+    # flagged unsupported, decided from finite stand-ins so that no NaN reaches the choice.
+    poses_ok = poses_supported(stance, stance_side, swing_from)
+    stance, swing_from = safe_poses(stance, swing_from)
     side = side_sign(stance_side)
     swing = -side
     n = robot.num_actions
@@ -445,7 +453,7 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     def terms_of(idx):
         return _costs_of(terrain, robot, stance, side, steps[idx], idx, swing_from, index, kernel)
 
-    supported = query_supported(terrain, robot)  # FootCost's own rule: every candidate was flagged by it
+    supported = query_supported(terrain, robot) & poses_ok  # FootCost's own rules
     plan_rest = None  # the lookahead's planned steps after this one (refinement keeps them valid)
     if method == "naive":
         best = jnp.argmin(dists).astype(jnp.int32)  # lowest dist, then lowest index
@@ -522,13 +530,14 @@ def _plan(terrain, robot, stance, stance_side, command, swing_from, targets, ind
     """The body of :func:`lookahead_plan` (run through :data:`_plan_jit`)."""
     if index is None:
         index = index_terrain(terrain, robot)
-    stance = jnp.asarray(stance, jnp.float32)
-    swing_from = None if swing_from is None else jnp.asarray(swing_from, jnp.float32)
+    poses_ok = poses_supported(stance, stance_side, swing_from)
+    stance, swing_from = safe_poses(stance, swing_from)
     side = side_sign(stance_side)
     n = robot.num_actions
     dists, _, _ = action_dists(robot, side, command, targets, quantize=quantize)
     steps = geometry.compose(stance, side_actions(robot, -side))
     fc = _costs_of(terrain, robot, stance, side, steps, jnp.arange(n, dtype=jnp.int32), swing_from, index, kernel)
+    fc = jnp.where(poses_ok, fc, jnp.inf)  # an unsupported query plans nothing (Plan.valid False)
     return _search(terrain, robot, stance, side, command, swing_from, targets, index, kernel, quantize,
                    fc + robot.w * dists, dists, steps, discount, horizon, beam, chunk)
 
@@ -553,8 +562,8 @@ def lookahead_plan(terrain: Terrain, robot: Robot, stance, stance_side, command,
       >>> [robot.actions[int(a)].tolist() for a in plan.sequence]   # left foot, then right (stored as left)
       [[0.20000000298023224, 0.1899999976158142, 0.0], [0.20000000298023224, 0.1899999976158142, 0.0]]
     """
-    stance, command, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("command", command),
-                                                               ("swing_from", swing_from)))
+    stance, swing_from = as_pose("stance", stance), as_pose("swing_from", swing_from)
+    command = as_array("command", command)
     validate(terrain, robot, stance, stance_side, command, method="lookahead", swing_from=swing_from,
              targets=targets, index=index, kernel=kernel, chunk=chunk)
     opts = search_options("lookahead", robot, horizon=horizon, beam=beam, discount=discount)
@@ -634,9 +643,12 @@ def select_step(
         float32 holds millimetres (a UTM-scale origin is refused: shift your
         world frame; traced inside a jit, every step is flagged invalid).
       robot: the robot model; ``robot.w`` and ``robot.rotation_weight`` weigh dist.
-      stance: (3,) world pose of the stance foot (m, rad).
+      stance: (3,) world pose of the stance foot (m, rad). A concrete heading
+        beyond :data:`~ijoy_jax.geometry.MAX_ANGLE` (1024 rad) is reduced by
+        whole turns in float64 first; a traced one is flagged
+        ``unsupported``, as a traced NaN is.
       stance_side: +1 if the stance foot is the left one (the right foot
-        swings), -1 if it is the right one.
+        swings), -1 if it is the right one (traced: anything else is flagged).
       command: (3,) joystick command (xdot m/s, ydot m/s, thetadot rad/s) in
         the stance foot's frame. NaN/inf: treated as zero and flagged.
       method: "exhaustive", "ordered" (the paper's search), "naive" or
@@ -695,8 +707,8 @@ def select_step(
       >>> bool(c.valid), round(float(c.pose[0]), 2)   # as far forward as the wall allows
       (True, 0.95)
     """
-    stance, command, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("command", command),
-                                                               ("swing_from", swing_from)))
+    stance, swing_from = as_pose("stance", stance), as_pose("swing_from", swing_from)
+    command = as_array("command", command)
     foot_costs = as_array("foot_costs", foot_costs)
     validate(terrain, robot, stance, stance_side, command, method=method, swing_from=swing_from, targets=targets,
              index=index, kernel=kernel, foot_costs=foot_costs, chunk=chunk)

@@ -75,8 +75,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax import select
-from ijoy_jax._struct import as_array, check_numeric, is_traced, pytree_dataclass
+from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced, pytree_dataclass
 from ijoy_jax.footcost import TerrainIndex, query_supported
+from ijoy_jax.footcost.xla import poses_supported
 from ijoy_jax.haptics import effects as fx
 from ijoy_jax.robots import Robot, side_actions, side_p0, side_sign
 from ijoy_jax.terrain import Terrain
@@ -215,8 +216,9 @@ class FeasibleCommands:
       frame: (5, 3) float32, per axis (command units): the rows :attr:`half_cell`, :attr:`lo`,
         :attr:`hi`, :attr:`unit` and :attr:`full_scale` (one leaf: one argument less per haptic tick).
       any_valid: () bool, at least one action is valid.
-      unsupported: () bool, the robot's or terrain's values are outside what FootCost supports (then no
-        action is valid).
+      unsupported: () bool, the robot's, terrain's or query's values are outside what FootCost supports
+        (a traced non-finite stance or swing pose, a stance side other than +1 or -1, as for
+        :func:`ijoy_jax.select_step`; then no action is valid and the cue is the stop force).
     """
 
     commands: jax.Array
@@ -290,7 +292,9 @@ def _half_spacing(values) -> jax.Array:
 def _feasible(terrain, robot, stance, stance_side, swing_from, index, kernel) -> FeasibleCommands:
     cost = select.action_foot_costs(terrain, robot, stance, stance_side, swing_from=swing_from, index=index,
                                     kernel=kernel)
-    supported = query_supported(terrain, robot)
+    # the query's own values too (a traced NaN stance, a side other than +-1): flagged, no action valid, so the
+    # cue is the full force towards the stick's centre that a robot which cannot step gets
+    supported = query_supported(terrain, robot) & poses_supported(stance, stance_side, swing_from)
     valid = jnp.isfinite(cost) & supported
     commands = action_commands(robot, stance_side)
     dt = robot.step_time.astype(jnp.float32)
@@ -342,7 +346,7 @@ def feasible_commands(terrain: Terrain, robot: Robot, stance, stance_side, swing
       >>> f.commands.shape, int(f.valid.sum())
       ((496, 3), 412)
     """
-    stance, swing_from = as_array("stance", stance), as_array("swing_from", swing_from)
+    stance, swing_from = as_pose("stance", stance), as_pose("swing_from", swing_from)
     select.validate(terrain, robot, stance, stance_side, np.zeros(3), swing_from=swing_from, index=index,
                     kernel=kernel)
     # One program whatever the caller's array types (lists, NumPy float64, Python ints).

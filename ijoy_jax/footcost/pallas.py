@@ -49,7 +49,9 @@ from ijoy_jax.footcost.xla import (
     exceeds,
     metric_term,
     plane_metrics,
+    poses_supported,
     query_supported,
+    safe_poses,
     sole_distance,
     solve3,
 )
@@ -505,7 +507,8 @@ def foot_cost_fused(
     if interpret is None:
         interpret = jax.default_backend() != "gpu"
     steps = jnp.asarray(steps, jnp.float32).reshape(-1, 3)
-    stance = jnp.asarray(stance, jnp.float32)
+    query_ok = poses_supported(stance, stance_side, swing_from)
+    stance, swing_from = safe_poses(stance, swing_from)
     num = steps.shape[0]
     if action_index is None:
         action_index = nearest_actions(robot, stance, stance_side, steps)
@@ -518,14 +521,13 @@ def foot_cost_fused(
     zero = f32(0.0)
     stance_h = start_h = zero
     swx = swy = zero
-    unsupported = ~query_supported(terrain, robot)  # the XLA path's rule, for the whole query
+    unsupported = ~query_supported(terrain, robot) | ~query_ok  # the XLA path's rules, for the whole query
     _, blocks, window, _ = index.height_sums.shape
     window = (window - 1) // 2  # rows per window step (>= k, the longest span)
     if has_height:
         stance_plane = plane_metrics(terrain, index, robot, stance)
         stance_h, unsupported = stance_plane.rest_height, unsupported | ~stance_plane.fitted
         if has_swing:
-            swing_from = jnp.asarray(swing_from, jnp.float32)
             start_plane = plane_metrics(terrain, index, robot, swing_from)
             start_h, unsupported = start_plane.rest_height, unsupported | ~start_plane.fitted
             swx, swy = swing_from[0] - terrain.origin[0], swing_from[1] - terrain.origin[1]

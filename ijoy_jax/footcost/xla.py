@@ -45,7 +45,7 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import as_array, check_numeric
+from ijoy_jax._struct import as_array, as_pose, check_numeric
 from ijoy_jax.footcost.index import (
     TerrainIndex,
     centre_off_map,
@@ -309,6 +309,30 @@ def query_supported(terrain: Terrain, robot: Robot) -> jax.Array:
     return robot_supported(robot) & terrain_supported(terrain) & ~far_frame(terrain)
 
 
+def poses_supported(stance, stance_side, swing_from=None) -> jax.Array:
+    """() bool: a query's own traced values are ones FootCost supports (traceable; both paths' rule).
+
+    False when ``stance`` or ``swing_from`` is not finite or turns beyond :data:`~ijoy_jax.geometry.MAX_ANGLE`
+    (:func:`~ijoy_jax.geometry.pose_supported`), or ``stance_side`` is not exactly +1 or -1: the values the
+    boundary checks refuse where they are concrete. Where False, every candidate is +inf with its
+    ``unsupported`` term set, as for :func:`query_supported`; compute with :func:`safe_poses`' stand-ins.
+    """
+    side = jnp.asarray(stance_side)
+    ok = geometry.pose_supported(stance) & ((side == 1) | (side == -1))
+    return ok if swing_from is None else ok & geometry.pose_supported(swing_from)
+
+
+def safe_poses(stance, swing_from=None):
+    """``(stance, swing_from)`` as float32 with each non-finite pose replaced by zeros: the finite stand-ins an
+    unsupported query (:func:`poses_supported`) computes with, so no NaN reaches a result."""
+
+    def safe(pose):
+        pose = jnp.asarray(pose, jnp.float32)
+        return jnp.where(jnp.all(jnp.isfinite(pose)), pose, 0.0)
+
+    return safe(stance), None if swing_from is None else safe(swing_from)
+
+
 def plane_metrics(terrain: Terrain, index: TerrainIndex, robot: Robot, pose: jax.Array) -> Plane:
     """Least-squares plane under the footprint at ``pose`` (3,) (world x, y, yaw), the metrics around it, and the
     rested sole.
@@ -447,8 +471,9 @@ def footprint_blocked(terrain: Terrain, index: TerrainIndex, pose: jax.Array, ha
 
 
 def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_from, step,
-                action_index) -> FootCostTerms:
-    """FootCost terms of one candidate step (world pose (3,)) executing ``action_index`` from ``stance`` (3,)."""
+                action_index, query_ok=True) -> FootCostTerms:
+    """FootCost terms of one candidate step (world pose (3,)) executing ``action_index`` from ``stance`` (3,);
+    ``query_ok`` False (:func:`poses_supported`) flags it unsupported."""
     res = terrain.resolution
     finite = jnp.all(jnp.isfinite(step))
     step = jnp.where(finite, step, 0.0)
@@ -459,7 +484,7 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
                                        0.5 * robot.foot_width + robot.margin)
     # The robot's and terrain's values (query_supported: a footprint beyond max_radius among them) and this
     # candidate's own: its grown footprint, swing corridor or plane fit beyond what the windows or float32 hold.
-    too_big = grown.overflow | ~query_supported(terrain, robot)
+    too_big = grown.overflow | ~query_supported(terrain, robot) | ~jnp.asarray(query_ok)
     metrics = robot.metrics
     zero = jnp.float32(0.0)
     neg_inf = jnp.float32(-jnp.inf)
@@ -541,7 +566,8 @@ def _foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, act
     if index is None:
         index = index_terrain(terrain, robot)
     steps = jnp.asarray(steps, jnp.float32).reshape(-1, 3)
-    stance = jnp.asarray(stance, jnp.float32)
+    query_ok = poses_supported(stance, stance_side, swing_from)
+    stance, swing_from = safe_poses(stance, swing_from)
     if action_index is None:
         action_index = nearest_actions(robot, stance, stance_side, steps)
     action_index = jnp.broadcast_to(jnp.asarray(action_index, jnp.int32), steps.shape[:1])
@@ -549,13 +575,12 @@ def _foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, act
     if terrain.has_height and swing_from is None:
         stance_plane = plane_metrics(terrain, index, robot, stance)
     elif terrain.has_height:  # both feet's planes as one batched fit: one copy of it in the program, not two
-        swing_from = jnp.asarray(swing_from, jnp.float32)
         planes = jax.vmap(lambda pose: plane_metrics(terrain, index, robot, pose))(jnp.stack([stance, swing_from]))
         stance_plane = jax.tree_util.tree_map(lambda x: x[0], planes)
         start_plane = jax.tree_util.tree_map(lambda x: x[1], planes)
 
     def one(step, a):
-        return _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_from, step, a)
+        return _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_from, step, a, query_ok)
 
     return jax.vmap(one)(steps, action_index)
 
@@ -608,8 +633,8 @@ def validate(terrain, robot, stance, stance_side, steps, swing_from=None, index=
 def checked_query(terrain, robot, stance, stance_side, steps, swing_from=None, index=None):
     """The boundary of both FootCost paths: lists (of numbers or traced scalars) as float32 arrays
     (:func:`~ijoy_jax._struct.as_array`), then :func:`validate`; returns ``(stance, steps, swing_from)``."""
-    stance, steps, swing_from = (as_array(n, v) for n, v in (("stance", stance), ("steps", steps),
-                                                             ("swing_from", swing_from)))
+    stance, steps, swing_from = (as_pose(n, v) for n, v in (("stance", stance), ("steps", steps),
+                                                            ("swing_from", swing_from)))
     validate(terrain, robot, stance, stance_side, steps, swing_from, index)
     return stance, steps, swing_from
 

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import ijoy_jax
-from ijoy_jax import robots, select
+from ijoy_jax import geometry, robots, select
 from ijoy_jax.footcost import FootCostTerms, TerrainIndex, index_terrain, window_cells
 from ijoy_jax.footcost.index import update_columns
 from ijoy_jax.footcost.xla import check_frame
@@ -113,9 +113,13 @@ def _term(value):
     return int(value) if value.dtype.kind in "iu" else json_float(value)
 
 
-def _f32(name: str, values) -> np.ndarray:
-    """JSON numbers as float32 (what select_step does with them), refusing values float32 cannot hold."""
+def _f32(name: str, values, *, pose: bool = False) -> np.ndarray:
+    """JSON numbers as float32 (what select_step does with them), refusing values float32 cannot hold; a
+    ``pose`` (x, y, theta) has a heading beyond :data:`ijoy_jax.geometry.MAX_ANGLE` reduced by whole turns in
+    float64 first, as select_step's boundary does (a float32 of 2 pi 1e7 rad is 4 rad coarse)."""
     a64 = np.asarray(values, np.float64)
+    if pose and a64.shape[-1:] == (3,):
+        a64 = geometry.reduce_turns(a64)
     with np.errstate(over="ignore"):
         a = a64.astype(np.float32)
     if not np.isfinite(a).all():
@@ -278,9 +282,9 @@ class Service:
 
     def _on_step(self, req):
         h = req.header
-        stance, command = _f32("stance", h["stance"]), _f32("command", h["command"])
+        stance, command = _f32("stance", h["stance"], pose=True), _f32("command", h["command"])
         swing = h.get("swing_from")
-        swing = None if swing is None else _f32("swing_from", swing)
+        swing = None if swing is None else _f32("swing_from", swing, pose=True)
         name = h.get("map", DEFAULT_MAP)
         m = self._map(name, "step")
         side = int(h["stance_side"])
