@@ -101,6 +101,37 @@ def test_another_sweep_into_a_folder_without_manifest_is_refused(tiny_file, othe
     assert not (out / "manifest.json").exists()
 
 
+@pytest.mark.parametrize("name", [".", "..", ".hidden", "a/b"])
+def test_a_name_that_is_not_one_plain_path_component_is_refused(tmp_path, name):
+    """The name is the default folder results/<name>: "." or ".." wrote into results/.. (the working folder)."""
+    path = write(tmp_path, TINY.replace('name = "tiny"', f"name = {name!r}".replace("'", '"')))
+    with pytest.raises(sweep.SweepConfigError, match=r"sweep\.name: must be letters") as e:
+        sweep.load_config(path)
+    assert str(path) in str(e.value)
+
+
+def test_a_folder_of_other_files_is_never_written_into(tiny_file, tmp_path):
+    """--out . in a project (its own sweep.toml, sources) is refused before any write; a new or empty folder,
+    or the sweep's own results, are not."""
+    project = tmp_path / "project"
+    project.mkdir()
+    (project / "sweep.toml").write_text("mine")
+    (project / "notes.md").write_text("also mine")
+    before = sorted(p.name for p in project.iterdir())
+    with pytest.raises(ValueError, match="holds files that are not a sweep's results") as e:
+        sweep.run(tiny_file, project, chunk_size=CHUNK, progress=False)
+    assert str(project) in str(e.value) and "notes.md" in str(e.value)
+    assert sorted(p.name for p in project.iterdir()) == before and (project / "sweep.toml").read_text() == "mine"
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    sweep.run(tiny_file, empty, chunk_size=CHUNK, max_scenarios=2, progress=False)
+    sweep.run(tiny_file, empty, chunk_size=CHUNK, max_scenarios=2, progress=False)  # its own results: resumed
+    afile = tmp_path / "file"
+    afile.write_text("x")
+    with pytest.raises(ValueError, match="is not a folder"):
+        sweep.run(tiny_file, afile, chunk_size=CHUNK, progress=False)
+
+
 def test_load_refuses_parts_of_another_plan(tiny_file, other_file, tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
     sweep.run(tiny_file, a, chunk_size=CHUNK, progress=False, max_scenarios=4)

@@ -658,8 +658,10 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     for k in ("name", "description"):
         if k in sweep:
             kw[k] = chk.string(f"sweep.{k}", sweep[k])
-    if "name" in kw and not kw["name"].replace("-", "_").replace(".", "_").isidentifier():
-        chk.fail("sweep.name", f"must be letters, digits, '_', '-' or '.', got {kw['name']!r}")
+    # The name is the default output folder results/<name>: one path component, never "." or ".." (or hidden).
+    if not kw["name"].replace("-", "_").replace(".", "_").isidentifier() or kw["name"].startswith("."):
+        where = "sweep.name" if "name" in sweep else "sweep.name (the file's stem, when not given)"
+        chk.fail(where, f"must be letters, digits, '_', '-' or '.', not starting with '.', got {kw['name']!r}")
     if "seed" in sweep:
         kw["seed"] = chk.integer("sweep.seed", sweep["seed"], lo=0)  # < 2**63: jax.random.key's range
     if "scenarios_per_cell" in sweep:

@@ -493,6 +493,26 @@ _LOCK = ".lock"
 _LOCK_PROC = ".lock-process-{:05d}"
 
 
+def check_out_folder(out: Path) -> None:
+    """Refuse an output folder that holds anything but a sweep's results (ValueError naming it and what it holds).
+
+    A folder is a sweep's once it has ``manifest.json`` or ``parts/``; before that (a fresh or an empty folder,
+    or one whose run stopped at once) it may hold only the run's locks and ``processes/``. So ``--out .`` in a
+    project, or a folder of other files, is never written into (a sweep writes ``sweep.toml`` there)."""
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise ValueError(f"{out} is not a folder; choose another --out")
+    if (out / "manifest.json").exists() or (out / "parts").is_dir():
+        return
+    foreign = sorted(p.name for p in out.iterdir()
+                     if not (p.name == _LOCK or p.name.startswith(".lock-process-") or p.name == "processes"))
+    if foreign:
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise ValueError(f"{out} holds files that are not a sweep's results ({shown}); a sweep writes only into a "
+                         f"new or empty folder or its own results: choose another --out")
+
+
 class _FolderLock:
     """An advisory lock (``fcntl.flock``) on a sweep's output folder, taken before its manifest is read.
 
@@ -886,6 +906,7 @@ def run(
     # Host-side robots per density (cheap, no compile): footprint problems surface before any output.
     bases = {d: _base_robot(cfg, table, d) for d in dict.fromkeys(table["robot.density"].tolist())}
     sim = _make_sim(cfg, table)  # the MJX biped of a physics sweep (host-side), before any output
+    check_out_folder(out)
     lock = _FolderLock(out, pid, nproc)  # one run per folder (members of a multi-process run share it)
     try:
         return _run_locked(cfg, out, table, bases, sim, devs, pid, nproc, chunk_size=chunk_size,
