@@ -58,6 +58,33 @@ def test_from_image_orientation(tmp_path):
     np.testing.assert_array_equal(np.asarray(t2.height), np.asarray(t.height))
 
 
+def test_from_image_reads_a_palette_images_colours_not_its_indices(tmp_path):
+    """A palette PNG's pixels are indices; its heights are the colours they stand for (here index i is grey
+    255 - 2 i, so reading the indices would give an upside-down, halved map)."""
+    from PIL import Image
+
+    idx = np.arange(15, dtype=np.uint8).reshape(3, 5)
+    im = Image.fromarray(idx, mode="P")
+    im.putpalette([v for i in range(256) for v in (255 - 2 * min(i, 127),) * 3])
+    im.save(tmp_path / "palette.png")
+    assert Image.open(tmp_path / "palette.png").mode == "P"
+    t = ij.terrain.from_image(tmp_path / "palette.png", resolution=0.1, height_scale=1.0)
+    grey = (255 - 2 * idx).astype(np.float32)
+    np.testing.assert_array_equal(np.asarray(t.height), np.flipud(grey).T)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(obstacle_above=float("nan")), "obstacle_above must be a height"),
+    (dict(obstacle_above="0.1"), "obstacle_above must be a height"),
+    (dict(image=np.zeros((40, 60, 0))), r"channels >= 1"),
+    (dict(image=np.full((4, 4), "a")), "must hold numbers"),
+])
+def test_from_image_refuses_what_it_cannot_read(kwargs, match):
+    kwargs = {"image": np.zeros((4, 6), np.uint8), **kwargs}
+    with pytest.raises(ValueError, match=match):
+        ij.terrain.from_image(resolution=0.1, **kwargs)
+
+
 def test_rasterize_matches_brute_force():
     rng = np.random.default_rng(3)
     base = ij.terrain.flat((60, 50), 0.02, origin=(-0.3, 0.1), has_height=True)

@@ -10,6 +10,8 @@ obstacles.
 
 from __future__ import annotations
 
+import math
+import numbers
 from typing import Any
 
 import jax
@@ -226,14 +228,15 @@ def from_image(
     Args:
       image: (rows, cols) array (uint8, uint16 or float), or (rows, cols, C)
         whose first channel is used, or a path to an image file (read with
-        Pillow).
+        Pillow; a palette image is converted through its palette first, so
+        its colours are read, not its palette indices).
       resolution: cell edge length in metres, > 0.
       height_scale: metres per image unit (e.g. 0.5 / 255 for a uint8 map whose
         white is 0.5 m).
       origin: (2,) world (x, y) of the map's lower-left corner, metres.
       free: optional free mask in the same image layout; default all free.
-      obstacle_above: optional height (metres); cells higher than it become
-        obstacles (``free=False``).
+      obstacle_above: optional height (metres; a number, not NaN); cells
+        higher than it become obstacles (``free=False``).
 
     Returns:
       Terrain with ``has_height=True``.
@@ -241,14 +244,22 @@ def from_image(
     if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__"):
         from PIL import Image
 
-        image = np.asarray(Image.open(image))
+        with Image.open(image) as opened:
+            # A palette image's pixels are indices into its palette: read the colours they stand for.
+            image = np.asarray(opened.convert("RGBA") if opened.mode in ("P", "PA") else opened)
     img = np.asarray(image)
-    if img.ndim == 3:
+    if img.ndim == 3 and img.shape[2] >= 1:
         img = img[..., 0]
     if img.ndim != 2:
-        raise ValueError(f"image must be 2D (rows, cols) or (rows, cols, channels), got shape {img.shape}")
+        raise ValueError(f"image must be 2D (rows, cols) or (rows, cols, channels >= 1), got shape {img.shape}")
+    if img.dtype.kind not in "biuf":
+        raise ValueError(f"image must hold numbers, got dtype {img.dtype}")
     if not np.isfinite(height_scale):
         raise ValueError("height_scale must be finite")
+    if obstacle_above is not None and (isinstance(obstacle_above, bool) or not isinstance(obstacle_above, numbers.Real)
+                                       or math.isnan(obstacle_above)):
+        raise ValueError(f"obstacle_above must be a height in metres (a number, not NaN) or None, "
+                         f"got {obstacle_above!r}")
     height = np.flipud(img).T.astype(np.float64) * height_scale
     free_arr = np.ones(height.shape, bool) if free is None else np.flipud(np.asarray(free, bool)).T
     if obstacle_above is not None:
