@@ -81,6 +81,60 @@ def test_the_readmes_small_walk_takes_new_physics_values_without_compiling():
     assert np.abs(other.footsteps[1] - first.footsteps[1]).max() > 1e-4
 
 
+def _bound_ends(name):
+    """A field's two ends as float32 (the smallest float32 above a strict lower bound)."""
+    b = physics.BOUNDS[name]
+    lo = np.nextafter(np.float32(b.lo), np.float32(1)) if b.strict else np.float32(b.lo)
+    return np.array([lo, b.hi], np.float32)
+
+
+@pytest.mark.parametrize("name", physics.FIELDS)
+def test_every_dynamics_field_at_both_ends_of_its_bounds_walks_or_falls_flagged_never_nan(name):
+    """The documented bounds are simulated: friction 0 once gave NaN footsteps and distances, unflagged, and
+    the boundary refused float32(0.1) s of latency, its own upper bound. A diverged simulation ends as a
+    flagged fall; the same compiled program serves every value."""
+    _tiny_walk.walk()  # the shared program, compiled once per process
+    before = W.compiled_programs()
+    fields, robots, starts, commands, _ = _tiny_walk.inputs()
+    dyn = physics.Dynamics(**{name: jnp.asarray(_bound_ends(name))})
+    traj = W.rollout_batch(_tiny_walk.sim(), fields, robots, starts, commands, num_steps=_tiny_walk.STEPS,
+                           frames_per_step=_tiny_walk.FRAMES, dynamics=dyn, key=0)
+    traj = jax.tree_util.tree_map(np.asarray, traj)
+    assert W.compiled_programs() == before
+    assert not traj.log.dynamics_invalid.any()  # in bounds: used as given, not replaced
+    for path, leaf in jax.tree_util.tree_leaves_with_path(traj):
+        if leaf.dtype.kind == "f":  # costs may be +inf (an invalid foothold); nothing is NaN
+            assert not np.isnan(leaf).any(), (name, jax.tree_util.keystr(path))
+    for key, value in W.summary(traj).items():
+        assert np.isfinite(np.asarray(value, np.float64)).all(), (name, key)
+
+
+def test_a_nan_terrain_is_refused_where_concrete_and_stands_flagged_where_traced():
+    """sim.walker's boundary refuses what ij.rollout's does; inside a trace (the module's jit, as a caller's jit
+    reaches it, unchecked) a NaN height makes every decision of that robot unsupported, and the robot stands
+    on finite stand-in heights: no NaN in its footsteps or landed soles, the other robot's walk unchanged."""
+    fields, robots, starts, commands, dyn = _tiny_walk.inputs()
+    bad = fields.replace(height=fields.height.at[0, 5, 5].set(jnp.nan))
+    with pytest.raises(ValueError, match="terrain.height must be finite"):
+        W.rollout_batch(_tiny_walk.sim(), bad, robots, starts, commands, num_steps=_tiny_walk.STEPS,
+                        frames_per_step=_tiny_walk.FRAMES, dynamics=dyn, key=0)
+    one = jax.tree_util.tree_map(lambda a: a[0], bad)
+    with pytest.raises(ValueError, match="terrain.height must be finite"):
+        W.rollout(_tiny_walk.sim(), one, ij.robots.hrp2(), _tiny_walk.START, commands[0], num_steps=1)
+    first = jnp.ones(2, jnp.float32)
+    dyn = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float32), (2,)), dyn)  # as given
+    traj = W._rollout_batch(_tiny_walk.sim(), bad, robots, jnp.asarray(starts, jnp.float32),
+                            jnp.asarray(commands, jnp.float32), first, None, dyn, W._keys(0, 2),
+                            num_steps=_tiny_walk.STEPS, method="exhaustive", swing_path=True, quantize=True,
+                            frames_per_step=_tiny_walk.FRAMES, kernel="xla", refine=False)
+    traj = jax.tree_util.tree_map(np.asarray, traj)
+    assert traj.unsupported[0].all() and not traj.taken[0].any() and not traj.unsupported[1].any()
+    for path, leaf in jax.tree_util.tree_leaves_with_path(traj):
+        if leaf.dtype.kind == "f":
+            assert not np.isnan(leaf).any(), jax.tree_util.keystr(path)
+    np.testing.assert_array_equal(traj.footsteps[1], _tiny_walk.walk().footsteps[1])
+
+
 @pytest.fixture(scope="module")
 def sim():
     return W.make_sim(SHAPE_2D, RES, robot=ij.robots.hrp2())

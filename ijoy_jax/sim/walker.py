@@ -540,25 +540,31 @@ def end_step(sim: Sim, world: World, state: SimState, step: Step, ticks: TickSta
              frames: jax.Array | None = None) -> SimState:
     """The robot after a step's last :func:`tick`: the measured soles, the plan's new soles, and the
     :class:`StepLog` (``frames``: its ``qpos`` snapshots, default none). A diverged simulation (a NaN state,
-    e.g. a stiffness beyond the timestep's limit) counts as a fall."""
+    e.g. a stiffness beyond the timestep's limit, or no friction at all) counts as a fall, and the robot is put
+    back to its state at the step's start (its last finite one): no NaN reaches the soles, the log or the
+    trajectory."""
     s, d, target, go = state, ticks.data, step.target, step.go
+    diverged = ~(jnp.all(jnp.isfinite(d.qpos)) & jnp.all(jnp.isfinite(d.qvel)))
+    d, ctrl, sent = jax.tree_util.tree_map(lambda new, old: jnp.where(diverged, old, new),
+                                           (d, ticks.ctrl, ticks.sent), (s.data, s.ctrl, s.sent))
     pst = step.planned_stance
     soles = measured_soles(sim, d)
     left_swings = s.swing > 0
     landed = jnp.where(left_swings, soles[0], soles[1])
     planned = jnp.where(left_swings, jnp.stack([step.plan.swing_to, pst]), jnp.stack([pst, step.plan.swing_to]))
-    fallen = (s.last.fallen | (ticks.low < sim.fall_height) | (ticks.tilt > sim.fall_tilt)
-              | ~jnp.all(jnp.isfinite(d.qpos)))
+    fallen = s.last.fallen | (ticks.low < sim.fall_height) | (ticks.tilt > sim.fall_tilt) | diverged
     err = jnp.where(go, jnp.hypot(landed[0] - target[0], landed[1] - target[1]), 0.0)
     yaw_err = jnp.where(go, jnp.abs(geometry.wrap_angle(landed[5] - target[5])), 0.0)
     cos_tilt = jnp.clip(jnp.dot(_normal(landed), _normal(target)), -1.0, 1.0)
     tilt_err = jnp.where(go, jnp.arccos(cos_tilt), 0.0)
     frames = jnp.zeros((0, sim.mj_model.nq), jnp.float32) if frames is None else frames
-    log = StepLog(landed, err, yaw_err, tilt_err, fallen, ticks.touched, ticks.low, ticks.tilt, frames,
-                  world.dynamics_invalid)
+    frames = jnp.where(jnp.all(jnp.isfinite(frames), axis=-1, keepdims=True), frames, d.qpos)  # a diverged one's
+    low = jnp.where(diverged | jnp.isnan(ticks.low), 0.0, ticks.low)  # the pelvis counted on the ground
+    tilt = jnp.where(diverged | jnp.isnan(ticks.tilt), jnp.pi, ticks.tilt)  # and the torso over
+    log = StepLog(landed, err, yaw_err, tilt_err, fallen, ticks.touched, low, tilt, frames, world.dynamics_invalid)
     anchor = jnp.where(go, pst[:2], 0.5 * (planned[0, :2] + planned[1, :2]))
-    return SimState(d, ticks.ctrl, soles, planned, jnp.where(go, -s.swing, s.swing), anchor, step.corr, log,
-                    jnp.bool_(False), step.key, _believed_error(world, step.belief_key), ticks.sent)
+    return SimState(d, ctrl, soles, planned, jnp.where(go, -s.swing, s.swing), anchor, step.corr, log,
+                    jnp.bool_(False), step.key, _believed_error(world, step.belief_key), sent)
 
 
 def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_per_step: int = 0, *,
@@ -619,10 +625,19 @@ def _rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, first_sw
              kernel: str, refine: bool = False) -> control.Trajectory:
     """The loop of :func:`rollout`, jitted (the Sim's models are traced arguments), its inputs checked by the
     caller; inside a caller's trace it is inlined."""
-    walker = mjx_walker(sim, terrain, frames_per_step=frames_per_step, robot=robot, dynamics=dynamics, key=key)
+    # The physics stands on finite heights: a traced NaN height or origin (refused where concrete, _check) is
+    # flagged by the selector on the terrain as given, every decision unsupported, and the robot stands.
+    walker = mjx_walker(sim, _finite_terrain(terrain), frames_per_step=frames_per_step, robot=robot,
+                        dynamics=dynamics, key=key)
     return control.rollout(terrain, robot, start, commands, num_steps, method=method, first_swing=first_swing,
                            walker=walker, swing_path=swing_path, quantize=quantize, targets=targets, kernel=kernel,
                            refine=refine)
+
+
+def _finite_terrain(terrain: Terrain) -> Terrain:
+    """``terrain`` with each non-finite height and origin coordinate replaced by 0 (the physics' stand-in)."""
+    return terrain.replace(height=jnp.where(jnp.isfinite(terrain.height), terrain.height, 0.0),
+                           origin=jnp.where(jnp.isfinite(terrain.origin), terrain.origin, 0.0))
 
 
 @functools.partial(jax.jit, static_argnames=_OPTIONS)
@@ -665,6 +680,11 @@ def _check(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_ste
         raise ValueError(f"terrain grid {grid} at {terrain.resolution} m does not match "
                          f"the Sim's {sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid")
     check_robot(robot, sim.cfg)
+    # concrete terrain values as ij.rollout's boundary checks them (check_terrain: finite heights and origin)
+    for name in ("height", "origin"):
+        leaf = getattr(terrain, name)
+        if not _is_traced(leaf) and not bool(jnp.all(jnp.isfinite(jnp.asarray(leaf)))):
+            raise ValueError(f"terrain.{name} must be finite (no NaN or inf)")
     if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
         raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
     if method not in METHODS:
