@@ -285,6 +285,9 @@ BAD = {
                              np.ones((_BIG, _BIG), bool).tobytes()], "too_large"),
     "resolution 0": ([_hdr(**{**_TERRAIN, "resolution": 0}, arrays=[_SPEC]), _F], "invalid_field"),
     "resolution 1 um": ([_hdr(**{**_TERRAIN, "resolution": 1e-6}, arrays=[_SPEC]), _F], "too_large"),
+    "resolution 1e-320": ([_hdr(**{**_TERRAIN, "resolution": 1e-320}, arrays=[_SPEC]), _F], "too_large"),
+    "a 400-digit resolution": ([_hdr(**{**_TERRAIN, "resolution": 10**400}, arrays=[_SPEC]), _F], "non_finite"),
+    "a 400-digit stance": ([_hdr(**{**_STEP, "stance": [10**400, 1.0, 0.0]})], "non_finite"),
     "origin far away": ([_hdr(**_TERRAIN, origin=[1e5, 0], arrays=[_SPEC]), _F], "invalid_value"),
     "step on an unknown map": ([_hdr(**_STEP, map="nowhere")], "no_terrain"),
 }

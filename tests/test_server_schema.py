@@ -106,6 +106,26 @@ def test_arrays_round_trip_bit_for_bit(dtype, nx, ny, seed):
     assert out.arrays[name].dtype == a.dtype and out.arrays[name].tobytes() == a.tobytes()
 
 
+def test_a_shape_written_as_whole_floats_is_read_as_integers():
+    """JSON Schema's integers include 60.0: the shape [4.0, 3.0] passes the schema, and the array is read as (4, 3)
+    (NumPy refused the floats with "'float' object cannot be interpreted as an integer")."""
+    a = np.ones((4, 3), bool)
+    header = {"version": 1, "type": "set_terrain", "resolution": 0.05,
+              "arrays": [{"name": "free", "dtype": "|b1", "shape": [4.0, 3.0]}]}
+    out = schema.decode_request([json.dumps(header).encode(), a.tobytes()], LIMITS)
+    assert out.arrays["free"].shape == (4, 3) and out.arrays["free"].all()
+
+
+@pytest.mark.parametrize("field, value", [("stance", [10**400, 1, 0]), ("command", [-(10**309), 0, 0]),
+                                          ("origin", [10**400, 0])])
+def test_an_integer_beyond_float64_is_non_finite_not_internal(field, value):
+    header = {"version": 1, "type": "step", "stance": [1, 1, 0], "stance_side": -1, "command": [0.2, 0, 0],
+              field: value}
+    with pytest.raises(schema.ProtocolError) as e:
+        schema.decode_request([json.dumps(header).encode()], LIMITS)
+    assert e.value.code == "non_finite" and "beyond float64" in e.value.message
+
+
 @given(st.floats(width=32))
 def test_reply_floats_round_trip_float32_exactly(x):
     back = np.float32(schema.float_from_json(json.loads(json.dumps(schema.json_float(np.float32(x))))))

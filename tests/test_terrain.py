@@ -29,6 +29,8 @@ def test_from_arrays_conventions():
         (dict(height=np.zeros((3, 3)), resolution=0.0), "resolution"),
         (dict(height=np.zeros((3, 3)), resolution=-1.0), "resolution"),
         (dict(height=np.zeros((3, 3)), resolution=float("nan")), "resolution"),
+        (dict(height=np.zeros((3, 3)), resolution=1e-300), r"resolution must be .* >= MIN_RESOLUTION"),
+        (dict(height=np.zeros((3, 3)), resolution=5e-324), r"resolution must be .* >= MIN_RESOLUTION"),
         (dict(height=np.full((3, 3), np.inf)), "finite"),
         (dict(height=np.zeros((3, 3)), origin=(0.0, np.nan)), "origin must be finite"),
         (dict(height=np.zeros((3, 3)), origin=(0.0,)), "origin must have shape"),
@@ -41,6 +43,12 @@ def test_from_arrays_rejects_bad_input(kwargs, match):
     kwargs.setdefault("free", None)
     with pytest.raises(ValueError, match=match):
         ij.terrain.from_arrays(**kwargs)
+
+
+def test_a_resolution_set_by_replace_is_checked_as_from_arrays_checks_it():
+    t = ij.terrain.from_arrays(np.zeros((3, 3), np.float32), None, ij.terrain.grid.MIN_RESOLUTION)  # the finest
+    with pytest.raises(ValueError, match="terrain.resolution must be"):
+        ij.terrain.check_terrain(t.replace(resolution=1e-300))
 
 
 def test_from_image_orientation(tmp_path):

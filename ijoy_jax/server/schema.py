@@ -18,6 +18,7 @@ import dataclasses
 import functools
 import json
 import math
+import sys
 from collections.abc import Mapping, Sequence
 from importlib import resources
 from typing import Any, NamedTuple
@@ -185,6 +186,16 @@ def _finite_float(text: str) -> float:
     return v
 
 
+def _float64_int(text: str) -> int:
+    """A JSON integer, refused (``non_finite``) beyond float64's range: every number field is read as a float
+    somewhere (a 400-digit integer in ``stance`` raised OverflowError there, answered ``internal``)."""
+    v = int(text)
+    if abs(v) > sys.float_info.max:
+        raise ProtocolError("non_finite", f"the header holds the integer {text[:40]}... ({len(text)} digits), "
+                                          "beyond float64 (values must be finite)")
+    return v
+
+
 def _parse_header(frame, limits: Limits) -> dict:
     raw = bytes(frame)
     if len(raw) > limits.max_header_bytes:
@@ -195,7 +206,7 @@ def _parse_header(frame, limits: Limits) -> dict:
     except UnicodeDecodeError as e:
         raise ProtocolError("malformed", f"header is not UTF-8 ({e.reason} at byte {e.start})") from None
     try:
-        header = json.loads(text, parse_constant=_no_constant, parse_float=_finite_float)
+        header = json.loads(text, parse_constant=_no_constant, parse_float=_finite_float, parse_int=_float64_int)
     except ProtocolError:
         raise
     except RecursionError:
@@ -246,7 +257,8 @@ def request_id(frames: Sequence) -> Any:
 
 
 def _decode_array(rtype: str, spec: dict, frame, limits: Limits) -> np.ndarray:
-    name, dtype, shape = spec["name"], spec["dtype"], tuple(spec["shape"])
+    # whole numbers, as the schema checked them; JSON Schema's integers include 60.0, which NumPy refuses
+    name, dtype, shape = spec["name"], spec["dtype"], tuple(int(v) for v in spec["shape"])
     accepted = ARRAY_FIELDS.get(rtype, {})
     if name not in accepted:
         raise ProtocolError("invalid_field", f"arrays: {rtype} takes no array {name!r} (it takes "

@@ -219,12 +219,15 @@ class Service:
                                                  f"({sorted(self.maps)})")
         height, free = req.arrays.get("height"), req.arrays.get("free")
         res = float(h["resolution"])
-        cells = max(window_cells(self.robot.max_radius, res), window_cells(0.5 * self.robot.max_swing, res))
+        origin = _f32("origin", h.get("origin", [0.0, 0.0]))
+        try:
+            cells = max(window_cells(self.robot.max_radius, res), window_cells(0.5 * self.robot.max_swing, res))
+        except OverflowError:  # a denormal resolution (1e-320 m): windows beyond any count
+            cells = math.inf
         if cells > self.limits.max_window_cells:
             raise ProtocolError("too_large", f"resolution {res!r} m gives the robot's footprint and swing windows "
                                              f"{cells} cells across, above max_window_cells = "
                                              f"{self.limits.max_window_cells}: use a coarser map")
-        origin = _f32("origin", h.get("origin", [0.0, 0.0]))
         terrain = from_arrays(None if height is None else np.asarray(height, np.float32),
                               None if free is None else np.asarray(free, bool), res, origin)
         check_frame(terrain)

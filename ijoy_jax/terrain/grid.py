@@ -107,9 +107,9 @@ def check_terrain(terrain) -> None:
     if not isinstance(terrain, Terrain):
         raise TypeError(f"terrain must be an ijoy_jax.Terrain, got {type(terrain).__name__}")
     res = terrain.resolution
-    if isinstance(res, bool) or not isinstance(res, (int, float, np.integer, np.floating)) or not np.isfinite(res) \
-            or res <= 0:
-        raise ValueError(f"terrain.resolution must be a positive finite number of metres, got {res!r}")
+    if isinstance(res, bool) or not isinstance(res, (int, float, np.integer, np.floating)):
+        raise ValueError(f"terrain.resolution must be a number of metres, got {res!r}")
+    _check_resolution("terrain.resolution", float(res))
     for name, kinds, what in (("free", "b", "bool"), ("height", "biuf", "numeric"), ("origin", "biuf", "numeric")):
         dtype = _dtype(getattr(terrain, name))
         if dtype.kind not in kinds:
@@ -135,13 +135,25 @@ def terrain_supported(terrain: Terrain) -> jax.Array:
     return jnp.all(jnp.isfinite(terrain.origin)) & jnp.all(jnp.isfinite(terrain.height))
 
 
+MIN_RESOLUTION = 1e-4
+"""m: the finest cell a map may have (0.1 mm). Finer, a footprint's window is beyond any memory (HRP-2's spans
+3000 cells a side at 0.1 mm) and a window's cell count overflows: ``resolution=1e-300`` was accepted and
+failed later with an OverflowError."""
+
+
+def _check_resolution(label: str, res) -> None:
+    if not np.isfinite(res) or res < MIN_RESOLUTION:
+        raise ValueError(f"{label} must be a finite number of metres >= MIN_RESOLUTION ({MIN_RESOLUTION:g} m), "
+                         f"got {res!r}")
+
+
 def grid_spec(resolution, origin) -> tuple[float, jax.Array]:
-    """Validate a grid's resolution (> 0, finite, metres) and origin ((2,), finite); return them typed."""
+    """Validate a grid's resolution (finite, metres, >= :data:`MIN_RESOLUTION`) and origin ((2,), finite); return
+    them typed."""
     if isinstance(resolution, bool) or np.ndim(resolution) != 0 or _dtype(resolution).kind not in "iuf":
         raise TypeError(f"resolution must be a number of metres, got {resolution!r}")
     res = float(resolution)
-    if not np.isfinite(res) or res <= 0.0:
-        raise ValueError(f"resolution must be a positive finite number of metres, got {resolution!r}")
+    _check_resolution("resolution", res)
     _check_numeric("origin", origin)
     origin = jnp.asarray(origin, jnp.float32)
     if origin.shape != (2,):
