@@ -34,8 +34,8 @@ def _decide(methods):
         for m in methods})
 
 
-_decide_all = _decide(("exhaustive", "ordered", "naive"))
-_decide_ahead = _decide(("lookahead",))  # the two-step search: a larger program, in the slow tier
+_decide_all = _decide(("exhaustive",))  # the fast tier's: one selector program
+_decide_others = _decide(("ordered", "naive", "lookahead"))  # the other searches: larger programs, slow tier
 _plan = jax.jit(lambda s, d, w: select.lookahead_plan(ROUGH, ROBOT, s, d, COMMAND, swing_from=w, targets=TARGETS))
 
 
@@ -87,10 +87,10 @@ def test_a_traced_query_is_flagged_where_the_boundary_would_refuse_it_and_never_
 @pytest.mark.slow
 @settings(max_examples=12, deadline=None, derandomize=True)
 @given(hostile_queries())
-def test_the_lookahead_flags_a_traced_query_alike(query):
+def test_the_other_searches_flag_a_traced_query_alike(query):
     stance, side, swing_from = query
     ok = _expected_supported(stance, side, swing_from)
-    _check_choices(_decide_ahead(jnp.asarray(stance), jnp.float32(side), jnp.asarray(swing_from)), ok)
+    _check_choices(_decide_others(jnp.asarray(stance), jnp.float32(side), jnp.asarray(swing_from)), ok)
     plan = _plan(jnp.asarray(stance), jnp.float32(side), jnp.asarray(swing_from))
     assert ok or (int(plan.first) == -1 and np.all(np.asarray(plan.sequence) == -1)
                   and float(plan.score) == np.inf)
@@ -129,19 +129,28 @@ def test_a_traced_start_that_is_not_finite_stops_flagged_with_finite_distances()
     assert int(run(jnp.asarray(good), jnp.float32(1.0)).summary()["unsupported_decisions"]) == 0
 
 
-@pytest.mark.parametrize("turns", [2.0e2, 1.0e7, -3.0e9])
-def test_a_heading_of_many_turns_keeps_the_steps_turn(turns):
+TURNS = [2.0e2, 1.0e7, -3.0e9]
+
+
+def test_a_heading_of_many_turns_keeps_the_steps_turn():
     """2 pi 1e7 rad in float32 is 4 rad coarse: a step's turn would vanish in the sum. The boundary reduces the
     heading by whole turns in float64, so the decision equals the one from the same direction written small."""
+    small, swing = np.array([0.4, 0.45, 0.3]), np.array([0.35, 0.26, 0.3])  # swing_from: the program above's
+    a = ij.select_step(ROUGH, ROBOT, small, -1, [0.1, 0.0, 0.4], swing_from=swing, targets=TARGETS)
+    for turns in TURNS:
+        many, far_swing = (p + np.array([0.0, 0.0, 2 * np.pi * turns]) for p in (small, swing))
+        b = ij.select_step(ROUGH, ROBOT, list(many), -1, [0.1, 0.0, 0.4], swing_from=far_swing, targets=TARGETS)
+        assert bool(b.valid) and int(b.index) == int(a.index), turns
+        np.testing.assert_allclose(np.asarray(b.pose[:2]), np.asarray(a.pose[:2]), atol=2e-6)
+        assert abs(float(geometry.wrap_angle(b.pose[2] - a.pose[2]))) < 1e-5, turns
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("turns", TURNS)
+def test_the_rollout_and_the_server_reduce_a_heading_of_many_turns_alike(turns):
     small = np.array([0.4, 0.45, 0.3])
     many = small + np.array([0.0, 0.0, 2 * np.pi * turns])
     a = ij.select_step(ROUGH, ROBOT, small, -1, [0.1, 0.0, 0.4], targets=TARGETS)
-    b = ij.select_step(ROUGH, ROBOT, list(many), -1, [0.1, 0.0, 0.4], targets=TARGETS)
-    assert bool(b.valid) and int(b.index) == int(a.index)
-    np.testing.assert_allclose(np.asarray(b.pose[:2]), np.asarray(a.pose[:2]), atol=2e-6)
-    turn = float(geometry.wrap_angle(b.pose[2] - a.pose[2]))
-    assert abs(turn) < 1e-5
-    # the rollout's start and the server's stance go through the same boundary
     feet = np.array([[0.4, 0.55, 0.0], [0.4, 0.36, 0.0]]) + np.array([0.0, 0.0, 2 * np.pi * turns])
     t_many = ij.rollout(ROUGH, ROBOT, feet, [0.1, 0.0, 0.4], 2, targets=TARGETS)
     t_small = ij.rollout(ROUGH, ROBOT, feet - np.array([0.0, 0.0, 2 * np.pi * turns]), [0.1, 0.0, 0.4], 2,
