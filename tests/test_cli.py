@@ -45,6 +45,12 @@ CASES = [
     (["drive", "--server", "nohost"], "server must be HOST:PORT, got 'nohost'"),
     (["drive", "--margin", "-1"], "margin must be >= 0"),
     (["drive", "--replay", "no_such_drive.mcap"], "recording 'no_such_drive.mcap' does not exist"),
+    (["drive", "--duration", "nan"], "--duration must be in (0, 86400] s, got nan"),
+    (["drive", "--duration", "-1"], "--duration must be in (0, 86400] s"),
+    (["drive", "--duration", "1e30"], "--duration must be in (0, 86400] s"),
+    (["drive", "--server", "127.0.0.1:99999"], "server port must be in 1..65535"),
+    (["tune", "inverse", "--out", "o", "--config", "."], "[Errno 21] Is a directory: '.'"),  # any OSError
+    (["sweep", "run", str(ROOT / "sweeps" / "w_sweep.toml"), "--out", "/dev/null"], "/dev/null is not a folder"),
     (["serve", "--port", "99999", "--warm-up", "none"], "port must be in 0..65535"),
     (["serve", "--warm-up", "big"], "a map shape is NXxNY or NXxNY@RES"),
     (["serve", "--margin", "-0.1", "--warm-up", "none"], "margin must be >= 0"),
@@ -116,3 +122,13 @@ def test_every_subcommand_has_a_bad_input_case(tmp_path):
     listed = re.search(r"\{([a-z,]+)\}", p.stdout).group(1).split(",")
     assert p.returncode == 0 and len(listed) >= 5
     assert set(listed) == {a[0] for a, _ in CASES}
+
+
+def test_a_trace_that_would_never_end_is_refused_before_the_drive(tmp_path):
+    """A trace's last time is the drive's end: 1e30 s ran without end (memory growing), now one line."""
+    trace = tmp_path / "forever.csv"
+    trace.write_text("t,forward,left,turn\n0,0.5,0,0\n1e30,0.5,0,0\n")
+    p = run_cli(["drive", "--script", str(trace), "--headless"], tmp_path)
+    assert p.returncode == 2 and p.stdout == "", p.stderr
+    assert p.stderr.strip().splitlines() == [
+        f"ijoy: error: the trace's last time ({trace}) must be in (0, 86400] s, got 1e+30"], p.stderr

@@ -172,13 +172,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         _use_compile_cache(not args.no_compile_cache)
         return _run(args)
-    except (ValueError, TypeError, FileNotFoundError) as e:  # bad input: one line, like argparse's own errors
+    except (ValueError, TypeError, OSError) as e:  # bad input, or a file or server it names: one line, like
+        # argparse's own errors (OSError: a file that is missing, a folder or read-only; a server that does
+        # not answer, TimeoutError)
         print(f"ijoy: error: {e}", file=sys.stderr)
         return 2
 
 
 def _run(args) -> int:
-    """Dispatch a parsed command line; bad input raises ValueError, TypeError or FileNotFoundError."""
+    """Dispatch a parsed command line; bad input raises ValueError, TypeError or OSError."""
     from ijoy_jax.apps import tune_cli
 
     if args.command == "tune":

@@ -133,9 +133,13 @@ def main(args) -> int:
         raise ValueError("give --script or --input, not both")
     if args.server is not None:
         live.session.server_address(args.server)  # a malformed --server: one line, before the terrain is built
+    if args.duration is not None:
+        live.loop.check_duration(args.duration, "--duration")  # before anything is built
     source = None
     if args.script:
         source = live.ScriptInput(args.script)  # a missing or malformed trace fails here, before any compile
+        if args.duration is None:
+            live.loop.check_duration(source.duration, f"the trace's last time ({args.script})")
     kind = args.input or (None if args.script else ("keyboard" if args.headless else "view"))
     if kind == "view" and args.headless:
         raise ValueError("--input view needs the view (drop --headless)")

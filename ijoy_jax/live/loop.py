@@ -46,7 +46,13 @@ from ijoy_jax.live.inputs import DEFAULT_DEADZONE, Trace, axes_to_command
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
-__all__ = ["DEFAULT_REACH_DIRECTIONS", "TERM_NAMES", "DriveResult", "drive", "latency_stats", "scripted_commands"]
+__all__ = ["DEFAULT_REACH_DIRECTIONS", "MAX_DURATION", "TERM_NAMES", "DriveResult", "check_duration", "drive",
+           "latency_stats", "scripted_commands"]
+
+MAX_DURATION = 86400.0
+"""s: the longest drive (a day). A drive keeps every tick's state for its result and its recording, so a longer
+one (a trace whose last time is 1e30, ``--duration 1e30``) would grow without end; end a longer session with
+the stop event instead."""
 
 DEFAULT_REACH_DIRECTIONS = 32
 """Directions of the cue's reach polygon shown in the live view."""
@@ -170,6 +176,18 @@ def _terms(terrain, robot, prepared, info, decision: Decision) -> dict:
     return {name: float(np.asarray(getattr(t, name))[0]) for name in TERM_NAMES}
 
 
+def check_duration(duration, what: str = "duration") -> float:
+    """``duration`` (s) as a float, or ValueError naming ``what`` unless it is in ``(0, MAX_DURATION]`` (NaN and
+    -1 ran no step and exited 0; 1e30 ran without end)."""
+    try:
+        value = float(duration)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be a number of seconds, got {duration!r}") from None
+    if not 0.0 < value <= MAX_DURATION:
+        raise ValueError(f"{what} must be in (0, {MAX_DURATION:g}] s, got {duration!r}")
+    return value
+
+
 def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: float = DEFAULT_DEADZONE,
           decide_at: float = 0.0, realtime: bool = True, num_steps: int | None = None,
           duration: float | None = None, recorder=None, on_tick: Callable[[dict], Any] | None = None,
@@ -207,7 +225,10 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
         raise ValueError(f"decide_at must be in [0, 1) (a fraction of the step), got {decide_at!r}")
     if num_steps is not None and (isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 0):
         raise ValueError(f"num_steps must be a whole number >= 0, got {num_steps!r}")
+    given = duration is not None
     duration = getattr(source, "duration", None) if duration is None else float(duration)
+    if duration is not None:
+        check_duration(duration, "duration" if given else "the source's duration (its last time)")
     if num_steps is None and duration is None and stop is None:
         raise ValueError("a drive without num_steps, duration or a stop event would never end")
     prepared = select.prepare(terrain, robot) if prepared is None else prepared

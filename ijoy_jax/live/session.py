@@ -198,6 +198,8 @@ def server_address(text) -> tuple[str, int]:
     host, _, port = (text or "").rpartition(":")
     if not host or not port.isdigit():
         raise ValueError(f"server must be HOST:PORT, got {text!r}")
+    if not 1 <= int(port) <= 65535:
+        raise ValueError(f"server port must be in 1..65535, got {port} in {text!r}")
     return host, int(port)
 
 
