@@ -135,6 +135,28 @@ def test_a_nan_terrain_is_refused_where_concrete_and_stands_flagged_where_traced
     np.testing.assert_array_equal(traj.footsteps[1], _tiny_walk.walk().footsteps[1])
 
 
+def test_the_boundary_checks_pass_through_a_callers_trace_with_traced_and_concrete_leaves_mixed():
+    """Under a user's jit one traced Dynamics leaf or terrain leaf beside concrete ones once failed at the
+    boundary (TracerArrayConversionError: the concrete values were checked with jnp, staged into the trace). The
+    boundary checks concrete leaves with NumPy and skips traced ones, so it goes on to the next check: a bad
+    ``commands`` shape is still named, before any physics is traced."""
+    fields, robots, starts, commands, _ = _tiny_walk.inputs()
+    sim = _tiny_walk.sim()  # built outside the trace: a Sim is static
+
+    def walk(friction, origin):
+        dyn = physics.Dynamics(friction=friction, latency=0.01, push=np.zeros(2))  # traced beside concrete
+        return W.rollout_batch(sim, fields.replace(origin=origin), robots, starts, commands[:, :2],
+                               num_steps=_tiny_walk.STEPS, frames_per_step=_tiny_walk.FRAMES, dynamics=dyn, key=0)
+
+    with pytest.raises(ValueError, match="commands must have shape"):
+        jax.make_jaxpr(walk)(jnp.array([1.0, 0.5]), fields.origin)
+    with pytest.raises(ValueError, match="dynamics.latency must be finite"):  # a concrete bad value, still named
+        jax.make_jaxpr(lambda f: W.rollout_batch(
+            sim, fields, robots, starts, commands, num_steps=_tiny_walk.STEPS,
+            frames_per_step=_tiny_walk.FRAMES, dynamics=physics.Dynamics(friction=f, latency=np.nan), key=0))(
+            jnp.ones(2))
+
+
 @pytest.fixture(scope="module")
 def sim():
     return W.make_sim(SHAPE_2D, RES, robot=ij.robots.hrp2())

@@ -120,10 +120,12 @@ NOMINAL = Dynamics()
 """The robot as built: what a rollout without ``dynamics`` simulates."""
 
 
-def _out_of_bounds(name: str, x):
+def _out_of_bounds(name: str, x, xp=jnp):
+    """Whether ``x`` is outside field ``name``'s bounds; ``xp=np`` for concrete values, so that the boundary check
+    stages nothing into a caller's trace."""
     b = BOUNDS[name]
     low = x <= b.lo if b.strict else x < b.lo
-    return ~jnp.isfinite(x) | low | (x > b.hi)
+    return ~xp.isfinite(x) | low | (x > b.hi)
 
 
 def check(dynamics: Dynamics, batch: int | None = None) -> None:
@@ -155,7 +157,7 @@ def check(dynamics: Dynamics, batch: int | None = None) -> None:
         # in float32, as the walker computes and sanitize() checks: float32(0.1) is 0.1000000015 in float64,
         # and the documented bound itself was refused
         with np.errstate(invalid="ignore", over="ignore"):
-            bad = np.asarray(_out_of_bounds(name, arr.astype(np.float32)))
+            bad = np.asarray(_out_of_bounds(name, arr.astype(np.float32), np))
         if bad.any():
             shown = arr[bad].ravel()[0]
             lo = f"> {b.lo:g}" if b.strict else f">= {b.lo:g}"

@@ -39,6 +39,7 @@ from mujoco import mjx
 
 from ijoy_jax import control, geometry, select
 from ijoy_jax import terrain as terrain_mod
+from ijoy_jax._struct import is_traced
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
@@ -666,10 +667,6 @@ def compiled_programs() -> int:
     return compiled_count(_rollout) + compiled_count(_rollout_batch)
 
 
-def _is_traced(x) -> bool:
-    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(x))
-
-
 def _check(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_steps, method: str, first_swing,
            frames_per_step: int, batch: int | None, dynamics, kernel: str) -> None:
     """The inputs of one rollout (``batch`` None) or of ``batch`` rollouts: shapes and static options always,
@@ -683,7 +680,7 @@ def _check(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_ste
     # concrete terrain values as ij.rollout's boundary checks them (check_terrain: finite heights and origin)
     for name in ("height", "origin"):
         leaf = getattr(terrain, name)
-        if not _is_traced(leaf) and not bool(jnp.all(jnp.isfinite(jnp.asarray(leaf)))):
+        if not is_traced(leaf) and not np.all(np.isfinite(np.asarray(leaf))):  # NumPy: no op staged into a trace
             raise ValueError(f"terrain.{name} must be finite (no NaN or inf)")
     if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
         raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
@@ -695,14 +692,14 @@ def _check(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_ste
     if dynamics is not None:
         physics.check(dynamics, batch)
     if np.shape(first_swing) not in ((), lead) or (
-            not _is_traced(first_swing) and not np.all(np.isin(np.asarray(first_swing), (LEFT, -LEFT)))):
+            not is_traced(first_swing) and not np.all(np.isin(np.asarray(first_swing), (LEFT, -LEFT)))):
         raise ValueError(f"first_swing must be +1 (left) or -1 (right) (one, or one per rollout), got {first_swing!r}")
     if batch is None and np.shape(start) != (2, 3):
         raise ValueError(f"start must have shape (2, 3) (left foot, right foot), got {np.shape(start)}")
     if batch is not None and np.shape(start) != (batch, 2, 3):
         raise ValueError(f"starts must have shape (B, 2, 3) with B = the terrains' batch {batch}, "
                          f"got {np.shape(start)}")
-    if not _is_traced(start) and not np.all(np.isfinite(np.asarray(start))):
+    if not is_traced(start) and not np.all(np.isfinite(np.asarray(start))):
         raise ValueError("start must be finite")
     shapes = (lead + (3,), lead + (num_steps, 3))
     if np.shape(commands) not in shapes:
