@@ -87,6 +87,60 @@ def test_gamepad_axes_mapping():
     np.testing.assert_array_equal(live.gamepad_axes([np.nan, 3.0, 0.0, 0.0]), [-1.0, 0.0, 0.0])
 
 
+_JSON = st.recursive(st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=8),
+                     lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner,
+                                                                                  max_size=4), max_leaves=12)
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(_JSON)
+def test_a_page_message_is_an_object_or_ignored(value):
+    from ijoy_jax.live.view import page_message
+
+    text = json.dumps(value)
+    assert page_message(text) == (value if isinstance(value, dict) else None) or value != value  # NaN != NaN
+    assert page_message(text[: len(text) // 2]) in (None, value) or isinstance(value, dict)
+
+
+def test_the_views_socket_ignores_hostile_messages_and_keeps_the_connection():
+    """Valid JSON that is not an object, JSON nested past the parser's recursion limit (in 4000 bytes), a stick
+    of the wrong size and a message over MAX_MESSAGE_BYTES: the first three are ignored on the same connection
+    (they once raised AttributeError / RecursionError in the handler and dropped it), the last closes only its
+    own connection."""
+    import asyncio
+
+    import aiohttp
+
+    from ijoy_jax.live.view import MAX_MESSAGE_BYTES, ViewServer
+
+    async def talk(url):
+        async with aiohttp.ClientSession() as session:
+            async with session.ws_connect(url) as ws:
+                for text in ("[1, 2, 3]", "42", "null", '"axes"', "[" * 2000 + "]" * 2000, "{", '{"type": 1}',
+                             '{"type": "axes"}', '{"type": "axes", "axes": [1, 2]}',
+                             '{"type": "axes", "axes": {"a": 1}}', '{"type": "axes", "axes": [0.5, 0, 0], "source": '
+                             + "[" * 10 + "]" * 10 + "}"):
+                    await ws.send_str(text)
+                await ws.send_str(json.dumps({"type": "axes", "axes": [0.25, -0.5, 1.0], "source": "test"}))
+                for _ in range(100):
+                    if view.axes.source == "test":
+                        break
+                    await asyncio.sleep(0.02)
+                assert not ws.closed
+            async with session.ws_connect(url) as ws:
+                await ws.send_str('{"type": "axes", "pad": "' + "x" * MAX_MESSAGE_BYTES + '"}')
+                msg = await ws.receive(timeout=5)
+                while msg.type == aiohttp.WSMsgType.TEXT:  # the state the server pushes, then the close
+                    msg = await ws.receive(timeout=5)
+                assert msg.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.CLOSING)
+
+    with ViewServer(port=0) as view:
+        asyncio.run(talk(view.url.replace("http://", "ws://").rstrip("/") + "/ws"))
+        np.testing.assert_array_equal(view.axes.axes(), [0.25, -0.5, 1.0])
+        assert view.axes.source == "test"
+        assert view.axes.updates == 2  # the "[[...]]" source was a valid stick message (source as text); no other
+
+
 def test_no_gamepad_is_a_clear_error():
     with pytest.raises(live.InputError, match="no gamepad found"):
         live.inputs.Gamepad()

@@ -30,10 +30,24 @@ from ijoy_jax.live.record import json_ready
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
-__all__ = ["DEFAULT_PORT", "ViewServer", "terrain_image"]
+__all__ = ["DEFAULT_PORT", "MAX_MESSAGE_BYTES", "ViewServer", "page_message", "terrain_image"]
 
 DEFAULT_PORT = 8765
 """The view's default TCP port."""
+MAX_MESSAGE_BYTES = 4096
+"""Largest WebSocket message a page may send (a stick message is under 100 bytes); aiohttp closes a connection
+that sends more."""
+
+
+def page_message(text: str) -> dict | None:
+    """A page's WebSocket message as a JSON object, or None where it is not one: not JSON, JSON that is not an
+    object (``[1, 2, 3]``, ``42``, ``null``), or nested too deeply for the parser. The view ignores such a
+    message and keeps the connection: a page cannot stop the drive or fill its log."""
+    try:
+        data = json.loads(text)
+    except (ValueError, RecursionError):
+        return None
+    return data if isinstance(data, dict) else None
 
 
 def terrain_image(terrain: Terrain) -> bytes:
@@ -172,7 +186,7 @@ class ViewServer:
                 return web.Response(text=self._state, content_type="application/json")
 
         async def socket(request):
-            ws = web.WebSocketResponse(heartbeat=20)
+            ws = web.WebSocketResponse(heartbeat=20, max_msg_size=MAX_MESSAGE_BYTES)
             await ws.prepare(request)
             self.clients += 1
 
@@ -194,12 +208,13 @@ class ViewServer:
                 async for msg in ws:
                     if msg.type != WSMsgType.TEXT:
                         continue
+                    data = page_message(msg.data)
+                    if data is None or data.get("type") != "axes":
+                        continue
                     try:
-                        data = json.loads(msg.data)
-                        if data.get("type") == "axes":
-                            self.axes.set(data["axes"], data.get("source", "view"))
+                        self.axes.set(data["axes"], str(data.get("source", "view"))[:32])
                     except (ValueError, KeyError, TypeError):
-                        continue  # a malformed message from a page is ignored, not fatal
+                        continue  # a malformed stick message from a page is ignored, not fatal
             finally:
                 task.cancel()
                 self.clients -= 1
