@@ -373,6 +373,11 @@ def test_swing_foot_lands_level_under_a_tilted_body(sim):
     half = dataclasses.replace(cfg, land_gain=0.5)
     q_half, _, _ = controller.control_tick(params, half, pg, plan, cs, None, base)
     np.testing.assert_allclose(q_half - qpos[7:], 0.5 * (q - qpos[7:]), atol=1e-5)
+    # A known control delay lowers the gain: 1 / (1 + L / land_delay), half at L = land_delay, a third at twice.
+    for latency, scale in ((cfg.land_delay, 0.5), (2 * cfg.land_delay, 1 / 3)):
+        q_late, _, _ = controller.control_tick(params, cfg, pg, plan, cs, None, base, None, None,
+                                               jnp.float32(latency))
+        np.testing.assert_allclose(q_late - qpos[7:], scale * (q - qpos[7:]), atol=1e-5)
     # Next step: the leg that landed carries the body and its offset fades; the new swing leg starts with none.
     nxt = _swing_plan(cfg, side=-1.0)
     cs2 = cs1._replace(t=jnp.float32(0))

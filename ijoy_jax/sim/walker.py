@@ -514,7 +514,7 @@ def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
     c, v = centre_of_mass(sim, d)
     com = ((to_plan @ (c - st[:3]) + pst[:3])[:2], (to_plan @ v)[:2])
     q, cs, _ = controller.control_tick(params, cfg, world.gains, step.plan, cs, window, base, ankle_wrench(sim, d),
-                                       com)
+                                       com, world.delay * cfg.control_dt)
     sent = jnp.concatenate([q[None], sent[:-1]])
     q = sent[world.delay]  # what the actuators receive now: the targets of `delay` ticks ago
     d = d.replace(qvel=d.qvel.at[:2].add(jnp.where(k == step.kick_tick, step.kick_dv, 0.0)))
