@@ -45,6 +45,11 @@ EXPECTED = {
               "terrain.run": (0.30, 0.40), "sim.stance_noise": (0.0, 0.005, 0.01)},
         family="stairs", has_height=True, shape=(300, 100), resolution=0.02, scenarios_per_cell=64, num_steps=16,
         method="ordered", num_scenarios=10 * 2 * 3 * 64, extra_metrics=(), walker="mjx"),
+    "rough_robustness.toml": dict(
+        grid={"terrain.amplitude": (0.01, 0.02, 0.03), "robot.w": (1.0, 2.0, 4.0),
+              "robot.metrics.support_limit": (0.015, 0.025, 0.04)},
+        family="rough", has_height=True, shape=(250, 100), resolution=0.02, scenarios_per_cell=256, num_steps=30,
+        method="ordered", num_scenarios=27 * 256, extra_metrics=(), walker="mjx"),
 }
 _SELECTORS = {"selector.horizon": (1, 2, 3), "selector.refine": (False, True)}
 for _fam, _family in (("stones", "stone_path"), ("corridor", "corridor"), ("clutter", "obstacles"),
@@ -117,6 +122,25 @@ def test_physics_sweeps_cross_the_margin_with_the_simulated_robots_errors(name):
     first, last = table.iloc[:per_cell], table.iloc[-per_cell:]
     for c in ("command.vx", "command.vy", "command.wz", "replicate"):
         assert first[c].tolist() == last[c].tolist(), c
+
+
+# MuJoCo Playground's humanoid randomisation, as issue #48 and rough_robustness.toml's comments state it
+PLAYGROUND = {"friction": (0.4, 1.0), "mass_scale": (0.9, 1.1), "kp_scale": (0.9, 1.1), "latency": (0.0, 0.02),
+              "push": (0.0, 10.0)}
+
+
+def test_the_robustness_sweep_draws_playgrounds_dynamics_per_replicate_alike_in_every_cell():
+    cfg = sweep.load_config(DIR / "rough_robustness.toml")
+    table = sweep.scenarios(cfg)
+    assert len(table) == 27 * 256
+    by_cell = table.sort_values(["cell", "replicate"])
+    for k, (lo, hi) in PLAYGROUND.items():
+        v = by_cell[f"sim.{k}"].to_numpy().reshape(27, 256)
+        assert lo <= v.min() and v.max() <= hi, k
+        assert v.max() - v.min() > 0.9 * (hi - lo), k  # spread over the range, not a fixed value
+        np.testing.assert_array_equal(v, np.broadcast_to(v[0], v.shape), err_msg=k)  # replicate r alike
+    assert (table["sim.stance_noise"] == 0).all()
+    assert set(table["command.vx"]) == {0.25} and set(table["command.vy"]) == {0.0}
 
 
 def test_stairs_sweep_walks_the_longer_reach_past_the_top_riser_and_within_the_map():
