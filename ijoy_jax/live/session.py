@@ -281,8 +281,15 @@ def replay(path, *, decider: str = "local", server: str | None = None, on_tick=N
     Returns ``(result, recording, mismatches)``: ``mismatches`` lists the steps whose sent foothold, ``go``
     or feet after the step differ from the recording in any bit (empty: identical footsteps).
     """
-    rec = record.read_recording(path)
+    rec = record.read_recording(path)  # ValueError (one line) for a corrupt or hand-edited file
     s = rec.config["settings"]
+    unknown = sorted(set(s) - {f.name for f in dataclasses.fields(DriveSettings)})
+    if unknown:
+        raise ValueError(f"{str(path)!r}: the 'ijoy.drive' metadata: config.settings has keys a drive does not know: "
+                         f"{', '.join(unknown)}")
+    if s["body"] not in BODIES:
+        raise ValueError(f"{str(path)!r}: the 'ijoy.drive' metadata: config.settings.body must be one of {BODIES}, "
+                         f"got {s['body']!r}")
     settings = DriveSettings(**{**s, "start": None if s.get("start") is None else tuple(s["start"]),
                                 "decider": decider, "server": server})
     result = run(settings, ReplayInput(rec), realtime=realtime, num_steps=len(rec.decisions),
