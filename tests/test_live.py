@@ -576,6 +576,8 @@ def test_the_drives_trace_file_as_a_sweeps_commands_is_the_same_sweep(exports, r
     (["--replay", "/nonexistent.mcap"], "recording '/nonexistent.mcap' does not exist"),
     (["--script", "TRACE", "--shape", "12by5"], "--shape must be NXxNY"),
     (["--script", "TRACE", "--server", "localhost"], "server must be HOST:PORT"),
+    (["--script", "TRACE", "--server", "127.0.0.1:1"], "no footstep server at 127.0.0.1:1: nothing accepted a "
+                                                       "connection within 5 s"),
     (["--script", "TRACE", "--export-sweep", "out.toml"], "--export-sweep needs --replay FILE"),
     (["--replay", "/nonexistent.mcap", "--export-sweep", "out.toml"], "recording '/nonexistent.mcap' does not exist"),
 ])

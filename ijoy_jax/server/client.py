@@ -30,6 +30,21 @@ from ijoy_jax.server.schema import DEFAULT_MAP, float_from_json
 
 DEFAULT_TIMEOUT_S = 60.0
 """Seconds a request waits for its reply by default (a map of a new shape compiles for a few seconds)."""
+CONNECT_TIMEOUT_S = 5.0
+"""Seconds :class:`Client` waits for the TCP connection itself (before its ``hello``): nothing listening there
+is said in seconds, while a server that is there but busy compiling still gets the request timeout."""
+
+
+def _connected(monitor: zmq.Socket, timeout: float) -> bool:
+    """Whether the monitored socket reports its connection established within ``timeout`` seconds (ZeroMQ
+    connects in the background and retries a refused connection without telling the sender)."""
+    from zmq.utils.monitor import recv_monitor_message
+
+    deadline = time.monotonic() + timeout
+    while (left := deadline - time.monotonic()) > 0:
+        if monitor.poll(max(1, int(left * 1000))) and recv_monitor_message(monitor)["event"] == zmq.EVENT_CONNECTED:
+            return True
+    return False
 
 
 class ServerError(RuntimeError):
@@ -102,7 +117,9 @@ class Client:
       context: a ``zmq.Context`` to share (default: the process's shared instance).
 
     Raises:
-      TimeoutError: no reply (no server there, or one that is busy compiling for longer than ``timeout``).
+      ConnectionError: with ``hello``, nothing accepts a TCP connection at ``host:port`` within
+        :data:`CONNECT_TIMEOUT_S` (no server there).
+      TimeoutError: no reply (a server that is busy compiling for longer than ``timeout``).
       ServerError: an error reply, e.g. ``unsupported_version``.
 
     Example (against a server started by :func:`serve_subprocess`)::
@@ -123,9 +140,20 @@ class Client:
         where = f"[{host}]" if ":" in host else host
         if ":" in host:
             self._socket.setsockopt(zmq.IPV6, 1)
+        monitor = self._socket.get_monitor_socket(zmq.EVENT_CONNECTED) if hello else None
         self._socket.connect(f"tcp://{where}:{self.port}")
         self.server_hello: dict = {}
         if hello:
+            try:
+                up = _connected(monitor, min(CONNECT_TIMEOUT_S, self.timeout))
+            finally:
+                self._socket.disable_monitor()
+                monitor.close(linger=0)
+            if not up:
+                self.close()
+                raise ConnectionError(f"no footstep server at {host}:{self.port}: nothing accepted a connection "
+                                      f"within {min(CONNECT_TIMEOUT_S, self.timeout):g} s (start one with "
+                                      f"`ijoy serve --port {self.port}`)")
             try:
                 self.server_hello = self.request({"type": "hello", "versions": list(schema.SUPPORTED_VERSIONS),
                                                   "client": f"ijoy_jax.server.Client (pid {os.getpid()})"}).header
