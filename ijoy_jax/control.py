@@ -30,6 +30,7 @@ from jax import lax
 
 from ijoy_jax import geometry, select
 from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced
+from ijoy_jax.limits import check_num_steps
 from ijoy_jax.robots import LEFT, Robot, footprints_overlap, side_actions
 from ijoy_jax.select import Targets
 from ijoy_jax.terrain import Terrain
@@ -518,8 +519,7 @@ def rollout(
     if bad_start:
         raise ValueError("start must be finite")
     _check_start(robot, start)
-    if isinstance(num_steps, bool) or not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
-        raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
+    num_steps = check_num_steps(num_steps)
     cs = np.shape(commands)
     if cs not in ((3,), (num_steps, 3)):
         raise ValueError(f"commands must have shape (3,) or ({num_steps}, 3), got {cs}")

@@ -26,6 +26,7 @@ import numpy as np
 
 from ijoy_jax import geometry
 from ijoy_jax._struct import pytree_dataclass, static_field
+from ijoy_jax.limits import MAX_ACTIONS, MAX_DENSITY
 from ijoy_jax.prng import as_key
 
 LEFT = 1
@@ -454,6 +455,9 @@ def make_robot(
         raise ValueError(f"actions must have shape (N, 3), got {acts.shape}")
     if acts.shape[0] == 0:
         raise ValueError("the action set is empty")
+    if acts.shape[0] > MAX_ACTIONS:
+        raise ValueError(f"{acts.shape[0]} actions are above ijoy_jax.limits.MAX_ACTIONS = {MAX_ACTIONS} (the "
+                         f"targets table grows with their number)")
     if not np.all(np.isfinite(acts)):
         raise ValueError("actions must be finite (no NaN or inf)")
     _check_scalar("foot_length", foot_length, positive=True)
@@ -692,8 +696,17 @@ def hrp2_actions(density: float = 1.0, reach: float = PAPER_REACH) -> np.ndarray
     Example:
       >>> hrp2_actions().shape, hrp2_actions(2.0).shape
       ((496, 3), (3307, 3))
+
+    Raises:
+      ValueError: a density above :data:`ijoy_jax.limits.MAX_DENSITY`, before the lattice is built (a robot
+        of more than :data:`ijoy_jax.limits.MAX_ACTIONS` actions, at a longer reach, is refused by
+        :func:`make_robot`).
     """
-    return lattice_actions(density_counts(density, reach), dx_range=(-reach, reach), dy_range=_HRP2_DY)
+    counts = density_counts(density, reach)
+    if density > MAX_DENSITY:
+        raise ValueError(f"density must be <= ijoy_jax.limits.MAX_DENSITY = {MAX_DENSITY} ({MAX_ACTIONS} actions; "
+                         f"the targets table grows as its sixth power), got {density!r}")
+    return lattice_actions(counts, dx_range=(-reach, reach), dy_range=_HRP2_DY)
 
 
 def start_stance(robot: Robot, x, y, theta=0.0, *, width=None) -> jax.Array:

@@ -4,7 +4,12 @@ It binds first (a port in use or a bad host fails at once, in one line), compile
 the warm-up map shapes runs (so the first request does not wait for a compile), prints ``listening on
 HOST:PORT`` on stdout (the line a script waits for; port 0 takes a free port and prints it), and serves
 until SIGINT or SIGTERM, then closes and exits 0. Logs go to stderr: the warm-up, one line per connection,
-and the totals at exit; ``--verbose`` adds a line per request.
+a line when a map kind's compiled programs are dropped (``--max-programs``), and the totals at exit;
+``--verbose`` adds a line per request.
+
+Map shapes: every map kind (shape in cells, resolution, 2D or 2.5D) has programs of its own, compiled on its
+first request while every client waits; the server keeps those of the ``--max-programs`` most recently used
+kinds. A deployment uses a few fixed map shapes and lists them in ``--warm-up``.
 """
 
 from __future__ import annotations
@@ -17,6 +22,11 @@ import threading
 DEFAULT_PORT = 5555
 DEFAULT_WARM_UP = "200x200@0.02"
 
+SHAPES_HELP = ("Map shapes: each map kind (shape in cells, resolution, 2D or 2.5D) runs programs compiled for it "
+               "on its first request (a second or more, while every client waits); the server keeps those of the "
+               "--max-programs most recently used kinds. Use a few fixed map shapes per deployment and list them "
+               "in --warm-up.")
+
 
 def add_parser(sub) -> None:
     """Add ``ijoy serve`` to the ``ijoy`` command's subparsers."""
@@ -24,7 +34,8 @@ def add_parser(sub) -> None:
                                      "stack to call",
                        description="The footstep server of the paper's Fig. 6: terrain maps in, the chosen step's "
                                    "foothold, validity, cost and cost terms out (ij.select_step, bit for bit). "
-                                   "Prints 'listening on HOST:PORT' once it answers; stops on SIGINT/SIGTERM.")
+                                   "Prints 'listening on HOST:PORT' once it answers; stops on SIGINT/SIGTERM. "
+                                   + SHAPES_HELP)
     p.add_argument("--host", default="127.0.0.1", help="address or name to listen on (default: %(default)s; "
                                                        "0.0.0.0 for every interface: the protocol has no "
                                                        "authentication, expose it on a trusted network only)")
@@ -44,6 +55,10 @@ def add_parser(sub) -> None:
     lim = p.add_argument_group("limits")
     lim.add_argument("--max-cells", type=int, default=None, help="largest map in cells (default: 1048576)")
     lim.add_argument("--max-maps", type=int, default=None, help="maps held at once (default: 4)")
+    lim.add_argument("--max-programs", default=None, metavar="N",
+                     help="map kinds (shape, resolution, 2D or 2.5D) whose compiled programs are kept, the least "
+                          "recently used dropped first and compiled again when next needed (default: 8; each "
+                          "--warm-up shape is two kinds)")
     p.add_argument("--warm-up", action="append", default=None, metavar="NXxNY[@RES]",
                    help=f"map shape (cells) and resolution (m) to compile for before listening; repeatable; "
                         f"'none' for no warm-up (default: {DEFAULT_WARM_UP})")
@@ -87,6 +102,22 @@ def main(args) -> int:
         log.propagate = propagate
 
 
+def max_programs(text: str | None) -> int:
+    """``--max-programs`` as an integer of at least 1 (ValueError in one line naming the flag otherwise)."""
+    from ijoy_jax.server.service import DEFAULT_MAX_PROGRAMS
+
+    if text is None:
+        return DEFAULT_MAX_PROGRAMS
+    try:
+        value = int(text.strip())
+    except ValueError:
+        value = None
+    if value is None or value < 1:
+        raise ValueError(f"--max-programs must be a positive integer (map kinds whose compiled programs are "
+                         f"kept), got {text!r}")
+    return value
+
+
 def _serve(args, log) -> int:
     """:func:`main` once its log handler is in place."""
     from ijoy_jax.server import Limits, Service
@@ -94,9 +125,18 @@ def _serve(args, log) -> int:
     from ijoy_jax.server.service import parse_shape
 
     warm = args.warm_up or [DEFAULT_WARM_UP]
-    shapes = [] if [w.lower() for w in warm] == ["none"] else [parse_shape(w) for w in warm]
+    shapes = [] if [w.lower() for w in warm] == ["none"] else list(dict.fromkeys(parse_shape(w) for w in warm))
+    programs = max_programs(args.max_programs)
+    if 2 * len(shapes) > programs:  # each is compiled for 2D and 2.5D maps: two kinds
+        raise ValueError(f"--warm-up: {len(shapes)} map shapes are {2 * len(shapes)} map kinds (2D and 2.5D), "
+                         f"above --max-programs {programs}: the first would be dropped before the server "
+                         "listens; warm up fewer shapes or raise --max-programs")
     limit_kw = {k: v for k, v in (("max_cells", args.max_cells), ("max_maps", args.max_maps)) if v is not None}
     limits = Limits(**limit_kw)
+    for shape, _ in shapes:  # before the robot is built or anything allocated
+        if not limits.holds(shape):
+            raise ValueError(f"--warm-up {shape[0]}x{shape[1]}: {limits.shape_refusal(shape)}; raise --max-cells "
+                             f"or warm up a smaller shape")
     robot, options = build_robot(args)
     try:
         listener = net.listen(args.host, args.port, max_frame_bytes=limits.max_frame_bytes)
@@ -104,7 +144,7 @@ def _serve(args, log) -> int:
         raise ValueError(str(e)) from None
     stop = threading.Event()
     try:
-        service = Service(robot, name="hrp2", options=options, limits=limits)
+        service = Service(robot, name="hrp2", options=options, limits=limits, max_programs=programs)
         for shape, res in shapes:
             w = service.warm_up(shape, res)
             log.info("warm-up for %dx%d maps at %g m: %d programs in %.1f s", *shape, res, w["programs"],

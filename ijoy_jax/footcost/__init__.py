@@ -13,7 +13,6 @@ from ijoy_jax.footcost.index import TerrainIndex as TerrainIndex
 from ijoy_jax.footcost.index import block_sums as block_sums
 from ijoy_jax.footcost.index import index_terrain as index_terrain
 from ijoy_jax.footcost.index import swing_corridor as swing_corridor
-from ijoy_jax.footcost.index import window_cells as window_cells
 from ijoy_jax.footcost.pallas import foot_cost_fused as foot_cost_fused
 from ijoy_jax.footcost.xla import COST_TERMS as COST_TERMS
 from ijoy_jax.footcost.xla import MAX_COORDINATE as MAX_COORDINATE
@@ -22,6 +21,7 @@ from ijoy_jax.footcost.xla import foot_cost as foot_cost
 from ijoy_jax.footcost.xla import foot_cost_terms as foot_cost_terms
 from ijoy_jax.footcost.xla import query_supported as query_supported
 from ijoy_jax.footcost.xla import validate as validate
+from ijoy_jax.limits import window_cells as window_cells
 
 __all__ = [
     "COST_TERMS",

@@ -6,14 +6,13 @@ paths make of them (a column's obstacle count, a span's highest cell, the swing 
 
 from __future__ import annotations
 
-import math
-
 import jax
 import jax.numpy as jnp
 from jax import lax
 
 from ijoy_jax import geometry
 from ijoy_jax._struct import pytree_dataclass, static_field
+from ijoy_jax.limits import check_window
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
@@ -45,11 +44,6 @@ class TerrainIndex:
     pad: int = static_field()
 
 
-def window_cells(radius: float, resolution: float) -> int:
-    """Columns (and rows) a window needs to hold any shape of half-diagonal ``radius``."""
-    return int(math.ceil(2.0 * radius / resolution - 1e-9)) + 1
-
-
 def index_terrain(terrain: Terrain, robot: Robot) -> TerrainIndex:
     """Build the :class:`TerrainIndex` of a terrain (once per terrain, reused across steps)."""
     occ = (~terrain.free).astype(jnp.int32)
@@ -66,7 +60,7 @@ def index_terrain(terrain: Terrain, robot: Robot) -> TerrainIndex:
         shifted = jnp.concatenate([prev[:, span:], jnp.full((h.shape[0], span), -jnp.inf, h.dtype)], axis=1)
         levels.append(jnp.maximum(prev, shifted))
         span *= 2
-    pad = window_cells(robot.max_radius, terrain.resolution)
+    pad = check_window(robot.max_radius, terrain.resolution, "footprint")
     padded = jnp.pad(h, pad, mode="edge")
     block = 1 << max(pad - 1, 1).bit_length()
     if terrain.has_height:

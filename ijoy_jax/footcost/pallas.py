@@ -41,20 +41,23 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
-from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max, window_cells
+from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max
 from ijoy_jax.footcost.sole import contact_offsets, sole_on_ground
 from ijoy_jax.footcost.xla import (
     SLACK,
+    check_action_index,
     checked_query,
     exceeds,
     metric_term,
     plane_metrics,
     poses_supported,
     query_supported,
+    safe_action_index,
     safe_poses,
     sole_distance,
     solve3,
 )
+from ijoy_jax.limits import check_window
 from ijoy_jax.robots import Robot, nearest_actions
 from ijoy_jax.terrain import Terrain
 
@@ -500,6 +503,7 @@ def foot_cost_fused(
       :mod:`ijoy_jax.tune`'s relaxation.
     """
     stance, steps, swing_from = checked_query(terrain, robot, stance, stance_side, steps, swing_from, index)
+    check_action_index(robot, action_index, steps.shape[0])
     if block < 1 or block & (block - 1):
         raise ValueError(f"block must be a power of two, got {block}")
     if index is None:
@@ -512,7 +516,7 @@ def foot_cost_fused(
     num = steps.shape[0]
     if action_index is None:
         action_index = nearest_actions(robot, stance, stance_side, steps)
-    action_index = jnp.broadcast_to(jnp.asarray(action_index, jnp.int32), (num,))
+    action_index, index_ok = safe_action_index(robot, action_index, num)
     res = terrain.resolution
     k = index.pad
     has_height = terrain.has_height
@@ -567,7 +571,7 @@ def foot_cost_fused(
                   pl.BlockSpec((index.height_block_first.size,), lambda i: (0,))]
     kernel = functools.partial(
         _kernel, shape=terrain.shape, res=res, pad=k, has_height=has_height,
-        has_swing=has_swing, swing_cols=window_cells(0.5 * robot.max_swing, res),
+        has_swing=has_swing, swing_cols=check_window(0.5 * robot.max_swing, res, "swing path"),
         unroll=_UNROLL, window=window, blocks=blocks, native=not interpret,
         broad_phase=broad_phase)
     out = pl.pallas_call(
@@ -581,6 +585,7 @@ def foot_cost_fused(
         name="foot_cost_fused",
     )(*args)
     if order is None:
-        return out[:num]
-    back = jnp.zeros_like(order).at[order].set(jnp.arange(num, dtype=order.dtype))  # the inverse permutation
-    return out[back]
+        out = out[:num]
+    else:
+        out = out[jnp.zeros_like(order).at[order].set(jnp.arange(num, dtype=order.dtype))]  # inverse permutation
+    return jnp.where(index_ok, out, jnp.inf)  # a step whose action index is outside the set is unsupported

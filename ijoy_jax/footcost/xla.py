@@ -45,7 +45,7 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import as_array, as_pose, check_numeric
+from ijoy_jax._struct import as_pose, check_numeric, is_traced
 from ijoy_jax.footcost.index import (
     TerrainIndex,
     centre_off_map,
@@ -53,9 +53,9 @@ from ijoy_jax.footcost.index import (
     column_max_height,
     index_terrain,
     swing_corridor,
-    window_cells,
 )
 from ijoy_jax.footcost.sole import contact_offsets, sole_on_ground, tilt
+from ijoy_jax.limits import check_window
 from ijoy_jax.robots import Robot, check_robot, nearest_actions, robot_supported, side_sign
 from ijoy_jax.terrain import Terrain, check_terrain, terrain_supported
 
@@ -510,7 +510,7 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
     path_height = neg_inf
     path_bad = jnp.bool_(False)
     if terrain.has_height and swing_from is not None:
-        kp = window_cells(0.5 * robot.max_swing, res)
+        kp = check_window(0.5 * robot.max_swing, res, "swing path")
         sx = swing_from[0] - origin[0]
         sy = swing_from[1] - origin[1]
         corridor, length = swing_corridor(sx, sy, cx, cy, 0.5 * robot.foot_width, res, kp)
@@ -561,6 +561,35 @@ def _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_
     )
 
 
+def check_action_index(robot: Robot, action_index, num: int) -> None:
+    """Refuse an ``action_index`` argument that is not () or (num,) integers, or (where concrete) that indexes
+    outside the action set ``[0, robot.num_actions)``. Traced values are flagged inside instead
+    (:func:`safe_action_index`)."""
+    if action_index is None:
+        return
+    shape = np.shape(action_index)
+    if shape not in ((), (num,)):
+        raise ValueError(f"action_index must be one int or ({num},) ints (one per step), got shape {shape}")
+    dtype = action_index.dtype if hasattr(action_index, "dtype") else np.asarray(action_index).dtype
+    if dtype.kind not in "iu":
+        raise TypeError(f"action_index must hold integers, got dtype {dtype}")
+    if not is_traced(action_index):
+        a = np.asarray(action_index)
+        bad = (a < 0) | (a >= robot.num_actions)
+        if bad.any():
+            raise ValueError(f"action_index must be in [0, {robot.num_actions}) (the robot's action set), got "
+                             f"{int(a[bad].ravel()[0])}")
+
+
+def safe_action_index(robot: Robot, action_index, num: int) -> tuple[jax.Array, jax.Array]:
+    """``(index, ok)``: (num,) int32 action indices (one given index is broadcast) with every one outside
+    ``[0, robot.num_actions)`` replaced by 0, and ``ok`` whether each was inside (a step with a bad index is
+    flagged ``unsupported``, never another action's cost read silently: a gather clamps out-of-range indices)."""
+    a = jnp.broadcast_to(jnp.asarray(action_index, jnp.int32), (num,))
+    ok = (a >= 0) & (a < robot.num_actions)
+    return jnp.where(ok, a, 0), ok
+
+
 def _foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, action_index, index) -> FootCostTerms:
     """The body of :func:`foot_cost_terms` (always run through :data:`_foot_cost_terms_jit`)."""
     if index is None:
@@ -570,7 +599,7 @@ def _foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, act
     stance, swing_from = safe_poses(stance, swing_from)
     if action_index is None:
         action_index = nearest_actions(robot, stance, stance_side, steps)
-    action_index = jnp.broadcast_to(jnp.asarray(action_index, jnp.int32), steps.shape[:1])
+    action_index, index_ok = safe_action_index(robot, action_index, steps.shape[0])
     stance_plane = start_plane = None
     if terrain.has_height and swing_from is None:
         stance_plane = plane_metrics(terrain, index, robot, stance)
@@ -579,10 +608,11 @@ def _foot_cost_terms(terrain, robot, stance, stance_side, steps, swing_from, act
         stance_plane = jax.tree_util.tree_map(lambda x: x[0], planes)
         start_plane = jax.tree_util.tree_map(lambda x: x[1], planes)
 
-    def one(step, a):
-        return _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_from, step, a, query_ok)
+    def one(step, a, a_ok):
+        return _step_terms(terrain, index, robot, stance, stance_plane, start_plane, swing_from, step, a,
+                           query_ok & a_ok)
 
-    return jax.vmap(one)(steps, action_index)
+    return jax.vmap(one)(steps, action_index, index_ok)
 
 
 _foot_cost_terms_jit = jax.jit(_foot_cost_terms)
@@ -667,9 +697,11 @@ def foot_cost_terms(
         footprint's length runs along the foot's own x axis.
       swing_from: (3,) current world pose of the swing foot, for the swing-path
         check (2.5D only); None: no path check.
-      action_index: (N,) int indices into the action set: whose cost,
-        clearance and height limit apply to each step. None: the nearest
-        action of S to each step in the stance frame (:func:`nearest_actions`).
+      action_index: (N,) (or one) int indices into the action set, in
+        ``[0, robot.num_actions)``: whose cost, clearance and height limit
+        apply to each step. None: the nearest action of S to each step in the
+        stance frame (:func:`nearest_actions`). A traced index outside the set
+        flags its step ``unsupported``.
       index: the terrain's prebuilt :class:`TerrainIndex`
         (:func:`~ijoy_jax.footcost.index_terrain` of this terrain and robot),
         for many queries on one terrain; None: built inside.
@@ -687,6 +719,7 @@ def foot_cost_terms(
       TypeError: an argument of the wrong type.
     """
     stance, steps, swing_from = checked_query(terrain, robot, stance, stance_side, steps, swing_from, index)
+    check_action_index(robot, action_index, steps.shape[0])
     return _foot_cost_terms_jit(terrain, robot, stance, side_sign(stance_side), steps, swing_from, action_index,
                                 index)
 

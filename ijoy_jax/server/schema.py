@@ -25,6 +25,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ijoy_jax import limits
+
 PROTOCOL_VERSION = 1
 """The protocol version this package speaks by default (the newest)."""
 
@@ -85,6 +87,9 @@ class Limits:
         evaluation and the index grow with its square (HRP-2: its swing window is 47 cells at 2 cm;
         resolutions finer than about 3.5 mm are refused by the default).
 
+    ``max_cells`` and ``max_window_cells`` may be set lower than the library's bounds
+    (:data:`ijoy_jax.limits.MAX_MAP_CELLS`, :data:`ijoy_jax.limits.MAX_WINDOW_CELLS`), never higher.
+
     ``max_frame_bytes`` (ZeroMQ's per-frame limit; a larger frame makes ZeroMQ drop the connection without a
     reply) is twice a float64 map of ``max_cells`` plus a header, so a map up to twice too large still gets a
     ``too_large`` reply.
@@ -101,6 +106,19 @@ class Limits:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"Limits.{name} must be a positive integer, got {v!r}")
+        for name, bound in (("max_cells", "MAX_MAP_CELLS"), ("max_window_cells", "MAX_WINDOW_CELLS")):
+            if getattr(self, name) > getattr(limits, bound):
+                raise ValueError(f"Limits.{name} must be <= ijoy_jax.limits.{bound} = {getattr(limits, bound)} (the "
+                                 f"library's memory budget), got {getattr(self, name)!r}")
+
+    def holds(self, shape) -> bool:
+        """Whether a map of ``shape`` (nx, ny) cells is within ``max_side`` and ``max_cells``."""
+        return max(shape) <= self.max_side and shape[0] * shape[1] <= self.max_cells
+
+    def shape_refusal(self, shape) -> str:
+        """Why a map of ``shape`` cells is refused (for a message)."""
+        return (f"shape {list(shape)} ({shape[0] * shape[1]} cells) is above the server's limits (max_cells = "
+                f"{self.max_cells}, max_side = {self.max_side})")
 
     @property
     def max_frame_bytes(self) -> int:
@@ -269,10 +287,8 @@ def _decode_array(rtype: str, spec: dict, frame, limits: Limits) -> np.ndarray:
         raise ProtocolError("bad_shape", f"{name}: shape {list(shape)} must be 2D (nx, ny)")
     if min(shape) < 1:
         raise ProtocolError("bad_shape", f"{name}: shape {list(shape)} is empty")
-    if max(shape) > limits.max_side or shape[0] * shape[1] > limits.max_cells:
-        raise ProtocolError("too_large", f"{name}: shape {list(shape)} ({shape[0] * shape[1]} cells) is above the "
-                                         f"server's limits (max_cells = {limits.max_cells}, max_side = "
-                                         f"{limits.max_side})")
+    if not limits.holds(shape):
+        raise ProtocolError("too_large", f"{name}: {limits.shape_refusal(shape)}")
     dt = np.dtype(dtype)
     nbytes = len(frame)
     if nbytes != shape[0] * shape[1] * dt.itemsize:

@@ -6,6 +6,17 @@ answers it with :meth:`Service.handle` and sends the reply without blocking (a r
 gone, or that does not read and has ``SNDHWM`` replies queued, is dropped: ZeroMQ's ROUTER never blocks on
 one peer). Decisions are therefore serialised: one at a time, in arrival order across clients.
 
+Map shapes: a request runs programs compiled for its map's kind (shape in cells, resolution, 2D or 2.5D).
+The first request on a new kind compiles them (a second or more) and, decisions being serialised, every
+other client's replies wait behind that compile; the service keeps the programs of its ``max_programs``
+most recently used kinds (``ijoy serve --max-programs``) and drops the least recently used, so a client
+that sends a new shape for every map makes everyone wait on compiles but does not grow the server's memory
+without end. Use a few fixed map shapes per deployment and compile them before serving (``ijoy serve
+--warm-up``). Compiles are not moved off this loop: a request that needs one would have to be parked while
+later requests, also that client's own, are answered in its place, and ``set_terrain`` and ``set_robot``
+from others would change what it decides on; the loop would lose its one guarantee (replies in arrival
+order, each equal to ``select_step`` on the state it arrived to) for a case warm-up avoids.
+
 Clients may use DEALER sockets (the Python :class:`~ijoy_jax.server.Client` does) or REQ sockets: a
 request that begins with an empty delimiter frame (REQ's envelope) gets its reply with the delimiter.
 """

@@ -10,6 +10,14 @@ A step is :func:`ijoy_jax.select_step` (the exhaustive method, as its default) o
 :func:`ijoy_jax.foot_cost_terms` of the chosen pose for its named cost terms. Decisions run one at a time
 in the calling thread (:mod:`ijoy_jax.server.server` calls :meth:`Service.handle` from its one loop), so
 replies equal in-process ``select_step`` bit for bit.
+
+Compiled programs: what a request runs is compiled for its map's kind (:func:`program_key`: the grid shape
+in cells, the resolution and 2D or 2.5D), once, on the first request on a map of that kind (a second or more
+per kind, during which the calling loop answers no one). A :class:`ProgramCache` keeps the programs of the
+``max_programs`` most recently used kinds (:data:`DEFAULT_MAX_PROGRAMS`) and drops the least recently used,
+with their compiled code, so a client that sends a new shape for every map costs compile time, not memory
+without end. Deployments use a few fixed map shapes and compile them before serving (:meth:`Service.warm_up`,
+``ijoy serve --warm-up``).
 """
 
 from __future__ import annotations
@@ -20,7 +28,8 @@ import math
 import threading
 import time
 import traceback
-from collections.abc import Mapping, Sequence
+from collections import OrderedDict
+from collections.abc import Hashable, Mapping, Sequence
 from typing import Any
 
 import jax
@@ -45,10 +54,12 @@ TERM_NAMES = tuple(FootCostTerms._fields)
 MIN_UPDATE_COLUMNS = 16
 """Narrowest column band a window update rebuilds (a power of two; wider bands are the next power of two)."""
 
-_index_jit = jax.jit(index_terrain)
+DEFAULT_MAX_PROGRAMS = 8
+"""Map kinds (:func:`program_key`) whose compiled programs a :class:`Service` keeps by default: twice the
+default ``Limits.max_maps``, so the maps a default server holds never evict each other's programs, with room
+for as many warm-up kinds again (each warm-up shape is two kinds: 2D and 2.5D)."""
 
 
-@jax.jit
 def _decide(terrain: Terrain, robot: Robot, prepared: select.Prepared, stance, side, command, swing_from,
             p0_index) -> tuple[select.StepChoice, FootCostTerms]:
     """One step request: :func:`ijoy_jax.select_step` with the map's prepared tables, and
@@ -62,6 +73,105 @@ def _decide(terrain: Terrain, robot: Robot, prepared: select.Prepared, stance, s
     terms = ijoy_jax.foot_cost_terms(terrain, robot, stance, side, choice.pose[None], swing_from=swing_from,
                                      action_index=action, index=prepared.index)
     return choice, jax.tree.map(lambda a: a[0], terms)
+
+
+def check_max_programs(value) -> int:
+    """``value`` as a number of map kinds a :class:`ProgramCache` keeps (ValueError names it unless it is an
+    integer of at least 1)."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+        raise ValueError(f"max_programs must be a positive integer (map kinds whose compiled programs are kept), "
+                         f"got {value!r}")
+    return int(value)
+
+
+def program_key(terrain: Terrain) -> tuple:
+    """What of ``terrain`` decides the programs a request on it runs: its pytree structure (which carries the
+    static ``resolution`` and ``has_height``) and its leaves' shapes and dtypes. The robot's static fields are
+    the service's own and never change; its leaves, the stance and the command are traced."""
+    leaves, structure = jax.tree.flatten(terrain)
+    return structure, tuple((tuple(np.shape(a)), np.dtype(a.dtype).name) for a in leaves)
+
+
+def describe_key(key: tuple) -> str:
+    """A :func:`program_key` in words, for a log line (e.g. ``"20x20 maps at 0.05 m (2.5D)"``)."""
+    structure, leaves = key
+    terrain = jax.tree.unflatten(structure, [np.zeros(shape, dtype) for shape, dtype in leaves])
+    nx, ny = terrain.shape
+    return f"{nx}x{ny} maps at {terrain.resolution:g} m ({'2.5D' if terrain.has_height else '2D'})"
+
+
+class Programs:
+    """The programs of one map kind: the index (``set_terrain``, a whole-map update), a column band's update
+    (one program per band width) and a step decision (with and without ``swing_from``).
+
+    Each is a :func:`jax.jit` of a function object of its own, made here: JAX keys its caches of traced and
+    compiled programs on the function, so a module-level jitted function would keep every shape it ever saw
+    for the life of the process, while these are freed with this object. Their compiled programs are named
+    ``jit_served_index``, ``jit_served_update`` and ``jit_served_decide`` (in profiles and in
+    ``jax.devices()[0].client.live_executables()``).
+    """
+
+    def __init__(self):
+        def served_index(terrain, robot):
+            return index_terrain(terrain, robot)
+
+        def served_update(index, terrain, robot, start, width):
+            return update_columns(index, terrain, robot, start, width)
+
+        def served_decide(*args):
+            return _decide(*args)
+
+        self.index = jax.jit(served_index)
+        self.update = jax.jit(served_update, static_argnames="width")
+        self.decide = jax.jit(served_decide)
+
+
+class ProgramCache:
+    """The :class:`Programs` of at most ``max_programs`` map kinds, least recently used dropped first.
+
+    Attributes:
+      max_programs: map kinds kept (:func:`check_max_programs`).
+      builds: kinds whose programs were made (a first use, or a use after they were dropped).
+      evictions: kinds dropped to make room.
+
+    Example:
+      >>> import numpy as np, ijoy_jax as ij
+      >>> cache = ProgramCache(1)
+      >>> a = cache.get(ij.terrain.from_arrays(None, np.ones((20, 20), bool), 0.05))
+      >>> b = cache.get(ij.terrain.from_arrays(None, np.ones((20, 24), bool), 0.05))
+      >>> len(cache), cache.builds, cache.evictions
+      (1, 2, 1)
+    """
+
+    def __init__(self, max_programs: int = DEFAULT_MAX_PROGRAMS):
+        self.max_programs = check_max_programs(max_programs)
+        self._entries: OrderedDict[Hashable, Programs] = OrderedDict()
+        self.builds = 0
+        self.evictions = 0
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def keys(self) -> list[tuple]:
+        """The kinds held (:func:`program_key`), least recently used first."""
+        return list(self._entries)
+
+    def get(self, terrain: Terrain) -> Programs:
+        """The programs for ``terrain``'s kind, now the most recently used (made, and the least recently used
+        kind dropped when full, if it was not held)."""
+        key = program_key(terrain)
+        programs = self._entries.get(key)
+        if programs is not None:
+            self._entries.move_to_end(key)
+            return programs
+        while len(self._entries) >= self.max_programs:
+            old, _ = self._entries.popitem(last=False)
+            self.evictions += 1
+            log.info("dropped the compiled programs for %s, the least recently used kind (max_programs = %d): "
+                     "a request on such a map compiles them again", describe_key(old), self.max_programs)
+        programs = self._entries[key] = Programs()
+        self.builds += 1
+        return programs
 
 
 @dataclasses.dataclass
@@ -136,6 +246,8 @@ class Service:
       name: the robot's name for the ``info`` reply.
       options: how the robot was built (reported as is, e.g. ``{"margin": 0.02, "density": 1.0}``).
       limits: input limits (:class:`~ijoy_jax.server.schema.Limits`).
+      max_programs: map kinds whose compiled programs are kept (:class:`ProgramCache`; a positive integer,
+        default :data:`DEFAULT_MAX_PROGRAMS`).
 
     Example:
       >>> import numpy as np, ijoy_jax as ij
@@ -152,8 +264,9 @@ class Service:
     """
 
     def __init__(self, robot: Robot, *, name: str = "custom", options: Mapping[str, Any] | None = None,
-                 limits: Limits | None = None):
+                 limits: Limits | None = None, max_programs: int = DEFAULT_MAX_PROGRAMS):
         robots.check_robot(robot)
+        self.programs = ProgramCache(max_programs)
         _count_compiles()
         self.robot = robot
         self.name = name
@@ -232,7 +345,7 @@ class Service:
                               None if free is None else np.asarray(free, bool), res, origin)
         check_frame(terrain)
         t0 = time.perf_counter()
-        index = jax.block_until_ready(_index_jit(terrain, self.robot))
+        index = jax.block_until_ready(self.programs.get(terrain).index(terrain, self.robot))
         revision = self.maps[name].revision + 1 if name in self.maps else 1
         self.maps[name] = MapState(terrain, select.Prepared(index, self.targets),
                                    np.array(terrain.height, np.float32), np.array(terrain.free, bool), revision)
@@ -271,11 +384,12 @@ class Service:
         index rebuilt, in a band of a power-of-two width (one program per band width), or all of it when the
         band would cover half the map or more."""
         nx = terrain.shape[0]
+        programs = self.programs.get(terrain)
         band = max(MIN_UPDATE_COLUMNS, 1 << max(wx - 1, 0).bit_length())
         if 2 * band >= nx:
-            return _index_jit(terrain, self.robot), (0, nx)
+            return programs.index(terrain, self.robot), (0, nx)
         start = min(ix, nx - band)
-        return update_columns(index, terrain, self.robot, start, band), (start, start + band)
+        return programs.update(index, terrain, self.robot, start, band), (start, start + band)
 
     def _on_drop_terrain(self, req):
         name = req.header.get("map", DEFAULT_MAP)
@@ -292,8 +406,9 @@ class Service:
         m = self._map(name, "step")
         side = int(h["stance_side"])
         t0 = time.perf_counter()
-        choice, terms = jax.device_get(_decide(m.terrain, self.robot, m.prepared, stance, side, command, swing,
-                                               self._p0_index))
+        decide = self.programs.get(m.terrain).decide
+        choice, terms = jax.device_get(decide(m.terrain, self.robot, m.prepared, stance, side, command, swing,
+                                              self._p0_index))
         compute_us = (time.perf_counter() - t0) * 1e6
         vec = lambda a: [json_float(v) for v in np.asarray(a).ravel()]  # noqa: E731
         return {"map": name, "revision": m.revision, "valid": bool(choice.valid), "index": int(choice.index),
@@ -341,7 +456,13 @@ class Service:
 
         Returns:
           ``{"shape", "resolution", "seconds", "programs"}``: wall time and programs lowered.
+
+        Raises:
+          ValueError: a shape beyond the service's limits (``max_cells``, ``max_side``), before anything is built.
         """
+        if not self.limits.holds(shape):  # before a map of that shape is allocated
+            raise ValueError(f"warm-up {shape[0]}x{shape[1]}: {self.limits.shape_refusal(shape)}; raise "
+                             f"--max-cells or warm up a smaller shape")
         t0, c0 = time.perf_counter(), compile_count()
         saved_maps, saved_stats = dict(self.maps), dict(self.stats)
         nx, ny = shape

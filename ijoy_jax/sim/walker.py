@@ -41,6 +41,7 @@ from ijoy_jax import control, geometry, select
 from ijoy_jax import terrain as terrain_mod
 from ijoy_jax._struct import is_traced
 from ijoy_jax.jit_cache import compiled_count
+from ijoy_jax.limits import check_num_steps
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import METHODS, Targets
@@ -682,8 +683,7 @@ def _check(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_ste
         leaf = getattr(terrain, name)
         if not is_traced(leaf) and not np.all(np.isfinite(np.asarray(leaf))):  # NumPy: no op staged into a trace
             raise ValueError(f"terrain.{name} must be finite (no NaN or inf)")
-    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
-        raise ValueError(f"num_steps must be a positive int, got {num_steps!r}")
+    check_num_steps(num_steps)
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if kernel not in select.KERNELS:

@@ -137,6 +137,7 @@ import numpy as np
 
 from ijoy_jax import robots
 from ijoy_jax.footcost import MAX_COORDINATE
+from ijoy_jax.limits import MAX_ACTIONS, MAX_DENSITY, MAX_MAP_CELLS, MAX_NUM_STEPS
 from ijoy_jax.select import KERNELS, METHODS
 from ijoy_jax.sweep import recorded, seeding
 from ijoy_jax.terrain import generators
@@ -190,20 +191,11 @@ _MAX_MARGIN = 0.5
 _MAX_FLOAT = float(np.finfo(np.float32).max)
 # TOML's integers are 64-bit (tomllib reads longer ones): a seed or count beyond is refused, not overflowed later.
 _MAX_INT = 2**63 - 1
-MAX_NUM_STEPS = 100_000
-"""Most decisions per rollout (``sweep.num_steps``): the trajectory holds every step (a 22-hour walk at 0.8 s)."""
-MAX_DENSITY = 2.0
-"""Largest action-set density (``robot.density``, 3307 actions): the targets table F x N grows as its sixth power
-(~1 GB at 2, ~8 GB at 3)."""
-MAX_ACTIONS = 3307
-"""Most actions per foot (HRP-2's at :data:`MAX_DENSITY` and the paper's reach): a longer ``robot.reach`` makes
-more actions at a density, and the same bound on the targets table holds."""
+# MAX_NUM_STEPS, MAX_DENSITY, MAX_ACTIONS and MAX_MAP_CELLS are the library's (ijoy_jax.limits): a sweep file,
+# the CLI, the server and the functions they call share one memory budget.
 MIN_RESOLUTION = 0.005
 """Finest map resolution (m): FootCost's windows hold the footprint in cells, ~(footprint / resolution)**2 per
 candidate (~110 x 110 for HRP-2 at 5 mm)."""
-MAX_MAP_CELLS = 2**22
-"""Most cells of a sweep's map (nx * ny, e.g. 2048 x 2048): its FootCost tables take ~60 bytes per cell, per
-scenario of a chunk."""
 MAX_OBJECT_SLOTS = 1024
 """Most object slots (``terrain.max_count``) of an object family's map: each is rasterised over every cell."""
 
@@ -463,7 +455,7 @@ def _robot_value(chk: _Checker, key: str, name: str, value) -> float:
     if name in ("foot_length", "foot_width") and v > robots.MAX_SIZE:
         chk.fail(key, f"must be <= {robots.MAX_SIZE} m (ijoy_jax.robots.MAX_SIZE), got {v}")
     if name == "density" and v > MAX_DENSITY:
-        chk.fail(key, f"must be <= {MAX_DENSITY} (sweep.config.MAX_DENSITY: the targets table grows as its sixth "
+        chk.fail(key, f"must be <= {MAX_DENSITY} (ijoy_jax.limits.MAX_DENSITY: the targets table grows as its sixth "
                       f"power), got {v}")
     return v
 
@@ -505,7 +497,7 @@ def _generated_terrain(chk: _Checker, terrain: dict, kw: dict):
         kw["shape"] = (chk.integer("terrain.shape[0]", s[0], lo=8), chk.integer("terrain.shape[1]", s[1], lo=8))
         if math.prod(kw["shape"]) > MAX_MAP_CELLS:
             chk.fail("terrain.shape", f"{kw['shape'][0]} x {kw['shape'][1]} cells exceed the limit of "
-                                      f"{MAX_MAP_CELLS} (sweep.config.MAX_MAP_CELLS)")
+                                      f"{MAX_MAP_CELLS} (ijoy_jax.limits.MAX_MAP_CELLS)")
     if "resolution" in terrain:
         r = chk.number("terrain.resolution", terrain["resolution"])
         if r <= 0:
@@ -560,7 +552,7 @@ def _recorded_terrain(chk: _Checker, terrain: dict, kw: dict, folder: Path) -> N
     shape, res = tuple(int(v) for v in t.shape), float(t.resolution)
     if min(shape) < 8 or math.prod(shape) > MAX_MAP_CELLS:
         chk.fail(key, f"the recorded map of {shape[0]} x {shape[1]} cells is outside the sweep's sizes (at least "
-                      f"8 cells a side, at most {MAX_MAP_CELLS} cells: sweep.config.MAX_MAP_CELLS)")
+                      f"8 cells a side, at most {MAX_MAP_CELLS} cells: ijoy_jax.limits.MAX_MAP_CELLS)")
     if not res >= MIN_RESOLUTION:
         chk.fail(key, f"the recorded map's resolution {res} m is finer than {MIN_RESOLUTION} m "
                       "(sweep.config.MIN_RESOLUTION)")
@@ -615,7 +607,7 @@ def _command_file(chk: _Checker, command: dict, kw: dict, folder: Path, swept: t
         chk.fail("command.file", str(e))
     n = len(seq.commands)
     if n > MAX_NUM_STEPS:
-        chk.fail("command.file", f"more than {MAX_NUM_STEPS} commands (sweep.config.MAX_NUM_STEPS)")
+        chk.fail("command.file", f"more than {MAX_NUM_STEPS} commands (ijoy_jax.limits.MAX_NUM_STEPS)")
     if "num_steps" not in kw:
         kw["num_steps"] = n
     elif kw["num_steps"] > n:
@@ -987,7 +979,7 @@ def _check_reach(chk: _Checker, robot: dict, grid: dict, rand: dict) -> None:
                                         f"robot.max_sole_distance = {limit:g} m: its steps would always be refused")
         if isinstance(size, str) or size > MAX_ACTIONS:
             chk.fail("robot.reach", f"{reach:g} m makes {size} actions at density {density:g}, more than "
-                                    f"{MAX_ACTIONS} (sweep.config.MAX_ACTIONS: the targets table's bound)")
+                                    f"{MAX_ACTIONS} (ijoy_jax.limits.MAX_ACTIONS: the targets table's bound)")
 
 
 def _host_memory() -> int | None:

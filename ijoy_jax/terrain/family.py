@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ijoy_jax.limits import check_map_shape
 from ijoy_jax.terrain.grid import Terrain, grid_spec
 
 __all__ = [
@@ -344,12 +345,7 @@ class Grid(NamedTuple):
 
 def make_grid(shape, resolution, origin, has_height) -> Grid:
     """A :class:`Grid` from a generator's static keywords (checked)."""
-    try:
-        nx, ny = (int(s) for s in shape)
-    except (TypeError, ValueError):
-        raise ValueError(f"shape must be two integers (nx, ny), got {shape!r}") from None
-    if nx < 1 or ny < 1:
-        raise ValueError(f"shape must be positive, got {shape!r}")
+    nx, ny = check_map_shape(shape)
     res, origin = grid_spec(resolution, origin)
     return Grid((nx, ny), res, origin, bool(has_height))
 

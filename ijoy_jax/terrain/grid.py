@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax._struct import pytree_dataclass, static_field
+from ijoy_jax.limits import MAX_MAP_CELLS, check_map_shape
 
 
 @pytree_dataclass
@@ -189,6 +190,9 @@ def from_arrays(height, free=None, resolution: float = 0.02, origin=(0.0, 0.0)) 
     """
     if height is None and free is None:
         raise ValueError("from_arrays needs height, free, or both")
+    given = np.shape(height if height is not None else free)
+    if len(given) == 2 and min(given) > 0:  # (an empty grid is named below)
+        check_map_shape(given, "terrain grid")
     res, origin = grid_spec(resolution, origin)
     has_height = height is not None
     if has_height:
@@ -219,7 +223,7 @@ def from_arrays(height, free=None, resolution: float = 0.02, origin=(0.0, 0.0)) 
 
 def flat(shape: tuple[int, int], resolution: float = 0.02, origin=(0.0, 0.0), has_height: bool = False) -> Terrain:
     """An obstacle-free terrain of the given grid ``shape`` (nx, ny) at height 0."""
-    nx, ny = shape
+    nx, ny = check_map_shape(shape)
     height = np.zeros((nx, ny), np.float32) if has_height else None
     return from_arrays(height, np.ones((nx, ny), bool), resolution, origin)
 
@@ -256,10 +260,19 @@ def from_image(
     if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__"):
         from PIL import Image
 
-        with Image.open(image) as opened:
+        try:
+            opened = Image.open(image)
+        except Image.DecompressionBombError as e:  # beyond twice Pillow's own limit, refused before decoding
+            raise ValueError(f"image {str(image)!r} is too large to decode ({e}); a map holds at most "
+                             f"ijoy_jax.limits.MAX_MAP_CELLS = {MAX_MAP_CELLS} cells") from None
+        with opened:
+            cols, rows = opened.size  # from the header: checked before the pixels are decoded
+            check_map_shape((cols, rows), f"image {str(image)!r} of {cols} x {rows} pixels")
             # A palette image's pixels are indices into its palette: read the colours they stand for.
             image = np.asarray(opened.convert("RGBA") if opened.mode in ("P", "PA") else opened)
     img = np.asarray(image)
+    if img.ndim in (2, 3):
+        check_map_shape(img.shape[:2], f"image of shape {img.shape}")
     if img.ndim == 3 and img.shape[2] >= 1:
         img = img[..., 0]
     if img.ndim != 2:

@@ -74,6 +74,7 @@ import optax
 
 from ijoy_jax import geometry, robots
 from ijoy_jax.footcost import foot_cost_terms, index_terrain
+from ijoy_jax.limits import check_map_shape
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
 from ijoy_jax.select import make_targets, prepare, select_step
@@ -177,7 +178,11 @@ def _check_config(cfg: ForwardConfig) -> None:
         if not ok:
             raise ValueError(f"ForwardConfig: {msg}")
 
-    need(len(cfg.shape) == 2 and all(int(s) >= 8 for s in cfg.shape), f"shape must be 2 ints >= 8, got {cfg.shape}")
+    try:
+        shape = check_map_shape(cfg.shape)
+    except ValueError as e:
+        need(False, str(e))
+    need(min(shape) >= 8, f"shape must be 2 ints >= 8, got {cfg.shape}")
     need(cfg.resolution > 0, f"resolution must be > 0, got {cfg.resolution}")
     need(cfg.family in generators.FAMILIES, f"family must be one of {sorted(generators.FAMILIES)}, got {cfg.family!r}")
     fam = generators.FAMILIES[cfg.family]
