@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 
 
@@ -21,10 +22,11 @@ def assignments(items: Iterable[str] | None, example: str) -> dict[str, str]:
 
 
 def number_assignments(items: Iterable[str] | None, names: Iterable[str], example: str) -> dict[str, float]:
-    """:func:`assignments` whose names must be among ``names`` and whose values must be numbers (floats).
+    """:func:`assignments` whose names must be among ``names`` and whose values must be finite numbers (floats).
 
     Raises:
-      ValueError: a malformed item, an unknown name (listing ``names``) or a value that is not a number.
+      ValueError: a malformed item, an unknown name (listing ``names``), or a value that is not a number or
+        not finite (``nan``, ``inf``, ``1e999``: no robot leaf takes one), quoting the item.
     """
     known = list(names)
     out: dict[str, float] = {}
@@ -35,4 +37,6 @@ def number_assignments(items: Iterable[str] | None, names: Iterable[str], exampl
             out[name] = float(value)
         except ValueError:
             raise ValueError(f"--set '{name}={value}': {value!r} is not a number") from None
+        if not math.isfinite(out[name]):
+            raise ValueError(f"--set '{name}={value}': {name} takes a finite number, got {value!r}")
     return out

@@ -12,12 +12,18 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import time
+import types
+import typing
 
 from ijoy_jax.apps.options import assignments
 
 _SET_HELP = ("override one config field, VALUE parsed as JSON if it can be (0.05, [40, 40], true, \"x\"), "
-             "else as a string; repeatable, applied after --config")
+             "else as a string, and checked against the field's type; repeatable, applied after --config")
+
+_INT64 = 2**63  # an integer field holds a value of int64's range (a seed, a count)
+_FLOAT_MAX = 1.7976931348623157e308  # float64's largest: beyond it a number is not finite
 
 
 def add_parser(sub) -> None:
@@ -68,6 +74,9 @@ class InverseConfig:
     terrain: a :class:`~ijoy_jax.tune.forward.ForwardConfig` field dict for the maps and commands.
     density, margin, max_margin: the robot (HRP-2).
     sharpness, tau, noise, learning_rate, steps, seed: of :func:`ijoy_jax.tune.inverse.fit`.
+
+    Checked when built: each field's type as annotated (numbers finite, lists as tuples; ``terrain``'s
+    entries as the ForwardConfig fields they name) and its range; ValueError naming the field.
     """
 
     hidden: dict = dataclasses.field(default_factory=lambda: {"w": 0.5, "rotation_weight": 0.5})
@@ -87,29 +96,124 @@ class InverseConfig:
     steps: int = 300
     seed: int = 0
 
+    def __post_init__(self):
+        from ijoy_jax.tune import forward
+
+        for name, value in _checked_fields(InverseConfig, vars(self), "InverseConfig").items():
+            object.__setattr__(self, name, value)
+
+        def need(ok, msg):
+            if not ok:
+                raise ValueError(f"InverseConfig: {msg}")
+
+        robot_only = sorted({"density", "margin", "max_margin"} & set(self.terrain))
+        need(not robot_only, f"terrain.{robot_only[0] if robot_only else ''}: set it at the top level (the "
+                             "robot's, not the maps')")
+        object.__setattr__(self, "terrain", _checked_fields(forward.ForwardConfig, self.terrain, "InverseConfig",
+                                                            prefix="terrain."))
+        bad = {k: v for k, v in self.hidden.items() if isinstance(v, bool) or not isinstance(v, (int, float))
+               or not 0 < v < math.inf}
+        need(not bad, f"hidden must map parameter names to finite numbers > 0, got {bad}")
+        need(len(self.names) > 0, "names must name at least one parameter to fit")
+        need(len(self.starts) > 0 and all(v > 0 for v in self.starts),
+             f"starts must be one or more numbers > 0, got {list(self.starts)}")
+        for name in ("num_train", "num_held_out"):
+            need(getattr(self, name) >= 1, f"{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("density", "margin", "max_margin", "sharpness", "tau", "learning_rate"):
+            need(getattr(self, name) > 0, f"{name} must be > 0, got {getattr(self, name)}")
+        need(self.noise >= 0, f"noise must be >= 0, got {self.noise}")
+        need(self.margin < self.max_margin, f"margin must be < max_margin={self.max_margin}, got {self.margin}")
+        need(self.steps >= 1, f"steps must be >= 1, got {self.steps}")
+
 
 def _parse_value(text: str):
+    """A ``--set`` value: JSON where it parses (a number, a list, true, null, "x"), else the text itself."""
     try:
         return json.loads(text)
-    except json.JSONDecodeError:
+    except ValueError:  # not JSON; or an integer of more digits than Python converts
         return text
 
 
+_KINDS = {float: "a finite number", int: "an integer", bool: "true or false", str: "a string",
+          dict: "a table (JSON object)"}
+
+
+def _field_value(cls, name: str, value, where: str, label: str | None = None):
+    """``value`` for the field ``name`` of the config dataclass ``cls`` once it has the field's type (the
+    annotation; a tuple's items the type of its default's items), as that type.
+
+    Raises:
+      ValueError: ``"<where>: <label> takes <type>, got <value>"`` (``label`` defaults to ``name``), one line;
+        a range is the config's to check.
+    """
+    hint = typing.get_type_hints(cls)[name]
+    options = typing.get_args(hint) if isinstance(hint, types.UnionType) else (hint,)
+    if value is None and type(None) in options:
+        return None
+    kind = next(o for o in options if o is not type(None))
+    default = next(f for f in dataclasses.fields(cls) if f.name == name).default
+    items = {type(v) for v in default} if isinstance(default, tuple) else set()
+    item = items.pop() if len(items) == 1 else None  # (60, 60): ints; (0.1, 1.0): numbers; ("w",): strings
+
+    def fail(what: str):
+        shown = repr(value) if len(repr(value)) <= 80 else repr(value)[:77] + "..."
+        raise ValueError(f"{where}: {label or name} takes {what}, got {shown}")
+
+    if kind is tuple:
+        what = (f"a list of {_KINDS[item].removeprefix('a ').removeprefix('an ')}s" if item in _KINDS
+                else "a list")
+        if isinstance(value, dict) and not default:  # an empty default: a table of pairs too (terrain_params)
+            return value
+        if not isinstance(value, (list, tuple)):
+            fail(what)
+        return tuple(_scalar(item, v, lambda _: fail(what)) if item in _KINDS else v for v in value)
+    return _scalar(kind, value, fail)
+
+
+def _scalar(kind, value, fail):
+    """``value`` as ``kind`` (float, int, bool, str, dict): bools are not numbers, numbers are finite, integers
+    within int64; else ``fail(description)``."""
+    ok = {float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) <= _FLOAT_MAX,
+          int: lambda v: isinstance(v, int) and not isinstance(v, bool) and -_INT64 <= v < _INT64,
+          bool: lambda v: isinstance(v, bool), str: lambda v: isinstance(v, str),
+          dict: lambda v: isinstance(v, dict)}[kind]
+    if not ok(value):  # NaN fails abs(v) <= max, and an int beyond a float's range is compared exactly
+        fail(_KINDS[kind] + (" within int64" if kind is int else ""))
+    return float(value) if kind is float else value
+
+
+def _checked_fields(cls, values: dict, where: str, prefix: str = "") -> dict:
+    """Every ``values[name]`` checked against the type of ``cls``'s field (see :func:`_field_value`), named
+    ``prefix + name`` in an error; a name that is not a field is refused, listing the fields."""
+    known = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(values) - set(known))
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {[prefix + k for k in unknown]}; known: {sorted(known)}")
+    return {k: _field_value(cls, k, v, where, prefix + k) for k, v in values.items()}
+
+
 def _build_config(cls, args, extra: dict):
+    """The config ``cls`` from ``--config``, then ``--set``, then the run-level flags in ``extra`` (None: not
+    given); each value checked against its field's type, the error naming where it came from."""
     fields = {f.name for f in dataclasses.fields(cls)}
-    values: dict = {}
+    given: dict = {}  # name -> (value, where it came from)
     if args.config:
         import tomllib
 
-        with open(args.config, "rb") as f:
-            values.update(tomllib.load(f))
+        with open(args.config, "rb") as f:  # OSError: the CLI prints it, naming the file
+            try:
+                table = tomllib.load(f)
+            except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+                raise ValueError(f"--config {args.config}: not a valid TOML file ({e})") from None
+        given.update({k: (v, f"--config {args.config}") for k, v in table.items()})
     for key, val in assignments(args.set, "distance=0.04").items():
-        values[key] = _parse_value(val)
-    values.update({k: v for k, v in extra.items() if v is not None})
-    unknown = sorted(set(values) - fields)
+        shown = val if len(val) <= 40 else val[:37] + "..."
+        given[key] = (_parse_value(val), f"--set '{key}={shown}'")
+    given.update({k: (v, f"--{k}") for k, v in extra.items() if v is not None})
+    unknown = sorted(set(given) - fields)
     if unknown:
         raise ValueError(f"unknown config field(s) {unknown}; known: {sorted(fields)}")
-    return cls(**values)
+    return cls(**{k: _field_value(cls, k, v, where) for k, (v, where) in given.items()})
 
 
 def main(args) -> int:

@@ -1031,9 +1031,11 @@ def load_config(path) -> SweepConfig:
     """
     p = Path(path)
     try:
-        text = p.read_text()
+        text = p.read_text(encoding="utf-8")
     except OSError as e:
-        raise SweepConfigError(f"{p}: <file>: cannot read: {e.strerror}") from None
+        raise SweepConfigError(f"{p}: <file>: cannot read: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:  # a binary file named by mistake (a recording, a parquet part)
+        raise SweepConfigError(f"{p}: <file>: not a TOML text file (byte {e.start} is not UTF-8)") from None
     return parse_config(text, str(p))
 
 

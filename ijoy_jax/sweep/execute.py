@@ -106,6 +106,10 @@ Every part records the hash of its plan (:func:`ijoy_jax.sweep.results.plan_hash
 the sweep text and the chunk plan; also in the manifest as ``plan_hash``): a run
 refuses a folder holding parts of another plan (even with ``manifest.json``
 deleted) before writing anything, and :func:`ijoy_jax.sweep.load` refuses to mix them.
+A part or record damaged outside a run (truncated, overwritten, hand-edited) is never
+skipped or read as results: the run and :func:`ijoy_jax.sweep.load` refuse it in one
+line naming the file and the way out (delete that part, and the run recomputes its
+chunk; delete a record, and the run writes it anew from the parts' plan records).
 """
 
 from __future__ import annotations
@@ -141,7 +145,7 @@ from ijoy_jax.sweep.config import (
     reach_of,
     scenarios,
 )
-from ijoy_jax.sweep.results import PLAN_KEY, IncompleteSweepError, check_plans, describe_plan, plan_hash
+from ijoy_jax.sweep.results import PLAN_KEY, check_plans, differences, part_plan, plan_hash, read_record
 from ijoy_jax.terrain import generators
 
 __all__ = ["DEFAULT_CHUNK", "MAX_AUTO_CHUNK", "MEMORY_FRACTION", "RunStats", "Scenario", "auto_chunk_size",
@@ -590,6 +594,42 @@ def _alive(holder: dict) -> bool:
     return True
 
 
+def _parts_chunk_size(parts: Path) -> int | None:
+    """The chunk size the first part in ``parts`` records in its plan, or None (no part, or none recorded)."""
+    for f in sorted(parts.glob("part-*.parquet")) if parts.is_dir() else ():
+        rec = part_plan(f)  # IncompleteSweepError for a part that cannot be read
+        if rec is not None and isinstance(rec.get("chunk_size"), int) and rec["chunk_size"] >= 1:
+            return rec["chunk_size"]
+    return None
+
+
+def _what_differs(prev: dict, text: str, plan_key: dict) -> str:
+    """What differs between a folder's record (``prev``: its sweep text and plan) and this run's, compactly: the
+    sweep file's keys (``sweep.seed 3 -> 4``, ``grid.robot.w [0.5, 2.0] -> [1.0, 4.0]``), then the plan's
+    (``plan.chunk_size 2 -> 4``), each sorted, old -> new; the first differing line where the sweep files differ
+    only in comments or layout (the plan's hash covers the text)."""
+    import tomllib
+
+    old_text = prev.get("sweep_text", "")
+    sweep = ""
+    if old_text != text:
+        try:
+            sweep = differences(tomllib.loads(old_text), tomllib.loads(text))
+        except tomllib.TOMLDecodeError:
+            sweep = "the sweep file's text (the folder's is not TOML)"
+        if not sweep:  # the same keys and values
+            old_lines, new_lines = old_text.splitlines(), text.splitlines()
+            n = next((i for i, (a, b) in enumerate(zip(old_lines, new_lines, strict=False)) if a != b),
+                     min(len(old_lines), len(new_lines)))
+
+            def line(lines: list[str]) -> str:
+                return json.dumps(lines[n]) if n < len(lines) else "the end of the file"
+
+            sweep = f"the sweep file's comments or layout, line {n + 1}: {line(old_lines)} -> {line(new_lines)}"
+    plan = differences({"plan": prev.get("plan", {})}, {"plan": plan_key})
+    return ", ".join(d for d in (sweep, plan) if d)
+
+
 def _write_json(path: Path, obj) -> None:
     tmp = path.with_name(f"{path.name}.{_WHO}.tmp")
     tmp.write_text(json.dumps(obj, indent=2, default=str))
@@ -860,7 +900,8 @@ def run(
         from the same sweep file and options is resumed.
       chunk_size: scenarios per jitted call (>= 1); memory grows linearly with it.
         Rounded up to a multiple of the device count. None (default): the
-        chunk size of the folder's manifest when resuming, else
+        chunk size of the folder's manifest when resuming (or of its parts'
+        plan records, when the manifest was deleted), else
         :func:`default_chunk_size` (:data:`DEFAULT_CHUNK` on CPU, sized to
         device memory on an accelerator; process 0 decides for all).
       max_scenarios: run only the first this many scenarios (smoke tests).
@@ -879,7 +920,8 @@ def run(
 
     Raises:
       SweepConfigError: a bad sweep file (before any compute).
-      ValueError: ``out`` holds results of a different sweep or chunk plan, or is in
+      ValueError: ``out`` holds results of a different sweep or chunk plan (the message lists what
+        differs), a part or record that cannot be read (IncompleteSweepError naming it), or is in
         use by another run (its lock; members of one multi-process run share it), or a
         bad ``chunk_size``, ``max_scenarios``, ``devices`` or process layout.
 
@@ -923,11 +965,14 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     parts = out / "parts"
     manifest_path = out / "manifest.json"
     proc_path = out / "processes" / _PROC.format(pid)
-    old = json.loads(manifest_path.read_text()) if manifest_path.exists() else None
-    mine = json.loads(proc_path.read_text()) if pid > 0 and proc_path.exists() else None
+    # IncompleteSweepError (a ValueError) naming a record that is not one, and the way out
+    needed = ("sweep_text", "plan", "sessions")
+    old = read_record(manifest_path, needed) if manifest_path.exists() else None
+    mine = read_record(proc_path, needed) if pid > 0 and proc_path.exists() else None
     if chunk_size is None:
-        # Resume with the folder's chunk size; otherwise process 0 sizes it and the others take its figure.
-        prev = (old or mine or {}).get("plan", {}).get("chunk_size")
+        # Resume with the folder's chunk size (its record's, else its parts': a deleted manifest is rewritten);
+        # otherwise process 0 sizes it and the others take its figure.
+        prev = (old or mine or {}).get("plan", {}).get("chunk_size") or _parts_chunk_size(parts)
         chunk_size = distributed.agree(f"ijoy_sweep/chunk_size/{cfg.name}/{max_scenarios}",
                                        lambda: prev or default_chunk_size(cfg, table, bases, devs, sim), pid)
     chunk_size = -(-chunk_size // ndev) * ndev  # a multiple of the device count
@@ -938,18 +983,17 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
         plan_key["inputs"] = cfg.inputs
     for prev in (old, mine):
         if prev is not None and (prev.get("sweep_text") != cfg.text or prev.get("plan") != plan_key):
-            raise ValueError(f"{out} holds results of a different sweep or chunk plan "
-                             f"({prev.get('plan')} vs {plan_key}; chunk_size is rounded up to a multiple "
-                             f"of the {ndev} device(s)); choose another --out or delete it")
+            what = _what_differs(prev, cfg.text, plan_key)
+            if prev.get("plan", {}).get("chunk_size") != plan_key["chunk_size"]:
+                what += f"; chunk_size is rounded up to a multiple of the {ndev} device(s)"
+            raise ValueError(f"{out} holds results of a different sweep or chunk plan ({what}); choose another "
+                             f"--out or delete it")
     # Every part records its plan: parts of another plan (a deleted manifest) are never skipped as done.
     phash = plan_hash(cfg.text, plan_key)
     plan_record = {"hash": phash, "name": cfg.name, **plan_key}
-    if parts.exists():
-        try:  # unrecorded (older) parts are vouched for by a matching manifest only
-            check_plans(out, sorted(parts.glob("part-*.parquet")), plan_record,
-                        allow_unrecorded=(old or mine) is not None)
-        except IncompleteSweepError as e:
-            raise ValueError(f"{e} (this run's plan is {describe_plan(plan_record)})") from None
+    if parts.exists():  # IncompleteSweepError naming a part of another plan (and this run's), or a corrupt one
+        # unrecorded (older) parts are vouched for by a matching manifest only
+        check_plans(out, sorted(parts.glob("part-*.parquet")), plan_record, allow_unrecorded=(old or mine) is not None)
     layout = {"num_processes": nproc, "rule": "chunk % num_processes == process_id",
               "process_files": "processes/process-NNNNN.json (sessions of processes 1..N-1)"}
     if pid == 0:  # the manifest and sweep.toml are written by process 0 only

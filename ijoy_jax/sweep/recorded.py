@@ -37,6 +37,8 @@ file): :mod:`ijoy_jax.live.record` and :mod:`ijoy_jax.live.inputs` need the terr
 from __future__ import annotations
 
 import hashlib
+import os
+import stat
 from pathlib import Path
 from typing import NamedTuple
 
@@ -100,9 +102,28 @@ def _digest(path: Path) -> str:
 
 
 def _existing(path) -> Path:
+    """``path`` as a Path once it names a regular file this process may read.
+
+    Raises:
+      ValueError: one line quoting the path and what it is instead: missing, a directory, not a regular file
+        (a device, pipe or socket, which a read could block on or never end), or not readable.
+    """
     p = Path(path)
-    if not p.is_file():
-        raise ValueError(f"{str(p)!r} does not exist (paths are relative to the sweep file's folder)")
+    where = "paths are relative to the sweep file's folder"
+    try:
+        st = p.stat()
+    except FileNotFoundError:
+        raise ValueError(f"{str(p)!r} does not exist ({where})") from None
+    except NotADirectoryError:
+        raise ValueError(f"{str(p)!r} does not exist: a folder on its path is a file ({where})") from None
+    except (OSError, ValueError) as e:  # permission on a folder, a name too long, a NUL byte
+        raise ValueError(f"{str(p)!r} cannot be read: {getattr(e, 'strerror', None) or e}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise ValueError(f"{str(p)!r} is a directory, not a file (name the file in it; {where})")
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"{str(p)!r} is not a regular file (a device, pipe or socket): name a file")
+    if not os.access(p, os.R_OK):
+        raise ValueError(f"{str(p)!r} cannot be read: permission denied")
     return p
 
 

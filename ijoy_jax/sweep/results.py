@@ -34,8 +34,9 @@ from ijoy_jax.terrain import generators
 
 __all__ = ["EXTRA_METRICS", "PAPER_ACTIONS", "PHYSICS_PLOT_METRICS", "PLAN_KEY",
            "PLOT_METRICS", "SELECTOR_PLOT_METRICS", "UNITS", "IncompleteSweepError", "action_counts",
-           "aggregate", "b_max", "check_plans", "describe_plan", "load", "load_aggregates", "paired_differences",
-           "part_plan", "plan_hash",
+           "aggregate", "b_max", "check_plans", "describe_plan", "differences", "load", "load_aggregates",
+           "paired_differences",
+           "part_plan", "plan_hash", "read_record",
            "plot", "plot_crossing", "t_quantile"]
 
 EXTRA_METRICS = generators.METRIC_NAMES
@@ -96,8 +97,62 @@ def t_quantile(df: int) -> float:
 
 
 class IncompleteSweepError(ValueError):
-    """A sweep folder lacks chunks (a process has not finished), holds duplicated scenarios, or mixes in parts
-    of another plan."""
+    """A sweep folder lacks chunks (a process has not finished), holds duplicated scenarios, mixes in parts
+    of another plan, or holds a part or record that cannot be read (truncated, overwritten or hand-edited)."""
+
+
+def _reason(e: BaseException) -> str:
+    """An exception's message as one short line (a parquet or JSON reader's may span lines)."""
+    text = " ".join(str(e).split()) or type(e).__name__
+    return text if len(text) <= 160 else text[:157] + "..."
+
+
+def _corrupt_part(path, e: BaseException) -> IncompleteSweepError:
+    return IncompleteSweepError(
+        f"{path}: corrupt or truncated result part ({_reason(e)}); delete it and rerun `ijoy sweep run` with the "
+        f"same sweep file and --out: the run recomputes that chunk alone")
+
+
+def read_record(path, required: tuple[str, ...] = ()) -> dict:
+    """A sweep folder's JSON record (``manifest.json``, ``processes/process-*.json``) as a dict.
+
+    Args:
+      path: the record's file.
+      required: keys it must hold. Whatever it holds of ``plan`` (a dict with integer ``chunks`` and
+        ``scenarios``), ``sweep_text`` (a string) and ``sessions`` (a list of dicts) must have that form.
+
+    Raises:
+      IncompleteSweepError: one line naming the file, what is wrong with it and the way out: every part
+        records its plan (chunk size included), so a run with the same sweep file, ``--out`` and
+        ``--max-scenarios`` writes the record anew once it is deleted, and resumes (only the record's session
+        history is lost).
+    """
+    path = Path(path)
+    way_out = ("delete it and rerun `ijoy sweep run` with the same sweep file, --out and --max-scenarios: the "
+               "parts record their plan, so the run writes it anew and resumes")
+    try:
+        record = json.loads(path.read_bytes())
+    except OSError as e:
+        raise IncompleteSweepError(f"{path}: cannot read the sweep's record: {e.strerror or e}") from None
+    except ValueError as e:  # JSONDecodeError, UnicodeDecodeError
+        raise IncompleteSweepError(f"{path}: corrupt or truncated record, not JSON ({_reason(e)}); "
+                                   f"{way_out}") from None
+    if not isinstance(record, dict):
+        raise IncompleteSweepError(f"{path}: corrupt record: a JSON {type(record).__name__}, not an object; "
+                                   f"{way_out}")
+    plan = record.get("plan", {})
+    problems = [f"no {k!r}" for k in required if k not in record]
+    if not isinstance(plan, dict) or any(isinstance(plan.get(k), bool) or not isinstance(plan.get(k), int)
+                                         for k in ("chunks", "scenarios") if "plan" in record):
+        problems.append("'plan' is not an object with integer 'chunks' and 'scenarios'")
+    if not isinstance(record.get("sweep_text", ""), str):
+        problems.append("'sweep_text' is not a string")
+    sessions = record.get("sessions", [])
+    if not isinstance(sessions, list) or not all(isinstance(x, dict) for x in sessions):
+        problems.append("'sessions' is not a list of objects")
+    if problems:
+        raise IncompleteSweepError(f"{path}: corrupt record ({'; '.join(problems)}); {way_out}")
+    return record
 
 
 PLAN_KEY = b"ijoy_jax.plan"
@@ -119,11 +174,28 @@ def plan_hash(sweep_text: str, plan: dict) -> str:
 
 def part_plan(path) -> dict | None:
     """The plan record a part file was written with (:data:`PLAN_KEY`), or None for a part written before
-    parts recorded their plan. Reads only the file's footer."""
+    parts recorded their plan. Reads only the file's footer.
+
+    Raises:
+      IncompleteSweepError: the file is not a readable parquet file (truncated, overwritten) or its plan
+        record is not a JSON object; the message names the file and says to delete it and rerun.
+    """
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
-    meta = pq.read_schema(path).metadata or {}
-    return json.loads(meta[PLAN_KEY]) if PLAN_KEY in meta else None
+    try:
+        meta = pq.read_schema(path).metadata or {}
+    except (OSError, ValueError, pa.ArrowException) as e:  # ArrowInvalid: "Parquet magic bytes not found"
+        raise _corrupt_part(path, e) from None
+    if PLAN_KEY not in meta:
+        return None
+    try:
+        record = json.loads(meta[PLAN_KEY])
+    except ValueError as e:
+        raise _corrupt_part(path, ValueError(f"its plan record is not JSON: {e}")) from None
+    if not isinstance(record, dict):
+        raise _corrupt_part(path, ValueError("its plan record is not a JSON object"))
+    return record
 
 
 def describe_plan(record: dict | None) -> str:
@@ -134,10 +206,49 @@ def describe_plan(record: dict | None) -> str:
             f"{record.get('chunks')} chunks of {record.get('chunk_size')})")
 
 
+def _flat(d: dict, prefix: str = "") -> dict:
+    """``{"grid": {"robot.w": v}}`` as ``{"grid.robot.w": v}`` (an empty table stays a value)."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict) and v:
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+_UNSET = object()
+
+
+def differences(old: dict, new: dict, *, limit: int = 8) -> str:
+    """The keys whose values differ between two (nested) dicts, compactly: ``key old -> new`` for each, sorted
+    by dotted key (nested tables flattened: ``grid.robot.w``), values as JSON, ``unset`` where a key is absent;
+    at most ``limit`` of them, then how many more. ``""`` when none differ.
+
+    Example:
+      >>> differences({"plan": {"chunk_size": 2, "chunks": 3}}, {"plan": {"chunk_size": 3, "chunks": 2}})
+      'plan.chunk_size 2 -> 3, plan.chunks 3 -> 2'
+    """
+    a, b = _flat(old), _flat(new)
+
+    def show(v) -> str:
+        return "unset" if v is _UNSET else json.dumps(v, sort_keys=True, default=str)
+
+    diffs = [f"{k} {show(a.get(k, _UNSET))} -> {show(b.get(k, _UNSET))}" for k in sorted(set(a) | set(b))
+             if a.get(k, _UNSET) != b.get(k, _UNSET)]
+    more = f" and {len(diffs) - limit} more" if len(diffs) > limit else ""
+    return ", ".join(diffs[:limit]) + more
+
+
 def check_plans(path: Path, files, expected: dict | None, *, allow_unrecorded: bool) -> None:
-    """Raise :class:`IncompleteSweepError` (naming the folder, the part and both plans) unless every part
-    in ``files`` was written by the plan ``expected`` (a record as in :data:`PLAN_KEY`; None: the first
-    recorded part's plan). Unrecorded (older) parts pass when ``allow_unrecorded``."""
+    """Raise :class:`IncompleteSweepError` (naming the folder, the part, both plans and what differs between
+    them) unless every part in ``files`` was written by the plan ``expected`` (a record as in :data:`PLAN_KEY`;
+    None: the first recorded part's plan). Unrecorded (older) parts pass when ``allow_unrecorded``; a part that
+    cannot be read raises too (:func:`part_plan`)."""
+
+    def without_hash(record: dict | None) -> dict:
+        return {k: v for k, v in (record or {}).items() if k != "hash"}
+
     for f in files:
         rec = part_plan(f)
         if rec is None and allow_unrecorded:
@@ -146,10 +257,14 @@ def check_plans(path: Path, files, expected: dict | None, *, allow_unrecorded: b
             expected = rec
             continue
         if rec is None or rec.get("hash") != expected.get("hash"):
+            differing = ""
+            if rec is not None:  # the hash also covers the sweep file's text, which the records do not hold
+                what = differences(without_hash(rec), without_hash(expected)) or "the sweep file's text"
+                differing = f" (differing: {what})"
             raise IncompleteSweepError(
                 f"{path}: {Path(f).relative_to(path)} belongs to another plan: {describe_plan(rec)}, not "
-                f"{describe_plan(expected)}; results of different sweeps would be mixed: run into another "
-                f"folder, or delete the parts of the other plan")
+                f"{describe_plan(expected)}{differing}; results of "
+                f"different sweeps would be mixed: run into another folder, or delete the parts of the other plan")
 
 
 def _process_sessions(path: Path) -> list[dict]:
@@ -157,10 +272,19 @@ def _process_sessions(path: Path) -> list[dict]:
     out = []
     man = path / "manifest.json"
     if man.exists():
-        out += json.loads(man.read_text()).get("sessions", [])
+        out += read_record(man).get("sessions", [])
     for f in sorted((path / "processes").glob("process-*.json")):
-        out += json.loads(f.read_text()).get("sessions", [])
+        out += read_record(f).get("sessions", [])
     return out
+
+
+def _chunk_of(part: Path) -> int:
+    """The chunk id in a part's name (``part-00012.parquet``: 12)."""
+    digits = part.name[len("part-"):-len(".parquet")]
+    if not digits.isdigit():
+        raise IncompleteSweepError(f"{part}: not a part a sweep writes (part-NNNNN.parquet, NNNNN its chunk): "
+                                   f"move it out of {part.parent}")
+    return int(digits)
 
 
 def _check_complete(path: Path, files: list[Path], df) -> None:
@@ -168,8 +292,8 @@ def _check_complete(path: Path, files: list[Path], df) -> None:
     man_path = path / "manifest.json"
     if not man_path.exists():
         raise IncompleteSweepError(f"{path}: no manifest.json (process 0 writes it when it starts; has it run?)")
-    plan = json.loads(man_path.read_text())["plan"]
-    have = [int(f.name[len("part-"):-len(".parquet")]) for f in files]
+    plan = read_record(man_path, ("plan",))["plan"]
+    have = [_chunk_of(f) for f in files]
     missing = sorted(set(range(plan["chunks"])) - set(have))
     foreign = sorted(set(have) - set(range(plan["chunks"])))
     if foreign:
@@ -208,11 +332,12 @@ def load(path, *, partial: bool = False):
       pandas.DataFrame, one row per scenario, sorted by ``scenario``.
 
     Raises:
-      FileNotFoundError: no parts at all.
+      FileNotFoundError: no parts at all (NotADirectoryError: ``path`` is a file).
       IncompleteSweepError: parts of another plan are mixed in (every part records its plan's
-        hash; also with ``partial``); or (unless ``partial``) chunks of the manifest's plan are
-        missing (the message names them and, for a multi-process run, the processes they belong
-        to), or scenarios are duplicated.
+        hash; also with ``partial``); a part or the manifest cannot be read (truncated, overwritten,
+        hand-edited: the message names the file and the way out); or (unless ``partial``) chunks of
+        the manifest's plan are missing (the message names them and, for a multi-process run, the
+        processes they belong to), or scenarios are duplicated.
 
     Example:
       >>> from ijoy_jax import sweep
@@ -220,24 +345,37 @@ def load(path, *, partial: bool = False):
       >>> df.groupby("robot.w")["distance_along"].mean()  # doctest: +SKIP
     """
     import pandas as pd
+    import pyarrow as pa
 
     path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise NotADirectoryError(f"{path} is a file, not a sweep's output folder (ijoy sweep run --out)")
     files = sorted((path / "parts").glob("part-*.parquet"))
     if not files:
-        raise FileNotFoundError(f"no result parts under {path / 'parts'}")
+        raise FileNotFoundError(f"no result parts under {path / 'parts'}"
+                                + ("" if path.exists() else f" ({path} does not exist)"))
     man_path = path / "manifest.json"
-    man = json.loads(man_path.read_text()) if man_path.exists() else {}
+    man = read_record(man_path) if man_path.exists() else {}
     expected = ({"hash": man["plan_hash"], "name": man.get("name"), **man.get("plan", {})}
                 if "plan_hash" in man else None)
     check_plans(path, files, expected, allow_unrecorded=True)  # even with partial: never mix two sweeps
-    df = pd.concat([pd.read_parquet(p) for p in files], ignore_index=True)
+    tables = []
+    for p in files:
+        try:  # the footer was read above; a part cut or overwritten inside its data fails here
+            t = pd.read_parquet(p)
+        except (OSError, ValueError, pa.ArrowException) as e:
+            raise _corrupt_part(p, e) from None
+        if not {"scenario", "chunk"} <= set(t.columns):
+            raise _corrupt_part(p, ValueError("no 'scenario' and 'chunk' columns"))
+        tables.append(t)
+    df = pd.concat(tables, ignore_index=True)
     if not partial:
         _check_complete(path, files, df)
     return df.sort_values("scenario", kind="stable").reset_index(drop=True)
 
 
 def _swept(path) -> tuple[str, ...]:
-    man = json.loads((Path(path) / "manifest.json").read_text())
+    man = read_record(Path(path) / "manifest.json", ("sweep_text",))
     return parse_config(man["sweep_text"], man.get("sweep_file", "<manifest>")).swept
 
 
