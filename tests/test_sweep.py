@@ -514,6 +514,13 @@ def test_cli_run_and_summarize(base_file, tmp_path, capsys):
     err = printed.err.strip()
     assert len(err.splitlines()) == 1 and "--metrics: 'fell' is not a metric of this sweep" in err, err
     assert printed.out == ""  # refused before the table is printed
+    # the price of safety: one metric against another, one point per cell
+    assert cli.main(["sweep", "summarize", str(out), "--tradeoff", "stopped,distance_along"]) == 0
+    assert (out / "tradeoff.png").stat().st_size > 10_000 and "tradeoff.png" in capsys.readouterr().out
+    for bad in ("fell", "fell,distance_along", "stopped,distance_along,mean_deviation"):
+        assert cli.main(["sweep", "summarize", str(out), "--tradeoff", bad]) == 2
+        printed = capsys.readouterr()
+        assert "--tradeoff takes two metrics of this sweep" in printed.err and printed.out == ""
 
 
 def test_cli_bad_file_exits_2(tmp_path, capsys):
@@ -681,6 +688,35 @@ def test_density_axis_is_drawn_in_action_counts_with_the_papers_496(tmp_path, mo
     want = sweep.action_counts(dens, reach=0.30).tolist()
     assert want[3] == 720 and figs[0].axes[0].lines[0].get_xdata().tolist() == want
     assert figs[0].axes[0].containers[0].get_label() == "reach = 0.3"  # the line says which reach
+
+
+def test_the_tradeoff_plot_puts_each_cell_at_its_price_and_safety(tmp_path, monkeypatch):
+    """Falls against progress, one point per cell: coloured by the first swept column, labelled by the others,
+    each point at the cell's means with its CIs (a rate's clipped to [0, 1])."""
+    from ijoy_jax.sweep import results
+
+    amp, w = np.repeat([0.01, 0.03], 3), np.tile([1.0, 2.0, 4.0], 2)
+    agg = pd.DataFrame({"cell": range(6), "terrain.amplitude": amp, "robot.w": w, "n": 64,
+                        "fell.mean": amp * w, "fell.ci95": 0.05, "distance_along.mean": w / amp / 100,
+                        "distance_along.ci95": 0.1})
+    figs = []
+    finish = results._finish
+    monkeypatch.setattr(results, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
+    sweep.plot_tradeoff(agg, tmp_path / "t.png", title="rough")
+    ((ax,),) = [f.axes for f in figs]
+    assert len(ax.containers) == 2  # one per amplitude
+    for container, a in zip(ax.containers, (0.01, 0.03), strict=True):
+        xy = container.lines[0].get_xydata()
+        want = agg[agg["terrain.amplitude"] == a]
+        np.testing.assert_allclose(xy[:, 0], want["distance_along.mean"])
+        np.testing.assert_allclose(xy[:, 1], want["fell.mean"])
+        lower = container.lines[2][1].get_segments()  # the y error bars: fell within [0, 1]
+        assert all(seg[0][1] >= 0 and seg[1][1] <= 1 for seg in lower)
+    assert [t.get_text() for t in ax.texts] == [f"w {v:g}" for v in w]
+    assert {t.get_text() for t in ax.get_legend().get_texts()} == {"amplitude = 0.01", "amplitude = 0.03"}
+    assert ax.get_xlabel() == "distance along (m)" and ax.get_ylabel().startswith("fall rate")
+    with pytest.raises(ValueError, match="'collided' is not a metric of this sweep"):
+        sweep.plot_tradeoff(agg, tmp_path / "u.png", safety="collided")
 
 
 def test_summary_plot_is_a_grid_of_distinct_panels(tmp_path, monkeypatch):

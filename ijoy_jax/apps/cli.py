@@ -147,6 +147,9 @@ def main(argv: list[str] | None = None) -> int:
     ssum.add_argument("dir", help="a sweep's output folder")
     ssum.add_argument("--png", default=None, help="plot to write (default: DIR/summary.png)")
     ssum.add_argument("--x", default=None, help="parameter on the plot's x axis (default: the most varied)")
+    ssum.add_argument("--tradeoff", nargs="?", const="fell,distance_along", default=None, metavar="Y,X",
+                      help="also write DIR/tradeoff.png: one point per cell, metric Y (safety) against metric X "
+                           "(its price; default fell,distance_along: falls against progress)")
     ssum.add_argument("--metrics", default=None,
                       help="comma-separated metrics, one panel each (default: the sweep kind's, e.g. collisions "
                            "and falls for a physics sweep)")
@@ -400,6 +403,13 @@ def _sweep(args) -> int:
         for m in metrics:
             if m not in known:
                 raise ValueError(f"--metrics: {m!r} is not a metric of this sweep; known: {', '.join(known)}")
+    tradeoff = None
+    if args.tradeoff is not None:  # checked before anything is printed, like --metrics
+        tradeoff = tuple(m.strip() for m in args.tradeoff.split(","))
+        known = [c[: -len(".mean")] for c in agg.columns if c.endswith(".mean")]
+        if len(tradeoff) != 2 or any(m not in known for m in tradeoff):
+            raise ValueError(f"--tradeoff takes two metrics of this sweep, Y,X (e.g. fell,distance_along), got "
+                             f"{args.tradeoff!r}; known: {', '.join(known)}")
     show = [c for c in agg.columns if c.startswith(("robot.", "terrain.", "sim.", "selector.")) or c == "n"]
     table = agg[show].copy()
     physics = ("collided", "fell", "placement_error_mean") if "fell.mean" in agg else ()
@@ -415,6 +425,10 @@ def _sweep(args) -> int:
     name = json.loads((Path(args.dir) / "manifest.json").read_text()).get("name", "")
     sweep.plot(agg, png, x=args.x, metrics=metrics, title=name)
     print(f"plot: {png}")
+    if tradeoff is not None:
+        out = str(Path(png).with_name("tradeoff.png"))
+        sweep.plot_tradeoff(agg, out, safety=tradeoff[0], price=tradeoff[1], title=name)
+        print(f"plot: {out}")
     return 0
 
 

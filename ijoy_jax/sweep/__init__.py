@@ -20,6 +20,8 @@ Public names::
   local                                                          N local processes, one GPU each, in one call
   load / aggregate / load_aggregates / plot / METRICS / UNITS    tidy table (union of processes), 95% CIs, plot
   paired_differences                                             cell minus baseline, replicate by replicate
+  plot_tradeoff                                                  a safety metric against its price per cell
+                                                                 (falls against progress)
   PLOT_METRICS / PHYSICS_PLOT_METRICS / SELECTOR_PLOT_METRICS    the plot's default panels
   SELECTOR_DEFAULTS                                              the selector's options a sweep varies
                                                                  (lookahead horizon, refinement, discount)
@@ -97,6 +99,7 @@ from ijoy_jax.sweep.results import (
     plan_hash,
     plot,
     plot_crossing,
+    plot_tradeoff,
     t_quantile,
 )
 
@@ -149,6 +152,7 @@ __all__ = [
     "plan_hash",
     "plot",
     "plot_crossing",
+    "plot_tradeoff",
     "run",
     "scenario",
     "scenario_bytes",

@@ -37,7 +37,7 @@ __all__ = ["EXTRA_METRICS", "PAPER_ACTIONS", "PHYSICS_PLOT_METRICS", "PLAN_KEY",
            "aggregate", "b_max", "check_plans", "describe_plan", "differences", "load", "load_aggregates",
            "paired_differences",
            "part_plan", "plan_hash", "read_record",
-           "plot", "plot_crossing", "t_quantile"]
+           "plot", "plot_crossing", "plot_tradeoff", "t_quantile"]
 
 EXTRA_METRICS = generators.METRIC_NAMES
 """Family-specific metrics (every family's ``metric_names``, :data:`ijoy_jax.terrain.generators.METRIC_NAMES`),
@@ -617,6 +617,63 @@ def _finish(fig, agg, title, out):
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
+
+
+def _short(column: str) -> str:
+    """A swept column's name without its prefix, for a point's label (``robot.metrics.support_limit`` ->
+    ``support_limit``)."""
+    return column.rsplit(".", 1)[-1]
+
+
+def plot_tradeoff(agg, out, safety: str = "fell", price: str = "distance_along", title: str = ""):
+    """The price of safety: one point per cell, a safety metric (up) against what it costs (across), each with
+    its 95% CI.
+
+    Args:
+      agg: :func:`aggregate` output with ``{safety}.mean`` and ``{price}.mean`` (e.g. a physics sweep's fall
+        rate and progress).
+      out: PNG path.
+      safety, price: the metrics on the y and x axes (:data:`UNITS` gives their units).
+      title: figure title.
+
+    The first swept column (e.g. the terrain's amplitude, or the family's parameter) picks each point's
+    colour; the other swept columns label the point, so a reader sees which settings buy safety with
+    progress. A fraction metric's interval is clipped to [0, 1]. Returns ``out``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    for m in (safety, price):
+        if f"{m}.mean" not in agg:
+            known = [c[: -len(".mean")] for c in agg.columns if c.endswith(".mean")]
+            raise ValueError(f"{m!r} is not a metric of this sweep; known: {', '.join(known)}")
+    swept = [c for c in agg.columns if c.startswith(_PARAMS)]  # the swept parameters (aggregate groups by them)
+    colour_by, labels = (swept[0], swept[1:]) if swept else (None, [])
+    fig, ax = plt.subplots(figsize=(8.0, 5.4))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    groups = [(None, agg)] if colour_by is None else list(agg.groupby(colour_by, sort=True))
+    for i, (value, g) in enumerate(groups):
+        x, y = (g[f"{m}.mean"].to_numpy(np.float64) for m in (price, safety))
+        xe, ye = (np.nan_to_num(g[f"{m}.ci95"].to_numpy(np.float64)) for m in (price, safety))
+        y_lo, y_hi = y - ye, y + ye
+        if UNITS.get(safety) == "fraction":
+            y_lo, y_hi = np.clip(y_lo, 0, 1), np.clip(y_hi, 0, 1)
+        name = "all cells" if colour_by is None else f"{_short(colour_by)} = {value:g}"
+        ax.errorbar(x, y, xerr=xe, yerr=[y - y_lo, y_hi - y], fmt="o", capsize=2, color=colours[i % len(colours)],
+                    label=name)
+        for (_, row), xi, yi in zip(g.iterrows(), x, y, strict=True):
+            text = ", ".join(f"{_short(c)} {row[c]:g}" for c in labels)
+            if text:
+                ax.annotate(text, (xi, yi), textcoords="offset points", xytext=(4, 3), fontsize=6,
+                            color=colours[i % len(colours)])
+    ax.set_xlabel(f"{price.replace('_', ' ')} ({UNITS.get(price, '')})")
+    ax.set_ylabel(_TITLES.get(safety, f"{safety.replace('_', ' ')} ({UNITS.get(safety, '')})"))
+    ax.grid(alpha=0.3)
+    if colour_by is not None:
+        ax.legend(fontsize=8)
+    return _finish(fig, agg, title, out)
 
 
 def b_max(margin, step_length: float = 0.20, foot_length: float = 0.242):
