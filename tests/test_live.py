@@ -141,6 +141,17 @@ def test_the_views_socket_ignores_hostile_messages_and_keeps_the_connection():
         assert view.axes.updates == 2  # the "[[...]]" source was a valid stick message (source as text); no other
 
 
+@pytest.mark.parametrize("dt", [0.0, -0.01, float("nan"), float("inf"), 1e-300, "0.01", True])
+def test_a_control_period_that_would_never_tick_or_never_end_is_refused(dt):
+    """control_dt 0 once raised ZeroDivisionError and 1e-300 s ticked without end in real time."""
+    from ijoy_jax.live.bodies import MIN_CONTROL_DT, PerfectBody
+
+    start = np.array([[0.3, 0.9, 0.0], [0.3, 0.7, 0.0]])
+    with pytest.raises(ValueError, match=f"control_dt must be a finite number of seconds >= {MIN_CONTROL_DT:g}"):
+        PerfectBody(ij.robots.hrp2(), start, 1, dt)
+    assert PerfectBody(ij.robots.hrp2(), start, 1, np.float32(0.01)).ticks_per_step == 80
+
+
 def test_no_gamepad_is_a_clear_error():
     with pytest.raises(live.InputError, match="no gamepad found"):
         live.inputs.Gamepad()

@@ -11,14 +11,19 @@ sent, ``step_time`` after it began (the same float32 feet as the scanned rollout
 
 from __future__ import annotations
 
+import math
+import numbers
+
 import numpy as np
 
 from ijoy_jax import control
 from ijoy_jax.robots import LEFT, Robot
 
-__all__ = ["DEFAULT_CONTROL_DT", "PerfectBody"]
+__all__ = ["DEFAULT_CONTROL_DT", "MIN_CONTROL_DT", "PerfectBody"]
 
 DEFAULT_CONTROL_DT = 0.01
+MIN_CONTROL_DT = 1e-4
+"""Shortest control period (s) of the perfect body: a shorter one ticks without end in real time."""
 """s: the perfect body's tick (the MuJoCo biped's controller period), the rate the drive reads the stick at."""
 
 _PLANAR = np.array([0, 1, 5])
@@ -45,8 +50,12 @@ class PerfectBody:
 
     def __init__(self, robot: Robot, start, first_swing=LEFT, control_dt: float = DEFAULT_CONTROL_DT):
         step_time = float(robot.step_time)
+        number = isinstance(control_dt, numbers.Real) and not isinstance(control_dt, bool)
+        if not (number and math.isfinite(control_dt) and control_dt >= MIN_CONTROL_DT):
+            raise ValueError(f"control_dt must be a finite number of seconds >= {MIN_CONTROL_DT:g} (at most "
+                             f"{1 / MIN_CONTROL_DT:g} ticks per second), got {control_dt!r}")
         ticks = step_time / control_dt
-        if control_dt <= 0 or abs(ticks - round(ticks)) > 1e-4:  # float32 step times: 0.8 is 0.80000001
+        if abs(ticks - round(ticks)) > 1e-4:  # float32 step times: 0.8 is 0.80000001
             raise ValueError(f"step_time {step_time} s must be a whole number of control_dt {control_dt} s ticks")
         start = np.array(start, np.float32)
         if start.shape != (2, 3) or not np.all(np.isfinite(start)):
