@@ -5,8 +5,12 @@ returns a checked request or raises a ProtocolError with a known code, never ano
 answers every message with a reply that obeys the shipped JSON Schema. Arrays round-trip bit for bit.
 """
 
+import fnmatch
 import json
 import math
+import tomllib
+from importlib import resources
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 import pytest
@@ -198,3 +202,42 @@ def test_update_columns_equals_a_whole_new_index(has_height, start, width):
     got, want = update_columns(old, new, robot, start, width), index_terrain(new, robot)
     for name in ("obstacles_before", "height_max", "height_padded", "height_sums", "height_block_first"):
         np.testing.assert_array_equal(np.asarray(getattr(got, name)), np.asarray(getattr(want, name)), err_msg=name)
+
+
+# ------------------------------------------------------------------------- the files the installed package ships
+
+
+def _shipped(rel: PurePosixPath, package_data: dict) -> bool:
+    """Whether setuptools' ``package-data`` ships the file at ``rel`` (a path inside ``ijoy_jax/``): a pattern of
+    the package folder that holds it, or of one above, matches its path from there segment by segment (glob
+    patterns, ``*`` within a segment, as setuptools reads them)."""
+    for depth in range(len(rel.parts)):
+        package, tail = ".".join(("ijoy_jax", *rel.parts[:depth])), rel.parts[depth:]
+        for pattern in [*package_data.get(package, []), *package_data.get("*", [])]:
+            segments = pattern.split("/")
+            if len(segments) == len(tail) and all(map(fnmatch.fnmatchcase, tail, segments)):
+                return True
+    return False
+
+
+def test_the_package_is_typed_and_a_wheel_ships_every_file_it_reads():
+    """``py.typed`` (PEP 561: type checkers read the annotations) and every other file that is not Python
+    source (``protocol.schema.json``, the live view's pages) are in the installed package and declared in
+    pyproject.toml's package-data, so a wheel or sdist install has them too (an editable one reads the
+    source folder, which has them whether declared or not)."""
+    root = resources.files("ijoy_jax")
+    assert root.joinpath("py.typed").is_file()
+    folder = Path(str(root))
+    files = [
+        PurePosixPath(p.relative_to(folder).as_posix())
+        for p in folder.rglob("*")
+        if p.is_file()
+        and p.suffix not in (".py", ".pyc")
+        and "__pycache__" not in p.parts
+        and not any(part.startswith(".") for part in p.relative_to(folder).parts)
+    ]
+    assert {"py.typed", "server/protocol.schema.json"} <= {str(f) for f in files}
+    with open(Path(__file__).resolve().parents[1] / "pyproject.toml", "rb") as f:
+        package_data = tomllib.load(f)["tool"]["setuptools"]["package-data"]
+    assert [str(f) for f in files if not _shipped(f, package_data)] == []
+    assert not _shipped(PurePosixPath("live/other/notes.txt"), package_data)  # the check can fail

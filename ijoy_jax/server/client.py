@@ -12,6 +12,8 @@ import collections
 import contextlib
 import dataclasses
 import itertools
+import math
+import numbers
 import os
 import re
 import signal
@@ -48,7 +50,14 @@ def _connected(monitor: zmq.Socket, timeout: float) -> bool:
 
 
 class ServerError(RuntimeError):
-    """An error reply: ``code`` (one of :data:`~ijoy_jax.server.schema.ERROR_CODES`) and the server's message."""
+    """An error reply: ``code`` (one of :data:`~ijoy_jax.server.schema.ERROR_CODES`) and the server's message.
+
+    :class:`Client` raises it too, before sending, for a value the server would refuse that the client can
+    tell by itself (NaN or infinity, which JSON cannot carry; a field that is not a number; a stance side
+    other than +-1; an offset that is not a whole number), with the code the server would answer and a
+    message naming the field; ``header`` is then empty. So one ``except ServerError`` handles every
+    refused request, wherever it was found.
+    """
 
     def __init__(self, code: str, message: str, header: Mapping | None = None):
         super().__init__(f"{code}: {message}")
@@ -120,7 +129,8 @@ class Client:
       ConnectionError: with ``hello``, nothing accepts a TCP connection at ``host:port`` within
         :data:`CONNECT_TIMEOUT_S` (no server there).
       TimeoutError: no reply (a server that is busy compiling for longer than ``timeout``).
-      ServerError: an error reply, e.g. ``unsupported_version``.
+      ServerError: an error reply, e.g. ``unsupported_version``; every request method raises it, with the
+        code the server would answer, for a field the server would refuse (NaN in ``stance``: ``non_finite``).
 
     Example (against a server started by :func:`serve_subprocess`)::
 
@@ -169,12 +179,20 @@ class Client:
         """Send one request (``version`` and ``id`` are filled in) and return its reply.
 
         Raises:
-          ServerError: an error reply. TimeoutError: no reply within ``timeout`` seconds (default the
-          client's).
+          ServerError: an error reply, or ``non_finite`` before sending when a float in ``header`` is NaN or
+          infinite (JSON cannot carry it; the message names the field). TimeoutError: no reply within
+          ``timeout`` seconds (default the client's).
         """
         rid = next(self._ids)
         msg = {"version": self.version, **header, "id": rid}
-        self._socket.send_multipart(schema.encode(msg, arrays), copy=False)
+        try:
+            frames = schema.encode(msg, arrays)
+        except ValueError:  # the JSON encoder refuses NaN and infinity: say which field, as the server would
+            where = _first_non_finite(msg)
+            if where is None:
+                raise
+            raise _non_finite(*where) from None
+        self._socket.send_multipart(frames, copy=False)
         deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         while True:
             left = deadline - time.monotonic()
@@ -223,8 +241,8 @@ class Client:
         arrays = {"free": np.asarray(t["free"], bool)}
         if t["has_height"]:
             arrays["height"] = np.asarray(t["height"], np.float32)
-        header = {"type": "set_terrain", "map": map_name, "resolution": float(t["resolution"]),
-                  "origin": [float(v) for v in np.asarray(t["origin"], np.float32)]}
+        header = {"type": "set_terrain", "map": map_name, "resolution": _number("resolution", t["resolution"]),
+                  "origin": _floats("origin", t["origin"])}
         return self.request(header, arrays).header
 
     def update_terrain(self, offset: Sequence[int], *, free=None, height=None, map_name: str = DEFAULT_MAP) -> dict:
@@ -233,13 +251,17 @@ class Client:
 
         Returns:
           The reply header (``revision``, ``rebuilt_columns``: the index columns the server rebuilt).
+
+        Raises:
+          ServerError: the server's refusal, or before sending an offset that is not a whole number
+          (``invalid_field``; 2.0 is taken, 2.5 is not truncated) or is not finite (``non_finite``).
         """
         arrays = {}
         if free is not None:
             arrays["free"] = np.asarray(free, bool)
         if height is not None:
             arrays["height"] = np.asarray(height, np.float32)
-        header = {"type": "update_terrain", "map": map_name, "offset": [int(v) for v in offset]}
+        header = {"type": "update_terrain", "map": map_name, "offset": _ints("offset", offset)}
         return self.request(header, arrays).header
 
     def drop_terrain(self, map_name: str = DEFAULT_MAP) -> dict:
@@ -258,9 +280,15 @@ class Client:
 
         Returns:
           :class:`StepReply`.
+
+        Raises:
+          ServerError: the server's error reply, or before sending the code the server would answer: a pose
+          or command holding NaN or infinity (``non_finite``), something that is not a number or a side other
+          than +-1 (``invalid_field``); the message names the field, e.g. ``stance[0]``.
         """
-        header = {"type": "step", "map": map_name, "stance": _floats(stance), "stance_side": _side(stance_side),
-                  "command": _floats(command), "swing_from": None if swing_from is None else _floats(swing_from)}
+        header = {"type": "step", "map": map_name, "stance": _floats("stance", stance),
+                  "stance_side": _side(stance_side), "command": _floats("command", command),
+                  "swing_from": None if swing_from is None else _floats("swing_from", swing_from)}
         t0 = time.perf_counter()
         reply = self.request(header)
         return StepReply.from_header(reply.header, time.perf_counter() - t0)
@@ -271,21 +299,124 @@ class Client:
 
         Returns:
           Every scalar leaf's value after the change.
+
+        Raises:
+          ServerError: the server's refusal (``invalid_field`` for an unknown leaf, ``invalid_value`` for one out
+          of range), or before sending a value that is not a number (``invalid_field``) or is NaN or infinite
+          (``non_finite``), naming the leaf.
         """
         values = {**(leaves or {}), **more}
-        return self.request({"type": "set_robot", "leaves": {k: float(v) for k, v in values.items()}}).header["leaves"]
+        for k in values:
+            if not isinstance(k, str):
+                raise ServerError("invalid_field", f"leaves: a leaf's name must be a string, got {_shown(k)}")
+        return self.request(
+            {"type": "set_robot", "leaves": {k: _number(f"leaves[{k!r}]", v) for k, v in values.items()}}
+        ).header["leaves"]
 
 
-def _floats(v) -> list[float]:
-    """A pose or command as JSON numbers: float32 inputs pass exactly (via float64), others as float64."""
-    return [float(x) for x in np.asarray(v).ravel()]
+# ------------------------------------------------------------------------------- fields checked before sending
+
+
+def _shown(x) -> str:
+    """A value as a one-line message shows it (a 400-digit integer is cut)."""
+    text = " ".join(repr(x).split())
+    return text if len(text) <= 40 else f"{text[:37]}..."
+
+
+def _non_finite(field: str, value, why: str = "is not finite") -> ServerError:
+    """The server's ``non_finite`` refusal of ``field``, found before sending (JSON cannot carry the value)."""
+    return ServerError(
+        "non_finite",
+        f"{field} = {_shown(value)} {why}: every number sent must be finite (the server refuses NaN and infinity)",
+    )
+
+
+def _number(field: str, x) -> float:
+    """One value (a Python or NumPy scalar, or a 0-d array such as a JAX scalar) as a float64 JSON number, or
+    the ServerError the server would answer for it: ``invalid_field`` when it is not a real number (a string,
+    None, a bool), ``non_finite`` when NaN, infinite or beyond float64."""
+    if hasattr(x, "__array__") and np.ndim(x) == 0:
+        x = np.asarray(x).item()
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, numbers.Real):
+        if (found := _first_non_finite(x, field)) is not None:  # NaN inside a list: refused first, as the
+            raise _non_finite(*found)  # server's JSON parser refuses it before any field is read
+        raise ServerError("invalid_field", f"{field} = {_shown(x)} is not a number")
+    try:
+        v = float(x)
+    except OverflowError:  # a Python int beyond float64
+        raise _non_finite(field, x, "is beyond float64") from None
+    if not math.isfinite(v):
+        raise _non_finite(field, x)
+    return v
+
+
+def _floats(field: str, v) -> list[float]:
+    """A pose or command (any shape, read flat) as JSON numbers, each checked by :func:`_number` and named by
+    its index (``stance[0]``): float32 inputs pass exactly (via float64), others as float64."""
+    try:
+        items = np.asarray(v).ravel().tolist()
+    except (TypeError, ValueError):  # a ragged nesting
+        items = None
+    if items is None or any(isinstance(x, (list, tuple)) for x in items):
+        if (found := _first_non_finite(v, field)) is not None:
+            raise _non_finite(*found) from None
+        raise ServerError("invalid_field", f"{field} = {_shown(v)} is not a flat list of numbers")
+    return _each(field, items, _number)
+
+
+def _ints(field: str, v) -> list[int]:
+    """Cell indices as JSON integers: a float is taken when it is whole (2.0), refused when it is not (2.5:
+    ``invalid_field``, not truncated) or not finite (``non_finite``)."""
+
+    def whole(name: str, x) -> int:
+        if isinstance(x, numbers.Integral) and not isinstance(x, (bool, np.bool_)):
+            return int(x)
+        f = _number(name, x)
+        if not f.is_integer():
+            raise ServerError("invalid_field", f"{name} = {_shown(x)} is not a whole number of cells")
+        return int(f)
+
+    return _each(field, np.asarray(v, dtype=object).ravel().tolist(), whole)
+
+
+def _each(field: str, items: list, convert) -> list:
+    """``convert(f"{field}[i]", item)`` for each item; of several refusals, a ``non_finite`` one is raised
+    first, as the server's JSON parser refuses NaN before any field is read."""
+    out, refused = [], []
+    for i, x in enumerate(items):
+        try:
+            out.append(convert(f"{field}[{i}]", x))
+        except ServerError as e:
+            refused.append(e)
+    if refused:
+        raise next((e for e in refused if e.code == "non_finite"), refused[0])
+    return out
 
 
 def _side(side) -> int:
-    s = int(side)
-    if s != side:
-        raise ValueError(f"stance_side must be +1 or -1, got {side!r}")
-    return s
+    """The stance side as the JSON integer +1 or -1 (``invalid_field`` otherwise, as the server answers)."""
+    s = _number("stance_side", side)
+    if s not in (1.0, -1.0):
+        raise ServerError("invalid_field", f"stance_side must be +1 (left foot stands) or -1, got {_shown(side)}")
+    return int(s)
+
+
+def _first_non_finite(value, path: str = "") -> tuple[str, float] | None:
+    """The first NaN or infinite float in a JSON-like header (dicts, lists, numbers) and where it is
+    (``stance[0]``, ``leaves['w']``), or None."""
+    if isinstance(value, float):
+        return None if math.isfinite(value) else (path or "the header", value)
+    if isinstance(value, Mapping):
+        items = ((f"{path}[{k!r}]" if path else str(k), v) for k, v in value.items())
+    elif isinstance(value, (list, tuple)):
+        items = ((f"{path}[{i}]", v) for i, v in enumerate(value))
+    else:
+        return None
+    for where, v in items:
+        found = _first_non_finite(v, where)
+        if found is not None:
+            return found
+    return None
 
 
 # ---------------------------------------------------------------------------------------------- a subprocess
@@ -320,8 +451,9 @@ class ServerProcess:
 
 
 @contextlib.contextmanager
-def serve_subprocess(*args: str, host: str = "127.0.0.1", port: int = 0, timeout: float = 300.0,
-                     env: Mapping[str, str] | None = None) -> Iterator[ServerProcess]:
+def serve_subprocess(
+    *args: str, host: str = "127.0.0.1", port: int = 0, timeout: float = 300.0, env: Mapping[str, str] | None = None
+) -> Iterator[ServerProcess]:
     """Run ``ijoy serve --host HOST --port PORT ARGS...`` in a subprocess until the block ends.
 
     Waits for its ``listening on HOST:PORT`` line (after its warm-up compile), so the server answers as
@@ -341,8 +473,9 @@ def serve_subprocess(*args: str, host: str = "127.0.0.1", port: int = 0, timeout
       RuntimeError: the server exited or did not listen within ``timeout`` (with its last output lines).
     """
     cmd = [sys.executable, "-m", "ijoy_jax.apps.cli", "serve", "--host", host, "--port", str(port), *args]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=None if env is None else dict(env))
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=None if env is None else dict(env)
+    )
     output: collections.deque = collections.deque(maxlen=200)
     found = threading.Event()
     where: dict = {}
@@ -356,8 +489,9 @@ def serve_subprocess(*args: str, host: str = "127.0.0.1", port: int = 0, timeout
                 where["host"], where["port"] = m.group(1).strip("[]"), int(m.group(2))
                 found.set()
 
-    readers = [threading.Thread(target=read, args=(s, s is proc.stdout), daemon=True)
-               for s in (proc.stdout, proc.stderr)]
+    readers = [
+        threading.Thread(target=read, args=(s, s is proc.stdout), daemon=True) for s in (proc.stdout, proc.stderr)
+    ]
     for r in readers:
         r.start()
     server = ServerProcess(proc, host, port, output)
@@ -367,8 +501,11 @@ def serve_subprocess(*args: str, host: str = "127.0.0.1", port: int = 0, timeout
             if proc.poll() is not None or time.monotonic() > deadline:
                 for r in readers:
                     r.join(1.0)
-                why = f"exited with code {proc.returncode}" if proc.poll() is not None else \
-                    f"did not listen within {timeout:g} s"
+                why = (
+                    f"exited with code {proc.returncode}"
+                    if proc.poll() is not None
+                    else f"did not listen within {timeout:g} s"
+                )
                 raise RuntimeError(f"ijoy serve {why}:\n" + "\n".join(output))
         server.host, server.port = where["host"], where["port"]
         yield server
