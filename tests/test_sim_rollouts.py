@@ -355,7 +355,7 @@ def test_bad_inputs_are_refused_before_compiling(sim):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["sim", "render", "--size", "big"], "invalid literal"),
+    (["sim", "render", "--size", "big"], "argument --size: takes WIDTHxHEIGHT"),
     (["sim", "render", "--frames", "200", "--steps", "1"], "frames_per_step"),
 ])
 def test_cli_refuses_bad_arguments_before_compiling(argv, message, capsys):

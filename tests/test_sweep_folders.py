@@ -1,5 +1,5 @@
 """Sweep folders and sweep sizes: parts record their plan, one run per folder (a lock), sizes checked before
-any allocation, and a start zone that leaves room for the terrain (issue #22).
+any allocation, a start zone that leaves room for the terrain, and slices of a sweep that a later run extends.
 
 The sweep is tests/_sweep_util.py's tiny one (2D 60 x 50 map at 4 cm, 19 actions, 6 steps), as in
 tests/test_sweep.py, with a grid of robot.w alone: one compile of the chunk function for the module.
@@ -15,10 +15,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from _sweep_util import tiny_sweep, write  # tests/ is on sys.path (pytest rootdir import)
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ijoy_jax import sweep
+from ijoy_jax.apps import cli
 from ijoy_jax.sweep import config as sweep_config
 from ijoy_jax.sweep import results as sweep_results
 from ijoy_jax.sweep import seeding
@@ -308,3 +312,137 @@ def test_a_big_plan_reports_its_progress_and_builds_only_what_is_asked(monkeypat
         want = [rng.uniform(*fixed.command[k]) for k in sweep.COMMAND_KEYS]
         row = got.loc[r, [f"command.{k}" for k in sweep.COMMAND_KEYS]].to_numpy()
         assert np.array_equal(row, want) and np.array_equal(np.signbit(row), np.signbit(want))
+
+
+# --------------------------------------------------------------------------- 5. slices of a sweep, extended later
+
+FOUR = TINY.replace("scenarios_per_cell = 3", "scenarios_per_cell = 4")  # 2 cells x 4 replicates
+SLICE_CHUNK = CHUNK  # chunks [0, 1] [2, 3] (cell 0), [4, 5] [6, 7] (cell 1): one slice's call spans cells and chunks
+
+
+@pytest.fixture(scope="module")
+def four(tmp_path_factory) -> tuple[Path, pd.DataFrame]:
+    """FOUR's sweep file and the table of its whole run (what a folder extended slice by slice must end as)."""
+    root = tmp_path_factory.mktemp("four")
+    path = write(root, FOUR, "four.toml")
+    sweep.run(path, root / "whole", chunk_size=SLICE_CHUNK, progress=False)
+    return path, sweep.load(root / "whole")
+
+
+def _asked(whole: pd.DataFrame, kind: str, n: int) -> set[int]:
+    """The scenario ids a slice asks for, from the whole table: the first n replicates of every cell, or ids < n."""
+    keep = whole["replicate"] < n if kind == "scenarios_per_cell" else whole["scenario"] < n
+    return set(whole.loc[keep, "scenario"].tolist())
+
+
+def test_two_per_cell_then_the_whole_sweep_equal_a_whole_run(four, tmp_path):
+    """The brief's case: a slice of 2 per cell, then the whole sweep into the same folder: the second run
+    computes only the 4 scenarios missing and the folder loads exactly as the whole run's (chunk ids too)."""
+    path, whole = four
+    out = tmp_path / "b"
+    first = sweep.run(path, out, chunk_size=SLICE_CHUNK, scenarios_per_cell=2, progress=False)
+    assert (first.scenarios, first.computed, first.sweep_scenarios) == (4, 4, 8)
+    assert first.complete and not first.sweep_complete
+    got = sweep.load(out)
+    assert got.groupby("cell")["replicate"].apply(list).tolist() == [[0, 1], [0, 1]]  # every cell, evenly
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["complete"] is False and man["selection"]["scenarios_per_cell"] == 2
+    assert man["sessions"][-1]["truncated"] is True
+    second = sweep.run(path, out, chunk_size=SLICE_CHUNK, progress=False)
+    assert (second.computed, second.scenarios) == (4, 8) and second.sweep_complete
+    pd.testing.assert_frame_equal(sweep.load(out), whole, check_exact=True)
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["complete"] is True and man["sessions"][-1]["truncated"] is False
+    assert {sweep_results.part_plan(p)["hash"] for p in (out / "parts").glob("part-*.parquet")} == {man["plan_hash"]}
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "aggregates.parquet"), sweep.aggregate(whole, ["robot.w"]))
+
+
+SLICES = st.lists(st.one_of(st.tuples(st.just("scenarios_per_cell"), st.integers(1, 5)),
+                            st.tuples(st.just("max_scenarios"), st.integers(1, 9))), min_size=1, max_size=3)
+
+
+@given(slices=SLICES)
+@settings(max_examples=4)
+def test_any_slices_then_the_whole_sweep_compute_each_scenario_once(four, tmp_path_factory, slices):
+    """Slices of either kind in any order, then the whole sweep, into one folder: each run computes only what
+    the folder lacks, loads as the union so far (rows equal to the whole run's), and the folder ends as the
+    whole run's; a slice never counts as another plan."""
+    path, whole = four
+    out = tmp_path_factory.mktemp("sliced") / "o"
+    done: set[int] = set()
+    for kind, n in slices:
+        asked = _asked(whole, kind, n)
+        stats = sweep.run(path, out, chunk_size=SLICE_CHUNK, progress=False, **{kind: n})
+        assert stats.computed == len(asked - done) and stats.scenarios == len(asked), (kind, n)
+        done |= asked
+        want = whole[whole["scenario"].isin(done)].reset_index(drop=True)
+        pd.testing.assert_frame_equal(sweep.load(out), want, check_exact=True)
+        man = json.loads((out / "manifest.json").read_text())
+        assert man["complete"] is stats.sweep_complete is (len(done) == len(whole))
+    stats = sweep.run(path, out, chunk_size=SLICE_CHUNK, progress=False)
+    assert stats.computed == len(whole) - len(done) and stats.sweep_complete
+    pd.testing.assert_frame_equal(sweep.load(out), whole, check_exact=True)
+
+
+def test_a_slice_is_marked_incomplete_and_summarize_says_so(four, tmp_path, capsys):
+    path, _ = four
+    out = tmp_path / "cli"
+    run = ["sweep", "run", str(path), "--out", str(out), "--chunk", str(SLICE_CHUNK)]
+    assert cli.main([*run, "--scenarios-per-cell", "1"]) == 0
+    printed = capsys.readouterr()
+    row = json.loads(printed.out)
+    assert (row["scenarios"], row["sweep_scenarios"], row["complete"], row["sweep_complete"]) == (2, 8, True, False)
+    assert "1 of 4 scenarios per cell (2 of 8 scenarios)" in printed.err and "incomplete" in printed.err
+    assert cli.main(["sweep", "summarize", str(out), "--png", str(tmp_path / "s.png")]) == 0
+    said = capsys.readouterr().out
+    assert said.startswith("incomplete sweep: 2 of 8 scenarios, asked for 1 of 4 scenarios per cell"), said
+    assert f"`ijoy sweep run {path} --out {out}` computes the rest" in said
+    assert cli.main([*run, "--scenarios-per-cell", "3"]) == 0  # a larger slice: only the 4 new scenarios
+    assert json.loads(capsys.readouterr().out)["computed"] == 4
+    assert cli.main(run) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert (row["computed"], row["sweep_complete"]) == (2, True)
+    assert json.loads((out / "manifest.json").read_text())["complete"] is True
+
+
+@pytest.mark.parametrize("args, want", [
+    (["--scenarios-per-cell", "0"], "--scenarios-per-cell must be a positive int, got 0"),
+    (["--max-scenarios", "-2"], "--max-scenarios must be a positive int, got -2"),
+    (["--scenarios-per-cell", "2", "--max-scenarios", "4"], "give --scenarios-per-cell or --max-scenarios, not both"),
+])
+def test_bad_slice_flags_are_refused_in_one_line_naming_the_flag(tiny_file, tmp_path, capsys, args, want):
+    out = tmp_path / "o"
+    assert cli.main(["sweep", "run", str(tiny_file), "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and want in err, err
+    assert not out.exists()
+    with pytest.raises(ValueError, match="not both"):
+        sweep.run(tiny_file, out, scenarios_per_cell=1, max_scenarios=2, progress=False)
+
+
+def test_an_unfinished_slice_names_its_missing_chunk_and_the_rerun(four, tmp_path):
+    path, whole = four
+    out = tmp_path / "o"
+    sweep.run(path, out, chunk_size=SLICE_CHUNK, scenarios_per_cell=2, progress=False)  # chunks 0 and 2
+    (out / "parts" / "part-00002.parquet").unlink()  # ids 4 and 5
+    with pytest.raises(sweep.IncompleteSweepError) as e:
+        sweep.load(out)
+    msg = str(e.value)
+    assert "asked for 2 of 4 scenarios per cell" in msg and "1 of 2 chunks missing (chunks 2)" in msg, msg
+    assert "rerun `ijoy sweep run` with the same --out and --scenarios-per-cell 2" in msg, msg
+    assert sweep.load(out, partial=True)["scenario"].tolist() == [0, 1]
+    again = sweep.run(path, out, chunk_size=SLICE_CHUNK, scenarios_per_cell=2, progress=False)
+    assert (again.computed, again.skipped) == (2, 1)
+    pd.testing.assert_frame_equal(sweep.load(out), whole[whole["replicate"] < 2].reset_index(drop=True),
+                                  check_exact=True)
+
+
+def test_processes_share_a_slice_by_chunk(four, tmp_path):
+    """Process I of N computes the slice's rows of its own chunks (chunk % N == I): each part has one writer."""
+    path, whole = four
+    out = tmp_path / "o"
+    stats = [sweep.run(path, out, chunk_size=SLICE_CHUNK, scenarios_per_cell=1, process_id=i, num_processes=3,
+                       progress=False) for i in range(3)]  # ids 0 (chunk 0: process 0) and 4 (chunk 2: process 2)
+    assert [s.computed for s in stats] == [1, 0, 1] and stats[0].chunks == 2 and stats[-1].complete
+    pd.testing.assert_frame_equal(sweep.load(out), whole[whole["replicate"] < 1].reset_index(drop=True),
+                                  check_exact=True)

@@ -317,7 +317,8 @@ def test_local_processes_forward_every_sweep_run_option(tmp_path, monkeypatch, c
     with pytest.raises(SystemExit):
         cli.main(["sweep", "run", "--help"])
     options = set(re.findall(r"(--[a-z][a-z-]*)", capsys.readouterr().out)) - {"--help", "--local-processes"}
-    given = {"--out": str(tmp_path / "o"), "--chunk": "7", "--max-scenarios": "9", "--devices": "1",
+    given = {"--out": str(tmp_path / "o"), "--chunk": "7", "--max-scenarios": "9", "--scenarios-per-cell": "2",
+             "--devices": "1",
              "--num-processes": "2", "--process-id": "1", "--coordinator": "localhost:1234",
              "--barrier-timeout": "5.5", "--distributed": None}
     assert options == set(given), f"sweep run's options changed: forward {sorted(options - set(given))} in " \

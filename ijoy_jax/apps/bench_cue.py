@@ -27,6 +27,8 @@ import statistics
 import subprocess
 import sys
 
+from ijoy_jax.apps.options import output_file, positive_int, positive_ints
+
 SYNC_FLAG = "jax_cpu_enable_async_dispatch"
 
 
@@ -159,9 +161,9 @@ def format_report(r: dict) -> str:
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer calls and smaller batches")
-    parser.add_argument("--json", metavar="PATH", help="also write the results as JSON")
-    parser.add_argument("--calls", type=int, help="timed ticks per dispatch mode")
-    parser.add_argument("--sizes", help="comma-separated batch sizes, e.g. 1,64,1024")
+    parser.add_argument("--json", metavar="PATH", type=output_file, help="also write the results as JSON")
+    parser.add_argument("--calls", type=positive_int, help="timed ticks per dispatch mode")
+    parser.add_argument("--sizes", type=positive_ints, help="comma-separated batch sizes, e.g. 1,64,1024")
     parser.add_argument("--tick-only", action="store_true", help="only the tick, in this process (JSON line)")
     parser.add_argument("--sync", action="store_true", help="with --tick-only: synchronous CPU dispatch")
     parser.add_argument("--pin", action="store_true", help="with --tick-only: pin the process to one CPU")
@@ -170,8 +172,7 @@ def main(argv: list[str] | None = None) -> dict:
         result = tick(args.calls or 2000, args.sync, args.pin)
         print(json.dumps(result))
         return result
-    sizes = tuple(int(v) for v in args.sizes.split(",")) if args.sizes else None
-    result = run(quick=args.quick, calls=args.calls, sizes=sizes)
+    result = run(quick=args.quick, calls=args.calls, sizes=args.sizes)
     print(format_report(result))
     if args.json:
         with open(args.json, "w") as fh:

@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ijoy_jax.apps.options import output_file, positive_int, positive_ints
 from ijoy_jax.haptics.filter import SpringDamper, discretise, filter_step, init_state
 from ijoy_jax.haptics.leg import PAPER_Q, alduro_leg, leg_repulsive_force
 
@@ -149,12 +150,11 @@ def format_report(r: dict) -> str:
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer calls and smaller batches")
-    parser.add_argument("--json", metavar="PATH", help="also write the results as JSON")
-    parser.add_argument("--calls", type=int, help="timed calls per single-call benchmark")
-    parser.add_argument("--sizes", help="comma-separated batch sizes, e.g. 1,64,1024")
+    parser.add_argument("--json", metavar="PATH", type=output_file, help="also write the results as JSON")
+    parser.add_argument("--calls", type=positive_int, help="timed calls per single-call benchmark")
+    parser.add_argument("--sizes", type=positive_ints, help="comma-separated batch sizes, e.g. 1,64,1024")
     args = parser.parse_args(argv)
-    sizes = tuple(int(v) for v in args.sizes.split(",")) if args.sizes else None
-    result = run(quick=args.quick, calls=args.calls, sizes=sizes)
+    result = run(quick=args.quick, calls=args.calls, sizes=args.sizes)
     print(format_report(result))
     if args.json:
         with open(args.json, "w") as fh:

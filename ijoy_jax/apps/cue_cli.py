@@ -10,6 +10,8 @@ import json
 import time
 from pathlib import Path
 
+from ijoy_jax.apps.options import output_file, output_folder
+
 
 def add_parser(sub) -> None:
     """Register ``cue`` (with ``study`` and ``field``) on an argparse subparsers object."""
@@ -20,8 +22,14 @@ def add_parser(sub) -> None:
                                      "space (ijoy_jax.cue.plot).")
     csub = cue.add_subparsers(dest="cue_command", required=True)
     st = csub.add_parser("study", help="tune the cue on training scenarios, compare off / on / tuned on held-out "
-                                       "ones; write result.json, study.md and PNGs to --out")
-    st.add_argument("--out", required=True, help="output folder (created; files in it are overwritten)")
+                                       "ones; write result.json, study.md and PNGs to --out",
+                         description="A simulated operator drives the perfect robot through random scenarios of "
+                                     "each family with the cue off, on, and tuned by gradient on training "
+                                     "scenarios (ijoy_jax.cue.study); the three are compared on held-out "
+                                     "scenarios with 95%% intervals. Writes result.json, study.md, study.png and "
+                                     "field.png to --out.")
+    st.add_argument("--out", default="results/cue_study", type=output_folder,
+                    help="output folder (created; files in it are overwritten; default: %(default)s)")
     st.add_argument("--train", type=int, default=8, help="training scenarios per family (default: %(default)s)")
     st.add_argument("--held-out", type=int, default=40,
                     help="held-out scenarios per family (default: %(default)s)")
@@ -32,8 +40,12 @@ def add_parser(sub) -> None:
     st.add_argument("--quick", action="store_true", help="2 training and 3 held-out scenarios per family, 12 "
                                                         "decisions, 3 Adam steps (a smoke test)")
     fld = csub.add_parser("field", help="draw the paper's scenarios (wall ahead, sidestep along a wall, clutter) "
-                                        "with the cue field in command space")
-    fld.add_argument("--out", default="cue_field.png", help="PNG to write (default: %(default)s)")
+                                        "with the cue field in command space",
+                          description="The paper's scenarios (a wall ahead, a sidestep along a wall, clutter) drawn "
+                                      "beside the cue's force field in command space (ijoy_jax.cue.plot), with the "
+                                      "default cue parameters; writes one PNG.")
+    fld.add_argument("--out", default="ijoy_cue_field.png", type=output_file,
+                     help="PNG to write (default: %(default)s)")
 
 
 def main(args) -> int:
@@ -45,9 +57,7 @@ def main(args) -> int:
     from ijoy_jax.cue import plot
 
     robot = robots.hrp2(margin=0.02)
-    if args.cue_command == "field":
-        if not Path(args.out).resolve().parent.is_dir():
-            raise FileNotFoundError(f"no folder for {args.out!r}")
+    if args.cue_command == "field":  # --out checked as parsed
         plot.scenario_figure(plot.paper_cases(), robot, out=args.out)
         print(json.dumps({"png": args.out}))
         return 0

@@ -10,6 +10,8 @@ import json
 import sys
 from pathlib import Path
 
+from ijoy_jax.apps.options import output_file
+
 
 def add_parser(sub) -> None:
     """Register ``drive`` on an argparse subparsers object."""
@@ -60,16 +62,19 @@ def add_parser(sub) -> None:
                                                                    "0.1)")
     loop.add_argument("--headless", action="store_true", help="no view; with --script, faster than real time")
     loop.add_argument("--realtime", action="store_true", help="pace a headless drive to the wall clock anyway")
-    loop.add_argument("--record", metavar="OUT", help="record the drive to an MCAP file")
+    loop.add_argument("--record", metavar="OUT", type=output_file, help="record the drive to an MCAP file")
     loop.add_argument("--host", default="127.0.0.1", help="the view's address (default: %(default)s; forward it "
                                                           "with ssh -L)")
     loop.add_argument("--port", type=int, default=8765, help="the view's port (default: %(default)s)")
-    loop.add_argument("--ff", default="auto", metavar="DEVICE|auto|off",
-                      help="force feedback: an evdev device path, the first one found (auto, default), or off")
+    loop.add_argument("--ff", default=None, metavar="DEVICE|auto|off",
+                      help="force feedback: an evdev device path, the first one found (auto), or off; it says which "
+                           "device plays the forces, or why none does (default: the first one found, said only "
+                           "when there is one)")
     loop.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     exp = d.add_argument_group("exports of a recording (with --replay FILE, instead of replaying)")
-    exp.add_argument("--export-trace", metavar="TRACE", help="write the recorded stick as a trace file")
-    exp.add_argument("--export-sweep", metavar="OUT.toml",
+    exp.add_argument("--export-trace", metavar="TRACE", type=output_file,
+                     help="write the recorded stick as a trace file")
+    exp.add_argument("--export-sweep", metavar="OUT.toml", type=output_file,
                      help="write a sweep file whose scenario is the recorded drive (its commands step by step; ijoy "
                           "sweep run OUT.toml)")
     exp.add_argument("--sweep-terrain", choices=["recording", "family"], default="recording",
@@ -77,14 +82,33 @@ def add_parser(sub) -> None:
                           "drawn from (replicate 0 is the recorded map)")
 
 
-def _family_params(items) -> dict:
+def _family_params(items, family: str) -> dict:
+    """``--param NAME=VALUE`` items as the terrain family's parameters (ints where written as ints, else floats).
+
+    Raises:
+      ValueError: an unknown family (naming --terrain), an item that is not NAME=VALUE, a name that is not a
+        field of the family's parameters (listing them, as a sweep file's ``terrain.params`` keys are) or a
+        value that is not a number, naming the flag.
+    """
+    import dataclasses
+
+    from ijoy_jax.terrain import generators
+
+    if family not in generators.FAMILIES:
+        raise ValueError(f"--terrain {family}: unknown terrain family {family!r}; known: "
+                         f"{', '.join(sorted(generators.FAMILIES))}")
+    known = [f.name for f in dataclasses.fields(generators.FAMILIES[family].params)]
     out = {}
     for item in items:
         name, sep, value = item.partition("=")
+        name = name.strip()
         if not sep or not name:
             raise ValueError(f"--param must be NAME=VALUE, got {item!r}")
+        if name not in known:
+            raise ValueError(f"--param {item}: unknown key of terrain family {family!r}; known keys: "
+                             f"{', '.join(known)}")
         try:
-            out[name.strip()] = int(value) if value.strip().lstrip("-").isdigit() else float(value)
+            out[name] = int(value) if value.strip().lstrip("-").isdigit() else float(value)
         except ValueError:
             raise ValueError(f"--param {name}: not a number: {value!r}") from None
     return out
@@ -106,8 +130,9 @@ def _terrain_spec(args) -> dict:
         nx, ny = (int(v) for v in args.shape.lower().split("x"))
     except ValueError:
         raise ValueError(f"--shape must be NXxNY cells, e.g. 200x120, got {args.shape!r}") from None
-    return {"kind": "family", "family": args.terrain or "obstacles", "seed": args.seed, "shape": [nx, ny],
-            "resolution": args.resolution, "has_height": bool(args.height), "params": _family_params(args.param)}
+    family = args.terrain or "obstacles"
+    return {"kind": "family", "family": family, "seed": args.seed, "shape": [nx, ny], "resolution": args.resolution,
+            "has_height": bool(args.height), "params": _family_params(args.param, family)}
 
 
 def _start(text):
@@ -214,12 +239,18 @@ def _live_source(kind, view):
 
 
 def _feedback(spec):
+    """The force-feedback device of ``--ff`` (None: not given, the first one found), or None for ``off``.
+
+    Its line on stderr says which device plays the forces; that none does only where one was asked for (``--ff
+    auto`` or a path): a drive without a joystick that pushes back is the usual case, not news.
+    """
     if spec == "off":
         return None
     from ijoy_jax.live import forcefeedback
 
-    out = forcefeedback.open_device(None if spec == "auto" else spec)
-    print(f"ijoy drive: force feedback: {out.description}", file=sys.stderr, flush=True)
+    out = forcefeedback.open_device(None if spec in (None, "auto") else spec)
+    if spec is not None or not isinstance(out, forcefeedback.NoFeedback):
+        print(f"ijoy drive: force feedback: {out.description}", file=sys.stderr, flush=True)
     return out
 
 

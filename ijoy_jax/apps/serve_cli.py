@@ -125,7 +125,10 @@ def _serve(args, log) -> int:
     from ijoy_jax.server.service import parse_shape
 
     warm = args.warm_up or [DEFAULT_WARM_UP]
-    shapes = [] if [w.lower() for w in warm] == ["none"] else list(dict.fromkeys(parse_shape(w) for w in warm))
+    try:
+        shapes = [] if [w.lower() for w in warm] == ["none"] else list(dict.fromkeys(parse_shape(w) for w in warm))
+    except ValueError as e:
+        raise ValueError(f"--warm-up: {e}") from None
     programs = max_programs(args.max_programs)
     if 2 * len(shapes) > programs:  # each is compiled for 2D and 2.5D maps: two kinds
         raise ValueError(f"--warm-up: {len(shapes)} map shapes are {2 * len(shapes)} map kinds (2D and 2.5D), "

@@ -17,7 +17,7 @@ import time
 import types
 import typing
 
-from ijoy_jax.apps.options import assignments
+from ijoy_jax.apps.options import assignments, output_folder
 
 _SET_HELP = ("override one config field, VALUE parsed as JSON if it can be (0.05, [40, 40], true, \"x\"), "
              "else as a string, and checked against the field's type; repeatable, applied after --config")
@@ -47,8 +47,9 @@ def add_parser(sub) -> None:
         description="Inverse tuner: label random decisions with the EXACT selector at hidden parameters, fit "
                     "them by maximum-entropy likelihood, and report the recovered values and the held-out "
                     "agreement. Config fields: see ijoy_jax.apps.tune_cli.InverseConfig.")
-    for p in (fwd, inv):
-        p.add_argument("--out", required=True, help="output folder (created; files in it are overwritten)")
+    for p, name in ((fwd, "forward"), (inv, "inverse")):
+        p.add_argument("--out", default=f"results/tune_{name}", type=output_folder,
+                       help="output folder (created; files in it are overwritten; default: %(default)s)")
         p.add_argument("--config", default=None, help="TOML file of config fields (top-level keys)")
         p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=_SET_HELP)
         p.add_argument("--steps", type=int, default=None, help="optimiser steps (overrides the config's)")

@@ -95,13 +95,24 @@ Progress: one line per chunk on stderr (scenarios done, scenarios/s over
 compiled chunks, ETA); ``first_chunk_s`` in the manifest holds each density's
 first chunk time, which includes its compile.
 
-Resume. The chunk plan is a pure function of the sweep file, ``chunk_size``
-(after rounding to the device count) and ``max_scenarios`` and is saved in the
+Slices. ``scenarios_per_cell=N`` runs the first N replicates of every cell (the sweep shrunk evenly),
+``max_scenarios=M`` the first M scenario ids (cell after cell: a check of the program, which stays a
+prefix of the ids so its rows are a whole run's first rows, as :func:`scenario` numbers them). Either is a
+slice (:func:`ijoy_jax.sweep.results.selection`) computed in the whole sweep's chunks: calls of the group's
+chunk shape (the whole run's compiled program) hold the slice's rows of one or more chunks, and each row is
+written into its own chunk's part, merged with the rows that part already holds. So a later run into the
+same folder with a larger slice, or none, computes only the scenarios missing, and the folder ends equal to
+a whole run's, bit for bit. ``manifest.json`` records the union of the slices asked (``selection``) and
+whether the folder holds the whole sweep (``complete``); each session its own ``selection`` and
+``truncated``.
+
+Resume. The chunk plan is a pure function of the sweep file and ``chunk_size``
+(after rounding to the device count), the whole sweep's whatever slice a run computes, and is saved in the
 manifest; a rerun with another device count resumes when the rounded chunk
 size is the same (e.g. the default 32 on 1, 2, 4 or 8 devices). Each finished
 chunk is written to a temporary file and renamed (atomic on POSIX), so after a
-kill a part file is either complete or absent; a rerun on the same folder skips the
-chunks whose part exists and computes the rest. Nothing is lost or duplicated.
+kill a part file is either complete or absent; a rerun on the same folder reads which scenarios each part
+holds and computes the rest. Nothing is lost or duplicated.
 Every part records the hash of its plan (:func:`ijoy_jax.sweep.results.plan_hash`:
 the sweep text and the chunk plan; also in the manifest as ``plan_hash``): a run
 refuses a folder holding parts of another plan (even with ``manifest.json``
@@ -145,7 +156,19 @@ from ijoy_jax.sweep.config import (
     reach_of,
     scenarios,
 )
-from ijoy_jax.sweep.results import PLAN_KEY, check_plans, differences, part_plan, plan_hash, read_record
+from ijoy_jax.sweep.results import (
+    PLAN_KEY,
+    check_plans,
+    chunk_plan,
+    describe_selection,
+    differences,
+    part_plan,
+    plan_hash,
+    read_part,
+    read_record,
+    selected,
+    selection,
+)
 from ijoy_jax.terrain import generators
 
 __all__ = ["DEFAULT_CHUNK", "MAX_AUTO_CHUNK", "MEMORY_FRACTION", "RunStats", "Scenario", "auto_chunk_size",
@@ -369,8 +392,9 @@ class RunStats:
     Fields::
 
       out: the output folder.
-      scenarios: scenarios in the plan; computed: scenarios computed by this
-        call (skipped chunks excluded); chunks, skipped: chunk counts.
+      scenarios: scenarios this call was asked for (its slice, or the whole sweep); computed: scenarios
+        computed by this call (those already in the folder excluded); chunks: the plan's chunks holding them;
+        skipped: this process's share of those with nothing left to compute.
       compiles: traces of the chunk function during this call.
       devices: devices the rows of a chunk are split over; chunk_size: the
         plan's chunk size (the requested one rounded up to a multiple of devices).
@@ -381,8 +405,12 @@ class RunStats:
       physics_steps: physics steps per scenario (``walker = "mjx"``: the steps and the robot's one standing
         step, times the control ticks per step and the physics steps per tick; 0 for the perfect robot), so
         ``rate * physics_steps`` is the physics steps/s.
-      complete: every chunk of the plan has its part in the folder at the end of the call (with several
-        processes: after the final barrier, or its timeout).
+      complete: every scenario this call was asked for (all processes' share of its slice, or of the whole
+        sweep) has its result in the folder at the end of the call (with several processes: after the final
+        barrier, or its timeout).
+      sweep_scenarios: scenarios of the whole sweep (``scenarios`` is fewer for a slice: ``max_scenarios``,
+        ``scenarios_per_cell``); sweep_complete: every one of them has its result in the folder (False after
+        a slice, until a later run computes the rest; the manifest's ``"complete"``).
     """
 
     out: Path
@@ -398,6 +426,8 @@ class RunStats:
     rate: float = 0.0
     physics_steps: int = 0
     complete: bool = False
+    sweep_scenarios: int = 0
+    sweep_complete: bool = False
 
 
 def _base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
@@ -646,27 +676,6 @@ def _write_part(df, path: Path, plan_record: dict) -> None:
     pq.write_table(table.replace_schema_metadata(meta), path)
 
 
-def _groups(table) -> np.ndarray:
-    """Each scenario's compile group: (density, selector horizon, selector refine) as a structured array."""
-    out = np.empty(len(table), [("density", "f8"), ("horizon", "i8"), ("refine", "i8")])
-    out["density"] = table["robot.density"].to_numpy()
-    out["horizon"] = table["selector.horizon"].to_numpy()
-    out["refine"] = table["selector.refine"].to_numpy()
-    return out
-
-
-def _plan(cfg: SweepConfig, table, chunk_size: int) -> list[tuple[int, tuple, np.ndarray]]:
-    """Chunks as (chunk id, group, scenario ids), by group (what changes the compiled program: density, the
-    selector's horizon and refinement) in order of first appearance."""
-    plan = []
-    groups = _groups(table)
-    for g in dict.fromkeys(groups.tolist()):
-        ids = table["scenario"].to_numpy()[groups == np.array(g, groups.dtype)]
-        for i in range(0, len(ids), chunk_size):
-            plan.append((len(plan), (float(g[0]), int(g[1]), bool(g[2])), ids[i : i + chunk_size]))
-    return plan
-
-
 def _group_label(cfg: SweepConfig, group: tuple):
     """How a group is named in :attr:`RunStats.first_chunk_s`: its density when the selector is not swept,
     else ``"<density> horizon=<h> refine=<r>"``."""
@@ -864,7 +873,9 @@ def default_chunk_size(cfg: SweepConfig, table, bases: dict, devices: list, sim=
     On an accelerator with a known memory limit: :func:`auto_chunk_size` of
     :func:`scenario_bytes` for the largest action set (one extra ahead-of-time
     compile; ``sim``: a physics sweep's MJX biped); :data:`DEFAULT_CHUNK` when
-    the backend reports no memory figure.
+    the backend reports no memory figure. ``table``: rows covering every cell (a run passes replicate 0 of
+    each); a physics sweep's chunks are balanced over the whole sweep's scenarios, so a slice of it plans the
+    chunks the whole sweep does.
     """
     mem = _device_bytes(devices[0])
     if mem is None:
@@ -877,7 +888,7 @@ def default_chunk_size(cfg: SweepConfig, table, bases: dict, devices: list, sim=
     cap = auto_chunk_size(per, mem, len(devices), shared_bytes=shared)
     # a physics sweep's padded rollouts cost as much as real ones: balance the chunks (a perfect-robot sweep
     # keeps the power of two, whose compiled program other sweeps' sizes reuse)
-    return cap if sim is None else balanced_chunk_size(cap, len(table), len(devices))
+    return cap if sim is None else balanced_chunk_size(cap, cfg.num_scenarios, len(devices))
 
 
 def run(
@@ -886,25 +897,33 @@ def run(
     *,
     chunk_size: int | None = None,
     max_scenarios: int | None = None,
+    scenarios_per_cell: int | None = None,
     progress: bool = True,
     devices: int | None = None,
     process_id: int | None = None,
     num_processes: int | None = None,
     barrier_timeout_s: float = 3600.0,
 ) -> RunStats:
-    """Run (or resume) a sweep, or this process's share of it, and write its results (see the module docstring).
+    """Run (or resume, or extend) a sweep, or a slice of it, or this process's share of it, and write its results
+    (see the module docstring).
 
     Args:
       sweep: a sweep file path or a :class:`SweepConfig`.
       out: output folder (default ``results/<name>``); an existing folder
-        from the same sweep file and options is resumed.
+        from the same sweep file and chunk size is resumed, or extended by a larger slice.
       chunk_size: scenarios per jitted call (>= 1); memory grows linearly with it.
         Rounded up to a multiple of the device count. None (default): the
         chunk size of the folder's manifest when resuming (or of its parts'
         plan records, when the manifest was deleted), else
         :func:`default_chunk_size` (:data:`DEFAULT_CHUNK` on CPU, sized to
         device memory on an accelerator; process 0 decides for all).
-      max_scenarios: run only the first this many scenarios (smoke tests).
+      max_scenarios: run only the first this many scenario ids (a check of the program: ids are cell-major, so
+        fewer than ``scenarios_per_cell`` of the sweep cover its first cell alone).
+      scenarios_per_cell: run only the first this many replicates of every cell: the sweep shrunk evenly, each
+        cell on the same terrains with the same commands. Beyond the sweep's own: all of them. Not with
+        ``max_scenarios``. Either makes a slice (:func:`ijoy_jax.sweep.results.selection`): computed in the
+        whole sweep's chunks (the same compiled program), so a later run into ``out`` with a larger slice, or
+        none, computes only the scenarios missing and the folder ends as a whole run's, bit for bit.
       progress: print a progress line (scenarios/s, ETA) to stderr.
       devices: split each chunk over the first this many local devices
         (default None: all of them); 1 runs on the default device.
@@ -923,44 +942,89 @@ def run(
       ValueError: ``out`` holds results of a different sweep or chunk plan (the message lists what
         differs), a part or record that cannot be read (IncompleteSweepError naming it), or is in
         use by another run (its lock; members of one multi-process run share it), or a
-        bad ``chunk_size``, ``max_scenarios``, ``devices`` or process layout.
+        bad ``chunk_size``, ``max_scenarios``, ``scenarios_per_cell``, ``devices`` or process layout.
 
     Example:
       >>> from ijoy_jax import sweep
-      >>> stats = sweep.run("sweeps/w_sweep.toml", "/tmp/w", max_scenarios=4, progress=False)  # doctest: +SKIP
-      >>> sweep.load("/tmp/w").shape[0]  # doctest: +SKIP
-      4
+      >>> stats = sweep.run("sweeps/w_sweep.toml", "/tmp/w", scenarios_per_cell=2, progress=False)  # doctest: +SKIP
+      >>> sweep.load("/tmp/w").shape[0], stats.sweep_complete  # 2 of 64 per cell, 8 cells  # doctest: +SKIP
+      (16, False)
     """
     t_start = time.perf_counter()
     cfg = sweep if isinstance(sweep, SweepConfig) else load_config(sweep)
     if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, int)
                                    or chunk_size < 1):
         raise ValueError(f"chunk_size must be a positive int or None, got {chunk_size!r}")
-    if max_scenarios is not None and (not isinstance(max_scenarios, int) or max_scenarios < 1):
-        raise ValueError(f"max_scenarios must be a positive int, got {max_scenarios!r}")
+    for name, v in (("max_scenarios", max_scenarios), ("scenarios_per_cell", scenarios_per_cell)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+            raise ValueError(f"{name} must be a positive int, got {v!r}")
+    if max_scenarios is not None and scenarios_per_cell is not None:
+        raise ValueError("give max_scenarios or scenarios_per_cell, not both (scenarios_per_cell: an even slice of "
+                         "every cell; max_scenarios: the first scenario ids)")
     if isinstance(barrier_timeout_s, bool) or not isinstance(barrier_timeout_s, (int, float)) or not (
             0 < barrier_timeout_s < math.inf):
         raise ValueError(f"barrier_timeout_s must be a positive number of seconds, got {barrier_timeout_s!r}")
     pid, nproc = _process_layout(process_id, num_processes)
     devs = _local_devices(devices)
     out = Path(out) if out is not None else Path("results") / cfg.name
-    table = scenarios(cfg, max_scenarios, progress=progress)
+    sel = selection(cfg.num_cells, cfg.scenarios_per_cell, scenarios_per_cell=scenarios_per_cell,
+                    max_scenarios=max_scenarios)
+    table = _selected_rows(cfg, sel, progress)
+    # Replicate 0 of every cell: the plan's groups, and the robots and MJX biped built for the whole sweep
+    # (the same static windows and program for a slice as for the whole sweep).
+    cell_rows = scenarios(dataclasses.replace(cfg, scenarios_per_cell=1))
     # Host-side robots per density (cheap, no compile): footprint problems surface before any output.
-    bases = {d: _base_robot(cfg, table, d) for d in dict.fromkeys(table["robot.density"].tolist())}
-    sim = _make_sim(cfg, table)  # the MJX biped of a physics sweep (host-side), before any output
+    bases = {d: _base_robot(cfg, cell_rows, d) for d in dict.fromkeys(cell_rows["robot.density"].tolist())}
+    sim = _make_sim(cfg, cell_rows)  # the MJX biped of a physics sweep (host-side), before any output
     check_out_folder(out)
     lock = _FolderLock(out, pid, nproc)  # one run per folder (members of a multi-process run share it)
     try:
-        return _run_locked(cfg, out, table, bases, sim, devs, pid, nproc, chunk_size=chunk_size,
-                           max_scenarios=max_scenarios, progress=progress, barrier_timeout_s=barrier_timeout_s,
-                           t_start=t_start)
+        return _run_locked(cfg, out, table, cell_rows, bases, sim, devs, pid, nproc, sel, chunk_size=chunk_size,
+                           progress=progress, barrier_timeout_s=barrier_timeout_s, t_start=t_start)
     finally:
         lock.release()
 
 
-def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list, pid: int, nproc: int, *,
-                chunk_size, max_scenarios, progress: bool, barrier_timeout_s: float, t_start: float) -> RunStats:
+def _selected_rows(cfg: SweepConfig, sel: dict, progress: bool):
+    """The scenario rows of a :func:`~ijoy_jax.sweep.results.selection` (only those are built): the first N
+    replicates of every cell are the rows of the sweep with N per cell, renumbered into the sweep's ids
+    (replicate r's terrain, command and physics draws do not depend on the replicate count)."""
+    import pandas as pd
+
+    n, m, reps = sel["scenarios_per_cell"], sel["max_scenarios"], sel["replicates"]
+    if n >= reps:
+        return scenarios(cfg, progress=progress)
+    tables = []
+    if n:
+        t = scenarios(dataclasses.replace(cfg, scenarios_per_cell=n), progress=progress)
+        t["scenario"] = t["cell"] * reps + t["replicate"]
+        tables.append(t)
+    if m:
+        tables.append(scenarios(cfg, m, progress=progress))
+    t = tables[0] if len(tables) == 1 else pd.concat(tables).drop_duplicates("scenario")
+    return t.sort_values("scenario", kind="stable").reset_index(drop=True)
+
+
+def _held(path: Path, ids: np.ndarray) -> np.ndarray:
+    """The scenario ids whose results the part of a chunk (its scenario ids ``ids``) holds: none without a part,
+    all of them when its footer counts them all, else its ``scenario`` column."""
+    import pyarrow.parquet as pq
+
+    if not path.exists():
+        return ids[:0]
+    try:
+        if pq.read_metadata(path).num_rows == len(ids):
+            return ids
+    except Exception:  # noqa: BLE001 - read_part names the damaged file in one line
+        pass
+    return read_part(path, ["scenario"])["scenario"].to_numpy(np.int64)
+
+
+def _run_locked(cfg: SweepConfig, out: Path, table, cell_rows, bases: dict, sim, devs: list, pid: int, nproc: int,
+                sel: dict, *, chunk_size, progress: bool, barrier_timeout_s: float, t_start: float) -> RunStats:
     """:func:`run` once it holds the folder's lock."""
+    import pandas as pd
+
     ndev = len(devs)
     parts = out / "parts"
     manifest_path = out / "manifest.json"
@@ -969,15 +1033,17 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     needed = ("sweep_text", "plan", "sessions")
     old = read_record(manifest_path, needed) if manifest_path.exists() else None
     mine = read_record(proc_path, needed) if pid > 0 and proc_path.exists() else None
+    run_key = f"{cfg.name}/{sel['scenarios_per_cell']}/{sel['max_scenarios']}"  # the same in every process
     if chunk_size is None:
         # Resume with the folder's chunk size (its record's, else its parts': a deleted manifest is rewritten);
         # otherwise process 0 sizes it and the others take its figure.
         prev = (old or mine or {}).get("plan", {}).get("chunk_size") or _parts_chunk_size(parts)
-        chunk_size = distributed.agree(f"ijoy_sweep/chunk_size/{cfg.name}/{max_scenarios}",
-                                       lambda: prev or default_chunk_size(cfg, table, bases, devs, sim), pid)
+        chunk_size = distributed.agree(f"ijoy_sweep/chunk_size/{run_key}",
+                                       lambda: prev or default_chunk_size(cfg, cell_rows, bases, devs, sim), pid)
     chunk_size = -(-chunk_size // ndev) * ndev  # a multiple of the device count
-    plan = _plan(cfg, table, chunk_size)
-    plan_key = {"chunk_size": chunk_size, "max_scenarios": max_scenarios, "scenarios": len(table),
+    plan = chunk_plan(cfg, chunk_size, cell_rows)  # the whole sweep's, whatever slice this run computes
+    # max_scenarios is null: a slice is recorded apart (selection), so it shares the whole sweep's plan and hash
+    plan_key = {"chunk_size": chunk_size, "max_scenarios": None, "scenarios": cfg.num_scenarios,
                 "chunks": len(plan)}
     if cfg.inputs:  # the files it reads (their hashes): a changed recording is another plan
         plan_key["inputs"] = cfg.inputs
@@ -994,6 +1060,11 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     if parts.exists():  # IncompleteSweepError naming a part of another plan (and this run's), or a corrupt one
         # unrecorded (older) parts are vouched for by a matching manifest only
         check_plans(out, sorted(parts.glob("part-*.parquet")), plan_record, allow_unrecorded=(old or mine) is not None)
+    # What the folder was asked for: the union of its runs' slices (a manifest from before slices: the plan's all)
+    before = (old or {}).get("selection") or (selection(cfg.num_cells, cfg.scenarios_per_cell) if old else sel)
+    union = selection(cfg.num_cells, cfg.scenarios_per_cell,
+                      scenarios_per_cell=max(before["scenarios_per_cell"], sel["scenarios_per_cell"]),
+                      max_scenarios=max(before["max_scenarios"], sel["max_scenarios"]))
     layout = {"num_processes": nproc, "rule": "chunk % num_processes == process_id",
               "process_files": "processes/process-NNNNN.json (sessions of processes 1..N-1)"}
     if pid == 0:  # the manifest and sweep.toml are written by process 0 only
@@ -1001,18 +1072,28 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
                            "versions": _versions(), "git_commit": _git_commit(), "sessions": []}
         manifest.setdefault("plan_hash", phash)  # a manifest from before plans were hashed: same text and plan
         manifest["layout"] = layout
+        manifest["selection"] = union
+        manifest.setdefault("complete", False)  # the whole sweep is in the folder (set when a session ends)
         record = manifest_path
     else:  # each other process writes only its own file
         manifest = mine or {"sweep_text": cfg.text, "plan": plan_key, "process_id": pid, "sessions": []}
         manifest.setdefault("plan_hash", phash)
         record = proc_path
-    mine_plan = [p for p in plan if p[0] % nproc == pid]
+    # The chunks this run's slice touches, with its scenarios in each; this process's share of them
+    touched = []
+    for chunk_id, group, ids in plan:
+        want = ids[selected(ids, sel)]
+        if len(want):
+            touched.append((chunk_id, group, ids, want))
+    mine_plan = [p for p in touched if p[0] % nproc == pid]
     parts.mkdir(parents=True, exist_ok=True)
     record.parent.mkdir(parents=True, exist_ok=True)
     if pid == 0:
         (out / "sweep.toml").write_text(cfg.text)
+    truncated = sel["scenarios"] < sel["of"]
     session: dict[str, Any] = {"started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                                "process_id": pid, "num_processes": nproc, "chunks_assigned": len(mine_plan),
+                               "selection": sel, "truncated": truncated,
                                "host": platform.node(),
                                "device": str(devs[0]), "backend": jax.default_backend(),
                                "device_count": jax.device_count(), "devices": ndev, "chunk_size": chunk_size,
@@ -1022,45 +1103,67 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     manifest["sessions"].append(session)
     _write_json(record, manifest)
 
-    stats = RunStats(out=out, scenarios=len(table), chunks=len(plan), devices=ndev, chunk_size=chunk_size,
-                     physics_steps=_physics_steps(sim, cfg.num_steps))
+    stats = RunStats(out=out, scenarios=sel["scenarios"], chunks=len(touched), devices=ndev, chunk_size=chunk_size,
+                     physics_steps=_physics_steps(sim, cfg.num_steps), sweep_scenarios=cfg.num_scenarios)
     static = _static(cfg)
     run_chunk = _chunk_runner(static)
     on_devices = _OnDevices(devs)
     key = jax.random.key(cfg.seed)
     robot_cols, terrain_cols, sim_cols = _cols(table)
-    # Scenarios per group, counted once (per chunk, a pass over the whole table cost ~20 ms at 2e7 rows).
-    per_group = {}
+    # Scenarios per group of the whole plan, counted once: a group's call shape (the same for a slice)
+    per_group: dict[tuple, int] = {}
     for _, group, ids in plan:
         per_group[group] = per_group.get(group, 0) + len(ids)
-    todo = [p for p in mine_plan if not (parts / _PART.format(p[0])).exists()]
-    stats.skipped = len(mine_plan) - len(todo)
-    total = int(sum(len(p[2]) for p in mine_plan))
-    done_before = total - int(sum(len(p[2]) for p in todo))
+    # Per chunk of this process: the scenarios its part already holds, and those of the slice still to compute
+    held = {p[0]: _held(parts / _PART.format(p[0]), p[2]) for p in mine_plan}
+    need = {p[0]: p[3][~np.isin(p[3], held[p[0]])] for p in mine_plan}
+    stats.skipped = sum(not len(v) for v in need.values())
+    if pid == 0 and any(len(v) for v in need.values()):
+        (out / "aggregates.parquet").unlink(missing_ok=True)  # stale once this run adds scenarios; rewritten after
+    # Calls: per group, the scenarios to compute in plan order cut into the group's call shape; a call may hold
+    # rows of several chunks (a slice's few rows of many chunks), each row written into its own chunk's part.
+    calls = []
+    for group in per_group:
+        size = -(-min(chunk_size, per_group[group]) // ndev) * ndev  # every device gets the same rows
+        rows_g = [(need[c], np.full(len(need[c]), c)) for c, g, _, _ in mine_plan if g == group and len(need[c])]
+        if rows_g:
+            ids_g, chunks_g = (np.concatenate(x) for x in zip(*rows_g, strict=True))
+            calls += [(group, size, ids_g[i:i + size], chunks_g[i:i + size]) for i in range(0, len(ids_g), size)]
+    total = int(sum(len(p[3]) for p in mine_plan))
+    done_before = total - int(sum(len(v) for v in need.values()))
     who = f" {pid}/{nproc}" if nproc > 1 else ""
     by_id = table.set_index("scenario", drop=False)
     traces0 = trace_count()
     shared_of: dict[float, Any] = {}  # per density: (base robot, targets, key, sim, scene), placed
     computed = steady_n = 0
     steady_s = 0.0
-    t_last = None  # when the last chunk was written
+    t_last = None  # when the last call's results were written
+
+    def write(result) -> None:
+        """Write a call's rows into their chunks' parts, each merged with the rows its part already holds."""
+        for c in dict.fromkeys(result["chunk"].tolist()):
+            rows = result[result["chunk"] == c]
+            path = parts / _PART.format(c)
+            if len(held[c]):  # an earlier slice's rows of this chunk: kept, the new ones added
+                rows = pd.concat([read_part(path), rows], ignore_index=True).sort_values("scenario", kind="stable")
+            tmp = path.with_name(f"{path.name}.{_WHO}.tmp")  # per process: members never share a temp file
+            _write_part(rows.reset_index(drop=True), tmp, plan_record)
+            os.replace(tmp, path)
+            held[c] = rows["scenario"].to_numpy(np.int64)
 
     def finish(p) -> None:
-        """Wait for a dispatched chunk's summaries, write its part and count it."""
+        """Wait for a dispatched call's summaries, write its rows and count them."""
         nonlocal computed, steady_n, steady_s, t_last
-        chunk_id, label, rows, outs, t0 = p
+        index, label, rows, chunk_of, outs, t0 = p
         summary = _OnDevices.collect(outs)
         n = len(rows)
         result = rows.reset_index(drop=True).copy()
         for k, v in summary.items():
             result[k] = np.asarray(v)[:n]
-        result.insert(1, "chunk", chunk_id)
-        path = parts / _PART.format(chunk_id)
-        tmp = path.with_name(f"{path.name}.{_WHO}.tmp")  # per process: members never share a temp file
-        _write_part(result, tmp, plan_record)
-        os.replace(tmp, path)
+        result.insert(1, "chunk", chunk_of.astype(np.int64))
+        write(result)
         now = time.perf_counter()
-        # A chunk's time: from its start, or from the last write when it ran behind the chunk before it.
+        # A call's time: from its start, or from the last write when it ran behind the call before it.
         dt = now - (t0 if t_last is None else max(t0, t_last))
         t_last = now
         if label not in stats.first_chunk_s:
@@ -1069,24 +1172,24 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
             steady_n, steady_s = steady_n + n, steady_s + dt
         computed += n
         if progress:
-            # Rate over compiled chunks only (the first chunk of a density includes its compile).
+            # Rate over compiled calls only (the first call of a density includes its compile).
             rate = steady_n / steady_s if steady_n else n / dt
-            _progress(done_before + computed, total, rate, chunk_id + 1, len(plan), who, stats.physics_steps)
+            _progress(done_before + computed, total, rate, index + 1, len(calls), who, stats.physics_steps)
 
-    # One chunk in flight behind the host: chunk k+1 is built and dispatched before chunk k's summaries are
-    # fetched and written, so the devices compute while the host writes. A chunk that compiles (the first of
-    # its group) waits until the one before is written, so no compile time is counted in a steady chunk.
+    # One call in flight behind the host: call k+1 is built and dispatched before call k's summaries are
+    # fetched and written, so the devices compute while the host writes. A call that compiles (the first of
+    # its group) waits until the one before is written, so no compile time is counted in a steady call.
     pending = None
 
     def finish_pending(new=None) -> None:
-        """Finish the chunk in flight, if any; ``new`` (a dispatched chunk, or None) is in flight after."""
+        """Finish the call in flight, if any; ``new`` (a dispatched call, or None) is in flight after."""
         nonlocal pending
         done, pending = pending, new
         if done is not None:
             finish(done)
 
     try:
-        for chunk_id, group, ids in todo:
+        for index, (group, size, ids, chunk_of) in enumerate(calls):
             density = group[0]
             static_g = static._replace(horizon=group[1], refine=group[2])
             label = _group_label(cfg, group)
@@ -1094,15 +1197,15 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
                 finish_pending()
             t0 = time.perf_counter()
             if density not in shared_of:  # shared by every scenario: a copy on every device
-                shared_of[density] = on_devices.put_shared((*_shared(table, bases[density]), key, sim, _scene(cfg)))
+                shared_of[density] = on_devices.put_shared((*_shared(cell_rows, bases[density]), key, sim,
+                                                            _scene(cfg)))
             rows = by_id.loc[ids]
-            size = -(-min(chunk_size, per_group[group]) // ndev) * ndev  # every device gets the same rows
             batch = _batch(rows, size, robot_cols, terrain_cols, sim_cols, cfg=cfg)
             outs = on_devices.dispatch(run_chunk, static_g, shared_of[density], batch)
-            finish_pending((chunk_id, label, rows, outs, t0))
+            finish_pending((index, label, rows, chunk_of, outs, t0))
         finish_pending()
     finally:
-        if pending is not None:  # an error or interrupt after a chunk was dispatched: keep its results
+        if pending is not None:  # an error or interrupt after a call was dispatched: keep its results
             try:
                 finish(pending)
             except Exception:  # noqa: BLE001 - the error that got here is the one to report
@@ -1112,23 +1215,40 @@ def _run_locked(cfg: SweepConfig, out: Path, table, bases: dict, sim, devs: list
     stats.compiles = trace_count() - traces0
     stats.run_s = time.perf_counter() - t_start
 
+    def lacking(chunks, of_sel) -> list[int]:
+        """The chunks (id, group, ids, ...) whose parts lack scenarios of the selection ``of_sel``."""
+        out_ = []
+        for chunk_id, _, ids, *_ in chunks:
+            want = ids[selected(ids, of_sel)]
+            have = held[chunk_id] if chunk_id in held else _held(parts / _PART.format(chunk_id), ids)
+            if len(want) and not np.isin(want, have).all():
+                out_.append(chunk_id)
+        return out_
+
     if nproc > 1:  # no device collective: the coordination service's barrier (skipped without jax.distributed)
-        missing = sorted({p[0] % nproc for p in plan if not (parts / _PART.format(p[0])).exists()})
+        missing = sorted({c % nproc for c in lacking(touched, sel)})
         if progress and missing and distributed.client() is not None:
             print(f"[ijoy sweep{who}] this process is done; waiting up to {barrier_timeout_s:g} s for process(es) "
                   f"{', '.join(map(str, missing))} (relaunch one that died with its same command)", file=sys.stderr)
-        distributed.barrier(f"ijoy_sweep/done/{cfg.name}/{max_scenarios}", barrier_timeout_s)
-    complete = stats.complete = all((parts / _PART.format(p[0])).exists() for p in plan)
-    if complete and pid == 0:
-        from ijoy_jax.sweep.results import aggregate, load
+        distributed.barrier(f"ijoy_sweep/done/{run_key}", barrier_timeout_s)
+    complete = stats.complete = not lacking(touched, sel)
+    stats.sweep_complete = complete and not lacking(plan, selection(cfg.num_cells, cfg.scenarios_per_cell))
+    if pid == 0:
+        if complete and not lacking(plan, union):  # everything the folder was asked for
+            from ijoy_jax.sweep.results import aggregate, load
 
-        aggregate(load(out), cfg.swept).to_parquet(out / "aggregates.parquet", index=False)
+            aggregate(load(out), cfg.swept).to_parquet(out / "aggregates.parquet", index=False)
+        manifest["complete"] = stats.sweep_complete
     session.update(finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), run_s=stats.run_s,
                    computed=computed, skipped_chunks=stats.skipped, compiles=stats.compiles, rate=stats.rate,
                    physics_steps_per_scenario=stats.physics_steps,
                    first_chunk_s={str(k): v for k, v in stats.first_chunk_s.items()}, complete=complete)
     _write_json(record, manifest)
-    if progress and not todo:
+    if progress and not calls:
         print(f"[ijoy sweep{who}] {out}: all {len(mine_plan)} of this process's chunks already done",
               file=sys.stderr)
+    if progress and truncated and pid == 0:
+        print(f"[ijoy sweep] {out}: a slice of the sweep, {describe_selection(sel)}; the manifest marks the folder "
+              "incomplete: a later run into this --out with a larger slice, or the whole sweep, computes only the "
+              "scenarios missing", file=sys.stderr)
     return stats

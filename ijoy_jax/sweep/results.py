@@ -18,10 +18,16 @@ Cornish-Fisher expansion beyond (:func:`t_quantile`; no SciPy needed).
 Scenarios of a replicate share terrain and command across cells (paired), so
 differences between cells are estimated more precisely than these marginal
 intervals suggest.
+
+Slices. A run may compute part of a sweep (:func:`selection`: the first N replicates of every cell, or the
+first M scenario ids) into a folder that a later run with more scenarios extends: the chunk plan is always the
+whole sweep's (:func:`chunk_plan`), a part holds the rows of its chunk computed so far, and ``manifest.json``
+records what the folder was asked for (``selection``) and whether it holds the whole sweep (``complete``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -29,14 +35,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ijoy_jax.sweep.config import METRICS, PHYSICS_METRICS, ROBOT_DEFAULTS, parse_config
+from ijoy_jax.sweep.config import METRICS, PHYSICS_METRICS, ROBOT_DEFAULTS, SweepConfig, parse_config, scenarios
 from ijoy_jax.terrain import generators
 
 __all__ = ["EXTRA_METRICS", "PAPER_ACTIONS", "PHYSICS_PLOT_METRICS", "PLAN_KEY",
            "PLOT_METRICS", "SELECTOR_PLOT_METRICS", "UNITS", "IncompleteSweepError", "action_counts",
-           "aggregate", "b_max", "check_plans", "describe_plan", "differences", "load", "load_aggregates",
-           "paired_differences",
-           "part_plan", "plan_hash", "read_record",
+           "aggregate", "b_max", "check_plans", "chunk_plan", "describe_plan", "describe_selection",
+           "differences", "load", "load_aggregates", "paired_differences",
+           "part_plan", "plan_hash", "read_part", "read_record", "selected", "selection",
            "plot", "plot_crossing", "plot_tradeoff", "t_quantile"]
 
 EXTRA_METRICS = generators.METRIC_NAMES
@@ -123,13 +129,13 @@ def read_record(path, required: tuple[str, ...] = ()) -> dict:
 
     Raises:
       IncompleteSweepError: one line naming the file, what is wrong with it and the way out: every part
-        records its plan (chunk size included), so a run with the same sweep file, ``--out`` and
-        ``--max-scenarios`` writes the record anew once it is deleted, and resumes (only the record's session
-        history is lost).
+        records its plan (chunk size included), so a run with the same sweep file and ``--out`` writes the
+        record anew once it is deleted, and resumes (only the record's session history is lost, and with it
+        what slice the folder was asked for: give ``--scenarios-per-cell`` or ``--max-scenarios`` again).
     """
     path = Path(path)
-    way_out = ("delete it and rerun `ijoy sweep run` with the same sweep file, --out and --max-scenarios: the "
-               "parts record their plan, so the run writes it anew and resumes")
+    way_out = ("delete it and rerun `ijoy sweep run` with the same sweep file and --out (and --scenarios-per-cell "
+               "or --max-scenarios as before): the parts record their plan, so the run writes it anew and resumes")
     try:
         record = json.loads(path.read_bytes())
     except OSError as e:
@@ -147,6 +153,13 @@ def read_record(path, required: tuple[str, ...] = ()) -> dict:
         problems.append("'plan' is not an object with integer 'chunks' and 'scenarios'")
     if not isinstance(record.get("sweep_text", ""), str):
         problems.append("'sweep_text' is not a string")
+    sel = record.get("selection", {})
+    if not isinstance(sel, dict) or any(isinstance(sel.get(k), bool) or not isinstance(sel.get(k), int)
+                                        or sel[k] < (1 if k == "replicates" else 0)
+                                        for k in ("scenarios_per_cell", "max_scenarios", "replicates", "cells",
+                                                  "scenarios", "of") if "selection" in record):
+        problems.append("'selection' is not an object with non-negative integer 'scenarios_per_cell', "
+                        "'max_scenarios', 'replicates' (>= 1), 'cells', 'scenarios' and 'of'")
     sessions = record.get("sessions", [])
     if not isinstance(sessions, list) or not all(isinstance(x, dict) for x in sessions):
         problems.append("'sessions' is not a list of objects")
@@ -157,12 +170,15 @@ def read_record(path, required: tuple[str, ...] = ()) -> dict:
 
 PLAN_KEY = b"ijoy_jax.plan"
 """Key of the plan record in every part's parquet metadata: JSON ``{"hash", "name", "chunk_size",
-"max_scenarios", "scenarios", "chunks"}`` (the hash of the sweep text and the chunk plan, :func:`plan_hash`)."""
+"max_scenarios", "scenarios", "chunks"}`` (the hash of the sweep text and the chunk plan, :func:`plan_hash`).
+The plan is the whole sweep's (``max_scenarios`` null), whatever slice of it a run computes
+(:func:`selection`), so a slice and the whole sweep share a folder."""
 
 
 def plan_hash(sweep_text: str, plan: dict) -> str:
     """The hash (16 hex digits) of a sweep's plan: its file's text and its chunk plan (chunk size,
-    ``max_scenarios``, scenario and chunk counts); everything that decides which results a chunk holds.
+    ``max_scenarios``, scenario and chunk counts); everything that decides which results a chunk holds. A run
+    of a slice of the sweep (:func:`selection`) has the whole sweep's plan, and so its hash.
 
     Example:
       >>> plan_hash("[sweep]\\n", {"chunk_size": 2}) == plan_hash("[sweep]\\n", {"chunk_size": 3})
@@ -204,6 +220,132 @@ def describe_plan(record: dict | None) -> str:
         return "an unrecorded plan (a part written before parts recorded their plan)"
     return (f"plan {record.get('hash')} (sweep {record.get('name')!r}, {record.get('scenarios')} scenarios in "
             f"{record.get('chunks')} chunks of {record.get('chunk_size')})")
+
+
+def selection(num_cells: int, replicates: int, *, scenarios_per_cell: int | None = None,
+              max_scenarios: int | None = None) -> dict:
+    """Which scenarios of a sweep a run computes, or a folder was asked for, as its manifest records it.
+
+    Scenario ``s = cell * replicates + replicate`` is selected when ``replicate < scenarios_per_cell`` or
+    ``s < max_scenarios``: the first N replicates of every cell (an even slice: every cell, the same terrains
+    and commands in each) and the first M scenario ids (cell 0's replicates first). Neither given: the whole
+    sweep. The union of two selections is the selection of their larger N and larger M, so a folder's
+    results only ever grow towards the whole sweep.
+
+    Args:
+      num_cells, replicates: the sweep's cells and scenarios per cell (``SweepConfig.num_cells``,
+        ``SweepConfig.scenarios_per_cell``).
+      scenarios_per_cell: N (>= 0; beyond ``replicates`` means all of them), or None.
+      max_scenarios: M (>= 0; beyond the sweep's scenarios means all of them), or None.
+
+    Returns:
+      ``{"scenarios_per_cell": N, "max_scenarios": M, "replicates", "cells", "scenarios": how many are
+      selected, "of": the sweep's scenarios}``, with ``N == replicates`` and ``M == 0`` for the whole sweep.
+
+    Example:
+      >>> selection(8, 64, scenarios_per_cell=2)["scenarios"], selection(8, 64, max_scenarios=64)["scenarios"]
+      (16, 64)
+      >>> selection(4, 3, scenarios_per_cell=1, max_scenarios=4)["scenarios"]  # ids 0, 3, 6, 9 and 0, 1, 2, 3
+      6
+    """
+    total = num_cells * replicates
+    if scenarios_per_cell is None and max_scenarios is None:
+        n, m = replicates, 0
+    else:
+        n, m = min(int(scenarios_per_cell or 0), replicates), min(int(max_scenarios or 0), total)
+    if n >= replicates or m >= total:  # the whole sweep, one way of writing it
+        n, m = replicates, 0
+    q, rem = divmod(m, replicates)
+    count = num_cells * n + q * (replicates - n) + max(0, rem - n)  # ids below m whose replicate is >= n
+    return {"scenarios_per_cell": n, "max_scenarios": m, "replicates": replicates, "cells": num_cells,
+            "scenarios": count, "of": total}
+
+
+def selected(ids, sel: dict) -> np.ndarray:
+    """Which scenario ids (an int array) the :func:`selection` ``sel`` holds: a bool array of their shape.
+
+    Example:
+      >>> selected([0, 1, 3, 4], selection(2, 3, scenarios_per_cell=1)).tolist()
+      [True, False, True, False]
+    """
+    ids = np.asarray(ids, np.int64)
+    return (ids % sel["replicates"] < sel["scenarios_per_cell"]) | (ids < sel["max_scenarios"])
+
+
+def describe_selection(sel: dict) -> str:
+    """A :func:`selection` in words, for messages: ``2 of 64 scenarios per cell (16 of 512 scenarios)``.
+
+    Example:
+      >>> describe_selection(selection(8, 64, max_scenarios=64))
+      'the first 64 scenario ids, 1 of 8 cells (64 of 512 scenarios)'
+    """
+    n, m, reps, cells = sel["scenarios_per_cell"], sel["max_scenarios"], sel["replicates"], sel["cells"]
+    if n >= reps:
+        return f"all {sel['of']} scenarios"
+    what = []
+    if n:
+        what.append(f"{n} of {reps} scenarios per cell")
+    if m:
+        what.append(f"the first {m} scenario ids, {min(cells, -(-m // reps))} of {cells} cells")
+    return f"{' and '.join(what)} ({sel['scenarios']} of {sel['of']} scenarios)"
+
+
+def _groups(rows) -> np.ndarray:
+    """Each row's compile group: (density, selector horizon, selector refine) as a structured array."""
+    out = np.empty(len(rows), [("density", "f8"), ("horizon", "i8"), ("refine", "i8")])
+    out["density"] = rows["robot.density"].to_numpy()
+    out["horizon"] = rows["selector.horizon"].to_numpy()
+    out["refine"] = rows["selector.refine"].to_numpy()
+    return out
+
+
+def chunk_plan(cfg: SweepConfig, chunk_size: int, rows=None) -> list[tuple[int, tuple, np.ndarray]]:
+    """The whole sweep's chunks: ``(chunk id, group, scenario ids)``, by compile group (what changes the
+    compiled program: density, the selector's horizon and refinement) in order of first appearance, each
+    group's scenario ids in order, cut every ``chunk_size``.
+
+    A run of a slice of the sweep (:func:`selection`) computes its scenarios in this plan's chunks too, so a
+    scenario lands in the same chunk (and part file) whatever slice computed it.
+
+    Args:
+      cfg: the sweep.
+      chunk_size: scenarios per chunk (as the run rounds it: a multiple of its device count).
+      rows: one row per cell with its ``robot.density``, ``selector.horizon`` and ``selector.refine`` (e.g.
+        replicate 0 of every cell); None: built here (:func:`ijoy_jax.sweep.scenarios` of one replicate).
+
+    Example:
+      >>> from ijoy_jax.sweep import parse_config
+      >>> cfg = parse_config('[sweep]\\nscenarios_per_cell = 3\\n[grid]\\n"robot.w" = [1, 2]\\n')
+      >>> [ids.tolist() for _, _, ids in chunk_plan(cfg, 4)]
+      [[0, 1, 2, 3], [4, 5]]
+    """
+    if rows is None:
+        rows = scenarios(dataclasses.replace(cfg, scenarios_per_cell=1))
+    reps = cfg.scenarios_per_cell
+    groups = _groups(rows)
+    cell = rows["cell"].to_numpy()
+    plan = []
+    for g in dict.fromkeys(groups.tolist()):
+        ids = (cell[groups == np.array(g, groups.dtype)][:, None] * reps + np.arange(reps)).ravel()
+        for i in range(0, len(ids), chunk_size):
+            plan.append((len(plan), (float(g[0]), int(g[1]), bool(g[2])), ids[i : i + chunk_size]))
+    return plan
+
+
+def read_part(path, columns=None):
+    """A result part's rows (``columns`` of them, None: all) as a pandas.DataFrame.
+
+    Raises:
+      IncompleteSweepError: the file cannot be read (truncated, overwritten); the message names it and says to
+        delete it and rerun (the run recomputes its chunk).
+    """
+    import pandas as pd
+    import pyarrow as pa
+
+    try:
+        return pd.read_parquet(path, columns=columns)
+    except (OSError, ValueError, pa.ArrowException) as e:
+        raise _corrupt_part(path, e) from None
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
@@ -288,37 +430,75 @@ def _chunk_of(part: Path) -> int:
 
 
 def _check_complete(path: Path, files: list[Path], df) -> None:
-    """Raise :class:`IncompleteSweepError` unless the parts are exactly the manifest plan's chunks."""
+    """Raise :class:`IncompleteSweepError` unless the parts hold every scenario the folder was asked for (the
+    manifest's ``selection``; the whole plan for a manifest written before runs recorded one), each once, and
+    nothing outside the manifest's plan."""
     man_path = path / "manifest.json"
     if not man_path.exists():
         raise IncompleteSweepError(f"{path}: no manifest.json (process 0 writes it when it starts; has it run?)")
-    plan = read_record(man_path, ("plan",))["plan"]
+    man = read_record(man_path, ("plan",))
+    plan = man["plan"]
     have = [_chunk_of(f) for f in files]
-    missing = sorted(set(range(plan["chunks"])) - set(have))
     foreign = sorted(set(have) - set(range(plan["chunks"])))
     if foreign:
         raise IncompleteSweepError(f"{path}: parts of chunks {foreign} are not in the plan ({plan['chunks']} "
                                    f"chunks): results of another plan are mixed in")
-    if missing:
-        sessions = _process_sessions(path)
-        latest = max(sessions, key=lambda s: s.get("started", "")) if sessions else {}
-        nproc = int(latest.get("num_processes", 1))
-        shown = ", ".join(map(str, missing[:20])) + (", ..." if len(missing) > 20 else "")
-        if nproc > 1:
-            owners = sorted({c % nproc for c in missing})
-            who = (f"; with {nproc} processes (chunk % {nproc} == process id) they belong to process(es) "
-                   f"{', '.join(map(str, owners))}: has each finished? Rerun `ijoy sweep run` with the same --out "
-                   f"and --process-id to resume it")
-        else:
-            who = "; the sweep has not finished: rerun `ijoy sweep run` with the same --out to resume it"
-        raise IncompleteSweepError(f"{path}: incomplete sweep: {len(missing)} of {plan['chunks']} chunks missing "
-                                   f"(chunks {shown}){who}; or load(..., partial=True) for the finished chunks")
     dup = df["scenario"][df["scenario"].duplicated()].unique()
     if len(dup):
         raise IncompleteSweepError(f"{path}: scenarios {sorted(dup.tolist())[:20]} appear more than once "
                                    f"(in chunks {sorted(df.loc[df['scenario'].isin(dup), 'chunk'].unique())})")
-    if len(df) != plan["scenarios"]:
-        raise IncompleteSweepError(f"{path}: {len(df)} scenarios in the parts, the plan has {plan['scenarios']}")
+    ids = df["scenario"].to_numpy(np.int64)
+    outside = ids[(ids < 0) | (ids >= plan["scenarios"])]
+    if len(outside):
+        raise IncompleteSweepError(f"{path}: scenarios {sorted(outside.tolist())[:20]} are not in the plan "
+                                   f"({plan['scenarios']} scenarios): results of another plan are mixed in")
+    sel = man.get("selection") or selection(plan["scenarios"], 1)  # before slices: the whole plan
+    if np.count_nonzero(selected(ids, sel)) >= sel["scenarios"]:
+        return
+    sliced = sel["scenarios"] < sel["of"]
+    flags = "".join(f" and --{k.replace('_', '-')} {sel[k]}" for k in ("scenarios_per_cell", "max_scenarios")
+                    if sliced and sel[k])  # what the folder was asked for
+    asked = f" (it was asked for {describe_selection(sel)})" if sliced else ""
+    missing, touched = _missing_chunks(man, sel, ids, have)
+    if missing is None:  # the plan cannot be rebuilt (its sweep file reads a file that moved): count scenarios
+        what = f"{sel['scenarios'] - np.count_nonzero(selected(ids, sel))} of {sel['scenarios']} scenarios missing"
+    else:
+        shown = ", ".join(map(str, missing[:20])) + (", ..." if len(missing) > 20 else "")
+        what = f"{len(missing)} of {touched} chunks missing (chunks {shown})"
+    sessions = _process_sessions(path)
+    latest = max(sessions, key=lambda s: s.get("started", "")) if sessions else {}
+    nproc = int(latest.get("num_processes", 1))
+    if nproc > 1 and missing is not None:
+        owners = sorted({c % nproc for c in missing})
+        who = (f"; with {nproc} processes (chunk % {nproc} == process id) they belong to process(es) "
+               f"{', '.join(map(str, owners))}: has each finished? Rerun `ijoy sweep run` with the same --out"
+               f"{flags} and --process-id to resume it")
+    else:
+        who = f"; the sweep has not finished: rerun `ijoy sweep run` with the same --out{flags} to resume it"
+    raise IncompleteSweepError(f"{path}: incomplete sweep{asked}: {what}{who}; or load(..., partial=True) for the "
+                               f"finished chunks")
+
+
+def _missing_chunks(man: dict, sel: dict, ids: np.ndarray, have: list[int]) -> tuple[list[int] | None, int]:
+    """The chunks lacking selected scenarios and how many chunks the selection touches; (None, 0) when the plan
+    cannot be rebuilt from the manifest's sweep text."""
+    plan = man["plan"]
+    if "selection" not in man:  # written before slices: every part holds its whole chunk
+        return sorted(set(range(plan["chunks"])) - set(have)), plan["chunks"]
+    try:
+        cfg = parse_config(man["sweep_text"], man.get("sweep_file", "<manifest>"))
+        chunks = chunk_plan(cfg, plan["chunk_size"])
+    except (ValueError, KeyError, TypeError, OSError):
+        return None, 0
+    if cfg.num_scenarios != plan["scenarios"] or len(chunks) != plan["chunks"]:
+        return None, 0
+    missing, touched = [], 0
+    for cid, _, cids in chunks:
+        want = cids[selected(cids, sel)]
+        touched += bool(len(want))
+        if not np.isin(want, ids).all():
+            missing.append(cid)
+    return missing, touched
 
 
 def load(path, *, partial: bool = False):
@@ -326,7 +506,9 @@ def load(path, *, partial: bool = False):
 
     Args:
       path: the sweep's output folder (``ijoy sweep run --out``).
-      partial: return the finished chunks of an unfinished sweep instead of raising.
+      partial: return the finished chunks of an unfinished sweep instead of raising. A folder of a slice of
+        its sweep (``ijoy sweep run --scenarios-per-cell`` or ``--max-scenarios``) loads without it once that
+        slice is done: its manifest says ``"complete": false`` and the table holds the slice's scenarios.
 
     Returns:
       pandas.DataFrame, one row per scenario, sorted by ``scenario``.
@@ -335,9 +517,9 @@ def load(path, *, partial: bool = False):
       FileNotFoundError: no parts at all (NotADirectoryError: ``path`` is a file).
       IncompleteSweepError: parts of another plan are mixed in (every part records its plan's
         hash; also with ``partial``); a part or the manifest cannot be read (truncated, overwritten,
-        hand-edited: the message names the file and the way out); or (unless ``partial``) chunks of
-        the manifest's plan are missing (the message names them and, for a multi-process run, the
-        processes they belong to), or scenarios are duplicated.
+        hand-edited: the message names the file and the way out); or (unless ``partial``) scenarios the
+        folder was asked for (the manifest's ``selection``) are missing (the message names their chunks and,
+        for a multi-process run, the processes they belong to), or scenarios are duplicated.
 
     Example:
       >>> from ijoy_jax import sweep
@@ -345,7 +527,6 @@ def load(path, *, partial: bool = False):
       >>> df.groupby("robot.w")["distance_along"].mean()  # doctest: +SKIP
     """
     import pandas as pd
-    import pyarrow as pa
 
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -361,10 +542,7 @@ def load(path, *, partial: bool = False):
     check_plans(path, files, expected, allow_unrecorded=True)  # even with partial: never mix two sweeps
     tables = []
     for p in files:
-        try:  # the footer was read above; a part cut or overwritten inside its data fails here
-            t = pd.read_parquet(p)
-        except (OSError, ValueError, pa.ArrowException) as e:
-            raise _corrupt_part(p, e) from None
+        t = read_part(p)  # the footer was read above; a part cut or overwritten inside its data fails here
         if not {"scenario", "chunk"} <= set(t.columns):
             raise _corrupt_part(p, ValueError("no 'scenario' and 'chunk' columns"))
         tables.append(t)
