@@ -274,31 +274,30 @@ def _sandbox(tmp: str) -> Path:
     return cwd
 
 
+def _write_file(path: Path) -> None:
+    path.write_text("x")
+
+
+def _make_folder_and_write_in_it(path: Path) -> None:
+    path.mkdir(parents=True, exist_ok=True)
+    (path / "x").write_text("x")
+
+
+@pytest.mark.parametrize("check, use", [(options.output_file, _write_file),
+                                        (options.output_folder, _make_folder_and_write_in_it)],
+                         ids=["output_file", "output_folder"])
 @settings(max_examples=150)
 @given(_names())
-def test_an_accepted_output_file_can_be_written(name):
-    """output_file refuses only with ArgumentTypeError, and a name it accepts can be opened for writing."""
+def test_an_accepted_output_can_be_made_and_written(check, use, name):
+    """output_file / output_folder refuse only with a one-line ArgumentTypeError, and what they accept can be
+    written (a file) or made and written in (a folder)."""
     with tempfile.TemporaryDirectory() as tmp, _cwd(_sandbox(tmp)):
         try:
-            options.output_file(name)
+            check(name)
         except argparse.ArgumentTypeError as e:
             assert str(e) and "\n" not in str(e)
             return
-        Path(name).write_text("x")
-
-
-@settings(max_examples=150)
-@given(_names())
-def test_an_accepted_output_folder_can_be_made_and_written_in(name):
-    """output_folder refuses only with ArgumentTypeError, and a folder it accepts can be made and written in."""
-    with tempfile.TemporaryDirectory() as tmp, _cwd(_sandbox(tmp)):
-        try:
-            options.output_folder(name)
-        except argparse.ArgumentTypeError as e:
-            assert str(e) and "\n" not in str(e)
-            return
-        Path(name).mkdir(parents=True, exist_ok=True)
-        (Path(name) / "x").write_text("x")
+        use(Path(name))
 
 
 @given(st.one_of(st.text(max_size=12), st.from_regex(r"\A-?[0-9]{1,5}[xX]-?[0-9]{1,5}\Z")))
