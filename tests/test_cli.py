@@ -57,7 +57,7 @@ CASES = [
     (["bench", "lava"], "argument BENCHMARK: invalid choice: 'lava'"),
     (["tune", "forward", "--out", "/dev/null/o"], "argument --out: no folder for '/dev/null/o'"),
     (["cue", "study", "--out", "/dev/null"], "argument --out: '/dev/null' is a file, not a folder"),
-    (["drive", "--record", "no/such/folder/drive.mcap"], "argument --record: no folder for"),
+    (["drive", "--record", "/dev/null/drive.mcap"], "argument --record: no folder for"),  # its folder is made
     (["drive", "--replay", "no_such_drive.mcap", "--export-trace", "no/such/folder/t.csv"],
      "argument --export-trace: no folder for"),
     (["drive", "--param", "bogus=1"], "--param bogus=1: unknown key of terrain family 'obstacles'; known keys: "
@@ -225,7 +225,8 @@ def test_each_benchmark_has_its_own_help():
 
 # A value each option type refuses; an option of a type not listed here fails the test below until it is added.
 BAD_VALUE = {"int": "abc", "float": "abc", "positive_int": "0", "positive_ints": "1,x", "image_size": "big",
-             "output_file": "no/such/folder/x.out", "output_folder": "/dev/null/x", "_walk_families": "lava"}
+             "output_file": "no/such/folder/x.out", "output_folder": "/dev/null/x",
+             "output_file_in_new_folder": "/dev/null/x/y.toml", "_walk_families": "lava"}
 
 
 def test_every_typed_option_refuses_a_bad_value_in_one_line_naming_it(tmp_path, monkeypatch):
@@ -278,19 +279,26 @@ def _write_file(path: Path) -> None:
     path.write_text("x")
 
 
+def _write_file_making_its_folder(path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("x")
+
+
 def _make_folder_and_write_in_it(path: Path) -> None:
     path.mkdir(parents=True, exist_ok=True)
     (path / "x").write_text("x")
 
 
 @pytest.mark.parametrize("check, use", [(options.output_file, _write_file),
+                                        (options.output_file_in_new_folder, _write_file_making_its_folder),
                                         (options.output_folder, _make_folder_and_write_in_it)],
-                         ids=["output_file", "output_folder"])
+                         ids=["output_file", "output_file_in_new_folder", "output_folder"])
 @settings(max_examples=150)
 @given(_names())
 def test_an_accepted_output_can_be_made_and_written(check, use, name):
-    """output_file / output_folder refuse only with a one-line ArgumentTypeError, and what they accept can be
-    written (a file) or made and written in (a folder)."""
+    """output_file / output_file_in_new_folder / output_folder refuse only with a one-line ArgumentTypeError, and
+    what they accept can be written (a file, its folder made first for the second) or made and written in (a
+    folder)."""
     with tempfile.TemporaryDirectory() as tmp, _cwd(_sandbox(tmp)):
         try:
             check(name)
@@ -298,6 +306,19 @@ def test_an_accepted_output_can_be_made_and_written(check, use, name):
             assert str(e) and "\n" not in str(e)
             return
         use(Path(name))
+
+
+def test_a_drive_records_and_exports_into_a_folder_it_makes(tmp_path):
+    """--record and --export-sweep name files whose writers make their folder (a new ``sweeps/``): accepted as
+    parsed, where --export-trace (written into an existing folder only) refuses the same name."""
+    new = str(tmp_path / "new" / "sweeps" / "drive.toml")
+    drive = dict(_commands(_parser()))[("ijoy", "drive")]
+    parsed = drive.parse_args(["--replay", "x.mcap", "--export-sweep", new])
+    assert parsed.export_sweep == new
+    assert drive.parse_args(["--record", new]).record == new
+    with pytest.raises(options.UsageError, match="--export-trace.*does not exist"):
+        drive.parse_args(["--replay", "x.mcap", "--export-trace", new])
+    assert not (tmp_path / "new").exists()  # parsing makes nothing
 
 
 @given(st.one_of(st.text(max_size=12), st.from_regex(r"\A-?[0-9]{1,5}[xX]-?[0-9]{1,5}\Z")))

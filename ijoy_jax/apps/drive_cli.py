@@ -10,7 +10,7 @@ import json
 import sys
 from pathlib import Path
 
-from ijoy_jax.apps.options import output_file
+from ijoy_jax.apps.options import output_file, output_file_in_new_folder
 
 
 def add_parser(sub) -> None:
@@ -62,7 +62,8 @@ def add_parser(sub) -> None:
                                                                    "0.1)")
     loop.add_argument("--headless", action="store_true", help="no view; with --script, faster than real time")
     loop.add_argument("--realtime", action="store_true", help="pace a headless drive to the wall clock anyway")
-    loop.add_argument("--record", metavar="OUT", type=output_file, help="record the drive to an MCAP file")
+    loop.add_argument("--record", metavar="OUT", type=output_file_in_new_folder,
+                      help="record the drive to an MCAP file (its folder is made)")
     loop.add_argument("--host", default="127.0.0.1", help="the view's address (default: %(default)s; forward it "
                                                           "with ssh -L)")
     loop.add_argument("--port", type=int, default=8765, help="the view's port (default: %(default)s)")
@@ -74,9 +75,9 @@ def add_parser(sub) -> None:
     exp = d.add_argument_group("exports of a recording (with --replay FILE, instead of replaying)")
     exp.add_argument("--export-trace", metavar="TRACE", type=output_file,
                      help="write the recorded stick as a trace file")
-    exp.add_argument("--export-sweep", metavar="OUT.toml", type=output_file,
+    exp.add_argument("--export-sweep", metavar="OUT.toml", type=output_file_in_new_folder,
                      help="write a sweep file whose scenario is the recorded drive (its commands step by step; ijoy "
-                          "sweep run OUT.toml)")
+                          "sweep run OUT.toml; its folder is made)")
     exp.add_argument("--sweep-terrain", choices=["recording", "family"], default="recording",
                      help="the exported sweep's terrain: the recorded map (default) or the generator family it was "
                           "drawn from (replicate 0 is the recorded map)")

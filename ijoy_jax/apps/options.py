@@ -44,7 +44,7 @@ def output_file(text: str) -> str:
     """
     _named(text, "file")
     path = Path(text)
-    if path.is_dir() or text.endswith(("/", os.sep)):
+    if path.is_dir() or text.replace(os.sep, "/").split("/")[-1] in ("", ".", ".."):
         raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name in it")
     _writable_folder(path.parent, text)
     return text
@@ -62,13 +62,26 @@ def output_folder(text: str) -> str:
     path = Path(text)
     if path.exists() and not path.is_dir():
         raise argparse.ArgumentTypeError(f"{text!r} is a file, not a folder")
-    existing = path
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir():  # an ancestor is a file (or a dangling link)
-        raise argparse.ArgumentTypeError(f"no folder for {text!r}: {str(existing)!r} is not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"cannot write {text!r}: no permission to write in {str(existing)!r}")
+    _creatable_folder(path, text)
+    return text
+
+
+def output_file_in_new_folder(text: str) -> str:
+    """``type=`` of an option naming a file to write whose writer makes its folder (with parents), e.g. a sweep
+    file exported into a ``sweeps/`` folder that does not exist yet: :func:`output_file`'s checks, except that
+    the folder may be missing as long as it can be made.
+
+    Raises:
+      argparse.ArgumentTypeError: an empty name or one with a NUL, a folder, or a nearest existing ancestor that
+        is not a writable folder.
+    """
+    _named(text, "file")
+    path = Path(text)
+    if path.is_dir() or text.replace(os.sep, "/").split("/")[-1] in ("", ".", ".."):
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name in it")
+    if path.parent.exists() and not path.parent.is_dir():
+        raise argparse.ArgumentTypeError(f"no folder for {text!r}: {str(path.parent)!r} is not a folder")
+    _creatable_folder(path.parent, text)
     return text
 
 
@@ -87,6 +100,18 @@ def _writable_folder(folder: Path, path: str) -> None:
         raise argparse.ArgumentTypeError(f"no folder for {path!r}: {str(folder)!r} {why}")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise argparse.ArgumentTypeError(f"cannot write {path!r}: no permission to write in {str(folder)!r}")
+
+
+def _creatable_folder(folder: Path, path: str) -> None:
+    """Refuse ``path`` unless ``folder`` exists or can be made: its nearest existing ancestor is a folder this
+    process may create entries in."""
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():  # an ancestor is a file (or a dangling link)
+        raise argparse.ArgumentTypeError(f"no folder for {path!r}: {str(existing)!r} is not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"cannot write {path!r}: no permission to write in {str(existing)!r}")
 
 
 def positive_int(text: str) -> int:
