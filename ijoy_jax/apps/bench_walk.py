@@ -57,6 +57,7 @@ import numpy as np
 
 from ijoy_jax import control, robots, select
 from ijoy_jax import terrain as terrain_mod
+from ijoy_jax.extras import require
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.sim import model
@@ -855,6 +856,7 @@ def plot(rows: Sequence[dict], path=None):
     random and forward commands (hatched: forward). Skipped families are left out. Saved as a PNG of
     :data:`PLOT_SIZE` inches at :data:`PLOT_DPI` when ``path`` is given; returns the figure.
     """
+    require("plot", "matplotlib", what="ijoy bench walk --plot")
     import matplotlib
 
     if path is not None:

@@ -57,6 +57,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from ijoy_jax import __version__
     from ijoy_jax.apps.options import CommandParser, image_size, output_file, output_folder, positive_int
+    from ijoy_jax.extras import MissingExtraError
 
     parser = CommandParser(prog="ijoy", description="The intelligent joystick for legged robots, in JAX.",
                            epilog="Outputs: a command that writes one file writes ijoy_<what>.<ext> in the current "
@@ -170,9 +171,9 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)  # a refused command line raises UsageError, a ValueError
         _use_compile_cache(not args.no_compile_cache)
         return _run(args)
-    except (ValueError, TypeError, OSError) as e:  # bad input, or a file or server it names: one line, argparse's
-        # refusals too (OSError: a file that is missing, a folder or read-only; a server that does not answer,
-        # TimeoutError)
+    except (ValueError, TypeError, OSError, MissingExtraError) as e:  # bad input, or a file or server it names:
+        # one line, argparse's refusals too (OSError: a file that is missing, a folder or read-only; a server that
+        # does not answer, TimeoutError); a part of the package whose extra is not installed
         print(f"ijoy: error: {e}", file=sys.stderr)
         return 2
 
@@ -516,10 +517,7 @@ def _sweep(args) -> int:
                              f"{args.tradeoff!r}; known: {', '.join(known)}")
     show = [c for c in agg.columns if c.startswith(("robot.", "terrain.", "sim.", "selector.")) or c == "n"]
     table = agg[show].copy()
-    physics = ("collided", "fell", "placement_error_mean") if "fell.mean" in agg else ()
-    near = ("footholds_near_obstacles",) if "footholds_near_obstacles.mean" in agg else ()
-    for m in (*physics, "distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles",
-              *near):
+    for m in sweep.results.summary_metrics(agg):  # the plot's default panels, in the same order
         unit = sweep.UNITS[m]
         table[f"{m} ({unit})"] = [f"{a:.3g} +- {b:.2g}" for a, b in zip(agg[f"{m}.mean"], agg[f"{m}.ci95"],
                                                                         strict=True)]

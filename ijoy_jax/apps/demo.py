@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 import ijoy_jax as ij
+from ijoy_jax.extras import require
 
 
 def demo_scene() -> ij.Terrain:
@@ -35,8 +36,10 @@ def plain(summary: dict) -> dict:
 def run(out: str = "ijoy_demo.png", num_steps: int = 24, margin: float = 0.02) -> dict:
     """Run both joysticks on :func:`demo_scene`, write a PNG to ``out``, return their summaries.
 
-    Raises ValueError for a negative margin or fewer than one step (before any compute).
+    Raises ValueError for a negative margin or fewer than one step (before any compute), MissingExtraError
+    without matplotlib.
     """
+    require("plot", "matplotlib", what="ijoy demo")
     import matplotlib
 
     matplotlib.use("Agg")

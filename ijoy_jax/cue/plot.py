@@ -12,8 +12,11 @@ import numpy as np
 
 from ijoy_jax import plot as terrain_plot
 from ijoy_jax.cue import field
+from ijoy_jax.extras import require
 from ijoy_jax.robots import Robot, side_sign
 from ijoy_jax.terrain import Terrain
+
+require("plot", "matplotlib", what="ijoy_jax.cue.plot")
 
 
 @jax.jit

@@ -9,6 +9,10 @@ import itertools
 
 import numpy as np
 
+from ijoy_jax.extras import require
+
+require("plot", "matplotlib", what="ijoy_jax.haptics.plot")
+
 _PAIR_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink")
 
 

@@ -14,6 +14,11 @@ measures its latency; a recording in MCAP
 Command line: ``ijoy drive`` (docs/drive.md).
 """
 
+# ruff: noqa: E402  (the package's imports follow the check of its extra)
+from ijoy_jax.extras import require as _require
+
+_require("live", "mcap", "aiohttp", "jsonschema", "PIL")
+
 from ijoy_jax.live import bodies as bodies
 from ijoy_jax.live import deciders as deciders
 from ijoy_jax.live import inputs as inputs

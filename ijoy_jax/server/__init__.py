@@ -14,6 +14,11 @@ Public API:
   server                               the network loop (listen, run)
 """
 
+# ruff: noqa: E402  (the package's imports follow the check of its extra)
+from ijoy_jax.extras import require as _require
+
+_require("server", "zmq", "jsonschema")
+
 from ijoy_jax.server import schema as schema
 from ijoy_jax.server import server as server
 from ijoy_jax.server import service as service

@@ -24,6 +24,10 @@ import ctypes.util as _ctypes_util
 import os as _os
 import sys as _sys
 
+from ijoy_jax.extras import require as _require
+
+_require("sim", "mujoco", "mujoco.mjx", "PIL")
+
 if (_sys.platform.startswith("linux") and "MUJOCO_GL" not in _os.environ and not _os.environ.get("DISPLAY")
         and "mujoco" not in _sys.modules and _ctypes_util.find_library("EGL")):
     _os.environ["MUJOCO_GL"] = "egl"
@@ -46,7 +50,7 @@ def _import_mjx_warp_quietly() -> None:
     try:
         with contextlib.redirect_stdout(buf):
             import mujoco.mjx.warp  # noqa: F401
-    except ImportError:  # no mujoco: the modules that need it say so when imported
+    except ImportError:  # a MuJoCo without the Warp backend module: nothing to quieten
         pass
     finally:
         for line in buf.getvalue().splitlines(keepends=True):

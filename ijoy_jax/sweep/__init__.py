@@ -42,6 +42,11 @@ Example:
 Command line: ``ijoy sweep run FILE`` and ``ijoy sweep summarize DIR``.
 """
 
+# ruff: noqa: E402  (the package's imports follow the check of its extra)
+from ijoy_jax.extras import require as _require
+
+_require("sweep", "pandas", "pyarrow", "matplotlib")
+
 from ijoy_jax.sweep import distributed, local, recorded
 from ijoy_jax.sweep.config import (
     COMMAND_KEYS,

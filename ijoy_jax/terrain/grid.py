@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax._struct import pytree_dataclass, static_field
+from ijoy_jax.extras import require
 from ijoy_jax.limits import MAX_MAP_CELLS, check_map_shape
 
 
@@ -258,6 +259,7 @@ def from_image(
       Terrain with ``has_height=True``.
     """
     if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__"):
+        require("plot", "PIL", what="terrain.from_image of an image file")
         from PIL import Image
 
         try:
