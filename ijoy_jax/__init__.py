@@ -38,13 +38,12 @@ from ijoy_jax import (
     tune,
     turning,
 )
+from ijoy_jax._version import __version__ as __version__
 from ijoy_jax.control import Trajectory, Walker, perfect_walker, rollout
 from ijoy_jax.footcost import FootCostTerms, foot_cost, foot_cost_terms
 from ijoy_jax.robots import LEFT, RIGHT, Robot, TerrainMetrics, action_steps
 from ijoy_jax.select import StepChoice, make_targets, select_step
 from ijoy_jax.terrain import Terrain
-
-__version__ = "0.1.0"
 
 __all__ = [
     "LEFT",

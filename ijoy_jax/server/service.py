@@ -36,9 +36,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-import ijoy_jax
 from ijoy_jax import geometry, robots, select
-from ijoy_jax.footcost import FootCostTerms, TerrainIndex, index_terrain, window_cells
+from ijoy_jax._version import __version__
+from ijoy_jax.footcost import FootCostTerms, TerrainIndex, foot_cost_terms, index_terrain, window_cells
 from ijoy_jax.footcost.index import update_columns
 from ijoy_jax.footcost.xla import check_frame
 from ijoy_jax.robots import Robot
@@ -67,11 +67,11 @@ def _decide(terrain: Terrain, robot: Robot, prepared: select.Prepared, stance, s
     ``p0_index``, when none is valid), in one program. Both public functions, traced here: their checks
     of values ran at the server's boundary (the request's schema, ``set_terrain``, ``set_robot``), not
     once more per request."""
-    choice = ijoy_jax.select_step(terrain, robot, stance, side, command, swing_from=swing_from,
-                                  index=prepared.index, targets=prepared.targets)
+    choice = select.select_step(terrain, robot, stance, side, command, swing_from=swing_from,
+                                index=prepared.index, targets=prepared.targets)
     action = jnp.where(choice.valid, choice.index, p0_index)[None].astype(jnp.int32)
-    terms = ijoy_jax.foot_cost_terms(terrain, robot, stance, side, choice.pose[None], swing_from=swing_from,
-                                     action_index=action, index=prepared.index)
+    terms = foot_cost_terms(terrain, robot, stance, side, choice.pose[None], swing_from=swing_from,
+                            action_index=action, index=prepared.index)
     return choice, jax.tree.map(lambda a: a[0], terms)
 
 
@@ -445,7 +445,7 @@ class Service:
 
     @staticmethod
     def _server_name() -> str:
-        return f"ijoy_jax {ijoy_jax.__version__} (jax {jax.__version__}, {jax.default_backend()})"
+        return f"ijoy_jax {__version__} (jax {jax.__version__}, {jax.default_backend()})"
 
     # ------------------------------------------------------------------------------------------------ warm-up
 
