@@ -4,6 +4,7 @@ sweeps (``walker = "mjx"``) are validated and their tables built here; running o
 map (about a minute on a CPU), so the physics path is run at tiny shapes in tests/test_sweep_physics.py."""
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -69,6 +70,34 @@ def test_every_shipped_sweep_is_described_here_and_in_the_readme():
     readme = (DIR / "README.md").read_text()
     for name in EXPECTED:
         assert f"`{name}`" in readme, name
+
+
+# A sweep file's run line: its scenarios (what sweep.scenarios expands), steps per rollout, and what running it
+# costs, which sweeps/README.md's row for the file states alike (the README's figures are the measured ones).
+RUN_LINE = re.compile(r"^# Run: +ijoy sweep run sweeps/(?P<file>\S+) +\((?P<n>\d+) (?:simulated )?rollouts of "
+                      r"(?P<steps>\d+) steps(?:; (?P<cost>[^)]+))?\)$", re.M)
+# A run time stated anywhere else in a file's comments ("about a minute", "About 2 minutes", "~10 s").
+OTHER_TIME = re.compile(r"(?i)(?:\babout|~) *(?:a|\d+(?:\.\d+)?) *(?:s|sec|seconds?|min|minutes?|h|hours?)\b")
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_shipped_sweeps_stated_size_and_run_time_are_the_readmes(name):
+    """Each file's comments state its scenario count and steps as the sweep expands them, and its run time (if
+    any) only on its run line, in the words of sweeps/README.md's row for it."""
+    text = (DIR / name).read_text()
+    comments = "\n".join(line for line in text.splitlines() if line.startswith("#"))
+    runs = list(RUN_LINE.finditer(comments))
+    assert len(runs) == 1, f"{name}: no '# Run: ijoy sweep run sweeps/{name}  (N rollouts of S steps; ...)' line"
+    (run,) = runs
+    cfg = sweep.load_config(DIR / name)
+    assert run["file"] == name
+    assert (int(run["n"]), int(run["steps"])) == (len(sweep.scenarios(cfg)), cfg.num_steps)
+    assert OTHER_TIME.findall(RUN_LINE.sub("", comments)) == [], name
+    (row,) = [line for line in (DIR / "README.md").read_text().splitlines()
+              if line.startswith("|") and f"`{name}`" in line]
+    assert f"{run['n']} rollouts of {run['steps']} steps" in row, name
+    assert run["cost"] is None or run["cost"] in row, (name, run["cost"])
+    assert run["cost"] is not None or not OTHER_TIME.findall(row), f"{name}: the README states a run time"
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED))

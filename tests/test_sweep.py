@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from pathlib import Path
 
 import jax
@@ -746,3 +747,42 @@ def test_summary_plot_is_a_grid_of_distinct_panels(tmp_path, monkeypatch):
     assert legend == {"margin = 0", "margin = 0.04", "library default (1)"}
     width, height = Image.open(png).size
     assert width <= 1600 and height >= 0.45 * width
+
+
+# What each walker kind's aggregates hold beside its metrics: the swept column that makes it that kind.
+KIND_COLUMN = {"perfect": ("robot.w", [0.3, 1.0, 3.0]), "selector": ("selector.horizon", [1, 2, 3]),
+               "mjx": ("sim.stance_noise", [0.0, 0.01, 0.02])}
+
+
+@pytest.mark.parametrize("near", [True, False], ids=["near", "no_near"])
+@pytest.mark.parametrize("kind", sorted(KIND_COLUMN))
+def test_summary_plot_panels_are_the_tables_metric_columns(kind, near, tmp_path, monkeypatch, capsys):
+    """``ijoy sweep summarize`` draws, panel by panel and in order, the metrics its table prints, for every
+    walker kind, and for results written before ``footholds_near_obstacles`` existed (``near`` False); a
+    physics sweep's fall rate and collision rate stand beside progress."""
+    from ijoy_jax.sweep import results
+
+    metrics = sweep.METRICS + (sweep.PHYSICS_METRICS if kind == "mjx" else ())
+    metrics = tuple(m for m in metrics if near or m != "footholds_near_obstacles")
+    column, values = KIND_COLUMN[kind]
+    agg = pd.DataFrame({"cell": range(3), column: values, "n": 8})
+    for m in metrics:
+        agg[f"{m}.mean"], agg[f"{m}.ci95"] = [0.2, 0.4, 0.6], 0.05  # within [0, 1]: rates among them
+    (tmp_path / "manifest.json").write_text(json.dumps({"name": kind, "plan": {"scenarios": 24}}))
+    monkeypatch.setattr(sweep, "load_aggregates", lambda path, **kw: agg)
+    figs = []
+    finish = results._finish
+    monkeypatch.setattr(results, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
+    assert cli.main(["sweep", "summarize", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    header = next(line for line in printed.splitlines() if "distance_along (m)" in line)
+    table = re.findall(r"(\w+) \(([^()]*)\)", header)  # the metric columns, "name (unit)"
+    assert all(unit == sweep.UNITS[m] for m, unit in table), table
+    columns = [m for m, _ in table]
+    (fig,) = figs
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles == [results._TITLES.get(m, f"{m.replace('_', ' ')} ({sweep.UNITS[m]})") for m in columns]
+    assert columns == list(results.summary_metrics(agg))
+    assert ("footholds_near_obstacles" in columns) == near
+    if kind == "mjx":
+        assert columns[:3] == ["fell", "distance_along", "collided"]  # falls and contacts beside progress

@@ -138,8 +138,8 @@ def main(argv: list[str] | None = None) -> int:
                       help="also write DIR/tradeoff.png: one point per cell, metric Y (safety) against metric X "
                            "(its price; default fell,distance_along: falls against progress)")
     ssum.add_argument("--metrics", default=None,
-                      help="comma-separated metrics, one panel each (default: the sweep kind's, e.g. collisions "
-                           "and falls for a physics sweep)")
+                      help="comma-separated metrics, one panel each (default: the table's columns, in its order; "
+                           "for a physics sweep falls and collisions beside progress)")
     simp = sub.add_parser("sim", help="the MJX biped: a rendered rollout (physics sweeps: 'ijoy sweep run' with "
                                       "walker = \"mjx\", e.g. sweeps/margin_physics.toml)",
                           description="The simulated biped (MuJoCo XLA): a rendered walk through clutter. Physics "

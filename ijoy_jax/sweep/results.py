@@ -43,7 +43,7 @@ __all__ = ["EXTRA_METRICS", "PAPER_ACTIONS", "PHYSICS_PLOT_METRICS", "PLAN_KEY",
            "aggregate", "b_max", "check_plans", "chunk_plan", "describe_plan", "describe_selection",
            "differences", "load", "load_aggregates", "paired_differences",
            "part_plan", "plan_hash", "read_part", "read_record", "selected", "selection",
-           "plot", "plot_crossing", "plot_tradeoff", "t_quantile"]
+           "plot", "plot_crossing", "plot_tradeoff", "summary_metrics", "t_quantile"]
 
 EXTRA_METRICS = generators.METRIC_NAMES
 """Family-specific metrics (every family's ``metric_names``, :data:`ijoy_jax.terrain.generators.METRIC_NAMES`),
@@ -676,18 +676,42 @@ def action_counts(densities, reach=None) -> np.ndarray:
     return np.array([sizes[p] for p in pairs], np.float64).reshape(d.shape)
 
 
-PLOT_METRICS = ("distance_along", "mean_deviation", "mean_foot_cost", "steps_in_place", "steps_stationary",
-                "footholds_on_obstacles")
-"""The panels :func:`plot` draws by default for a perfect-robot sweep."""
+PLOT_METRICS = ("distance_along", "mean_deviation", "steps_in_place", "stopped", "footholds_on_obstacles",
+                "footholds_near_obstacles")
+"""A perfect-robot sweep's summary (:func:`summary_metrics`), in order: progress along the command (m), deviation
+from it (m), steps marking time, the fraction of walks stopped (no valid step), footholds on and near obstacles."""
 
-SELECTOR_PLOT_METRICS = ("distance_along", "steps_in_place", "steps_stationary", "stopped", "footholds_near_obstacles",
-                         "mean_deviation")
-"""The panels :func:`plot` draws by default for a sweep over the selector's options (``selector.*``): progress,
-marking time, stops, and how close the feet come to obstacles."""
+SELECTOR_PLOT_METRICS = PLOT_METRICS
+"""A sweep over the selector's options (``selector.*``) is a perfect-robot sweep: the same summary, whose
+progress, marking time, stops and footholds near obstacles are what a better selector changes."""
 
-PHYSICS_PLOT_METRICS = ("collided", "fell", "obstacle_contacts", "placement_error_mean", "distance_along",
-                        "footholds_on_obstacles")
-"""The panels :func:`plot` draws by default for a ``walker = "mjx"`` sweep: collision and fall rates first."""
+PHYSICS_PLOT_METRICS = ("fell", "distance_along", "collided", "placement_error_mean",
+                        *(m for m in PLOT_METRICS if m != "distance_along"))
+"""A ``walker = "mjx"`` sweep's summary: the fall rate and the collision rate on either side of progress (the
+safety beside its price), the mean touch-down error (m), then the rest of :data:`PLOT_METRICS`."""
+
+
+def summary_metrics(agg) -> tuple[str, ...]:
+    """The metrics a sweep's summary shows by default, in order: the columns of the table ``ijoy sweep summarize``
+    prints and the panels of :func:`plot`, one definition for both so they cannot disagree.
+
+    :data:`PHYSICS_PLOT_METRICS` for a ``walker = "mjx"`` sweep (aggregates with ``fell``), else
+    :data:`PLOT_METRICS`, keeping those the aggregates hold (results written before
+    ``footholds_near_obstacles`` existed lack it).
+
+    Args:
+      agg: :func:`aggregate` output (columns ``m.mean`` per metric ``m``).
+
+    Returns:
+      the metric names, a tuple of str.
+
+    Example:
+      >>> import pandas as pd
+      >>> summary_metrics(pd.DataFrame(columns=["distance_along.mean", "stopped.mean", "fell.mean"]))
+      ('fell', 'distance_along', 'stopped')
+    """
+    return tuple(m for m in (PHYSICS_PLOT_METRICS if "fell.mean" in agg else PLOT_METRICS) if f"{m}.mean" in agg)
+
 
 _TITLES = {"collided": "collision rate (rollouts touching an obstacle)", "fell": "fall rate (rollouts that fell)"}
 
@@ -700,8 +724,8 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
       agg: :func:`aggregate` output.
       out: PNG path.
       x: the parameter on the x axis (default: the swept column with most values).
-      metrics: the metrics to plot (one panel each; default :data:`PHYSICS_PLOT_METRICS` for a physics sweep,
-        :data:`SELECTOR_PLOT_METRICS` for one over the selector's options, else :data:`PLOT_METRICS`).
+      metrics: the metrics to plot (one panel each; default :func:`summary_metrics`, the columns of the
+        summary table: :data:`PHYSICS_PLOT_METRICS` for a physics sweep, else :data:`PLOT_METRICS`).
       title: figure title.
 
     Other swept columns become one line each (legend). A robot parameter's
@@ -722,9 +746,7 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
     if "crossed.mean" in agg and "terrain.width" in agg and x in (None, "terrain.width") and metrics is None:
         return plot_crossing(agg, out, title=title)
     if metrics is None:
-        selector = any(c.startswith("selector.") for c in agg.columns) and "footholds_near_obstacles.mean" in agg
-        metrics = (PHYSICS_PLOT_METRICS if "fell.mean" in agg else SELECTOR_PLOT_METRICS if selector
-                   else PLOT_METRICS)
+        metrics = summary_metrics(agg)
     import matplotlib
 
     matplotlib.use("Agg")
@@ -750,10 +772,12 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
             key = key if isinstance(key, tuple) else (key,)
             label = ", ".join(f"{c.partition('.')[2]} = {v:g}" for c, v in zip(others, key, strict=True))
             mean, ci = g[f"{m}.mean"].to_numpy(np.float64), np.nan_to_num(g[f"{m}.ci95"].to_numpy(np.float64))
-            # a rate's interval stays within [0, 1]
+            # a rate's interval stays within [0, 1] (a mean outside it, which only made-up aggregates have,
+            # gets no bar on that side rather than matplotlib's refusal of a negative one)
             lo, hi = (np.clip(mean - ci, 0, 1), np.clip(mean + ci, 0, 1)) if UNITS.get(m) == "fraction" else (
                 mean - ci, mean + ci)
-            ax.errorbar(xv(g), mean, yerr=[mean - lo, hi - mean], marker="o", capsize=3, label=label or None)
+            yerr = [np.maximum(mean - lo, 0.0), np.maximum(hi - mean, 0.0)]
+            ax.errorbar(xv(g), mean, yerr=yerr, marker="o", capsize=3, label=label or None)
         if x == "robot.density":
             ax.axvline(PAPER_ACTIONS, color="0.4", ls="--", lw=1, label=f"paper's {PAPER_ACTIONS} actions (HRP-2)")
             ax.set_xscale("log")
