@@ -1,4 +1,5 @@
-"""Tests of ijoy_jax.tune.loop: the jitted tuning step, vmapped runs, minibatches, progress, saving."""
+"""Tests of ijoy_jax.optim and ijoy_jax.tune.loop: the jitted tuning step, vmapped runs, minibatches, progress,
+saving."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import numpy as np
 import optax
 import pytest
 
+from ijoy_jax import optim
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.tune import loop
 
@@ -26,7 +28,7 @@ def _batch_fn(key):
 
 
 def test_step_compiles_once_and_loss_falls():
-    tuner = loop.make_tuner(_quadratic, optax.adam(0.1), batch_fn=_batch_fn)
+    tuner = optim.make_tuner(_quadratic, optax.adam(0.1), batch_fn=_batch_fn)
     state = tuner.init({"mu": jnp.zeros(3)})
     key = jax.random.key(0)
     losses = []
@@ -44,7 +46,7 @@ def test_minibatches_differ_per_step_and_are_reproducible():
     def loss(p, batch):
         return jnp.sum(p * 0.0) + batch
 
-    tuner = loop.make_tuner(loss, optax.sgd(0.1), batch_fn=lambda k: jax.random.uniform(k))
+    tuner = optim.make_tuner(loss, optax.sgd(0.1), batch_fn=lambda k: jax.random.uniform(k))
     for _ in range(2):
         s = tuner.init(jnp.zeros(()))
         vals = []
@@ -131,14 +133,14 @@ def test_bad_arguments_raise(kwargs, match):
 
 def test_bijectors_round_trip_and_stay_in_range():
     u = jnp.linspace(-30.0, 30.0, 61)
-    pos, box = loop.positive(), loop.interval(0.0, 0.06)
+    pos, box = optim.positive(), optim.interval(0.0, 0.06)
     assert bool(jnp.all(pos.forward(u) > 0))
     v = box.forward(u)
     assert bool(jnp.all((v >= 0.0) & (v <= 0.06)))
     for b, x in ((pos, 3.5), (box, 0.02)):
         np.testing.assert_allclose(float(b.forward(b.inverse(x))), x, rtol=1e-6)
     with pytest.raises(ValueError):
-        loop.interval(1.0, 1.0)
+        optim.interval(1.0, 1.0)
 
 
 def _reference_adam_scan(loss_fn, init, steps, learning_rate):
@@ -163,8 +165,8 @@ def test_run_steps_is_the_hand_written_adam_scan():
 
     @jax.jit
     def shared(init):
-        tuner = loop.make_tuner(lambda p, _: loss(p), optax.adam(0.05))
-        state, metrics, traj = loop.run_steps(tuner, tuner.init(init), 20, trace_params=True)
+        tuner = optim.make_tuner(lambda p, _: loss(p), optax.adam(0.05))
+        state, metrics, traj = optim.run_steps(tuner, tuner.init(init), 20, trace_params=True)
         return state.params, metrics.loss, traj
 
     got = shared(init)
@@ -177,8 +179,8 @@ def test_run_steps_is_the_hand_written_adam_scan():
 def test_run_steps_matches_the_host_loop_with_minibatches_and_runs():
     p0 = {"mu": jnp.stack([jnp.zeros(3), jnp.ones(3)])}
     host = loop.tune(_quadratic, p0, optax.adam(0.1), 6, key=3, batch_fn=_batch_fn, num_runs=2, progress=False)
-    tuner = loop.make_tuner(_quadratic, optax.adam(0.1), batch_fn=_batch_fn, num_runs=2)
-    run = jax.jit(lambda s, k: loop.run_steps(tuner, s, 6, key=k))
+    tuner = optim.make_tuner(_quadratic, optax.adam(0.1), batch_fn=_batch_fn, num_runs=2)
+    run = jax.jit(lambda s, k: optim.run_steps(tuner, s, 6, key=k))
     state, metrics, traj = run(tuner.init(p0), jax.random.key(3))
     assert traj is None and metrics.loss.shape == (6, 2)
     np.testing.assert_allclose(np.asarray(metrics.loss).T, host.losses, rtol=TOL)
@@ -189,6 +191,6 @@ def test_run_steps_matches_the_host_loop_with_minibatches_and_runs():
 
 @pytest.mark.parametrize("steps", [0, -1, 1.5])
 def test_run_steps_rejects_bad_step_counts(steps):
-    tuner = loop.make_tuner(lambda p, _: jnp.sum(p**2), optax.sgd(0.1))
+    tuner = optim.make_tuner(lambda p, _: jnp.sum(p**2), optax.sgd(0.1))
     with pytest.raises(ValueError, match="steps"):
-        loop.run_steps(tuner, tuner.init(jnp.ones(2)), steps)
+        optim.run_steps(tuner, tuner.init(jnp.ones(2)), steps)

@@ -307,14 +307,15 @@ def bench(quick: bool = False) -> list:
     import jax
     import optax
 
-    from ijoy_jax.tune import forward, loop
+    from ijoy_jax import optim
+    from ijoy_jax.tune import forward
 
     rows = []
     sizes = [(8, 0.5)] if quick else [(8, 0.5), (32, 0.5), (8, 1.0)]
     for batch, density in sizes:
         cfg = forward.ForwardConfig(batch_size=batch, density=density)
         robot = forward.paper_robot(cfg)
-        tuner = loop.make_tuner(functools.partial(forward.objective, robot=robot, cfg=cfg),
+        tuner = optim.make_tuner(functools.partial(forward.objective, robot=robot, cfg=cfg),
                                 optax.adam(cfg.learning_rate), batch_fn=forward.make_batch_fn(robot, cfg),
                                 has_aux=True)
         state = tuner.init(forward.to_unconstrained(robot, cfg.tuned_names()))

@@ -45,7 +45,7 @@ and neither does the state carried from one decision to the next (the gradient i
 decision: through 30 decisions of greedy steering the full gradient is as erratic as the drive's
 outcome is sensitive to each step). Loss (:class:`Weights`): the mean distance to the goal after each
 step (m) + the mean squared command error + the mean squared force; Adam by the project's one loop
-(:func:`ijoy_jax.tune.loop.run_steps`) on (logit C1, log decay, log scales). Evaluate the result with the
+(:func:`ijoy_jax.optim.run_steps`) on (logit C1, log decay, log scales). Evaluate the result with the
 exact selector on held-out scenarios (:func:`compare`).
 
 Units: metres, seconds, radians; stick positions and forces as fractions of full scale.
@@ -61,7 +61,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ijoy_jax import geometry, select
+from ijoy_jax import geometry, optim, select
 from ijoy_jax._struct import pytree_dataclass, static_field
 from ijoy_jax.control import perfect_walker
 from ijoy_jax.cue import field
@@ -70,7 +70,6 @@ from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, side_p0, side_sign, start_stance
 from ijoy_jax.sweep.results import t_quantile
 from ijoy_jax.terrain import Terrain, flat, scene
-from ijoy_jax.tune import loop
 
 FAMILIES = ("clutter", "wall", "slide")
 """Scenario families (:func:`make_scenarios`): small obstacles to step around on the way to a goal
@@ -550,7 +549,7 @@ def tune_cue(scenarios: Scenario, robot: Robot, *, init: field.CueParams | None 
              steps: int = 40, learning_rate: float = 0.05) -> CueTuneResult:
     """Tune C1, the decay and the per-axis scales by Adam on the relaxed drives of ``scenarios``.
 
-    The project's tuning loop (:func:`ijoy_jax.tune.loop.make_tuner`, :func:`~ijoy_jax.tune.loop.run_steps`)
+    The project's tuning loop (:func:`ijoy_jax.optim.make_tuner`, :func:`~ijoy_jax.optim.run_steps`)
     inside one jit; the whole batch every step.
 
     Args:
@@ -580,6 +579,6 @@ def tune_cue(scenarios: Scenario, robot: Robot, *, init: field.CueParams | None 
 
 @jax.jit(static_argnames=("cfg", "weights", "steps", "learning_rate"))
 def _tune_jit(u0, scenarios, robot, operator, targets, cfg, weights, steps, learning_rate):
-    tuner = loop.make_tuner(lambda u, _: relaxed_loss(u, scenarios, robot, operator, targets, cfg, weights),
+    tuner = optim.make_tuner(lambda u, _: relaxed_loss(u, scenarios, robot, operator, targets, cfg, weights),
                             optax.adam(learning_rate), has_aux=True)
-    return loop.run_steps(tuner, tuner.init(u0), steps, trace_params=True)
+    return optim.run_steps(tuner, tuner.init(u0), steps, trace_params=True)

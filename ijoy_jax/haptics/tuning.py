@@ -58,11 +58,11 @@ import jax
 import jax.numpy as jnp
 import optax
 
+from ijoy_jax import optim
 from ijoy_jax.haptics.filter import SpringDamper, discretise, filter_signal, init_state
 from ijoy_jax.haptics.leg import LegGeometry, alduro_leg, forward_kinematics
 from ijoy_jax.haptics.workspace import linearise, plane_forces
 from ijoy_jax.prng import as_key
-from ijoy_jax.tune import loop
 
 TREMOR_BAND_HZ = (8.0, 12.0)
 SETTLE_S = 0.5  # s of start-up transient excluded from every metric
@@ -182,9 +182,9 @@ class HapticTuneResult(NamedTuple):
 
 
 def _adam_run(loss_fn, init, steps: int, learning_rate: float) -> HapticTuneResult:
-    """Adam on ``loss_fn(log_params)`` by the one tuning loop (:func:`ijoy_jax.tune.loop.run_steps`)."""
-    tuner = loop.make_tuner(lambda p, _: loss_fn(p), optax.adam(learning_rate))
-    state, metrics, trajectory = loop.run_steps(tuner, tuner.init(init), steps, trace_params=True)
+    """Adam on ``loss_fn(log_params)`` by the one tuning loop (:func:`ijoy_jax.optim.run_steps`)."""
+    tuner = optim.make_tuner(lambda p, _: loss_fn(p), optax.adam(learning_rate))
+    state, metrics, trajectory = optim.run_steps(tuner, tuner.init(init), steps, trace_params=True)
     return HapticTuneResult(state.params, metrics.loss, trajectory)
 
 

@@ -28,6 +28,12 @@ Example:
   (5,)
 """
 
+from ijoy_jax.optim import Bijector as Bijector
+from ijoy_jax.optim import Tuner as Tuner
+from ijoy_jax.optim import interval as interval
+from ijoy_jax.optim import make_tuner as make_tuner
+from ijoy_jax.optim import positive as positive
+from ijoy_jax.optim import run_steps as run_steps
 from ijoy_jax.tune import forward as forward
 from ijoy_jax.tune import inverse as inverse
 from ijoy_jax.tune import loop as loop
@@ -39,15 +45,9 @@ from ijoy_jax.tune.forward import compare as compare
 from ijoy_jax.tune.forward import tune_forward as tune_forward
 from ijoy_jax.tune.inverse import FitResult as FitResult
 from ijoy_jax.tune.inverse import fit as fit
-from ijoy_jax.tune.loop import Bijector as Bijector
 from ijoy_jax.tune.loop import Saved as Saved
-from ijoy_jax.tune.loop import Tuner as Tuner
 from ijoy_jax.tune.loop import TuneResult as TuneResult
-from ijoy_jax.tune.loop import interval as interval
 from ijoy_jax.tune.loop import load as load
-from ijoy_jax.tune.loop import make_tuner as make_tuner
-from ijoy_jax.tune.loop import positive as positive
-from ijoy_jax.tune.loop import run_steps as run_steps
 from ijoy_jax.tune.loop import save as save
 from ijoy_jax.tune.loop import tune as tune
 from ijoy_jax.tune.relax import RelaxedChoice as RelaxedChoice

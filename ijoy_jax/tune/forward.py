@@ -36,9 +36,9 @@ the robot steps onto neither mean.
 
 Tunable parameters (traced Robot leaves, optimised unconstrained):
 ``w``, ``rotation_weight`` and the metric weights and limits
-(``"metrics.slope_weight"``, ...) in log space (:func:`ijoy_jax.tune.loop.positive`);
+(``"metrics.slope_weight"``, ...) in log space (:func:`ijoy_jax.optim.positive`);
 ``margin`` through a scaled sigmoid into (0, max_margin)
-(:func:`ijoy_jax.tune.loop.interval`), max_margin being the margin the
+(:func:`ijoy_jax.optim.interval`), max_margin being the margin the
 robot's static windows were built for (``robots.make_robot(max_margin=...)``), so the
 window sizes never change and nothing recompiles. On 2D maps FootCost is 0
 or +inf, so the exact choice does not depend on ``w`` (zero action costs)
@@ -72,7 +72,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ijoy_jax import geometry, robots
+from ijoy_jax import geometry, optim, robots
 from ijoy_jax.footcost import foot_cost_terms, index_terrain
 from ijoy_jax.limits import check_map_shape
 from ijoy_jax.prng import as_key
@@ -228,14 +228,14 @@ def max_margin_of(robot: Robot) -> float:
 # --------------------------------------------------------------------------- parameters
 
 
-def bijectors(robot: Robot, names) -> dict[str, loop.Bijector]:
-    """name -> :class:`~ijoy_jax.tune.loop.Bijector`: ``interval(0, max_margin)`` for margin, else ``positive``."""
+def bijectors(robot: Robot, names) -> dict[str, optim.Bijector]:
+    """name -> :class:`~ijoy_jax.optim.Bijector`: ``interval(0, max_margin)`` for margin, else ``positive``."""
     out = {}
     for n in names:
         if n not in TUNABLE:
             raise ValueError(f"cannot tune {n!r}; tunable: {TUNABLE}")
         # 0.999: stay clear of the window's edge, where float rounding could flag a margin as too big.
-        out[n] = loop.interval(0.0, 0.999 * max_margin_of(robot)) if n == "margin" else loop.positive()
+        out[n] = optim.interval(0.0, 0.999 * max_margin_of(robot)) if n == "margin" else optim.positive()
     return out
 
 

@@ -35,11 +35,11 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ijoy_jax import geometry
+from ijoy_jax import geometry, optim
 from ijoy_jax.robots import Robot, dist, get_leaf, set_leaf, side_actions, side_p0, side_sign
 from ijoy_jax.select import make_targets, prepare, select_step
 from ijoy_jax.terrain import Terrain
-from ijoy_jax.tune import loop, relax
+from ijoy_jax.tune import relax
 
 _SELECTOR_ONLY = frozenset({"w", "rotation_weight"})  # soft FootCost does not depend on these
 
@@ -237,7 +237,7 @@ def fit(
       sharpness, tau, barrier_weight: of the relaxation.
       noise: demonstration noise of :func:`negative_log_likelihood` (robust fit).
       learning_rate: Adam step on the log-parameters.
-      num_steps: number of Adam steps, run in one ``lax.scan`` under jit (:func:`ijoy_jax.tune.loop.run_steps`).
+      num_steps: number of Adam steps, run in one ``lax.scan`` under jit (:func:`ijoy_jax.optim.run_steps`).
 
     Returns:
       :class:`FitResult` with the fitted Robot, the values and the loss curve.
@@ -259,8 +259,8 @@ def fit(
                 p, demos, robot, sharpness=sharpness, tau=tau, barrier_weight=barrier_weight, footcost=fc, noise=noise
             )
 
-        tuner = loop.make_tuner(loss, opt, num_runs=num_starts)  # the R starts vmapped
-        state, metrics, _ = loop.run_steps(tuner, tuner.init(log0), num_steps)
+        tuner = optim.make_tuner(loss, opt, num_runs=num_starts)  # the R starts vmapped
+        state, metrics, _ = optim.run_steps(tuner, tuner.init(log0), num_steps)
         return state.params, metrics.loss.T
 
     logp, losses = run(log0, fc)  # (R,) params, (R, num_steps) losses
