@@ -15,6 +15,7 @@ from scipy import stats
 
 import ijoy_jax as ij
 from ijoy_jax import cue
+from ijoy_jax import stats as ij_stats
 from ijoy_jax.cue import study
 from ijoy_jax.jit_cache import compiled_count
 
@@ -106,10 +107,10 @@ def test_summary_metrics_against_a_hand_built_log():
 @pytest.mark.parametrize("n", [2, 7, 45])
 def test_mean_ci_is_the_student_t_interval(n):
     x = np.random.default_rng(n).normal(1.0, 2.0, n)
-    mean, half = study.mean_ci(x)
+    mean, half = ij_stats.mean_ci(x)
     lo, hi = stats.t.interval(0.95, n - 1, loc=np.mean(x), scale=stats.sem(x))
     assert mean == pytest.approx(np.mean(x)) and half == pytest.approx((hi - lo) / 2, rel=1e-6)
-    assert math.isnan(study.mean_ci([1.0])[1])
+    assert math.isnan(ij_stats.mean_ci([1.0])[1])
 
 
 def test_compare_pairs_the_conditions_on_the_same_scenarios():
@@ -119,7 +120,7 @@ def test_compare_pairs_the_conditions_on_the_same_scenarios():
     assert res["n"] == 6 and res["family"] == ["clutter", "clutter", "wall", "wall", "slide", "slide"]
     for m in study.METRICS:
         d = res["per_scenario"]["cue"][m] - res["per_scenario"]["off"][m]
-        assert res["difference"]["cue"][m] == pytest.approx(study.mean_ci(d), nan_ok=True)
+        assert res["difference"]["cue"][m] == pytest.approx(ij_stats.mean_ci(d), nan_ok=True)
     table = study.markdown(res, "test")
     assert "| command_error (stick units) |" in table and "cue - off" in table and "soft - off" in table
     with pytest.raises(ValueError, match="condition"):

@@ -374,7 +374,7 @@ def turning_overshoot(rows, quick: bool):
     (:func:`ijoy_jax.turning.overshoot_study`): turning on the spot and while walking, without and with the
     paper's one decision of latency, on the lattice and refined. Degrees; 95% t intervals of the mean."""
     from ijoy_jax import turning
-    from ijoy_jax.sweep.results import t_quantile
+    from ijoy_jax.stats import mean_ci
 
     robot = ij.robots.hrp2(margin=0.02)
     num = 16 if quick else 256
@@ -384,7 +384,7 @@ def turning_overshoot(rows, quick: bool):
                 for refine in (False, True):
                     r = turning.overshoot_study(robot, num=num, latency=latency, mode=mode, forward=forward,
                                                 refine=refine)
-                    ci = lambda x: float(t_quantile(len(x) - 1) * np.std(x, ddof=1) / np.sqrt(len(x)))  # noqa: E731
+                    ci = lambda x: mean_ci(x)[1]  # noqa: E731
                     _emit(rows, dict(_env(), bench="turning-overshoot", forward_m_s=forward, latency=latency,
                                      mode=mode, refine=refine, scenarios=num,
                                      overshoot_deg_mean=float(np.mean(r.overshoot)),

@@ -68,7 +68,7 @@ def study(args, robot) -> int:
     """``ijoy cue study``: tune, then compare off / on / tuned on held-out scenarios; write the results."""
     import numpy as np
 
-    from ijoy_jax import cue
+    from ijoy_jax import cue, stats
     from ijoy_jax.cue import plot
     from ijoy_jax.cue import study as S
 
@@ -104,8 +104,8 @@ def study(args, robot) -> int:
     for fam in S.FAMILIES:
         pick = np.array([f == fam for f in res["family"]])
         by_family[fam] = {
-            "summary": {c: {m: S.mean_ci(v[m][pick]) for m in S.METRICS} for c, v in per.items()},
-            "difference": {c: {m: S.mean_ci((per[c][m] - per[names[0]][m])[pick]) for m in S.METRICS}
+            "summary": {c: {m: stats.mean_ci(v[m][pick]) for m in S.METRICS} for c, v in per.items()},
+            "difference": {c: {m: stats.mean_ci((per[c][m] - per[names[0]][m])[pick]) for m in S.METRICS}
                            for c in names[1:]},
             "n": int(pick.sum())}
     record.update(summary=res["summary"], difference=res["difference"], by_family=by_family, n=res["n"],

@@ -68,7 +68,7 @@ from ijoy_jax.cue import field
 from ijoy_jax.footcost import foot_cost_terms, index_terrain
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, side_p0, side_sign, start_stance
-from ijoy_jax.sweep.results import t_quantile
+from ijoy_jax.stats import mean_ci
 from ijoy_jax.terrain import Terrain, flat, scene
 
 FAMILIES = ("clutter", "wall", "slide")
@@ -423,23 +423,6 @@ def summarize(log: DriveLog, robot: Robot, cfg: StudyConfig | None = None) -> di
         "near_obstacles": (active & np.asarray(log.near)).sum(1).astype(np.float64),
         "effort": (np.asarray(log.effort) * active).sum(1) / n_active,
     }
-
-
-def mean_ci(x) -> tuple[float, float]:
-    """(mean, half-width of its two-sided 95% Student-t interval) of a sample (NaN half-width below 2).
-
-    The t quantile is :func:`ijoy_jax.sweep.results.t_quantile` (no SciPy needed).
-
-    Example:
-      >>> from ijoy_jax.cue import study
-      >>> [round(v, 3) for v in study.mean_ci([1.0, 2.0, 3.0, 4.0])]
-      [2.5, 2.054]
-    """
-    x = np.asarray(x, np.float64)
-    n = x.size
-    if n < 2:
-        return float(np.mean(x)) if n else math.nan, math.nan
-    return float(np.mean(x)), float(t_quantile(n - 1) * np.std(x, ddof=1) / math.sqrt(n))
 
 
 def compare(scenarios: Scenario, robot: Robot, conditions: dict, operator: Operator | None = None, *,

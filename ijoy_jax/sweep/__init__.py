@@ -105,7 +105,6 @@ from ijoy_jax.sweep.results import (
     plot,
     plot_crossing,
     plot_tradeoff,
-    t_quantile,
 )
 
 __all__ = [
@@ -162,7 +161,6 @@ __all__ = [
     "scenario",
     "scenario_bytes",
     "scenarios",
-    "t_quantile",
     "table_bytes",
     "trace_count",
 ]

@@ -14,7 +14,7 @@ Aggregates (:func:`aggregate`): per cell and metric, ``mean``, ``std``
 mean (``mean +- ci95``; NaN for n < 2). Boolean metrics (``stopped``;
 ``fell`` and ``collided``: the fall and collision rates) are averaged as
 fractions. The t quantile comes from a table (n - 1 <= 30) and a
-Cornish-Fisher expansion beyond (:func:`t_quantile`; no SciPy needed).
+Cornish-Fisher expansion beyond (:func:`ijoy_jax.stats.t_quantile`; no SciPy needed).
 Scenarios of a replicate share terrain and command across cells (paired), so
 differences between cells are estimated more precisely than these marginal
 intervals suggest.
@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ijoy_jax.stats import t_quantile
 from ijoy_jax.sweep.config import METRICS, PHYSICS_METRICS, ROBOT_DEFAULTS, SweepConfig, parse_config, scenarios
 from ijoy_jax.terrain import generators
 
@@ -43,7 +44,7 @@ __all__ = ["EXTRA_METRICS", "PAPER_ACTIONS", "PHYSICS_PLOT_METRICS", "PLAN_KEY",
            "aggregate", "b_max", "check_plans", "chunk_plan", "describe_plan", "describe_selection",
            "differences", "load", "load_aggregates", "paired_differences",
            "part_plan", "plan_hash", "read_part", "read_record", "selected", "selection",
-           "plot", "plot_crossing", "plot_tradeoff", "summary_metrics", "t_quantile"]
+           "plot", "plot_crossing", "plot_tradeoff", "summary_metrics"]
 
 EXTRA_METRICS = generators.METRIC_NAMES
 """Family-specific metrics (every family's ``metric_names``, :data:`ijoy_jax.terrain.generators.METRIC_NAMES`),
@@ -72,35 +73,6 @@ UNITS = {
 """Units of metrics and parameters, for tables and axis labels."""
 
 _PARAMS = ("robot.", "terrain.", "sim.", "selector.")  # the prefixes of the parameter columns
-
-_NORMAL_975 = 1.959963984540054
-
-
-# t_{0.975, df} for df = 1..30 (scipy.stats.t.ppf, 6 decimals); the expansion below is used beyond.
-_T975 = (12.706205, 4.302653, 3.182446, 2.776445, 2.570582, 2.446912, 2.364624, 2.306004, 2.262157, 2.228139,
-         2.200985, 2.178813, 2.160369, 2.144787, 2.131450, 2.119905, 2.109816, 2.100922, 2.093024, 2.085963,
-         2.079614, 2.073873, 2.068658, 2.063899, 2.059539, 2.055529, 2.051831, 2.048407, 2.045230, 2.042272)
-
-
-def t_quantile(df: int) -> float:
-    """Two-sided 95% Student-t quantile ``t_{0.975, df}`` (df >= 1; NaN below).
-
-    A table for df <= 30 (6 decimals), a 4-term Cornish-Fisher expansion in
-    1/df beyond (error < 1e-7 there), so no SciPy is needed.
-
-    Example:
-      >>> round(t_quantile(9), 3)
-      2.262
-    """
-    if df < 1:
-        return math.nan
-    if df <= len(_T975):
-        return _T975[df - 1]
-    z, v = _NORMAL_975, float(df)
-    return (z + (z**3 + z) / (4 * v) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * v**2)
-            + (3 * z**7 + 19 * z**5 + 17 * z**3 - 15 * z) / (384 * v**3)
-            + (79 * z**9 + 776 * z**7 + 1482 * z**5 - 1920 * z**3 - 945 * z) / (92160 * v**4))
-
 
 class IncompleteSweepError(ValueError):
     """A sweep folder lacks chunks (a process has not finished), holds duplicated scenarios, mixes in parts
