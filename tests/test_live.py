@@ -10,6 +10,7 @@ drive (``recorded``) serves every test that needs one. Exactly one test runs the
 """
 
 import contextlib
+import dataclasses
 import gc
 import io
 import json
@@ -24,7 +25,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ijoy_jax as ij
-from ijoy_jax import live, robots, sweep
+from ijoy_jax import live, robots, select, sweep
 from ijoy_jax.apps import cli
 from ijoy_jax.live import forcefeedback
 from ijoy_jax.server import Client
@@ -411,6 +412,117 @@ def test_no_valid_step_stands_and_decides_again():
     feet = np.asarray(res.states[-1]["feet"])
     assert feet[:, 0].max() < 1.1 - 0.121  # never onto the wall
     assert feet[:, 1].mean() > 0.85  # went left along it
+
+
+# ------------------------------------------------------------------------------------------- a drive's exported trace
+
+EXPORT_STICK = live.Trace(np.array([0.0, 0.7, 1.5, 2.2]),
+                          np.array([[1.0, 0, 0], [0.6, 0, 0.5], [0, -1.0, 0], [0, 0, 0]]))
+"""A stick whose axes change between the decisions of a 0.8 s step (read at 0, 0.8, 1.6 s, or 0.4, 1.2, 2.0 s
+half way into each step): a decision too many, too few or read from other axes has another command."""
+EXPORT_DT = 0.1  # s: the perfect body's tick in these drives (8 a step: cheap; the loop's schedule is the same)
+
+
+@pytest.fixture(scope="module")
+def open_map():
+    """The small 2D map without obstacles, its robot, start feet (2, 3), tables and one decider for every drive on
+    it (a decider built per drive costs about a second): (terrain, robot, start, prepared, decider)."""
+    terrain = ij.terrain.from_arrays(None, np.ones(SHAPE, bool), RES)
+    robot = robots.hrp2(margin=0.02)
+    prepared = select.prepare(terrain, robot)
+    start = np.asarray(robots.start_stance(robot, 0.5, 0.8), np.float32)
+    return terrain, robot, start, prepared, live.LocalDecider(terrain, robot, prepared=prepared)
+
+
+def _drive_on(open_map, source, record_to=None, **options):
+    """A headless drive of the perfect body on ``open_map`` (:func:`ijoy_jax.live.drive` ``options``), recorded
+    to ``record_to`` as ``ijoy drive --record`` writes it when given."""
+    terrain, robot, start, prepared, decider = open_map
+    settings = live.DriveSettings(terrain={"kind": "arrays"}, control_dt=EXPORT_DT,
+                                  decide_at=options.get("decide_at", 0.0))
+    config = {"settings": dataclasses.asdict(settings), "start": start.tolist()}
+    with contextlib.ExitStack() as stack:
+        recorder = None if record_to is None else stack.enter_context(live.Recorder(record_to, config, terrain, robot))
+        return live.drive(terrain, robot, live.PerfectBody(robot, start, control_dt=EXPORT_DT), source, decider,
+                          realtime=False, recorder=recorder, prepared=prepared, **options)
+
+
+@pytest.mark.parametrize("options, edit", [
+    ({}, None),
+    ({"duration": 1.5}, None),
+    ({"num_steps": 2}, None),
+    ({"decide_at": 0.5}, None),
+    ({}, lambda rec: rec._replace(inputs=[m for m in rec.inputs if m["t"] >= 1.0])),
+    ({}, lambda rec: rec._replace(inputs=[])),
+], ids=["ended by its script", "by duration", "by num_steps", "decide_at 0.5", "first input late", "no inputs"])
+def test_an_exported_trace_drives_the_drives_decisions(open_map, tmp_path, options, edit):
+    """A recorded drive's exported trace (``ijoy drive --replay A.mcap --export-trace B.csv``), driven with A's
+    settings (``ijoy drive --script B.csv``): the scripted drive makes A's decisions, as many (whatever ended A: its
+    script, a duration, a step count) at the same times with the same commands, so it takes A's footsteps; also
+    from a recording whose stick was recorded late or not at all (each decision keeps the axes it read)."""
+    drove = _drive_on(open_map, live.ScriptInput(EXPORT_STICK), tmp_path / "a.mcap", **options)
+    assert len(drove.decisions) == (3 if set(options) <= {"decide_at"} else 2)  # the premise: shorter when told so
+    rec = live.read_recording(tmp_path / "a.mcap")
+    live.session.export_trace(rec if edit is None else edit(rec), tmp_path / "b.csv")
+    again = _drive_on(open_map, live.ScriptInput(tmp_path / "b.csv"), decide_at=options.get("decide_at", 0.0))
+    assert len(again.decisions) == len(drove.decisions)
+    for key in ("t", "axes", "command"):
+        np.testing.assert_array_equal([d[key] for d in again.decisions], [d[key] for d in drove.decisions], key)
+    np.testing.assert_array_equal(again.footsteps(), drove.footsteps())
+
+
+def _loop_recording(stick, *, ticks, dt, dispatch, decisions, interrupted, first_input):
+    """The messages :func:`ijoy_jax.live.drive` records for the scripted ``stick`` (a function of the tick number)
+    on a body of ``ticks`` ticks of ``dt`` s a step, reading the stick ``dispatch`` ticks into each step:
+    ``decisions`` decisions, then the step period without one (or, ``interrupted``, Ctrl-C in it: its end not
+    recorded); the stick from tick ``first_input`` on (the drive's loop records it from tick 0)."""
+    periods = decisions + 1
+    inputs = [{"t": k * dt, "axes": stick(k)} for k in range(first_input, periods * ticks)]
+    made = [{"t": (j * ticks + dispatch) * dt, "axes": stick(j * ticks + dispatch)} for j in range(decisions)]
+    states = [{"step": j, "t": (j + 1) * ticks * dt} for j in range(periods - bool(interrupted))]
+    return live.Recording({}, None, ROBOT, inputs, made, states, None)
+
+
+_AXES = st.tuples(*[st.sampled_from([-1.0, -0.5, 0.0, 0.05, 0.3, 1.0, 2.5, -40.0])] * 3)  # beyond 1: hand-edited
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(dt=st.sampled_from([0.8, 0.4, 0.1, 0.05, 0.01]), decide_at=st.floats(0.0, 0.99), decisions=st.integers(1, 6),
+       interrupted=st.booleans(), first_input=st.integers(0, 700),
+       changes=st.lists(st.tuples(st.integers(0, 700), _AXES), max_size=8))
+def test_an_exported_trace_schedules_the_recorded_commands(tmp_path_factory, dt, decide_at, decisions, interrupted,
+                                                           first_input, changes):
+    """Any stick (axes beyond [-1, 1] too, as a hand-edited file may hold: the drive reads them clipped), step
+    timing, ``decide_at``, length and end of a drive (a last step period without a decision, or Ctrl-C), its
+    stick recorded from any tick: the exported trace, scheduled as a scripted drive reads it
+    (:func:`ijoy_jax.live.loop.scripted_commands`, the loop's schedule), gives exactly the recorded decisions'
+    commands, as many, bit for bit."""
+    ticks = int(round(float(ROBOT.step_time) / dt))
+    dispatch = int(np.floor(decide_at * ticks))
+
+    def stick(k):
+        held = [a for at, a in sorted(changes, key=lambda c: c[0]) if at <= k]
+        return list(held[-1]) if held else [0.0, 0.0, 0.0]
+
+    rec = _loop_recording(stick, ticks=ticks, dt=dt, dispatch=dispatch, decisions=decisions, interrupted=interrupted,
+                          first_input=first_input)
+    path = tmp_path_factory.mktemp("export") / "b.csv"
+    live.session.export_trace(rec, path)
+    got = live.loop.scripted_commands(live.read_trace(path), ROBOT, decide_at=decide_at, control_dt=dt)
+    want = np.asarray([live.axes_to_command(d["axes"], ROBOT) for d in rec.decisions], np.float64)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_a_recording_without_decisions_exports_no_trace(tmp_path):
+    """A drive stopped before its first decision (``--steps 0``) has no trace: with ``decide_at`` 0 a scripted
+    drive reads its first decision at 0 s, before any trace's last time (> 0 s). One line naming the file, and no
+    file written."""
+    rec = _loop_recording(lambda k: [1.0, 0.0, 0.0], ticks=80, dt=0.01, dispatch=0, decisions=0, interrupted=False,
+                          first_input=0)
+    out = tmp_path / "b.csv"
+    with pytest.raises(ValueError, match="no decision") as e:
+        live.session.export_trace(rec, out)
+    assert len(str(e.value).splitlines()) == 1 and str(out) in str(e.value) and not out.exists()
 
 
 @pytest.mark.slow

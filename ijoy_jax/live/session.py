@@ -308,22 +308,47 @@ def replay(path, *, decider: str = "local", server: str | None = None, on_tick=N
 
 
 def export_trace(recording: record.Recording, path) -> int:
-    """Write a recording's stick (its ``/ijoy/input`` axes) as a trace file; returns the samples written.
+    """Write a recording's stick as a trace file that drives the recorded decisions again; returns the samples
+    written.
 
-    Consecutive equal samples are merged, and a last line at the drive's end time closes it.
+    Driven with the recording's terrain, robot, body, dead zone and ``decide_at`` (``ijoy drive --script``), the
+    file makes the drive's decisions: as many, read at the same times (s) from the same axes, so with the same
+    commands (m/s, m/s, rad/s). Its samples are the ``/ijoy/input`` axes and each ``/ijoy/decision``'s own
+    axes at its time (the two agree in a drive's recording; the decision's win, so a recording whose stick was
+    recorded late, or not at all, still gives every decision its axes), clipped to [-1, 1] as the drive reads
+    them, consecutive equal samples merged. Its last line (axes 0) is the drive's end: the end of the step
+    period in which the drive read its last decision (that period's ``/ijoy/state`` ``t``), the start of the
+    period in which it read none. A scripted drive makes no decision at or after its trace's last time
+    (:func:`ijoy_jax.live.drive`), so it stops deciding where the recorded drive did, whatever ended that
+    drive: its script, a duration, a step count or the stop event. Samples from the end on decided nothing
+    and are left out.
+
+    Raises:
+      ValueError: (one line, naming ``path``) the recording holds no decision (a drive stopped before its
+        first, ``--steps 0``): no trace makes no decision (with ``decide_at`` 0 a scripted drive reads its
+        first at 0 s, before any trace's last time, which is > 0 s).
     """
+    decisions, states = recording.decisions, recording.states
+    if not decisions:
+        raise ValueError(f"{str(path)!r}: no trace to export: the recording holds no decision (its drive stopped "
+                         "before its first), and a scripted drive reads its first at 0 s")
+    last = float(decisions[-1]["t"])
+    # states[j] ends step period j (period 0 is the warm-up), and period j reads decision j + 1
+    end = float(states[len(decisions) - 1]["t"]) if len(states) >= len(decisions) else last
+    if not end > last:  # a hand-made recording without that period's end: one step period after the last read
+        end = last + float(recording.robot.step_time)
+    axes = {float(m["t"]): m["axes"] for m in recording.inputs}
+    axes.update({float(d["t"]): d["axes"] for d in decisions})
     lines = ["t,forward,left,turn"]
-    last = None
-    n = 0
-    for m in recording.inputs:
-        a = tuple(float(v) for v in m["axes"])
-        if a != last:
-            lines.append(f"{m['t']!r},{a[0]!r},{a[1]!r},{a[2]!r}")
-            last, n = a, n + 1
-    end = recording.states[-1]["t"] if recording.states else 0.0
-    lines.append(f"{float(end)!r},0.0,0.0,0.0")
+    held = None
+    for t in sorted(axes):
+        a = tuple(float(v) for v in np.clip(np.asarray(axes[t], np.float64), -1.0, 1.0))
+        if t < end and a != held:
+            lines.append(f"{t!r},{a[0]!r},{a[1]!r},{a[2]!r}")
+            held = a
+    lines.append(f"{end!r},0.0,0.0,0.0")
     Path(path).write_text("\n".join(lines) + "\n")
-    return n + 1
+    return len(lines) - 1
 
 
 def _shortest(x) -> str:
