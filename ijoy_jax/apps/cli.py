@@ -152,7 +152,8 @@ def main(argv: list[str] | None = None) -> int:
                                           "(sweeps/margin_physics.toml's) with the intelligent joystick and write "
                                           "the walk as a GIF (offscreen; headless Linux uses EGL), optionally a "
                                           "filmstrip PNG; prints the walk's summary as JSON. Compiling the walk "
-                                          "takes about a minute on a CPU.")
+                                          "takes about a minute on a CPU (stderr says what compiles and for how "
+                                          "long; seconds once the compilation cache holds it).")
     rend.add_argument("--out", default="ijoy_walk.gif", type=output_file, help="GIF to write (default: %(default)s)")
     rend.add_argument("--strip", default=None, type=output_file, help="also write a filmstrip PNG of 5 frames")
     rend.add_argument("--steps", type=positive_int, default=12, help="steps to walk (default: %(default)s)")
@@ -404,7 +405,7 @@ def _sim(args) -> int:
     x, y = np.asarray(generators.start_point(params, shape=_RENDER_SHAPE, resolution=_RENDER_RESOLUTION))
     start = robots.start_stance(robot, x, y)
     traj = W.rollout(sim, terrain, robot, start, np.asarray(_RENDER_COMMAND, np.float32), num_steps=args.steps,
-                     frames_per_step=args.frames)
+                     frames_per_step=args.frames, progress=True)
     frames = render.render(sim, terrain, render.states(traj), width=width, height=height,
                            footsteps=traj.commanded, sides=traj.sides, smooth=args.frames)
     render.write_gif(args.out, frames, fps=args.frames / sim.cfg.step_time)

@@ -3,7 +3,8 @@
 It binds first (a port in use or a bad host fails at once, in one line), compiles the programs a request on
 the warm-up map shapes runs (so the first request does not wait for a compile), prints ``listening on
 HOST:PORT`` on stdout (the line a script waits for; port 0 takes a free port and prints it), and serves
-until SIGINT or SIGTERM, then closes and exits 0. Logs go to stderr: the warm-up, one line per connection,
+until SIGINT or SIGTERM, then closes and exits 0. Logs go to stderr: the warm-up (what it compiles and the
+seconds elapsed while it lasts more than a few seconds, then a line per map shape), one line per connection,
 a line when a map kind's compiled programs are dropped (``--max-programs``), and the totals at exit;
 ``--verbose`` adds a line per request.
 
@@ -120,6 +121,7 @@ def max_programs(text: str | None) -> int:
 
 def _serve(args, log) -> int:
     """:func:`main` once its log handler is in place."""
+    from ijoy_jax.progress import compiling
     from ijoy_jax.server import Limits, Service
     from ijoy_jax.server import server as net
     from ijoy_jax.server.service import parse_shape
@@ -149,7 +151,11 @@ def _serve(args, log) -> int:
     try:
         service = Service(robot, name="hrp2", options=options, limits=limits, max_programs=programs)
         for shape, res in shapes:
-            w = service.warm_up(shape, res)
+            # the warm-up is its compiles (its requests on an empty map run in milliseconds): said while they
+            # last, ended by the line below
+            with compiling(f"the footstep programs for {shape[0]}x{shape[1]} maps at {res:g} m (2D and 2.5D)",
+                           prefix="ijoy serve: ", final=False):
+                w = service.warm_up(shape, res)
             log.info("warm-up for %dx%d maps at %g m: %d programs in %.1f s", *shape, res, w["programs"],
                      w["seconds"])
         for sig in (signal.SIGINT, signal.SIGTERM):

@@ -43,6 +43,7 @@ from ijoy_jax._struct import is_traced
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.limits import check_num_steps
 from ijoy_jax.prng import as_key
+from ijoy_jax.progress import compile_and_call
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import METHODS, Targets
 from ijoy_jax.sim import controller, dynamics, kinematics, model, physics, preview, swing
@@ -663,7 +664,9 @@ def compiled_programs() -> int:
     loop caused: each new input shape, static option or Sim setting (grid,
     ``params``, ``cfg``) compiles once; new terrain heights, robot parameters,
     commands, dynamics or keys reuse the program, and so does a Sim built again
-    with the same settings.
+    with the same settings. A call with ``progress=True`` compiles its program
+    ahead of time and runs it, outside this count; a later call without
+    ``progress`` finds that program compiled and counts it then.
     """
     return compiled_count(_rollout) + compiled_count(_rollout_batch)
 
@@ -723,7 +726,7 @@ def _keys(key, batch: int | None) -> jax.Array:
 def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_steps: int, method: str = "exhaustive",
             first_swing: int = LEFT, targets: Targets | None = None, swing_path: bool = True,
             quantize: bool = True, frames_per_step: int = 0, dynamics: physics.Dynamics | None = None, key=None,
-            kernel: str = "xla", refine: bool = False) -> control.Trajectory:
+            kernel: str = "xla", refine: bool = False, progress: bool = False) -> control.Trajectory:
     """Walk the simulated biped with the joystick for ``num_steps`` steps (jitted as one scan).
 
     Same arguments and result as :func:`ijoy_jax.rollout`, with the physics in
@@ -752,24 +755,31 @@ def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_st
       dynamics: the robot's :class:`~ijoy_jax.sim.physics.Dynamics` (scalar leaves; traced: new values never
         recompile); None: :func:`nominal_dynamics`.
       key: PRNG key or int seed of the stance noise and pushes (default 0).
+      progress: while the walk compiles (a minute or more on a CPU for a new shape or option), write what
+        compiles and the seconds elapsed to stderr (:func:`ijoy_jax.progress.compiling`; nothing for a
+        compile under 2 s). The same program and result, bit for bit; default False: silent.
 
     Returns:
       A :class:`ijoy_jax.control.Trajectory` whose ``log`` is a :class:`StepLog` per step.
     """
+    progress = _flag("progress", progress)
     _check(sim, terrain, robot, start, commands, num_steps=num_steps, method=method, first_swing=first_swing,
            frames_per_step=frames_per_step, batch=None, dynamics=dynamics, kernel=kernel)
     dyn = jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32),
                                  nominal_dynamics(sim) if dynamics is None else dynamics)
-    return _rollout(sim, terrain, robot, start, commands, first_swing, targets, dyn, _keys(key, None),
-                    num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
-                    frames_per_step=int(frames_per_step), kernel=kernel, refine=_refine(refine))
+    args = (sim, terrain, robot, start, commands, first_swing, targets, dyn, _keys(key, None))
+    static = dict(num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
+                  frames_per_step=int(frames_per_step), kernel=kernel, refine=_refine(refine))
+    if progress:
+        return compile_and_call(_rollout, *args, what=_compiling(sim, static["num_steps"], None), **static)
+    return _rollout(*args, **static)
 
 
 def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, *, num_steps: int,
                   method: str = "exhaustive", first_swing=LEFT, targets: Targets | None = None,
                   swing_path: bool = True, quantize: bool = True, frames_per_step: int = 0,
                   dynamics: physics.Dynamics | None = None, key=None, kernel: str = "xla",
-                  refine: bool = False) -> control.Trajectory:
+                  refine: bool = False, progress: bool = False) -> control.Trajectory:
     """:func:`rollout` for B robots at once: one jitted ``vmap`` of the simulated joystick loop.
 
     Args:
@@ -785,7 +795,7 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, 
         :func:`nominal_dynamics` for all.
       key: PRNG key or int seed, split into B keys, or (B,) keys: each robot's stance noise and pushes
         (default 0).
-      method, targets, swing_path, quantize, frames_per_step, kernel, refine: as in :func:`rollout`.
+      method, targets, swing_path, quantize, frames_per_step, kernel, refine, progress: as in :func:`rollout`.
 
     Returns:
       A :class:`ijoy_jax.control.Trajectory` with a leading axis B on every leaf.
@@ -800,6 +810,7 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, 
       >>> # dyn = physics.Dynamics(friction=jnp.array([0.3, 1.0]), mass_scale=jnp.array([1.0, 1.2]))
       >>> # traj = rollout_batch(sim, terrains, robots, starts, commands, num_steps=8, dynamics=dyn)
     """
+    progress = _flag("progress", progress)
     b = np.shape(terrains.free)[0] if np.ndim(terrains.free) == 3 else None
     if b is None:
         raise ValueError(f"terrains must have a leading batch axis, got a grid of shape {np.shape(terrains.free)}")
@@ -808,17 +819,35 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, 
     first = jnp.broadcast_to(jnp.asarray(first_swing, jnp.float32), (b,))
     dyn = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float32), (b,)),
                                  nominal_dynamics(sim) if dynamics is None else dynamics)
-    return _rollout_batch(sim, terrains, robots, starts, commands, first, targets, dyn, _keys(key, b),
-                          num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
-                          frames_per_step=int(frames_per_step), kernel=kernel, refine=_refine(refine))
+    args = (sim, terrains, robots, starts, commands, first, targets, dyn, _keys(key, b))
+    static = dict(num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
+                  frames_per_step=int(frames_per_step), kernel=kernel, refine=_refine(refine))
+    if progress:
+        return compile_and_call(_rollout_batch, *args, what=_compiling(sim, static["num_steps"], b), **static)
+    return _rollout_batch(*args, **static)
+
+
+def _compiling(sim: Sim, num_steps: int, batch: int | None) -> str:
+    """What a rollout's progress lines say compiles: ``the MJX walk (12 steps on a 200x100 map)``, or for a
+    batch ``the MJX walk of 64 robots (12 steps on 200x100 maps)``."""
+    nx, ny = sim.shape
+    steps = f"{num_steps} step{'' if num_steps == 1 else 's'}"
+    if batch is None:
+        return f"the MJX walk ({steps} on a {nx}x{ny} map)"
+    return f"the MJX walk of {batch} robot{'' if batch == 1 else 's'} ({steps} on {nx}x{ny} maps)"
+
+
+def _flag(name: str, value) -> bool:
+    """A boolean option, True or False (NumPy's too); ValueError names it otherwise."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
 
 
 def _refine(refine) -> bool:
     """``refine`` is a static option here: True or False (:func:`ijoy_jax.rollout` also takes a
     :class:`~ijoy_jax.refine.RefineParams`; its method check applies, in ``select.search_options``)."""
-    if not isinstance(refine, (bool, np.bool_)):
-        raise ValueError(f"refine must be True or False, got {refine!r}")
-    return bool(refine)
+    return _flag("refine", refine)
 
 
 def summary(traj: control.Trajectory) -> dict[str, jax.Array]:
