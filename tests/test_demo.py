@@ -19,9 +19,14 @@ def test_demo_prints_plain_metrics_and_writes_the_figure(tmp_path, capsys, monke
     figures = []
     close = plt.close
     monkeypatch.setattr(plt, "close", lambda fig=None: (figures.append(fig), close(fig)))
+    from ijoy_jax import progress
+
+    monkeypatch.setattr(progress, "SHOW_AFTER_S", 0.0)  # the compile line at once (a cached compile is quick)
     png = tmp_path / "demo.png"
     assert cli.main(["demo", "--out", str(png), "--steps", str(STEPS)]) == 0
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
+    what = f"the two rollouts ({STEPS} steps, the intelligent and the naive joystick)"
+    assert err.startswith(f"ijoy demo: compiling {what}: ") and f"ijoy demo: compiled {what} in " in err, err
     result = json.loads(out)
     for name in ("intelligent", "naive"):
         s = result[name]

@@ -45,7 +45,7 @@ def test_build_passes_with_warnings_as_errors(html):
     ("api/cli.html", "small sizes, for a smoke test"),  # ijoy bench --help
     ("api/server.html", 'id="ijoy_jax.server.Client"'),
     ("api/live.html", 'id="ijoy_jax.live.drive"'),  # the function; its module is ijoy_jax.live.loop
-    ("api/live.html", 'id="ijoy_jax.live.loop.scripted_commands"'),
+    ("api/stick.html", 'id="ijoy_jax.stick.scripted_commands"'),
     ("api/sweep.html", 'id="ijoy_jax.sweep.recorded.read_commands"'),
     ("api/sim.html", 'id="ijoy_jax.sim.mjx_biped.MjxBiped"'),  # ijoy drive --robot mjx's body
     ("api/sim.html", 'id="ijoy_jax.sim.walker.tick"'),  # the walker's step in public parts

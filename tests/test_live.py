@@ -14,9 +14,11 @@ import dataclasses
 import gc
 import io
 import json
+import re
 import subprocess
 import sys
 import textwrap
+import time
 
 import numpy as np
 import pytest
@@ -25,7 +27,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ijoy_jax as ij
-from ijoy_jax import live, robots, select, sweep
+from ijoy_jax import live, robots, select, stick, sweep
 from ijoy_jax.apps import cli
 from ijoy_jax.live import forcefeedback
 from ijoy_jax.server import Client
@@ -495,22 +497,41 @@ def test_an_exported_trace_schedules_the_recorded_commands(tmp_path_factory, dt,
     """Any stick (axes beyond [-1, 1] too, as a hand-edited file may hold: the drive reads them clipped), step
     timing, ``decide_at``, length and end of a drive (a last step period without a decision, or Ctrl-C), its
     stick recorded from any tick: the exported trace, scheduled as a scripted drive reads it
-    (:func:`ijoy_jax.live.loop.scripted_commands`, the loop's schedule), gives exactly the recorded decisions'
+    (:func:`ijoy_jax.stick.scripted_commands`, the loop's schedule), gives exactly the recorded decisions'
     commands, as many, bit for bit."""
     ticks = int(round(float(ROBOT.step_time) / dt))
     dispatch = int(np.floor(decide_at * ticks))
 
-    def stick(k):
-        held = [a for at, a in sorted(changes, key=lambda c: c[0]) if at <= k]
-        return list(held[-1]) if held else [0.0, 0.0, 0.0]
+    def held(k):
+        past = [a for at, a in sorted(changes, key=lambda c: c[0]) if at <= k]
+        return list(past[-1]) if past else [0.0, 0.0, 0.0]
 
-    rec = _loop_recording(stick, ticks=ticks, dt=dt, dispatch=dispatch, decisions=decisions, interrupted=interrupted,
+    rec = _loop_recording(held, ticks=ticks, dt=dt, dispatch=dispatch, decisions=decisions, interrupted=interrupted,
                           first_input=first_input)
     path = tmp_path_factory.mktemp("export") / "b.csv"
     live.session.export_trace(rec, path)
-    got = live.loop.scripted_commands(live.read_trace(path), ROBOT, decide_at=decide_at, control_dt=dt)
+    got = stick.scripted_commands(live.read_trace(path), ROBOT, decide_at=decide_at, control_dt=dt)
     want = np.asarray([live.axes_to_command(d["axes"], ROBOT) for d in rec.decisions], np.float64)
     np.testing.assert_array_equal(got, want)
+
+
+def test_a_drive_says_what_its_warm_up_compiles_only_when_asked(open_map, monkeypatch, capsys):
+    """``drive(..., progress=True)`` (``ijoy drive``) names its warm-up's compile on stderr with the seconds
+    elapsed (the threshold lowered to 0 s here: warm programs compile in no time); the library's default says
+    nothing. The decisions are the same either way."""
+    from ijoy_jax import progress
+
+    monkeypatch.setattr(progress, "SHOW_AFTER_S", 0.0)
+    monkeypatch.setattr(live.PerfectBody, "warm_up", lambda self: time.sleep(0.3), raising=False)  # a compile
+    trace = live.Trace(np.array([0.0, 2.0]), np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
+    quiet = _drive_on(open_map, live.ScriptInput(trace))
+    assert capsys.readouterr().err == ""
+    told = _drive_on(open_map, live.ScriptInput(trace), progress=True)
+    lines = capsys.readouterr().err.splitlines()
+    what = "the drive's programs (PerfectBody, the decision, the cue)"
+    assert lines[0].startswith(f"ijoy drive: compiling {what}: "), lines
+    assert re.fullmatch(rf"ijoy drive: compiled {re.escape(what)} in \d+\.\d s", lines[-1]), lines
+    np.testing.assert_array_equal([d["command"] for d in told.decisions], [d["command"] for d in quiet.decisions])
 
 
 def test_a_recording_without_decisions_exports_no_trace(tmp_path):
@@ -541,7 +562,7 @@ def test_native_robot_drives_and_replays(trace, tmp_path):
     assert feet[:, 0].mean() > np.asarray(res.states[0]["feet"])[:, 0].mean() + 0.2  # it walked forward
     _, _, mismatches = live.replay(out)
     assert mismatches == []
-    info = live.session.export_sweep(live.read_recording(out), tmp_path / "native.toml", out, terrain="family")
+    info = sweep.export_drive(live.read_recording(out), tmp_path / "native.toml", out, terrain="family")
     assert info["walker"] == "mjx" and info["decisions"] == 3 and info["terrain"] == "family"
     cfg = sweep.load_config(tmp_path / "native.toml")
     assert cfg.walker == "mjx" and cfg.family == "flat" and cfg.num_steps == 3
@@ -572,7 +593,7 @@ def test_mjx_robot_drives_through_the_cli_and_replays(trace, tmp_path, capsys):
     assert feet[:, 0].mean() > np.asarray(rec.states[0]["feet"])[:, 0].mean() + 0.2  # it walked forward
     assert cli.main(["drive", "--replay", str(out)]) == 0
     assert "footsteps identical" in capsys.readouterr().out
-    info = live.session.export_sweep(rec, tmp_path / "mjx.toml", out)
+    info = sweep.export_drive(rec, tmp_path / "mjx.toml", out)
     assert info["walker"] == "mjx" and info["decisions"] == 3
 
 
@@ -601,7 +622,7 @@ def _exported_run(recorded, folder, terrain):
 def exports(recorded, tmp_path_factory):
     """The recorded drive exported to a sweep with each terrain (its recorded map, its family) and run:
     {terrain: (JSON line, config, table)}."""
-    return {t: _exported_run(recorded, tmp_path_factory.mktemp(f"export-{t}"), t) for t in live.session.SWEEP_TERRAINS}
+    return {t: _exported_run(recorded, tmp_path_factory.mktemp(f"export-{t}"), t) for t in sweep.EXPORT_TERRAINS}
 
 
 def _along_across(result):
@@ -622,7 +643,7 @@ def _along_across(result):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("terrain", live.session.SWEEP_TERRAINS)
+@pytest.mark.parametrize("terrain", sweep.EXPORT_TERRAINS)
 def test_a_recorded_drive_exported_to_a_sweep_takes_its_footsteps(exports, recorded, terrain):
     """`ijoy drive --replay --export-sweep`: the sweep's scenario 0 is the drive (its map, robot, start and
     commands), the rollout of it takes the drive's footholds bit for bit, and the engine's table of it is that
@@ -658,12 +679,12 @@ def test_a_recorded_drive_exported_to_a_sweep_takes_its_footsteps(exports, recor
 @pytest.mark.slow
 def test_the_drives_trace_file_as_a_sweeps_commands_is_the_same_sweep(exports, recorded, trace, tmp_path):
     """The drive's own trace file as the sweep's command file gives the recorded commands bit for bit
-    (ijoy_jax.live.loop.scripted_commands: the loop's schedule, not a drive), so the same table: a scripted stick
+    (ijoy_jax.stick.scripted_commands: the loop's schedule, not a drive), so the same table: a scripted stick
     is the drive it scripts."""
     _, _, table = exports["recording"]
     path, result = recorded
     commands = np.asarray([d["command"] for d in result.decisions], np.float64)
-    scripted = live.loop.scripted_commands(live.read_trace(trace), ROBOT)
+    scripted = stick.scripted_commands(live.read_trace(trace), ROBOT)
     assert scripted.dtype == np.float64
     np.testing.assert_array_equal(scripted, commands)
     text = textwrap.dedent(f"""\

@@ -1,4 +1,4 @@
-"""Corrupt and hand-edited drive recordings (ijoy_jax.live.record): every way a file can be cut, bit-flipped or
+"""Corrupt and hand-edited drive recordings (ijoy_jax.recordings): every way a file can be cut, bit-flipped or
 edited ends in ONE ValueError line naming the file and what is wrong, in the library (read_recording), in a
 sweep (``[command] file``, ``[terrain] recording``: "file: key: reason") and at the command line (``ijoy drive
 --replay``: "ijoy: error: ..."), never a decoder's or a KeyError's traceback.
@@ -25,9 +25,8 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 import ijoy_jax as ij
-from ijoy_jax import live, sweep
+from ijoy_jax import live, recordings, sweep
 from ijoy_jax.apps import cli
-from ijoy_jax.live import record
 
 SHAPE, RES = (20, 16), 0.05  # 1 m x 0.8 m, 2.5D
 ROBOT = ij.robots.hrp2(margin=0.02, density=0.25)  # 19 actions
@@ -159,17 +158,17 @@ def _flip(data: bytes, offset: int, bit: int = 4) -> bytes:
 def _one_line(path, match: str = "") -> str:
     """read_recording(path) raises one ValueError line naming the file (and ``match``); returns it."""
     with pytest.raises(ValueError) as e:
-        record.read_recording(path)
+        recordings.read_recording(path)
     msg = str(e.value)
     assert len(msg.splitlines()) == 1 and repr(str(path)) in msg, msg
     assert match in msg, msg
     return msg
 
 
-def _read_or_one_line(path) -> record.Recording | None:
+def _read_or_one_line(path) -> recordings.Recording | None:
     """A recording that reads, or one ValueError line naming the file; anything else fails the test."""
     try:
-        return record.read_recording(path)
+        return recordings.read_recording(path)
     except ValueError as e:
         assert len(str(e).splitlines()) == 1 and repr(str(path)) in str(e), str(e)
         return None
@@ -177,7 +176,7 @@ def _read_or_one_line(path) -> record.Recording | None:
 
 def test_the_base_recording_reads(base):
     """The premise: the unedited file reads, with infinities back as floats, and feeds the sweep and a replay."""
-    rec = record.read_recording(base)
+    rec = recordings.read_recording(base)
     assert len(rec.inputs) == 2 and len(rec.decisions) == 2 and len(rec.states) == 3
     assert rec.decisions[1]["cost"] == math.inf and rec.decisions[1]["terms"]["total"] == math.inf
     assert rec.summary["steps"] == 2 and rec.terrain.shape == SHAPE and rec.robot.num_actions == ROBOT.num_actions
@@ -196,7 +195,7 @@ def test_the_schemas_a_recording_carries_hold_for_a_standard_validator(base):
             assert schema.encoding == "jsonschema" and channel.message_encoding == "json"
             Draft202012Validator.check_schema(json.loads(schema.data))
             Draft202012Validator(json.loads(schema.data)).validate(json.loads(message.data))
-    Draft202012Validator.check_schema(record.CONFIG_SCHEMA)
+    Draft202012Validator.check_schema(recordings.CONFIG_SCHEMA)
 
 
 # ------------------------------------------------------------------------------------------- cut, flipped bytes
@@ -220,7 +219,7 @@ def test_a_bit_flip_in_an_attachment_is_read_or_one_line(base, tmp_path_factory,
     path = tmp_path_factory.mktemp("flip") / "flip.mcap"
     _rewrite(base, path, attachment=lambda n, d: _flip(d, int(where * len(d)), bit) if n == name else d)
     try:
-        record.read_recording(path)
+        recordings.read_recording(path)
     except ValueError as e:
         assert len(str(e).splitlines()) == 1 and repr(str(path)) in str(e) and f"attachment {name!r}" in str(e), e
 

@@ -161,7 +161,7 @@ def test_a_recording_gives_its_commands_terrain_start_and_first_swing(files):
 
 
 def test_a_trace_gives_the_commands_a_drive_of_it_decides_with(files):
-    """ijoy_jax.live.loop.scripted_commands: the stick at 0, 0.8, 1.6 s (the trace ends at 2 s), through the
+    """ijoy_jax.stick.scripted_commands: the stick at 0, 0.8, 1.6 s (the trace ends at 2 s), through the
     dead zone onto the sweep robot's command range; a later decision point reads the stick later."""
     lo, hi = ij.robots.command_range(ROBOT)
     cfg = sweep.parse_config('[robot]\ndensity = 0.25\n[command]\nfile = "trace.csv"\n', str(files / "s.toml"))
@@ -196,7 +196,7 @@ def test_a_dead_end_in_the_recording_is_said(files, tmp_path):
     seq = sweep.recorded.read_commands(path)
     assert seq.invalid == (2,) and seq.kind == "recording"
     out = tmp_path / "export" / "stuck.toml"
-    info = live.session.export_sweep(live.read_recording(path), out, path)
+    info = sweep.export_drive(live.read_recording(path), out, path)
     assert info["invalid_decisions"] == [2] and info["terrain"] == "recording" and info["decisions"] == 3
     text = out.read_text()
     assert "(steps [2])" in text and "the footsteps agree up to the first of them" in text
@@ -220,7 +220,7 @@ def test_export_to_a_family_refuses_what_it_cannot_reproduce(files, tmp_path, ca
     recording = live.read_recording(path)
     recording.config["settings"]["start"] = start  # as ijoy drive --start records it
     with pytest.raises(ValueError, match=re.escape(match)) as e:
-        live.session.export_sweep(recording, tmp_path / "x.toml", path, terrain="family")
+        sweep.export_drive(recording, tmp_path / "x.toml", path, terrain="family")
     assert len(str(e.value).splitlines()) == 1 and not (tmp_path / "x.toml").exists()
     if start is None:  # the command line says the same
         code = cli.main(["drive", "--replay", str(path), "--export-sweep", str(tmp_path / "x.toml"),

@@ -8,6 +8,7 @@ import numpy as np
 
 import ijoy_jax as ij
 from ijoy_jax.extras import require
+from ijoy_jax.progress import compiling
 
 
 def demo_scene() -> ij.Terrain:
@@ -56,8 +57,10 @@ def run(out: str = "ijoy_demo.png", num_steps: int = 24, margin: float = 0.02) -
     start = ij.robots.start_stance(robot, 0.3, 1.2)  # left, right: 0.19 m apart, facing +x
     command = np.array([0.25, 0.0, 0.0])  # forward at full speed (m/s, m/s, rad/s)
     t0 = time.perf_counter()
-    smart = ij.rollout(terrain, robot, start, command, num_steps)
-    naive = ij.rollout(terrain, robot, start, command, num_steps, method="naive")
+    what = f"the two rollouts ({num_steps} steps, the intelligent and the naive joystick)"
+    with compiling(what, prefix="ijoy demo: "):
+        smart = ij.rollout(terrain, robot, start, command, num_steps)  # the compile; each runs in milliseconds
+        naive = ij.rollout(terrain, robot, start, command, num_steps, method="naive")
     seconds = time.perf_counter() - t0
     fig, axes = plt.subplots(2, 1, figsize=(10, 9), sharex=True)
     length, width = float(robot.foot_length), float(robot.foot_width)

@@ -149,6 +149,7 @@ def _start(text):
 def main(args) -> int:
     """Run ``ijoy drive`` from parsed arguments (bad values raise ValueError with a one-line message)."""
     from ijoy_jax import live
+    from ijoy_jax.stick import DEFAULT_DEADZONE
 
     if args.replay:
         return _replay(args)
@@ -171,7 +172,7 @@ def main(args) -> int:
         raise ValueError("--input view needs the view (drop --headless)")
     settings = live.DriveSettings(
         terrain=_terrain_spec(args), body=args.robot, margin=args.margin, start=_start(args.start),
-        deadzone=live.inputs.DEFAULT_DEADZONE if args.deadzone is None else args.deadzone,
+        deadzone=DEFAULT_DEADZONE if args.deadzone is None else args.deadzone,
         decide_at=args.decide_at, decider="server" if args.server else "local", server=args.server)
     if not 0.0 <= settings.deadzone < 1.0:
         raise ValueError(f"--deadzone must be in [0, 1), got {settings.deadzone}")
@@ -200,7 +201,7 @@ def main(args) -> int:
         result = live.run(settings, source, realtime=realtime, num_steps=args.steps, duration=args.duration,
                           record_to=args.record, on_tick=None if view is None else view.publish, feedback=feedback,
                           stop=None if (args.steps is not None or args.duration is not None or args.script)
-                          else _never(), terrain=terrain, robot=robot, start=start)
+                          else _never(), terrain=terrain, robot=robot, start=start, progress=True)
     finally:
         source.close()
         if feedback is not None:
@@ -278,8 +279,9 @@ def _replay(args) -> int:
             n = live.session.export_trace(rec, args.export_trace)
             print(json.dumps({"trace": args.export_trace, "samples": n}))
         if args.export_sweep:
-            print(json.dumps(live.session.export_sweep(rec, args.export_sweep, args.replay,
-                                                       terrain=args.sweep_terrain)))
+            from ijoy_jax import sweep
+
+            print(json.dumps(sweep.export_drive(rec, args.export_sweep, args.replay, terrain=args.sweep_terrain)))
         return 0
     if not Path(args.replay).is_file():
         raise ValueError(f"recording {args.replay!r} does not exist")

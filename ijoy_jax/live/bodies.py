@@ -18,13 +18,12 @@ import numpy as np
 
 from ijoy_jax import control
 from ijoy_jax.robots import LEFT, Robot
+from ijoy_jax.stick import DEFAULT_CONTROL_DT
 
-__all__ = ["DEFAULT_CONTROL_DT", "MIN_CONTROL_DT", "PerfectBody"]
+__all__ = ["MIN_CONTROL_DT", "PerfectBody"]
 
-DEFAULT_CONTROL_DT = 0.01
 MIN_CONTROL_DT = 1e-4
 """Shortest control period (s) of the perfect body: a shorter one ticks without end in real time."""
-"""s: the perfect body's tick (the MuJoCo biped's controller period), the rate the drive reads the stick at."""
 
 _PLANAR = np.array([0, 1, 5])
 

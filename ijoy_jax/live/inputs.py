@@ -17,152 +17,38 @@ Sources (each has ``axes(t) -> (3,)`` float64, ``t`` the drive's clock in second
   key repeat keeps it held.
 * :class:`Gamepad`: a gamepad or joystick through SDL (pygame-ce), :data:`GAMEPAD_AXES` by default.
 
-Trace file format (``ijoy drive --script TRACE``): UTF-8 text, one sample per line, comma-separated
-``t,forward,left,turn``: the time (s, from the drive's start, strictly increasing, first >= 0) and
-the three axes in [-1, 1]. Blank lines and lines starting with ``#`` are ignored, and so is one
-header line ``t,forward,left,turn``. The axes hold from their time until the next line's (before
-the first line: 0); the last line's time is the drive's end. Example::
-
-    t,forward,left,turn
-    0.0, 1.0, 0.0, 0.0     # full forward from the start
-    4.0, 0.6, 0.0, 0.5     # slower, turning left, from 4 s
-    8.0, 0.0, 0.0, 0.0     # stop; the drive ends here
 """
 
 from __future__ import annotations
 
-import math
 import os
 import threading
 import time
-from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
-from ijoy_jax.robots import Robot, command_range
+from ijoy_jax.stick import InputError, Trace, read_trace
 
 __all__ = [
-    "DEFAULT_DEADZONE",
     "GAMEPAD_AXES",
     "KEY_HOLD",
-    "TRACE_HEADER",
     "Gamepad",
-    "InputError",
     "ScriptInput",
     "SharedAxes",
     "TerminalKeyboard",
-    "Trace",
-    "axes_to_command",
     "gamepad_axes",
-    "read_trace",
 ]
 
-DEFAULT_DEADZONE = 0.1
-"""Fraction of each axis's travel around its centre that reads as 0 (a worn stick rests a few percent off)."""
 KEY_HOLD = 0.3
 """s: how long a terminal key press holds its axis (longer than a terminal's key-repeat interval, ~33 ms,
 and its initial delay, ~250-500 ms, would make a held key flicker; releasing stops within this)."""
-TRACE_HEADER = ("t", "forward", "left", "turn")
-"""The trace file's columns (and its optional header line)."""
 GAMEPAD_AXES = ((1, -1.0), (0, -1.0), (3, -1.0))
 """The SDL joystick axes read as forward, left and turn, each an (axis number, sign) pair: the left stick's y (up
 is -1 in SDL) and x (right is +1), the right stick's x (axis 3 on the Linux evdev layout of most pads; pass
 ``axes=`` otherwise)."""
 
 
-class InputError(ValueError):
-    """A bad input source: a malformed trace, no gamepad, no terminal. The message is one line."""
-
-
-def axes_to_command(axes, robot: Robot | tuple, deadzone: float = DEFAULT_DEADZONE) -> np.ndarray:
-    """(3,) float64 command (m/s, m/s, rad/s) for normalised stick axes (3,) (forward, left, turn) in [-1, 1].
-
-    Per axis, with dead zone ``d``: ``|a| <= d`` reads 0; beyond it ``s = (|a| - d) / (1 - d)`` rises
-    linearly to 1 at full deflection (no jump at the dead zone's edge), and the command is ``s * hi``
-    for a positive deflection and ``s * |lo|`` below the centre (the two ends of each axis's range
-    need not be equal). Axes beyond [-1, 1] are clipped; a NaN or infinite axis reads 0.
-
-    Args:
-      axes: (3,) forward, left, turn.
-      robot: the robot whose :func:`ijoy_jax.robots.command_range` is the range, or its ``(lo, hi)``.
-      deadzone: in [0, 1).
-
-    Example:
-      >>> import ijoy_jax as ij
-      >>> from ijoy_jax.live import axes_to_command
-      >>> axes_to_command([1.0, 0.05, -0.55], ij.robots.hrp2()).round(4).tolist()
-      [0.25, 0.0, -0.2182]
-    """
-    if not (isinstance(deadzone, (int, float)) and 0.0 <= deadzone < 1.0):
-        raise ValueError(f"deadzone must be in [0, 1), got {deadzone!r}")
-    lo, hi = command_range(robot) if isinstance(robot, Robot) else robot
-    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    a = np.asarray(axes, np.float64)
-    if a.shape != (3,):
-        raise ValueError(f"axes must have shape (3,) (forward, left, turn), got {a.shape}")
-    a = np.where(np.isfinite(a), np.clip(a, -1.0, 1.0), 0.0)
-    s = np.maximum(np.abs(a) - deadzone, 0.0) / (1.0 - deadzone)
-    return np.where(a > 0, s * hi, -s * np.abs(lo)) + 0.0  # + 0.0: no -0.0 in records
-
-
 # ---------------------------------------------------------------------------------------------- trace files
-
-
-class Trace(NamedTuple):
-    """A scripted stick: ``t`` (T,) s strictly increasing, ``axes`` (T, 3) in [-1, 1] (:func:`read_trace`)."""
-
-    t: np.ndarray
-    axes: np.ndarray
-
-    @property
-    def duration(self) -> float:
-        """s: the last sample's time, the drive's end."""
-        return float(self.t[-1])
-
-    def at(self, t: float) -> np.ndarray:
-        """(3,) the axes held at time ``t`` (s): the last sample at or before it, zeros before the first."""
-        i = int(np.searchsorted(self.t, t, side="right")) - 1
-        return np.zeros(3) if i < 0 else self.axes[i].copy()
-
-
-def read_trace(path) -> Trace:
-    """Read a trace file (format: the module docstring). Raises :class:`InputError` naming file, line and fault."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"trace file {str(path)!r} does not exist") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"trace file {str(path)!r} cannot be read: {e}") from None
-    ts, rows = [], []
-    for n, raw in enumerate(text.splitlines(), 1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
-            continue
-        cells = [c.strip() for c in line.split(",")]
-        if not ts and tuple(c.lower() for c in cells) == TRACE_HEADER:
-            continue
-        where = f"{path}:{n}"
-        if len(cells) != 4:
-            raise InputError(f"{where}: expected 4 comma-separated values t,forward,left,turn, got {len(cells)}: "
-                             f"{raw.strip()!r}")
-        try:
-            vals = [float(c) for c in cells]
-        except ValueError:
-            raise InputError(f"{where}: not a number in {raw.strip()!r}") from None
-        if not all(math.isfinite(v) for v in vals):
-            raise InputError(f"{where}: values must be finite, got {raw.strip()!r}")
-        if vals[0] < 0 or (ts and vals[0] <= ts[-1]):
-            raise InputError(f"{where}: times must start at >= 0 and increase strictly, got {vals[0]} after "
-                             f"{ts[-1] if ts else 'the start'}")
-        if any(abs(v) > 1.0 for v in vals[1:]):
-            raise InputError(f"{where}: axes must lie in [-1, 1] (normalised stick deflection), got {vals[1:]}")
-        ts.append(vals[0])
-        rows.append(vals[1:])
-    if not ts:
-        raise InputError(f"trace file {str(path)!r} has no samples (lines t,forward,left,turn)")
-    return Trace(np.asarray(ts, np.float64), np.asarray(rows, np.float64))
 
 
 class ScriptInput:

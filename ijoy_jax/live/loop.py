@@ -28,6 +28,7 @@ virtual, so a scripted drive is exactly reproducible (:func:`replay`).
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import dataclasses
 import gc
 import math
@@ -40,14 +41,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax import cue, footcost, robots, select
-from ijoy_jax.live.bodies import DEFAULT_CONTROL_DT
 from ijoy_jax.live.deciders import Decision
-from ijoy_jax.live.inputs import DEFAULT_DEADZONE, Trace, axes_to_command
+from ijoy_jax.progress import compiling
 from ijoy_jax.robots import Robot
+from ijoy_jax.stick import DEFAULT_DEADZONE, axes_to_command
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["DEFAULT_REACH_DIRECTIONS", "MAX_DURATION", "TERM_NAMES", "DriveResult", "check_duration", "drive",
-           "latency_stats", "scripted_commands"]
+           "latency_stats"]
 
 MAX_DURATION = 86400.0
 """s: the longest drive (a day). A drive keeps every tick's state for its result and its recording, so a longer
@@ -65,7 +66,7 @@ class DriveResult:
     """What a drive did (host values).
 
     Attributes:
-      decisions: one dict per decision (the ``/ijoy/decision`` record of :mod:`ijoy_jax.live.record`).
+      decisions: one dict per decision (the ``/ijoy/decision`` record of :mod:`ijoy_jax.recordings`).
       states: one dict per executed step period (``/ijoy/state``), the warm-up first.
       latencies: (n,) s, each decision's latency (command read to decision ready).
       slacks: (n,) s, decision ready to the end of the step it had to be ready by (< 0: late).
@@ -105,50 +106,6 @@ def latency_stats(latencies) -> dict:
         return {"latency_p50_s": float("nan"), "latency_p99_s": float("nan"), "latency_max_s": float("nan")}
     return {"latency_p50_s": float(np.percentile(lat, 50)), "latency_p99_s": float(np.percentile(lat, 99)),
             "latency_max_s": float(lat.max())}
-
-
-def scripted_commands(trace: Trace, robot: Robot, *, deadzone: float = DEFAULT_DEADZONE, decide_at: float = 0.0,
-                      control_dt: float = DEFAULT_CONTROL_DT, num_steps: int | None = None) -> np.ndarray:
-    """(n, 3) float64: the command (m/s, m/s, rad/s) of each decision :func:`drive` makes with the scripted stick
-    ``trace`` (host only, nothing is decided).
-
-    The loop's schedule: with ``ticks = round(step_time / control_dt)`` control ticks per step and
-    ``d = floor(decide_at * ticks)``, decision ``j`` (0-based; it chooses step ``j + 1``) reads the stick at
-    ``t_j = (j * ticks + d) * control_dt`` s, ``trace.at(t_j)`` through :func:`~ijoy_jax.live.axes_to_command`
-    with the robot's command range and ``deadzone``; there is no decision at or after the trace's end
-    (``trace.duration``), nor beyond ``num_steps``. The same float64 values as the ``command`` of each recorded
-    decision of a drive of that stick (the perfect body, or the MuJoCo biped: both tick at ``control_dt``), so
-    a trace file becomes a command sequence for a sweep (``[command] file``, :mod:`ijoy_jax.sweep.recorded`).
-
-    Example:
-      >>> import numpy as np, ijoy_jax as ij
-      >>> from ijoy_jax import live
-      >>> trace = live.Trace(np.array([0.0, 1.0, 2.0]), np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 0]]))
-      >>> live.loop.scripted_commands(trace, ij.robots.hrp2()).round(4).tolist()   # at 0 and 0.8 s, 1.6 s
-      [[0.25, 0.0, 0.0], [0.25, 0.0, 0.0], [0.0, 0.175, 0.0]]
-    """
-    if not 0.0 <= decide_at < 1.0:
-        raise ValueError(f"decide_at must be in [0, 1) (a fraction of the step), got {decide_at!r}")
-    if num_steps is not None and (isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 0):
-        raise ValueError(f"num_steps must be a whole number >= 0, got {num_steps!r}")
-    dt = float(control_dt)
-    ticks = float(robot.step_time) / dt
-    if dt <= 0 or abs(ticks - round(ticks)) > 1e-4:  # as the bodies require (float32 step times: 0.80000001)
-        raise ValueError(f"step_time {float(robot.step_time)} s must be a whole number of control_dt {dt} s ticks")
-    ticks = int(round(ticks))
-    d = int(math.floor(decide_at * ticks))
-    duration = trace.duration
-    upper = int(duration / (ticks * dt)) + 2  # past the last decision: the loop's test below decides
-    if num_steps is not None:
-        upper = min(upper, int(num_steps))
-    lo, hi = robots.command_range(robot)
-    out = []
-    for j in range(upper):
-        # drive()'s own expressions: t_start + d * dt against the end, then the tick's time tick_count * dt
-        if not (j * ticks) * dt + d * dt < duration - 1e-9:
-            break
-        out.append(axes_to_command(trace.at((j * ticks + d) * dt), (lo, hi), deadzone))
-    return np.asarray(out, np.float64).reshape(-1, 3)
 
 
 class _Outlook:
@@ -192,7 +149,7 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
           decide_at: float = 0.0, realtime: bool = True, num_steps: int | None = None,
           duration: float | None = None, recorder=None, on_tick: Callable[[dict], Any] | None = None,
           feedback=None, stop: threading.Event | None = None, reach_directions: int = DEFAULT_REACH_DIRECTIONS,
-          prepared: select.Prepared | None = None, view_every: float = 0.05) -> DriveResult:
+          prepared: select.Prepared | None = None, view_every: float = 0.05, progress: bool = False) -> DriveResult:
     """Drive ``body`` with the stick ``source`` and the footstep ``decider`` until the end (Algorithm 1 live).
 
     Args:
@@ -217,6 +174,9 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
       stop: an event that ends the drive after the step in progress.
       reach_directions: directions of the cue's reach polygon.
       prepared: the terrain's :func:`ijoy_jax.select.prepare` (built here when None).
+      progress: while the warm-up compiles (the body's controller, the decision and the cue's programs: about a
+        minute for the MuJoCo biped on a CPU), say so on stderr with the seconds elapsed
+        (:func:`ijoy_jax.progress.compiling`).
 
     Returns:
       :class:`DriveResult`.
@@ -280,9 +240,11 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
     # Warm-up, before the clock starts: one decision and the cue's programs from the start stance (their first
     # calls compile; the server's too), so the latencies measured are the drive's, not the compiler's.
     t_warm = time.perf_counter()
-    if hasattr(body, "warm_up"):
-        body.warm_up()  # the physics robot's controller programs
-    work(0, body.stance(), np.zeros(3), time.perf_counter())
+    what = f"the drive's programs ({type(body).__name__}, the decision, the cue)"
+    with compiling(what, prefix="ijoy drive: ") if progress else contextlib.nullcontext():
+        if hasattr(body, "warm_up"):
+            body.warm_up()  # the physics robot's controller programs
+        work(0, body.stance(), np.zeros(3), time.perf_counter())
     with outlook.lock:
         outlook.view = {}
         if outlook.tick is not None:

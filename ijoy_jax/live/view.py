@@ -26,7 +26,7 @@ import numpy as np
 
 from ijoy_jax import robots
 from ijoy_jax.live.inputs import SharedAxes
-from ijoy_jax.live.record import json_ready
+from ijoy_jax.recordings import json_ready
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 

@@ -47,7 +47,7 @@ from ijoy_jax.extras import require as _require
 
 _require("sweep", "pandas", "pyarrow", "matplotlib")
 
-from ijoy_jax.sweep import distributed, local, recorded
+from ijoy_jax.sweep import distributed, export, local, recorded
 from ijoy_jax.sweep.config import (
     COMMAND_KEYS,
     HOST_MEMORY_FRACTION,
@@ -86,6 +86,7 @@ from ijoy_jax.sweep.execute import (
     scenario_bytes,
     trace_count,
 )
+from ijoy_jax.sweep.export import EXPORT_TERRAINS, export_drive
 from ijoy_jax.sweep.results import (
     EXTRA_METRICS,
     PAPER_ACTIONS,
@@ -110,6 +111,7 @@ from ijoy_jax.sweep.results import (
 __all__ = [
     "COMMAND_KEYS",
     "DEFAULT_CHUNK",
+    "EXPORT_TERRAINS",
     "EXTRA_METRICS",
     "HOST_MEMORY_FRACTION",
     "MAX_AUTO_CHUNK",
@@ -145,6 +147,8 @@ __all__ = [
     "cells",
     "default_chunk_size",
     "distributed",
+    "export",
+    "export_drive",
     "local",
     "recorded",
     "load",

@@ -17,10 +17,10 @@ generated terrains or on the recording's own terrain:
     [terrain]
     recording = "drive.mcap"   # the recording's terrain and start feet (instead of family, shape, ...)
 
-Paths are relative to the sweep file's folder. A recording (MCAP, :mod:`ijoy_jax.live.record`) gives the
+Paths are relative to the sweep file's folder. A recording (MCAP, :mod:`ijoy_jax.recordings`) gives the
 ``command`` of each recorded decision, the float64 values its decider was given (as float32, what the
 decider computed with), and its first swing; a trace file (:func:`ijoy_jax.live.read_trace`) gives the
-commands :func:`ijoy_jax.live.loop.scripted_commands` computes, the ones a drive of that stick decides
+commands :func:`ijoy_jax.stick.scripted_commands` computes, the ones a drive of that stick decides
 with, for the sweep's robot (its command range and step time: ``robot.step_time`` and ``robot.density``
 are then fixed, not swept). ``sweep.num_steps`` defaults to the number of commands and may be smaller.
 
@@ -31,7 +31,7 @@ for bit, on its terrain with its robot (tested); with one, the footsteps agree u
 (:attr:`CommandSequence.invalid` lists them; ``ijoy drive --export-sweep`` says so).
 
 The file formats belong to :mod:`ijoy_jax.live`, which is read here lazily (only for a sweep that names a
-file): :mod:`ijoy_jax.live.record` and :mod:`ijoy_jax.live.inputs` need the terrain and robot modules alone.
+file): :mod:`ijoy_jax.recordings` and :mod:`ijoy_jax.live.inputs` need the terrain and robot modules alone.
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ijoy_jax import recordings, stick
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
@@ -139,7 +140,7 @@ def read_commands(path, robot: Robot | None = None, *, deadzone: float | None = 
     Args:
       path: the file.
       robot: a trace's robot (its command range and step time); not used for a recording.
-      deadzone, decide_at: a trace's stick dead zone (default :data:`ijoy_jax.live.inputs.DEFAULT_DEADZONE`)
+      deadzone, decide_at: a trace's stick dead zone (default :data:`ijoy_jax.stick.DEFAULT_DEADZONE`)
         and decision point in a step (default 0); a recording refuses them (its commands are recorded).
       first_swing: +1 or -1 (default: the recording's, +1 for a trace).
       max_steps: read at most this many commands of a trace (its schedule is computed up to it).
@@ -153,9 +154,7 @@ def read_commands(path, robot: Robot | None = None, *, deadzone: float | None = 
         if deadzone is not None or decide_at is not None:
             raise ValueError(f"{str(p)!r} is a recording: its commands are recorded, deadzone and decide_at are "
                              "for trace files")
-        from ijoy_jax.live import record
-
-        rec = record.read_recording(p)  # ValueError (one line) for a file that is not one
+        rec = recordings.read_recording(p)  # ValueError (one line) for a file that is not one
         steps = [d.get("step") for d in rec.decisions]
         if not steps:
             raise ValueError(f"{str(p)!r}: the recording has no decisions (nothing to replay)")
@@ -169,18 +168,16 @@ def read_commands(path, robot: Robot | None = None, *, deadzone: float | None = 
         swing = rec.config.get("settings", {}).get("first_swing", 1)
         kind = "recording"
     else:
-        from ijoy_jax.live import inputs, loop
-
         if robot is None:
             raise ValueError(f"{str(p)!r} is a trace file: its commands need the robot (command range, step time)")
-        trace = inputs.read_trace(p)  # InputError (a ValueError): file:line: fault
-        dz = inputs.DEFAULT_DEADZONE if deadzone is None else float(deadzone)
+        trace = stick.read_trace(p)  # InputError (a ValueError): file:line: fault
+        dz = stick.DEFAULT_DEADZONE if deadzone is None else float(deadzone)
         if not 0.0 <= dz < 1.0:
             raise ValueError(f"deadzone must be in [0, 1) (a fraction of the stick's travel), got {dz}")
         da = 0.0 if decide_at is None else float(decide_at)
         if not 0.0 <= da < 1.0:
             raise ValueError(f"decide_at must be in [0, 1) (a fraction of the step), got {da}")
-        raw = loop.scripted_commands(trace, robot, deadzone=dz, decide_at=da, num_steps=max_steps)
+        raw = stick.scripted_commands(trace, robot, deadzone=dz, decide_at=da, num_steps=max_steps)
         if not len(raw):
             raise ValueError(f"{str(p)!r}: the trace ends ({trace.duration} s) before its first decision")
         invalid, swing, kind = (), 1, "trace"
@@ -203,9 +200,7 @@ def read_terrain(path) -> RecordedTerrain:
     p = _existing(path)
     if not is_recording(p):
         raise ValueError(f"{str(p)!r} is not a drive recording (an .mcap file of ijoy drive --record)")
-    from ijoy_jax.live import record
-
-    rec = record.read_recording(p)
+    rec = recordings.read_recording(p)
     try:
         start = np.asarray(rec.config["start"], np.float64)
     except (KeyError, TypeError, ValueError):

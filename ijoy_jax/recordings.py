@@ -53,6 +53,7 @@ import numpy as np
 
 from ijoy_jax import robots
 from ijoy_jax import terrain as terrain_mod
+from ijoy_jax.extras import require
 from ijoy_jax.robots import Robot, TerrainMetrics
 from ijoy_jax.terrain import Terrain
 
@@ -320,6 +321,7 @@ class Recorder:
     """Writes one drive to an MCAP file (the layout: the module docstring). Use it as a context manager."""
 
     def __init__(self, path, config: dict, terrain: Terrain, robot: Robot):
+        require("live", "mcap", "jsonschema", what="recording a drive")
         from mcap.writer import Writer
 
         self.path = Path(path)
@@ -385,6 +387,7 @@ def read_recording(path) -> Recording:
     """Read an MCAP drive recording, checked (:data:`CHANNELS`, :data:`CONFIG_SCHEMA`, the attachments).
 
     Raises:
+      MissingExtraError: without the ``live`` extra (mcap, jsonschema).
       ValueError: one line naming the file and what is wrong: missing, not MCAP, cut short or corrupt (chunk
         CRCs are checked; an attachment that does not decode), no drive in it, a config, attachment or
         message that breaks its schema (a missing key, a wrong type, NaN or inf, out of range), input times
@@ -394,6 +397,7 @@ def read_recording(path) -> Recording:
     where = repr(str(path))
     if not path.is_file():
         raise ValueError(f"recording {where} does not exist")
+    require("live", "mcap", "jsonschema", what=f"reading the drive recording {where}")
     topics: dict[str, list] = {t: [] for t in CHANNELS}
     config, raw = None, {}
     try:
