@@ -7,6 +7,7 @@ from __future__ import annotations
 import ast
 import importlib.metadata
 import json
+import os
 import re
 import subprocess
 import sys
@@ -208,3 +209,15 @@ def test_the_core_runs_with_no_optional_module_and_each_part_names_its_extra(tmp
     assert out["demo_stderr"].startswith("ijoy: error: ijoy demo needs matplotlib") and out["demo_stderr"].count(
         "\n") == 1, out["demo_stderr"]
     assert out["loaded"] == [] and not (tmp_path / "demo.png").exists()
+
+
+def test_the_sim_extras_check_leaves_headless_rendering_to_egl():
+    """Checking the sim extra (finding ``mujoco.mjx`` imports mujoco) must come after ``ijoy_jax.sim`` chose
+    EGL for a headless Linux machine that has libEGL: MuJoCo reads MUJOCO_GL once, when it is imported."""
+    code = ("import ctypes.util, os, sys\nimport ijoy_jax.sim\n"
+            "print(os.environ.get('MUJOCO_GL'), bool(ctypes.util.find_library('EGL')), sys.platform)")
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "DISPLAY", "PYOPENGL_PLATFORM")}
+    p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr[-2000:]
+    gl, egl, platform = p.stdout.split()
+    assert gl == ("egl" if egl == "True" and platform.startswith("linux") else "None"), p.stdout

@@ -26,11 +26,11 @@ import sys as _sys
 
 from ijoy_jax.extras import require as _require
 
-_require("sim", "mujoco", "mujoco.mjx", "PIL")
-
 if (_sys.platform.startswith("linux") and "MUJOCO_GL" not in _os.environ and not _os.environ.get("DISPLAY")
         and "mujoco" not in _sys.modules and _ctypes_util.find_library("EGL")):
     _os.environ["MUJOCO_GL"] = "egl"
+
+_require("sim", "mujoco", "mujoco.mjx", "PIL")  # after MUJOCO_GL: finding mujoco.mjx imports mujoco
 
 
 def _import_mjx_warp_quietly() -> None:
