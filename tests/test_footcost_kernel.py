@@ -46,24 +46,57 @@ def _queries(n: int, seed: int):
     return jnp.asarray(stance, jnp.float32), jnp.asarray(swing, jnp.float32)
 
 
+# Every harness call runs this many stances, each with one candidate per action (stances and given steps are
+# padded by repetition, the results cut back): one compiled program per terrain kind and swing/no-swing serves
+# every test, since the interpreted kernel's compile is what these tests cost, not its run.
+BATCH = 6
+
+
 @functools.partial(jax.jit, static_argnames="fused")
 def _totals(terrain, robot, stance, swing, steps, fused):
+    """Fused totals (B, K), or the XLA path's terms (each (B, K)), of ``steps`` (B, K, 3) from each stance (B, 3)."""
     index = footcost.index_terrain(terrain, robot)
-    n = robot.num_actions
+    idx = jnp.arange(steps.shape[1]) % robot.num_actions
 
-    def one(s, w):
-        cand = ij.action_steps(robot, s, -1) if steps is None else steps
-        idx = jnp.arange(cand.shape[0]) % n
+    def one(s, w, cand):
         if fused:
             return foot_cost_fused(terrain, robot, s, -1, cand, swing_from=w, action_index=idx, index=index)
-        return footcost.foot_cost_terms(terrain, robot, s, -1, cand, swing_from=w, action_index=idx, index=index).total
+        return footcost.foot_cost_terms(terrain, robot, s, -1, cand, swing_from=w, action_index=idx, index=index)
 
-    return jax.vmap(one, in_axes=(0, 0 if swing is not None else None))(stance, swing)
+    return jax.vmap(one, in_axes=(0, 0 if swing is not None else None, 0))(stance, swing, steps)
+
+
+@jax.jit
+def _action_steps(robot, stance):
+    """(B, N, 3) every action's step from each right-foot stance (B, 3)."""
+    return jax.vmap(lambda s: ij.action_steps(robot, s, -1))(stance)
+
+
+def _both_terms(terrain, robot, stance, swing, steps=None):
+    """(XLA terms, fused totals) of every action of each of the n stances (or of the given (K, 3) steps from each),
+    each (n, N) or (n, K): computed on the BATCH x num_actions harness, so shapes never add a compile."""
+    n = stance.shape[0]
+    assert n <= BATCH
+    stance = jnp.asarray(np.resize(np.asarray(stance), (BATCH, 3)))
+    swing = None if swing is None else jnp.asarray(np.resize(np.asarray(swing), (BATCH, 3)))
+    num = robot.num_actions
+    if steps is None:
+        k = num
+        cand = _action_steps(robot, stance)
+    else:
+        k = steps.shape[0]
+        assert k <= num
+        padded = np.concatenate([np.asarray(steps), np.repeat(np.asarray(steps)[:1], num - k, axis=0)])
+        cand = jnp.broadcast_to(jnp.asarray(padded), (BATCH, num, 3))
+    terms = jax.tree.map(lambda a: np.asarray(a)[:n, :k], _totals(terrain, robot, stance, swing, cand, False))
+    fused = np.asarray(_totals(terrain, robot, stance, swing, cand, True))[:n, :k]
+    return terms, fused
 
 
 def _both(terrain, robot, stance, swing, steps=None):
-    """(XLA totals, fused totals) for every action of each stance (or the given steps); one compile per shape."""
-    return tuple(np.asarray(_totals(terrain, robot, stance, swing, steps, fused)) for fused in (False, True))
+    """(XLA totals, fused totals) for every action of each stance (or the given steps); one compile per kind."""
+    terms, fused = _both_terms(terrain, robot, stance, swing, steps)
+    return np.asarray(terms.total), fused
 
 
 def _assert_same(xla, fused):
@@ -103,10 +136,9 @@ def test_the_support_term_rejects_the_same_steps_on_both_paths():
                                                         roughness_limit=jnp.float32(1.0), bump_limit=jnp.float32(1.0)))
     terrain = _terrain("25d", seed=1)
     stance, swing = _queries(6, seed=2)
-    xla, fused = _both(terrain, robot, stance, swing)
+    terms, fused = _both_terms(terrain, robot, stance, swing)
+    xla = terms.total
     _assert_same(xla, fused)
-    terms = jax.vmap(lambda s, w: footcost.foot_cost_terms(terrain, robot, s, -1, ij.action_steps(robot, s, -1),
-                                                           swing_from=w))(stance, swing)
     support_only = np.isinf(np.asarray(terms.support)) & np.all([np.isfinite(np.asarray(getattr(terms, t))) for t in (
         "obstacle", "slope", "roughness", "bump", "step", "band", "swing_path", "ankle", "reach",
         "unsupported")], axis=0)
@@ -177,7 +209,7 @@ def test_one_rule_for_limits_a_metric_at_its_limit_is_decided_alike_on_both_path
     stance = jnp.array([[0.45, 0.5, 0.3]], jnp.float32)
     idx = np.arange(0, loose.num_actions, 31)[:16]
     steps = ij.action_steps(loose, stance[0], -1)[idx]
-    terms = footcost.foot_cost_terms(terrain, loose, stance[0], -1, steps, action_index=np.arange(len(idx)))
+    terms = jax.tree.map(lambda a: a[0], _both_terms(terrain, loose, stance, None, steps)[0])
     open_ = np.isfinite(np.asarray(terms.total))
     assert open_.sum() >= 8
     dh = np.abs(np.asarray(terms.step_height_m))
@@ -224,10 +256,9 @@ def test_ankle_and_reach_terms_match_the_xla_path(kind):
     terrain = ij.terrain.from_arrays(h if kind == "25d" else None, np.ones(SHAPE, bool), RES)
     stance, swing = _queries(4, seed=12)
     stance = jnp.clip(stance, 0.35, 0.6).at[:, 2].set(stance[:, 2])  # every step on the map
-    xla, fused = _both(terrain, robot, stance, swing if kind == "25d" else None)
+    terms, fused = _both_terms(terrain, robot, stance, swing if kind == "25d" else None)
+    xla = terms.total
     _assert_same(xla, fused)
-    terms = jax.vmap(lambda s: footcost.foot_cost_terms(terrain, robot, s, -1, ij.action_steps(robot, s, -1),
-                                                        action_index=jnp.arange(robot.num_actions)))(stance)
     others = sum(np.asarray(getattr(terms, f)) for f in ("action", "obstacle", "slope", "roughness", "bump", "step",
                                                           "band", "unsupported"))
     ankle, reach = np.isinf(np.asarray(terms.ankle)), np.isinf(np.asarray(terms.reach))
@@ -590,13 +621,11 @@ def _probe(robot, metric):
                          max_sole_roll=far, max_sole_distance=far)
 
 
-@jax.jit
 def _metric_both(terrain, robot, stance):
-    """(XLA terms, kernel totals) of every action at ``stance``, no swing corridor."""
-    steps = ij.action_steps(robot, stance, -1)
-    idx = jnp.arange(robot.num_actions)
-    return (footcost.foot_cost_terms(terrain, robot, stance, -1, steps, action_index=idx),
-            foot_cost_fused(terrain, robot, stance, -1, steps, action_index=idx))
+    """(XLA terms, kernel totals) of every action at ``stance`` (3,), each (N,), no swing corridor: on the
+    shared harness (the same program as the other no-swing 2.5D tests)."""
+    terms, fused = _both_terms(terrain, robot, stance[None], None)
+    return jax.tree.map(lambda a: a[0], terms), fused[0]
 
 
 # Measured largest |kernel - XLA| of each metric (CPU, interpreted kernel; 1000 maps like these of 496 steps, and

@@ -6,7 +6,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from jax.test_util import check_grads
 
 import ijoy_jax as ij
 from ijoy_jax.footcost import foot_cost_terms
@@ -113,21 +112,28 @@ def test_relaxed_selector_converges_to_exact(robot, has_height):
     assert invalid[-1] < invalid[0] and invalid[-1] < 1e-3
 
 
+@jax.jit
+def _exact_and_soft_paths(terrain, robot, stance, swing_from, sharpness):
+    """Exact and relaxed FootCost terms (each field (N,)) of every action's step from ``stance`` (3,), with the
+    swing-path check from ``swing_from`` (3,) or without it (None); one program per terrain kind for these tests."""
+    acts = ij.robots.side_actions(robot, 1.0)
+    steps = ij.geometry.compose(stance, acts)
+    idx = jnp.arange(acts.shape[0])
+    e = foot_cost_terms(terrain, robot, stance, -1.0, steps, swing_from=swing_from, action_index=idx)
+    s = relax.soft_foot_cost_terms(terrain, robot, stance, steps, idx, sharpness=sharpness, swing_from=swing_from)
+    return e, s
+
+
 def test_relaxed_cost_converges_to_exact_finite_costs(robot):
     """On exactly valid steps away from the validity boundary the relaxed FootCost tends to the exact one."""
     terrain = _terrain(3, True)
     stance, _ = _query(3)
-    acts = ij.robots.side_actions(robot, 1.0)
-    steps = ij.geometry.compose(jnp.asarray(stance), acts)
-    idx = jnp.arange(acts.shape[0])
-    exact = jax.jit(lambda t, r, s, x, i: foot_cost_terms(t, r, s, -1.0, x, action_index=i).total)
-    exact = np.asarray(exact(terrain, robot, jnp.asarray(stance), steps, idx))
+    exact = np.asarray(_exact_and_soft_paths(terrain, robot, jnp.asarray(stance), None, 10.0)[0].total)
     ok = np.isfinite(exact)
     assert ok.sum() > 10
     errors = []
-    soft_cost = jax.jit(lambda t, r, s, x, i, k: relax.soft_foot_cost_terms(t, r, s, x, i, sharpness=k).total)
     for sharpness in (10.0, 100.0, 1000.0):
-        soft = soft_cost(terrain, robot, jnp.asarray(stance), steps, idx, sharpness)
+        soft = _exact_and_soft_paths(terrain, robot, jnp.asarray(stance), None, sharpness)[1].total
         errors.append(float(np.median(np.abs(np.asarray(soft)[ok] - exact[ok]))))
     print(f"median |relaxed - exact| over {ok.sum()} valid steps: {errors}")
     assert errors[0] > errors[1] > errors[2]
@@ -143,13 +149,13 @@ def test_relaxed_support_converges_to_the_exact_support(robot):
     h = 0.004 * rng.standard_normal((60, 60)) + np.arange(60)[:, None] * RES * 0.1
     terrain = ij.terrain.from_arrays(h.astype(np.float32), None, RES)
     stance, _ = _query(8)
-    acts = ij.robots.side_actions(robot, 1.0)
-    steps = ij.geometry.compose(jnp.asarray(stance), acts)
-    idx = jnp.arange(acts.shape[0])
-    exact = np.asarray(foot_cost_terms(terrain, robot, jnp.asarray(stance), -1.0, steps, action_index=idx).support_m)
+    stance = jnp.asarray(stance)
+    exact = np.asarray(_exact_and_soft_paths(terrain, robot, stance, None, 10.0)[0].support_m)
     assert (exact < 1e-6).any() and (exact > 0.05).any()
-    soft_support = jax.jit(lambda k: relax.soft_foot_cost_terms(terrain, robot, jnp.asarray(stance), steps, idx,
-                                                                sharpness=k).support_m)
+
+    def soft_support(k):
+        return _exact_and_soft_paths(terrain, robot, stance, None, k)[1].support_m
+
     errors = [float(np.mean(np.abs(np.asarray(soft_support(k)) - exact))) for k in (10.0, 100.0, 1000.0)]
     assert errors[0] > errors[1] > errors[2] and errors[2] < 1e-3, errors
 
@@ -189,16 +195,54 @@ def _objective(terrain, robot, stance, command, sharpness, tau):
     return r.expected_cost + r.log_probs[3] + jnp.sum(r.expected_pose)
 
 
+# One compiled gradient program per objective and dtype serves every gradient test of it: the finite differences
+# take the value it returns, and the float32 checks share it with the degenerate-input tests.
+_value_and_grad = jax.jit(jax.value_and_grad(_objective, argnums=(1, 2, 3)))
+
+
+def _check_scaled_grads(value_and_grad, args, names, seed=0):
+    """``jax.test_util.check_grads(order=1, modes=("rev",), eps=1e-2)`` of the objective as a function of each
+    robot leaf in ``names`` as a multiple of its nominal value (so eps is a relative step), at 1: its reverse-mode
+    derivative along a random direction of those scales against central differences, within FD_RTOL32.
+    ``value_and_grad(terrain, robot, ...)`` returns the value and the gradients with respect to the robot first."""
+    terrain, robot, *rest = args
+    nominal = [get_leaf(robot, n) for n in names]
+
+    def scaled(scales):
+        rb = robot
+        for n, v, s in zip(names, nominal, scales, strict=True):
+            rb = set_leaf(rb, n, v * s)
+        return rb
+
+    ones = np.ones(len(names), np.float32)
+    d = np.random.default_rng(seed).normal(size=len(names)).astype(np.float32)
+    _, grads = value_and_grad(terrain, scaled(ones), *rest)
+    an = sum(float(jnp.sum(get_leaf(grads[0], n) * v)) * float(di) for n, v, di in zip(names, nominal, d, strict=True))
+    eps = 1e-2
+    plus = float(value_and_grad(terrain, scaled(ones + eps * d), *rest)[0])
+    minus = float(value_and_grad(terrain, scaled(ones - eps * d), *rest)[0])
+    fd = (plus - minus) / (2 * eps)
+    np.testing.assert_allclose(an, fd, atol=FD_RTOL32, rtol=FD_RTOL32)
+
+
 @pytest.mark.slow
-def test_gradients_match_finite_differences_float64(robot):
+def test_gradients_match_finite_differences_float64(small_robot):
+    """Every scalar and per-action leaf, the stance pose and the command, against float64 central differences.
+
+    The objective is the swing-path one (the selection objective plus the corridor heights), so this check and
+    test_swing_path_gradients_float64 share one float64 program; the objective without a swing start keeps its
+    float32 check (test_gradients_float32_check_grads)."""
     with jax.enable_x64(True):
         terrain = _terrain(5, True)
         terrain = terrain.replace(height=terrain.height.astype(jnp.float64), origin=terrain.origin.astype(jnp.float64))
-        r64 = _float_leaves(robot, jnp.float64)
+        r64 = _float_leaves(small_robot, jnp.float64)
         stance, command = (jnp.asarray(x, jnp.float64) for x in _query(5))
-        f = jax.jit(_objective)
-        args = (stance, command, 10.0, 1.0)
-        grads = jax.jit(jax.grad(_objective, argnums=(1, 2, 3)))(terrain, r64, *args)
+        swing_from = jnp.asarray(SWING_FROM, jnp.float64)
+
+        def f(rb, pose, cmd):
+            return _swing_value_and_grad(terrain, rb, pose, swing_from, cmd, 10.0, 1.0)[0]
+
+        _, grads = _swing_value_and_grad(terrain, r64, stance, swing_from, command, 10.0, 1.0)
         worst = 0.0
         h = 1e-6
         for name in SCALAR_LEAVES + ("action_cost", "max_step_height"):
@@ -206,22 +250,20 @@ def test_gradients_match_finite_differences_float64(robot):
             g = get_leaf(grads[0], name)
             direction = jnp.asarray(np.random.default_rng(len(name)).normal(size=leaf.shape))
             fd = (
-                f(terrain, set_leaf(r64, name, leaf + h * direction), *args)
-                - f(terrain, set_leaf(r64, name, leaf - h * direction), *args)
+                f(set_leaf(r64, name, leaf + h * direction), stance, command)
+                - f(set_leaf(r64, name, leaf - h * direction), stance, command)
             ) / (2 * h)
             an = jnp.sum(g * direction)
             assert np.isfinite(float(an)), name
             err = abs(float(fd - an)) / max(1.0, abs(float(fd)))
             worst = max(worst, err)
             assert err < FD_RTOL64, (name, float(fd), float(an))
-        for k, (x, g) in enumerate(((stance, grads[1]), (command, grads[2]))):
+        for k, (x, g) in enumerate(((stance, grads[1]), (command, grads[3]))):
             d = jnp.asarray(np.random.default_rng(k).normal(size=3))
             xs = [a if j != k else None for j, a in enumerate((stance, command))]
             plus, minus = list(xs), list(xs)
             plus[k], minus[k] = x + h * d, x - h * d
-            fd = (f(terrain, r64, plus[0], plus[1], 10.0, 1.0) - f(terrain, r64, minus[0], minus[1], 10.0, 1.0)) / (
-                2 * h
-            )
+            fd = (f(r64, plus[0], plus[1]) - f(r64, minus[0], minus[1])) / (2 * h)
             err = abs(float(fd - g @ d)) / max(1.0, abs(float(fd)))
             worst = max(worst, err)
             assert err < FD_RTOL64, ("pose" if k == 0 else "command", float(fd), float(g @ d))
@@ -232,22 +274,9 @@ def test_gradients_match_finite_differences_float64(robot):
 def test_gradients_float32_check_grads(robot):
     terrain = _terrain(6, True)
     stance, command = _query(6)
-
     names = ("w", "rotation_weight", "margin", "foot_length", "step_time", "metrics.slope_limit")
-    nominal = [get_leaf(robot, n) for n in names]
-
-    def f(*scales):  # each parameter as a multiple of its nominal value, so eps is a relative step
-        rb = robot
-        for n, v, s in zip(names, nominal, scales, strict=True):
-            rb = set_leaf(rb, n, v * s)
-        return _objective(terrain, rb, jnp.asarray(stance), jnp.asarray(command), 5.0, 3.0)
-
-    check_grads(
-        jax.jit(f), (jnp.float32(1.0),) * len(names), order=1, modes=("rev",), eps=1e-2, atol=FD_RTOL32, rtol=FD_RTOL32
-    )
-
-
-_value_and_grad = jax.jit(jax.value_and_grad(_objective, argnums=(1, 2, 3)))
+    args = (terrain, robot, jnp.asarray(stance), jnp.asarray(command), 5.0, 3.0)
+    _check_scaled_grads(_value_and_grad, args, names)
 
 
 @pytest.mark.slow
@@ -307,16 +336,6 @@ def _bar_terrain(seed: int) -> ij.Terrain:
         x, y0 = rng.integers(10, 50), rng.integers(0, 40)
         h[x : x + 2, y0 : y0 + rng.integers(10, 30)] = rng.uniform(0.05, 0.2)
     return ij.terrain.from_arrays(h, None, RES)
-
-
-@jax.jit
-def _exact_and_soft_paths(terrain, robot, stance, swing_from, sharpness):
-    acts = ij.robots.side_actions(robot, 1.0)
-    steps = ij.geometry.compose(stance, acts)
-    idx = jnp.arange(acts.shape[0])
-    e = foot_cost_terms(terrain, robot, stance, -1.0, steps, swing_from=swing_from, action_index=idx)
-    s = relax.soft_foot_cost_terms(terrain, robot, stance, steps, idx, sharpness=sharpness, swing_from=swing_from)
-    return e, s
 
 
 @pytest.mark.slow
@@ -402,6 +421,9 @@ def _swing_objective(terrain, robot, stance, swing_from, command, sharpness, tau
     return r.expected_cost + r.log_probs[3] + jnp.sum(r.expected_pose) + jnp.sum(r.terms.path_height_m)
 
 
+_swing_value_and_grad = jax.jit(jax.value_and_grad(_swing_objective, argnums=(1, 2, 3, 4)))
+
+
 @pytest.mark.slow
 def test_swing_path_gradients_float64(small_robot):
     robot = small_robot
@@ -412,9 +434,11 @@ def test_swing_path_gradients_float64(small_robot):
         stance = jnp.asarray(SWING_STANCE, jnp.float64)
         swing_from = jnp.asarray(SWING_FROM, jnp.float64)
         command = jnp.array([0.2, 0.05, 0.1])
-        f = jax.jit(_swing_objective)
-        grad_fn = jax.jit(jax.grad(_swing_objective, argnums=(1, 2, 3)))
-        grads = grad_fn(terrain, r64, stance, swing_from, command, 10.0, 1.0)
+
+        def f(*a):
+            return _swing_value_and_grad(*a)[0]
+
+        _, grads = _swing_value_and_grad(terrain, r64, stance, swing_from, command, 10.0, 1.0)
         h = 1e-6
         worst = 0.0
         for name in ("clearance", "foot_width", "foot_length", "w", "margin"):
@@ -446,19 +470,8 @@ def test_swing_path_gradients_float32_check_grads(small_robot):
     robot = small_robot
     terrain = _bar_terrain(2)
     names = ("clearance", "foot_width", "w")
-    nominal = [get_leaf(robot, n) for n in names]
-
-    def f(*scales):
-        rb = robot
-        for n, v, s in zip(names, nominal, scales, strict=True):
-            rb = set_leaf(rb, n, v * s)
-        return _swing_objective(
-            terrain, rb, jnp.asarray(SWING_STANCE), jnp.asarray(SWING_FROM), jnp.array([0.2, 0.05, 0.1]), 5.0, 3.0
-        )
-
-    check_grads(
-        jax.jit(f), (jnp.float32(1.0),) * len(names), order=1, modes=("rev",), eps=1e-2, atol=FD_RTOL32, rtol=FD_RTOL32
-    )
+    args = (terrain, robot, jnp.asarray(SWING_STANCE), jnp.asarray(SWING_FROM), jnp.array([0.2, 0.05, 0.1]), 5.0, 3.0)
+    _check_scaled_grads(_swing_value_and_grad, args, names)
 
 
 @pytest.mark.slow
@@ -468,9 +481,7 @@ def test_swing_path_zero_length_swing_is_finite(small_robot):
     terrain = _bar_terrain(0)
     stance = jnp.asarray(SWING_STANCE)
     swing_from = ij.geometry.compose(stance, ij.robots.side_actions(robot, 1.0)[5])  # exactly on candidate 5
-    val, grads = jax.jit(jax.value_and_grad(_swing_objective, argnums=(1, 2, 3)))(
-        terrain, robot, stance, swing_from, jnp.zeros(3), 20.0, 0.5
-    )
+    val, grads = _swing_value_and_grad(terrain, robot, stance, swing_from, jnp.zeros(3), 20.0, 0.5)
     assert np.isfinite(float(val))
     for g in jax.tree.leaves(grads):
         assert np.all(np.isfinite(np.asarray(g)))
