@@ -7,6 +7,7 @@ and through ``ijoy sim render``.
 """
 
 import io
+import json
 import re
 import signal
 import threading
@@ -300,3 +301,21 @@ def test_sim_render_says_what_it_compiles(quick_lines, tmp_path, capsys, monkeyp
     lines = err.splitlines()
     assert lines[0] == f"[ijoy] compiling {what}: 0 s", lines
     assert any(re.fullmatch(rf"\[ijoy\] compiled {re.escape(what)} in \d+\.\d s", line) for line in lines), lines
+
+
+def test_cue_field_says_what_it_compiles(monkeypatch, tmp_path, capsys):
+    """``ijoy cue field`` (its field's compile stood in for by a 0.3 s sleep): the compiling line, then the
+    compiled one, around the figure's computation; the JSON line on stdout as before."""
+    from ijoy_jax.apps import cli
+    from ijoy_jax.cue import plot
+
+    monkeypatch.setattr(progress, "SHOW_AFTER_S", 0.0)
+    monkeypatch.setattr(plot, "scenario_figure", lambda *a, **k: time.sleep(0.3))
+    out = tmp_path / "field.png"
+    assert cli.main(["cue", "field", "--out", str(out)]) == 0
+    stdout, err = capsys.readouterr()
+    what = "the cue's field over the paper's three scenes"
+    lines = err.splitlines()
+    assert lines[0].startswith(f"ijoy cue field: compiling {what}: "), lines
+    assert re.fullmatch(rf"ijoy cue field: compiled {re.escape(what)} in \d+\.\d s", lines[-1]), lines
+    assert json.loads(stdout) == {"png": str(out)}

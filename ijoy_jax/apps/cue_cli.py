@@ -58,7 +58,10 @@ def main(args) -> int:
 
     robot = robots.hrp2(margin=0.02)
     if args.cue_command == "field":  # --out checked as parsed
-        plot.scenario_figure(plot.paper_cases(), robot, out=args.out)
+        from ijoy_jax.progress import compiling
+
+        with compiling("the cue's field over the paper's three scenes", prefix="ijoy cue field: "):
+            plot.scenario_figure(plot.paper_cases(), robot, out=args.out)  # the compile; drawing is quick
         print(json.dumps({"png": args.out}))
         return 0
     return study(args, robot)
