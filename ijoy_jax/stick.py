@@ -138,7 +138,7 @@ def read_trace(path) -> Trace:
 
 def scripted_commands(trace: Trace, robot: Robot, *, deadzone: float = DEFAULT_DEADZONE, decide_at: float = 0.0,
                       control_dt: float = DEFAULT_CONTROL_DT, num_steps: int | None = None) -> np.ndarray:
-    """(n, 3) float64: the command (m/s, m/s, rad/s) of each decision :func:`drive` makes with the scripted stick
+    """(n, 3) float64: the command (m/s, m/s, rad/s) of each decision :func:`ijoy_jax.live.drive` makes with the stick
     ``trace`` (host only, nothing is decided).
 
     The loop's schedule: with ``ticks = round(step_time / control_dt)`` control ticks per step and

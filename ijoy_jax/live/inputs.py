@@ -1,22 +1,21 @@
 """Where a live drive's command comes from: stick axes, mapped through a dead zone onto the robot's command range.
 
 Every source gives the same thing, three *normalised stick axes* ``(forward, left, turn)``, each in
-[-1, 1] (+1: full forward, full left, full turn to the left), and :func:`axes_to_command` maps them
-onto a command ``(xdot m/s, ydot m/s, thetadot rad/s)`` in the robot's range
+[-1, 1] (+1: full forward, full left, full turn to the left), and :func:`ijoy_jax.stick.axes_to_command` maps
+them onto a command ``(xdot m/s, ydot m/s, thetadot rad/s)`` in the robot's range
 (:func:`ijoy_jax.robots.command_range`) through a dead zone. So a script, a keyboard, a gamepad and
 the browser view drive the robot alike, and a recorded drive keeps both the axes and the command.
 
 Sources (each has ``axes(t) -> (3,)`` float64, ``t`` the drive's clock in seconds, and ``close()``):
 
-* :class:`ScriptInput`: a trace file (:func:`read_trace`, the format below), sampled and held; a
-  scripted virtual joystick, for tests and for repeating a drive.
+* :class:`ScriptInput`: a trace file (:func:`ijoy_jax.stick.read_trace`, whose module documents the format),
+  sampled and held; a scripted virtual joystick, for tests and for repeating a drive.
 * :class:`SharedAxes`: the latest axes set by another thread (the live view's keyboard or
   browser gamepad, :mod:`ijoy_jax.live.view`).
 * :class:`TerminalKeyboard`: keys typed into a terminal (w/s forward and back, a/d left and
   right, q/e turn, space stop); a key holds its axis for :data:`KEY_HOLD` s, so the terminal's
   key repeat keeps it held.
 * :class:`Gamepad`: a gamepad or joystick through SDL (pygame-ce), :data:`GAMEPAD_AXES` by default.
-
 """
 
 from __future__ import annotations
@@ -48,7 +47,7 @@ is -1 in SDL) and x (right is +1), the right stick's x (axis 3 on the Linux evde
 ``axes=`` otherwise)."""
 
 
-# ---------------------------------------------------------------------------------------------- trace files
+# ---------------------------------------------------------------------------------------------- a trace file
 
 
 class ScriptInput:
