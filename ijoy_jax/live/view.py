@@ -1,14 +1,16 @@
 """The live view: a browser page that shows a drive as it happens and takes the stick from the keyboard or a gamepad.
 
 A small aiohttp server (one thread, its own asyncio loop) serves one page (``static/index.html``,
-``static/view.js``: a top-down canvas drawing, no build step) and a WebSocket. The page draws the
-terrain (the height map as an image, obstacles dark), both feet, the chosen next foothold, every
-candidate of the current decision (a dot per action of S: green to yellow by FootCost, red where
-invalid), the haptic cue's reach (the polygon of the footholds the next decision can reach per
-direction), the command (the stick's position and the cue's force on it) and the decision latency
-(a bar per decision against the step time). Keys w/s, a/d, q/e (or the arrow keys, with shift for
-turning) and a gamepad through the browser's Gamepad API send stick axes back over the WebSocket into
-a :class:`ijoy_jax.live.SharedAxes` the drive reads.
+``static/view.js``: a top-down canvas drawing, no build step) and a WebSocket. The page comes with the scene
+and the latest state written into it (:func:`page_html`), so its first paint, at the page's load event,
+already shows the robot; the WebSocket then sends every new state. The page draws the terrain (the height
+map as an image, obstacles dark) with x and y axes in metres along its edges, both feet, the chosen next
+foothold, every candidate of the current decision (a dot per action of S: green to yellow by FootCost, red
+where invalid), the haptic cue's reach (the polygon of the footholds the next decision can reach per
+direction), the command (the stick's position and the cue's force on it) and the decision latency (a bar per
+decision against the step time). Keys w/s, a/d, q/e (or the arrow keys, with shift for turning) and a
+gamepad through the browser's Gamepad API send stick axes back over the WebSocket into a
+:class:`ijoy_jax.live.SharedAxes` the drive reads.
 
 On a remote GPU machine: ``ijoy drive --port 8765`` there, ``ssh -L 8765:localhost:8765 HOST`` here, and
 open http://localhost:8765 (docs/drive.md). The server binds 127.0.0.1 by default.
@@ -30,7 +32,7 @@ from ijoy_jax.recordings import json_ready
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
-__all__ = ["DEFAULT_PORT", "MAX_MESSAGE_BYTES", "ViewServer", "page_message", "terrain_image"]
+__all__ = ["DEFAULT_PORT", "MAX_MESSAGE_BYTES", "ViewServer", "page_html", "page_message", "terrain_image"]
 
 DEFAULT_PORT = 8765
 """The view's default TCP port."""
@@ -48,6 +50,32 @@ def page_message(text: str) -> dict | None:
     except (ValueError, RecursionError):
         return None
     return data if isinstance(data, dict) else None
+
+
+_INITIAL = '<script id="ijoy-initial" type="application/json">null</script>'
+"""The page's placeholder for the scene and state it starts with (static/index.html)."""
+
+
+def page_html(scene: dict, state: str) -> str:
+    """The view's page with the scene and the latest state written into it, so its first paint shows the robot.
+
+    The page draws them as its load event fires (the terrain image is an ``<img>`` of the page, so the load event
+    waits for it), before the WebSocket brings newer states: a screenshot taken at the load event shows the
+    terrain and the feet rather than an empty map.
+
+    Args:
+      scene: the scene as ``/scene.json`` serves it ({} before :meth:`ViewServer.set_scene`).
+      state: the latest state as JSON text, as the WebSocket sends it ("{}" before the first
+        :meth:`ViewServer.publish`).
+
+    Returns:
+      The HTML text. Every ``<`` in the embedded JSON is written ``\\u003c`` (the same JSON value), so no text in
+      a state (``</script>``, ``<!--``) can end the script element early.
+    """
+    template = (resources.files("ijoy_jax.live") / "static" / "index.html").read_text()
+    data = '{"scene": ' + json.dumps(scene) + ', "state": ' + state + "}"
+    data = data.replace("<", "\\u003c")
+    return template.replace(_INITIAL, f'<script id="ijoy-initial" type="application/json">{data}</script>', 1)
 
 
 def terrain_image(terrain: Terrain) -> bytes:
@@ -167,7 +195,11 @@ class ViewServer:
         static = resources.files("ijoy_jax.live") / "static"
 
         async def page(_):
-            return web.Response(text=(static / "index.html").read_text(), content_type="text/html")
+            with self._lock:
+                scene, state = self._scene, self._state
+            return web.Response(
+                text=page_html(scene, state), content_type="text/html", headers={"Cache-Control": "no-store"}
+            )
 
         async def script(_):
             return web.Response(text=(static / "view.js").read_text(), content_type="application/javascript")

@@ -4,7 +4,14 @@ const mapCanvas = document.getElementById("map");
 const ctx = mapCanvas.getContext("2d");
 const status = document.getElementById("status");
 let scene = null, terrainImg = null, state = null, ws = null;
-window.ijoy = { frames: 0, states: 0, sent: 0, axes: [0, 0, 0] };
+window.ijoy = { frames: 0, states: 0, sent: 0, axes: [0, 0, 0], initial: false };
+
+// The scene and latest state the server wrote into the page (#ijoy-initial), so the first paint shows the robot
+// before the WebSocket connects; null where the page came without them (the drive had not started).
+function initialData() {
+  const el = document.getElementById("ijoy-initial");
+  try { return el ? JSON.parse(el.textContent) : null; } catch (e) { return null; }
+}
 
 async function loadScene() {
   for (;;) {
@@ -25,12 +32,76 @@ function connect() {
 }
 
 // ---- world <-> canvas
+// canvas px kept free around the map for the metre axes: their labels left and below, the titles, the last labels
+const AXIS_LEFT = 52, AXIS_BOTTOM = 40, AXIS_TOP = 24, AXIS_RIGHT = 24;
+
 function view() {
+  // the map fitted into the canvas less the axes' margins: k px per metre, (ox, oy) its top-left corner in px
   const W = mapCanvas.width, H = mapCanvas.height;
   const wx = scene.shape[0] * scene.resolution, wy = scene.shape[1] * scene.resolution;
-  const k = Math.min(W / wx, H / wy) * 0.97;
-  const ox = (W - k * wx) / 2, oy = (H - k * wy) / 2;
-  return { k, tx: x => ox + (x - scene.origin[0]) * k, ty: y => H - oy - (y - scene.origin[1]) * k, wx, wy, ox, oy };
+  const aw = Math.max(1, W - AXIS_LEFT - AXIS_RIGHT), ah = Math.max(1, H - AXIS_BOTTOM - AXIS_TOP);
+  const k = Math.min(aw / wx, ah / wy);
+  const ox = AXIS_LEFT + (aw - k * wx) / 2, oy = AXIS_TOP + (ah - k * wy) / 2;
+  return { k, tx: x => ox + (x - scene.origin[0]) * k, ty: y => oy + k * wy - (y - scene.origin[1]) * k, wx, wy, ox, oy };
+}
+
+// The metre axes' tick step: the smallest of 1, 2, 2.5, 5 times a power of ten that cuts the map's longer side
+// into at most 6 intervals and keeps ticks at least 60 px apart (labels readable at any canvas size).
+function tickStep(extent, pxPerMetre) {
+  for (let e = -3; e <= 6; e++) {
+    for (const m of [1, 2, 2.5, 5]) {
+      const step = m * Math.pow(10, e);
+      if (extent / step <= 6 && step * pxPerMetre >= 60) return step;
+    }
+  }
+  return extent;
+}
+
+// Tick values (m): the multiples of step within [lo, hi], in world coordinates, with the decimals step needs.
+function ticks(lo, hi, step) {
+  const dec = [0, 1, 2, 3, 4, 5, 6].find(d => Math.abs(step * 10 ** d - Math.round(step * 10 ** d)) < 1e-9) ?? 6;
+  const eps = 1e-9 * Math.max(1, Math.abs(lo), Math.abs(hi));
+  const out = [];
+  for (let i = Math.ceil((lo - eps) / step); i * step <= hi + eps; i++) {
+    const value = Number((i * step).toFixed(dec));
+    out.push({ value: Object.is(value, -0) ? 0 : value, label: (Object.is(value, -0) ? 0 : value).toFixed(dec) });
+  }
+  return out;
+}
+
+function drawAxes(v) {
+  // x along the map's bottom edge, y along its left edge: ticks and labels in metres (world coordinates); the
+  // tick values and their canvas positions go on the canvas's data attributes (data-x-ticks etc.) for tests
+  const step = tickStep(Math.max(v.wx, v.wy), v.k);
+  const x0 = scene.origin[0], y0 = scene.origin[1];
+  const xt = ticks(x0, x0 + v.wx, step), yt = ticks(y0, y0 + v.wy, step);
+  const left = v.ox, bottom = v.oy + v.k * v.wy;
+  // 2 px lines on whole pixels: crisp at the default size
+  const px = Math.round, bl = px(bottom), ll = px(left);
+  ctx.strokeStyle = "#c8d0d8"; ctx.fillStyle = "#c8d0d8"; ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.moveTo(ll - 2, bl + 1); ctx.lineTo(px(left + v.k * v.wx), bl + 1);
+  ctx.moveTo(ll - 1, bl + 2); ctx.lineTo(ll - 1, px(v.oy));
+  for (const t of xt) { ctx.moveTo(px(v.tx(t.value)), bl); ctx.lineTo(px(v.tx(t.value)), bl + 8); }
+  for (const t of yt) { ctx.moveTo(ll, px(v.ty(t.value))); ctx.lineTo(ll - 8, px(v.ty(t.value))); }
+  ctx.stroke();
+  ctx.font = "13px system-ui, sans-serif";
+  ctx.textAlign = "center"; ctx.textBaseline = "top";
+  for (const t of xt) ctx.fillText(t.label, v.tx(t.value), bottom + 9);
+  ctx.textAlign = "right"; ctx.textBaseline = "middle";
+  for (const t of yt) ctx.fillText(t.label, left - 10, v.ty(t.value));
+  ctx.textAlign = "left"; ctx.textBaseline = "top";
+  ctx.fillText("y (m)", 4, 4);
+  ctx.textAlign = "right"; ctx.textBaseline = "top";
+  ctx.fillText("x (m)", left + v.k * v.wx, bottom + 24);
+  ctx.textAlign = "start"; ctx.textBaseline = "alphabetic";
+  const d = mapCanvas.dataset, key = JSON.stringify([step, x0, y0, v.k, v.ox, v.oy]);
+  if (d.axesKey === key) return;   // unchanged since the last frame: leave the DOM alone
+  d.axesKey = key; d.tickStep = String(step);
+  d.xTicks = JSON.stringify(xt.map(t => t.value)); d.yTicks = JSON.stringify(yt.map(t => t.value));
+  d.xTickLabels = JSON.stringify(xt.map(t => t.label)); d.yTickLabels = JSON.stringify(yt.map(t => t.label));
+  d.xTicksPx = JSON.stringify(xt.map(t => v.tx(t.value))); d.yTicksPx = JSON.stringify(yt.map(t => v.ty(t.value)));
+  d.mapPx = JSON.stringify([left, v.oy, left + v.k * v.wx, bottom]);   // the terrain's left, top, right, bottom
 }
 
 function foot(v, pose, fill, stroke, width) {
@@ -58,6 +129,7 @@ function drawMap() {
   const v = view();
   ctx.imageSmoothingEnabled = false;
   ctx.drawImage(terrainImg, v.ox, v.oy, v.wx * v.k, v.wy * v.k);
+  drawAxes(v);
   if (!state || !state.feet) return;
   // candidates of the current decision
   if (state.candidates) {
@@ -182,4 +254,20 @@ function pollGamepad() {
 }
 setInterval(() => { if (pressed.size) send(keyAxes(), "keyboard"); }, 200);
 
-loadScene().then(() => { connect(); requestAnimationFrame(frame); });
+// The first paint: with the scene and state the server wrote into the page and the terrain image the page
+// loaded with (#terrain), draw them as the page's load event fires (a screenshot taken then shows the robot);
+// without them, wait for the scene as the drive sets it. Then the WebSocket brings every new state.
+function start() {
+  const init = initialData(), img = document.getElementById("terrain");
+  if (init && init.scene && init.scene.shape && img && img.complete && img.naturalWidth > 0) {
+    scene = init.scene; terrainImg = img;
+    if (init.state && init.state.feet) { state = init.state; window.ijoy.initial = true; }
+    else status.textContent = "waiting for the drive's first state...";
+    frame();
+    connect();
+    return;
+  }
+  loadScene().then(() => { connect(); requestAnimationFrame(frame); });
+}
+if (document.readyState === "complete") start();
+else window.addEventListener("load", start);
