@@ -97,7 +97,7 @@ def test_unreachable_is_finite_and_flagged(side, target):
         pos, rot = kin.leg_fk(P, side, q)
         assert float(q[3]) == 0.0
         np.testing.assert_allclose(np.asarray(rot), np.eye(3), atol=1e-6)
-        hip = np.array([0.0, kin.side_sign(side) * P.hip_offset_y, 0.0])
+        hip = np.array([0.0, kin.leg_sign(side) * P.hip_offset_y, 0.0])
         lift = np.array([0.0, 0.0, P.ankle_height])
         want, got = np.asarray(sole) + lift - hip, np.asarray(pos) + lift - hip
         np.testing.assert_allclose(got / np.linalg.norm(got), want / np.linalg.norm(want), atol=1e-6)

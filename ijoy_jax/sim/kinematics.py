@@ -29,11 +29,11 @@ __all__ = [
     "LegIK",
     "leg_fk",
     "leg_ik",
+    "leg_sign",
     "rot_x",
     "rot_y",
     "rot_z",
     "rpy_to_rot",
-    "side_sign",
     "yaw_rot",
 ]
 
@@ -58,8 +58,9 @@ class LegIK(NamedTuple):
     reachable: jax.Array
 
 
-def side_sign(side: Any) -> float:
-    """+1.0 for the left leg, -1.0 for the right (accepts "left"/"right" or +1/-1)."""
+def leg_sign(side: Any) -> float:
+    """+1.0 for the left leg, -1.0 for the right (a leg named "left"/"right" or +1/-1), on the host; a traced side
+    flag reads through :func:`ijoy_jax.robots.side_sign`."""
     if isinstance(side, str):
         if side not in ("left", "right"):
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
@@ -147,7 +148,7 @@ def leg_fk(params, side: Any, q: jax.Array) -> tuple[jax.Array, jax.Array]:
       >>> [round(float(v), 3) for v in pos]
       [0.0, 0.06, -0.705]
     """
-    s = side_sign(side)
+    s = leg_sign(side)
     hip_y, a, b, h = _leg_dims(params)
     q = jnp.asarray(q, _dtype(q))
     dt = q.dtype
@@ -206,7 +207,7 @@ def leg_ik(params, side: Any, pelvis_pos, pelvis_rot, sole_pos, sole_rot) -> Leg
       >>> bool(ok), bool(jnp.allclose(q, q2, atol=1e-4))
       (True, True)
     """
-    s = side_sign(side)
+    s = leg_sign(side)
     hip_y, a, b, h = _leg_dims(params)
     dt = _dtype(pelvis_pos, pelvis_rot, sole_pos, sole_rot)
     pelvis_pos = jnp.asarray(pelvis_pos, dt)

@@ -212,7 +212,7 @@ class BipedParams:
     def joint_range(self, side: Any) -> tuple[np.ndarray, np.ndarray]:
         """(6,) lower and upper joint limits (radians) of one leg; the right leg mirrors yaw and roll."""
         lo, hi = np.array(self.range_lo), np.array(self.range_hi)
-        if kinematics.side_sign(side) < 0:
+        if kinematics.leg_sign(side) < 0:
             mirror = np.array([True, True, False, False, False, True])
             lo, hi = np.where(mirror, -hi, lo), np.where(mirror, -lo, hi)
         return lo, hi
@@ -279,7 +279,7 @@ def _add_robot(spec: mujoco.MjSpec, p: BipedParams) -> None:
 
     shin_con = dict(contype=1, conaffinity=0) if p.shin_contacts else visual
     for side in SIDES:
-        sgn = kinematics.side_sign(side)
+        sgn = kinematics.leg_sign(side)
         lo, hi = p.joint_range(side)
 
         def joint(body, k, pos=(0, 0, 0), side=side, lo=lo, hi=hi):
