@@ -770,9 +770,7 @@ def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_st
     args = (sim, terrain, robot, start, commands, first_swing, targets, dyn, _keys(key, None))
     static = dict(num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
                   frames_per_step=int(frames_per_step), kernel=kernel, refine=_refine(refine))
-    if progress:
-        return compile_and_call(_rollout, *args, what=_compiling(sim, static["num_steps"], None), **static)
-    return _rollout(*args, **static)
+    return _run(_rollout, args, static, progress=progress, batch=None)
 
 
 def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, *, num_steps: int,
@@ -822,9 +820,15 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, 
     args = (sim, terrains, robots, starts, commands, first, targets, dyn, _keys(key, b))
     static = dict(num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
                   frames_per_step=int(frames_per_step), kernel=kernel, refine=_refine(refine))
-    if progress:
-        return compile_and_call(_rollout_batch, *args, what=_compiling(sim, static["num_steps"], b), **static)
-    return _rollout_batch(*args, **static)
+    return _run(_rollout_batch, args, static, progress=progress, batch=b)
+
+
+def _run(program, args: tuple, static: dict, *, progress: bool, batch: int | None) -> control.Trajectory:
+    """``program(*args, **static)`` (``_rollout`` or ``_rollout_batch``; ``args[0]`` is the Sim), compiled
+    ahead of time under progress lines when ``progress`` (:func:`ijoy_jax.progress.compile_and_call`)."""
+    if not progress:
+        return program(*args, **static)
+    return compile_and_call(program, *args, what=_compiling(args[0], static["num_steps"], batch), **static)
 
 
 def _compiling(sim: Sim, num_steps: int, batch: int | None) -> str:
