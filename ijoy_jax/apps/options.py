@@ -42,11 +42,7 @@ def output_file(text: str) -> str:
       argparse.ArgumentTypeError: an empty name or one with a NUL, a folder, or a missing, non-folder or
         read-only parent folder.
     """
-    _named(text, "file")
-    path = Path(text)
-    if path.is_dir() or text.replace(os.sep, "/").split("/")[-1] in ("", ".", ".."):
-        raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name in it")
-    _writable_folder(path.parent, text)
+    _writable_folder(_file_name(text).parent, text)
     return text
 
 
@@ -75,13 +71,7 @@ def output_file_in_new_folder(text: str) -> str:
       argparse.ArgumentTypeError: an empty name or one with a NUL, a folder, or a nearest existing ancestor that
         is not a writable folder.
     """
-    _named(text, "file")
-    path = Path(text)
-    if path.is_dir() or text.replace(os.sep, "/").split("/")[-1] in ("", ".", ".."):
-        raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name in it")
-    if path.parent.exists() and not path.parent.is_dir():
-        raise argparse.ArgumentTypeError(f"no folder for {text!r}: {str(path.parent)!r} is not a folder")
-    _creatable_folder(path.parent, text)
+    _creatable_folder(_file_name(text).parent, text)
     return text
 
 
@@ -91,6 +81,16 @@ def _named(text: str, what: str) -> None:
         raise argparse.ArgumentTypeError(f"needs a {what} name, got {text!r}")
     if "\x00" in text:
         raise argparse.ArgumentTypeError(f"a {what} name cannot hold a NUL character, got {text!r}")
+
+
+def _file_name(text: str) -> Path:
+    """``text`` as the path of a file to write; refused when no file system takes the name (:func:`_named`) or
+    it names a folder (an existing one, or a name ending in a separator, ``.`` or ``..``)."""
+    _named(text, "file")
+    path = Path(text)
+    if path.is_dir() or text.replace(os.sep, "/").split("/")[-1] in ("", ".", ".."):
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name in it")
+    return path
 
 
 def _writable_folder(folder: Path, path: str) -> None:
