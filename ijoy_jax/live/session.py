@@ -25,7 +25,7 @@ from ijoy_jax.live.bodies import PerfectBody
 from ijoy_jax.live.deciders import LocalDecider, RemoteDecider
 from ijoy_jax.live.loop import DriveResult, drive
 from ijoy_jax.robots import Robot
-from ijoy_jax.stick import DEFAULT_CONTROL_DT, DEFAULT_DEADZONE, Trace
+from ijoy_jax.stick import DEFAULT_CONTROL_DT, DEFAULT_DEADZONE, TRACE_HEADER, Trace
 from ijoy_jax.terrain import Terrain, generators
 
 __all__ = ["BODIES", "DriveSettings", "ReplayInput", "build_body", "export_trace",
@@ -334,7 +334,7 @@ def export_trace(recording: recordings.Recording, path) -> int:
         end = last + float(recording.robot.step_time)
     axes = {float(m["t"]): m["axes"] for m in recording.inputs}
     axes.update({float(d["t"]): d["axes"] for d in decisions})
-    lines = ["t,forward,left,turn"]
+    lines = [",".join(TRACE_HEADER)]
     held = None
     for t in sorted(axes):
         a = tuple(float(v) for v in np.clip(np.asarray(axes[t], np.float64), -1.0, 1.0))
