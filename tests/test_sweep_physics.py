@@ -299,7 +299,7 @@ def test_physics_values_do_not_recompile_the_sweep(reference, physics_file, tmp_
 
 
 @pytest.mark.slow
-def test_summary_plot_of_a_physics_sweep_draws_collision_and_fall_rates(reference, tmp_path, monkeypatch):
+def test_summary_plot_of_a_physics_sweep_draws_falls_and_collisions_beside_progress(reference, tmp_path, monkeypatch):
     from ijoy_jax.sweep import results
 
     out, _, _ = reference
@@ -309,7 +309,9 @@ def test_summary_plot_of_a_physics_sweep_draws_collision_and_fall_rates(referenc
     sweep.plot(sweep.load_aggregates(out), tmp_path / "p.png", x="robot.margin")
     (fig,) = figs
     titles = [ax.get_title() for ax in fig.axes]
-    assert titles[:2] == ["collision rate (rollouts touching an obstacle)", "fall rate (rollouts that fell)"]
+    # falls and collisions on either side of progress: the safety beside its price, as the table prints them
+    assert titles[:3] == ["fall rate (rollouts that fell)", "distance along (m)",
+                          "collision rate (rollouts touching an obstacle)"]
     assert len(fig.axes[1].containers) == 2  # one line per friction
     assert {t.get_text() for t in fig.axes[0].get_legend().get_texts()} >= {"friction = 0.05", "friction = 1"}
 
