@@ -1,4 +1,4 @@
-"""The haptic cue (ijoy_jax.cue.field): the feasible command set, the force, reach and effects.
+"""The haptic cue (ijoy_jax.cue): the feasible command set, the force, reach and effects.
 
 References: the selector itself (select_step on the same terrain), brute-force NumPy float64 geometry of
 the action cells (hard min, hard clip), closed forms on a straight wall, exact grid rotations and
@@ -17,7 +17,6 @@ from jax.test_util import check_grads
 
 import ijoy_jax as ij
 from ijoy_jax import cue, haptics, select
-from ijoy_jax.cue import field
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.robots import dist
 from ijoy_jax.testing import NumpyFootCost
@@ -69,7 +68,7 @@ def _clutter(seed):
 
 @jax.jit
 def _forces(feasible, commands, params):
-    return jax.vmap(field._force, in_axes=(None, 0, None))(feasible, commands, params)
+    return jax.vmap(cue.force_terms, in_axes=(None, 0, None))(feasible, commands, params)
 
 
 def _mirror(v):
@@ -289,8 +288,8 @@ def test_consistent_with_select_step():
     assert counts["zero"] > 100 and counts["deviates"] > 50  # both sides of the property were exercised
 
 
-_grad_command = jax.jit(jax.grad(lambda f, c, p: jnp.sum(field._force(f, c, p).force), argnums=1))
-_grad_params = jax.jit(jax.grad(lambda f, c, p: jnp.sum(field._force(f, c, p).force), argnums=2))
+_grad_command = jax.jit(jax.grad(lambda f, c, p: jnp.sum(cue.force_terms(f, c, p).force), argnums=1))
+_grad_params = jax.jit(jax.grad(lambda f, c, p: jnp.sum(cue.force_terms(f, c, p).force), argnums=2))
 
 
 def test_no_valid_action_is_a_flagged_full_force_towards_the_centre():
@@ -307,13 +306,14 @@ def test_no_valid_action_is_a_flagged_full_force_towards_the_centre():
     assert np.all(np.asarray(cue.force(f, [0.0, 0.0, 0.0])) == 0.0)  # at the centre: nowhere to push
     # An unsupported robot (margin beyond its window, set inside a trace) blocks everything the same way.
     wide = ROBOT.replace(margin=jnp.float32(0.5))  # the module's jit, as called inside a trace: not checked
-    g = field._feasible_jit(FLAT, wide, jnp.asarray(STANCE, jnp.float32), jnp.int32(-1), None, None, kernel="xla")
+    g = cue.feasible._feasible_jit(FLAT, wide, jnp.asarray(STANCE, jnp.float32), jnp.int32(-1), None, None,
+                                   kernel="xla")
     assert bool(g.unsupported) and not bool(g.any_valid)
 
 
 def test_nonfinite_command_and_bad_params_inside_jit_give_a_flagged_zero_force():
     f = _wall_feasible()
-    run = field._force_jit  # what force() calls: the checks above it skip traced values
+    run = cue.forces._force_jit  # what force() calls: the checks above it skip traced values
     out = run(f, jnp.array([np.nan, 0.0, 0.0]), PARAMS)
     assert bool(out.nonfinite_command) and np.all(np.asarray(out.force) == 0)
     for bad in (dict(c1=jnp.float32(1.5)), dict(decay=jnp.float32(0.0)), dict(temperature=jnp.float32(np.nan)),
@@ -401,7 +401,7 @@ def test_batched_over_thousands_of_stances_and_commands_matches_one_at_a_time():
         jnp.asarray(stances, jnp.float32), jnp.asarray(sides))
     which = rng.integers(0, 64, 2048)
     cmds = jnp.asarray(rng.uniform([-0.3, -0.2, -0.5], [0.3, 0.2, 0.5], (2048, 3)), jnp.float32)
-    batched = jax.jit(jax.vmap(lambda i, c: field._force(jax.tree_util.tree_map(lambda x: x[i], feas), c, PARAMS)))(
+    batched = jax.jit(jax.vmap(lambda i, c: cue.force_terms(jax.tree_util.tree_map(lambda x: x[i], feas), c, PARAMS)))(
         jnp.asarray(which), cmds)
     assert np.asarray(batched.blocked).mean() > 0.1
     for k in rng.integers(0, 2048, 12):
@@ -419,8 +419,8 @@ def test_gradients_match_finite_differences_in_float64():
     with jax.enable_x64(True):
         f = jax.tree_util.tree_map(lambda x: x.astype(jnp.float64) if x.dtype == jnp.float32 else x, f32)
         p = jax.tree_util.tree_map(lambda x: x.astype(jnp.float64), PARAMS)
-        of_command = jax.jit(lambda c: field._force(f, c, p).force)
-        of_params = jax.jit(lambda c, c1, decay, scales, t: field._force(f, c, p.replace(
+        of_command = jax.jit(lambda c: cue.force_terms(f, c, p).force)
+        of_params = jax.jit(lambda c, c1, decay, scales, t: cue.force_terms(f, c, p.replace(
             c1=c1, decay=decay, scales=scales, temperature=t)).force)
         for command in ([0.2, 0.05, 0.0], [0.27, 0.1, 0.1], [0.15, 0.17, -0.2]):
             c = jnp.asarray(command, jnp.float64)
@@ -439,21 +439,21 @@ def test_gradients_match_finite_differences_in_float64():
 def test_parameters_are_traced_leaves_no_recompile():
     f = _wall_feasible()
     cue.force(f, [0.25, 0.0, 0.0])
-    n_force = compiled_count(field._force_jit)
+    n_force = compiled_count(cue.forces._force_jit)
     for kw in (dict(c1=0.3), dict(decay=0.02), dict(c2=0.5), dict(scales=[1.0, 2.0, 0.5]), dict(temperature=0.01)):
         cue.force(f, [0.2, 0.1, 0.0], **kw)
         cue.force(f, [0.2, 0.1, 0.0], cue.make_params(**kw))
-    assert compiled_count(field._force_jit) == n_force
+    assert compiled_count(cue.forces._force_jit) == n_force
     cue.feasible_commands(WALL, ROBOT, STANCE, -1)
-    n_feas = compiled_count(field._feasible_jit)
+    n_feas = compiled_count(cue.feasible._feasible_jit)
     for stance, side, robot in (([1.0, 1.1, 0.3], 1, ROBOT), (STANCE, -1, ROBOT.replace(margin=jnp.float32(0.05))),
                                 (STANCE, 1, ROBOT.replace(w=jnp.float32(3.0), step_time=jnp.float32(0.6)))):
         cue.feasible_commands(WALL, robot, stance, side)
-    assert compiled_count(field._feasible_jit) == n_feas
+    assert compiled_count(cue.feasible._feasible_jit) == n_feas
     cue.reach(f, 8)
-    n_reach = compiled_count(field._reach_jit)
+    n_reach = compiled_count(cue.reachable._reach_jit)
     cue.reach(_flat_feasible(), 8, turn_rate=0.3)
-    assert compiled_count(field._reach_jit) == n_reach
+    assert compiled_count(cue.reachable._reach_jit) == n_reach
 
 
 def test_c2_is_aldurós_factor_per_unit_of_depth():
@@ -487,8 +487,8 @@ def test_reach_is_where_the_force_starts():
     assert np.all((r >= 0) & (r <= box + 1e-6)) and np.any(r < box - 0.01)
     inside = np.stack([0.999 * r * np.cos(phi), 0.999 * r * np.sin(phi), np.full(32, 0.1)], 1)
     beyond = np.stack([(r + 0.01) * np.cos(phi), (r + 0.01) * np.sin(phi), np.full(32, 0.1)], 1)
-    hard_in = field._hard_open(f, jnp.asarray(inside, jnp.float32))
-    hard_out = field._hard_open(f, jnp.asarray(beyond, jnp.float32))
+    hard_in = cue.reachable._hard_open(f, jnp.asarray(inside, jnp.float32))
+    hard_out = cue.reachable._hard_open(f, jnp.asarray(beyond, jnp.float32))
     assert np.all(np.asarray(hard_in)[r > 0])
     short = r < box - 0.01
     assert np.all(~np.asarray(hard_out)[short])  # the first blocked speed follows the largest open one
@@ -604,10 +604,10 @@ def test_the_prepared_tick_is_the_force_split_at_the_rate_boundary():
     np.testing.assert_array_equal(got, want)
     assert np.any(want != 0)
     cue.tick_force(tick, cmds[0])
-    n = compiled_count(field._tick_jit)
+    n = compiled_count(cue.forces._tick_jit)
     for kw in (dict(c1=0.1), dict(decay=0.3), dict(temperature=0.003)):
         cue.tick_force(cue.prepare_tick(f, **kw), cmds[1])
-    assert compiled_count(field._tick_jit) == n  # the parameters live in the tick's arrays: no recompile
+    assert compiled_count(cue.forces._tick_jit) == n  # the parameters live in the tick's arrays: no recompile
     with pytest.raises(TypeError, match="CueTick"):
         cue.tick_force(f, cmds[0])
     with pytest.raises(ValueError, match="command"):
