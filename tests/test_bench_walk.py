@@ -17,6 +17,7 @@ from ijoy_jax import robots
 from ijoy_jax.apps import bench_walk as B
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.sim import walker as W
+from ijoy_jax.terrain import walk_families
 
 SHAPE = B.grid_shape()
 RES = B.RESOLUTION
@@ -90,7 +91,7 @@ def test_the_jitted_maps_are_the_op_by_op_maps_and_a_new_key_reuses_the_program(
         jitted = fam.maps(jax.random.key(7), BATCH, shape=SHAPE, resolution=RES)
         np.testing.assert_allclose(np.asarray(jitted.height), np.asarray(maps[name].height), atol=1e-6, err_msg=name)
         np.testing.assert_array_equal(np.asarray(jitted.free), np.asarray(maps[name].free), err_msg=name)
-    program = B._jitted(B.FAMILIES["rough"].make)
+    program = walk_families._jitted(B.FAMILIES["rough"].make)
     before = compiled_count(program)
     again = B.FAMILIES["rough"].maps(jax.random.key(8), BATCH, shape=list(SHAPE), resolution=RES)
     assert compiled_count(program) == before == 1
@@ -343,7 +344,7 @@ def test_aggregate_forward_on_flat_is_the_closed_form_and_does_not_recompile():
     midpoint 0.1 m, each later one 0.2 m; and a second batch of maps and commands reuses the program."""
     robot = robots.hrp2()
     starts = B.start_stances(robot, BATCH)
-    terrains = B.flat(0, BATCH, shape=SHAPE, resolution=RES)
+    terrains = B.flat_maps(0, BATCH, shape=SHAPE, resolution=RES)
     traj = B.perfect_rollouts(terrains, robot, starts, B.forward_commands(BATCH, 5), num_steps=5)
     got = B.aggregate(jax.tree_util.tree_map(np.asarray, traj), starts)
     assert got["progress_mean_m"] == pytest.approx(0.1 + 4 * 0.2, abs=1e-5)

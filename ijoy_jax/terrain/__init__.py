@@ -7,6 +7,7 @@ call. Each family's registry record (:mod:`~ijoy_jax.terrain.family`) carries it
 validation and extra metrics; the families live in :mod:`~ijoy_jax.terrain.objects` (walls, obstacles, bars,
 platforms), :mod:`~ijoy_jax.terrain.surfaces` (flat, stairs, stepping stones, slope, rough) and
 :mod:`~ijoy_jax.terrain.passages` (a corridor with pockets, a path of staggered stones).
+:mod:`~ijoy_jax.terrain.walk_families` draws the walking benchmark's batches of maps from those generators.
 """
 
 from ijoy_jax.terrain import generators as generators
