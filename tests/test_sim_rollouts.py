@@ -31,7 +31,7 @@ import pytest
 from test_experiments import HL, RES, SHAPE_2D, STEPS_2D, _start, scenario, scenarios_2d
 
 import ijoy_jax as ij
-from ijoy_jax.sim import physics, render
+from ijoy_jax.sim import _checks, physics, render
 from ijoy_jax.sim import walker as W
 from ijoy_jax.terrain import generators
 
@@ -124,7 +124,7 @@ def test_a_nan_terrain_is_refused_where_concrete_and_stands_flagged_where_traced
     first = jnp.ones(2, jnp.float32)
     dyn = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float32), (2,)), dyn)  # as given
     traj = W._rollout_batch(_tiny_walk.sim(), bad, robots, jnp.asarray(starts, jnp.float32),
-                            jnp.asarray(commands, jnp.float32), first, None, dyn, W._keys(0, 2),
+                            jnp.asarray(commands, jnp.float32), first, None, dyn, _checks.rollout_keys(0, 2),
                             num_steps=_tiny_walk.STEPS, method="exhaustive", swing_path=True, quantize=True,
                             frames_per_step=_tiny_walk.FRAMES, kernel="xla", refine=False)
     traj = jax.tree_util.tree_map(np.asarray, traj)

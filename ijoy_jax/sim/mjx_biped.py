@@ -151,7 +151,7 @@ class MjxBiped(SteppedBiped):
         if grid != sim.shape or float(terrain.resolution) != sim.resolution:
             raise ValueError(f"terrain grid {grid} at {float(terrain.resolution)} m does not match the Sim's "
                              f"{sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid")
-        walker.check_robot(robot, sim.cfg)
+        walker.check_robot_for_sim(robot, sim.cfg)
         start = np.asarray(start, np.float32)
         if start.shape != (2, 3) or not np.all(np.isfinite(start)):
             raise ValueError(f"start must be finite (2, 3) feet (left, right), got shape {start.shape}")

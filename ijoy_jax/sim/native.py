@@ -47,7 +47,7 @@ from ijoy_jax import control, geometry, select
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import controller, kinematics, model, swing
 from ijoy_jax.sim.stepped import PLANAR, SteppedBiped
-from ijoy_jax.sim.walker import Sim, StepLog, ankle_wrench, centre_of_mass, check_robot
+from ijoy_jax.sim.walker import Sim, StepLog, ankle_wrench, centre_of_mass, check_robot_for_sim
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["NativeBiped", "Programs", "programs"]
@@ -156,7 +156,7 @@ class NativeBiped(SteppedBiped):
     """
 
     def __init__(self, sim: Sim, terrain: Terrain, robot: Robot, start, first_swing=LEFT):
-        check_robot(robot, sim.cfg)
+        check_robot_for_sim(robot, sim.cfg)
         start = np.asarray(start, np.float32)
         if start.shape != (2, 3) or not np.all(np.isfinite(start)):
             raise ValueError(f"start must be finite (2, 3) feet (left, right), got shape {start.shape}")

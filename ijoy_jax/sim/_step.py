@@ -1,0 +1,445 @@
+"""The simulated walker's step in public parts: its state, its world, and a step as begin, ticks, end.
+
+:func:`make_world` puts a :class:`~ijoy_jax.sim.walker.Sim`'s robot on a
+terrain with its dynamics (:class:`World`); :func:`init_state` stands it on its
+start feet (:class:`SimState`); :func:`stance_info` is the next decision's
+stance; a step is :func:`begin_step` (the plan, :class:`Step`), one
+:func:`tick` per control period (:class:`TickState`: the controller, then the
+physics steps) and :func:`end_step` (the measured soles and the step's
+:class:`StepLog`). The jitted walk (:func:`ijoy_jax.sim.walker.mjx_walker`)
+and a robot stepped from the host tick by tick
+(:class:`ijoy_jax.sim.mjx_biped.MjxBiped`) run these same functions.
+
+Implementation module of :mod:`ijoy_jax.sim.walker`, which exports its public names.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+from mujoco import mjx
+
+from ijoy_jax import control, geometry, select
+from ijoy_jax.prng import as_key
+from ijoy_jax.robots import Robot
+from ijoy_jax.sim import controller, kinematics, model, physics, preview, swing
+from ijoy_jax.sim._sensors import (
+    ankle_wrench,
+    centre_of_mass,
+    measured_soles,
+    read_sensors,
+    step_start,
+    without_sensors,
+)
+from ijoy_jax.sim._simulator import Sim, nominal_dynamics
+from ijoy_jax.terrain import Terrain
+
+
+class StepLog(NamedTuple):
+    """What one executed step did (recorded per step in ``Trajectory.log``)."""
+
+    landed: jax.Array  # (6,) measured swing sole at the step's end: x, y, z, roll, pitch, yaw
+    placement_error: jax.Array  # () m, |landed - commanded| in xy (0 when no step was sent)
+    yaw_error: jax.Array  # () rad, |wrap(landed - commanded)| yaw
+    tilt_error: jax.Array  # () rad, angle between the landed sole's normal and the commanded one (0 when no step)
+    fallen: jax.Array  # () bool, the robot has fallen (now or before)
+    obstacle_contact: jax.Array  # () bool, a sole sphere (or shin) touched an obstacle cell during the step
+    min_pelvis_height: jax.Array  # () m, lowest pelvis height above the ground during the step
+    max_tilt: jax.Array  # () rad, largest torso tilt during the step
+    qpos: jax.Array  # (frames_per_step, nq) snapshots of the state through the step, for rendering (0 by default)
+    dynamics_invalid: jax.Array  # () bool, a Dynamics value was out of bounds and replaced by its nominal one
+
+
+class SimState(NamedTuple):
+    data: mjx.Data
+    ctrl: controller.CtrlState
+    soles: jax.Array  # (2, 6) measured soles x, y, z, roll, pitch, yaw (row 0 left)
+    planned: jax.Array  # (2, 6) the same soles as the controller commanded them, in its own frame
+    swing: jax.Array  # () +1 if the left foot swings next
+    anchor: jax.Array  # (2,) the ZMP's current support point (controller frame)
+    corr: jax.Array  # (controller.correction_length, 2) the dynamics filter's last correction
+    last: StepLog
+    fresh: jax.Array  # () bool, nothing simulated yet: the next execute stands (the Walker's warm-up step)
+    key: jax.Array  # () PRNG key of the stance noise and the pushes still to come
+    belief: jax.Array  # (2,) m, the measured stance's error for the next decision (physics.Dynamics.stance_noise)
+    sent: jax.Array  # (latency ticks + 1, nu) the last joint targets, newest first (physics.Dynamics.latency)
+
+
+def _normal(sole) -> jax.Array:
+    """(3,) the unit normal of a sole (6,) x, y, z, roll, pitch, yaw."""
+    return kinematics.rpy_to_rot(sole[3:6])[:, 2]
+
+
+def _tilt(quat) -> jax.Array:
+    """Angle between the torso's z axis and the vertical (rad)."""
+    x, y = quat[1], quat[2]
+    cos = 1 - 2 * (x * x + y * y) / jnp.maximum(jnp.sum(quat**2), 1e-12)
+    return jnp.arccos(jnp.clip(cos, -1.0, 1.0))
+
+
+def _obstacle_contact(sim: Sim, terrain: Terrain, d: mjx.Data) -> jax.Array:
+    """A robot geom touches the terrain inside an obstacle cell (looked up half a cell into the ground)."""
+    con = model.contacts(d)
+    robot_geoms = jnp.asarray(np.concatenate([sim.index.sole_geoms.ravel(), sim.index.shin_geom]))
+    g = con.geom  # (ncon, 2)
+    involves = jnp.any(g[:, :, None] == robot_geoms[None, None, :], axis=(1, 2))
+    with_ground = jnp.any(g == sim.index.hfield_geom, axis=1)
+    active = (con.dist < 0) & involves & with_ground
+    normal = con.frame[:, 0, :]
+    probe = con.pos[:, :2] - 0.5 * terrain.resolution * normal[:, :2]
+    ij = jnp.floor((probe - terrain.origin) / terrain.resolution).astype(jnp.int32)
+    nx, ny = terrain.free.shape
+    inside = (ij[:, 0] >= 0) & (ij[:, 0] < nx) & (ij[:, 1] >= 0) & (ij[:, 1] < ny)
+    free = terrain.free[jnp.clip(ij[:, 0], 0, nx - 1), jnp.clip(ij[:, 1], 0, ny - 1)]
+    return jnp.any(active & (~free | ~inside))
+
+
+PLANAR = np.array([0, 1, 5])
+"""The x, y and yaw entries of a sole (6,): x, y, z, roll, pitch, yaw."""
+
+
+def frame_ticks(sim: Sim, frames_per_step: int) -> np.ndarray:
+    """The control ticks (0-based, within a step) whose end states ``StepLog.qpos`` keeps: evenly spaced, the last
+    tick last (the touch-down)."""
+    n = sim.cfg.ticks_per_step
+    if not 0 <= frames_per_step <= n:
+        raise ValueError(f"frames_per_step must be in [0, {n}] (control ticks per step), got {frames_per_step}")
+    return np.round(np.arange(1, frames_per_step + 1) * n / max(frames_per_step, 1)).astype(int) - 1
+
+
+class World(NamedTuple):
+    """What one simulated biped steps on: the terrain, the robot's MJX models on it, its dynamics and the
+    controller's gains (a pytree; :func:`make_world` builds it, inside or outside jit).
+
+    Every field is a traced leaf (or a pytree of them), so one compiled step serves every terrain of the
+    Sim's grid and every :class:`~ijoy_jax.sim.physics.Dynamics`.
+    """
+
+    m: mjx.Model  # the robot on the terrain's height field, with the dynamics' friction, masses and stiffness
+    free: mjx.Model  # the controller's own nominal model without contacts (its dynamics filter's)
+    terrain: Terrain  # the terrain as given (its obstacle cells: StepLog.obstacle_contact; the start footholds)
+    phys: Terrain  # the heights the robot meets: 2D obstacles raised, clipped to the height field's range
+    dynamics: physics.Dynamics  # sanitized: scalar float32 leaves, out-of-bounds values replaced by nominal ones
+    dynamics_invalid: jax.Array  # () bool, a Dynamics value was out of bounds and replaced by its nominal one
+    delay: jax.Array  # () int32 control ticks between the controller's joint targets and the actuators
+    push_dv: jax.Array  # () m/s, the velocity change of the whole robot by a step's push
+    gains: preview.PreviewGains  # the controller's preview gains (controller.gains)
+
+
+def make_world(
+    sim: Sim,
+    terrain: Terrain,
+    *,
+    dynamics: physics.Dynamics | None = None,
+    m: mjx.Model | None = None,
+    free: mjx.Model | None = None,
+) -> World:
+    """The :class:`World` of ``sim``'s robot on ``terrain`` (a grid of ``sim.shape``) with ``dynamics``.
+
+    Args:
+      sim: the :class:`Sim`.
+      terrain: one :class:`Terrain` of ``sim.shape`` cells at ``sim.resolution`` m.
+      dynamics: the robot's :class:`~ijoy_jax.sim.physics.Dynamics` (scalar leaves; sanitized, never
+        NaN); None: :func:`nominal_dynamics`.
+      m: the model with the terrain's height field (default: ``model.put_terrain`` of ``sim.mjx_model``);
+        the dynamics are written into it (:func:`ijoy_jax.sim.physics.put_dynamics`).
+      free: the controller's nominal model for its dynamics filter (default ``sim.mjx_free``).
+    """
+    params, cfg = sim.params, sim.cfg
+    # the heights the robot meets: MuJoCo's height field clips them to [z_lo, z_hi] (model.hfield_data)
+    phys = terrain.replace(
+        height=jnp.clip(model.physical_heights(terrain, params.obstacle_height), params.z_lo, params.z_hi),
+        has_height=True,
+    )
+    m = model.put_terrain(sim.mjx_model, params, terrain) if m is None else m
+    free = sim.mjx_free if free is None else free
+    dyn, dyn_invalid = physics.sanitize(nominal_dynamics(sim) if dynamics is None else dynamics)
+    m = physics.put_dynamics(m, dyn)
+    delay = physics.latency_ticks(dyn.latency, cfg.control_dt)
+    push_dv = dyn.push / jnp.sum(m.body_mass)  # m/s: the impulse's velocity change of the whole robot
+    return World(m, free, terrain, phys, dyn, dyn_invalid, delay, push_dv, controller.gains(cfg))
+
+
+def _rest(sim: Sim, world: World, foothold) -> jax.Array:
+    """The foothold (6,) with z where the tilted sole's spheres first touch the physical terrain."""
+    p = sim.params
+    points = jnp.asarray(model.sole_points(p)[:, :2], jnp.float32)
+    return foothold.at[2].set(swing.resting_height(world.phys, foothold, p.foot_length, p.foot_width, points=points))
+
+
+def _tilt_drop(sim: Sim, sole) -> jax.Array:
+    """How far the lowest sole corner hangs below the centre of a tilted sole (m)."""
+    p = sim.params
+    return 0.5 * p.foot_length * jnp.abs(jnp.sin(sole[4])) + 0.5 * p.foot_width * jnp.abs(jnp.sin(sole[3]))
+
+
+def _split(soles, swing_side):
+    """(stance, swing) rows of (2, ...) soles for the swing side (+1: the left foot swings)."""
+    left_swings = swing_side > 0
+    return jnp.where(left_swings, soles[1], soles[0]), jnp.where(left_swings, soles[0], soles[1])
+
+
+def _believed(pose, s: SimState) -> jax.Array:
+    """A planar pose (3,) as the robot believes it: shifted by its current position error."""
+    return pose.at[:2].add(s.belief)
+
+
+def _believed_error(world: World, k) -> jax.Array:
+    """(2,) m: the error of the stance position the next decision is given (Dynamics.stance_noise)."""
+    return world.dynamics.stance_noise * jax.random.normal(k, (2,), jnp.float32)
+
+
+def init_state(
+    sim: Sim, world: World, robot: Robot, start, first_swing, key=None, *, frames_per_step: int = 0
+) -> SimState:
+    """The biped standing on ``start`` (2, 3) (x, y, yaw of the feet, row 0 left; m, rad), ``first_swing`` (+1
+    left) to swing first: the Walker's ``init``.
+
+    The soles rest on the footholds :func:`ijoy_jax.select.foothold` gives ``robot`` there (the rested sole
+    of the selector's), the pelvis ``cfg.pelvis_height`` above the lower one. ``key`` (PRNG key or int seed,
+    default 0) draws the stance noise and pushes to come; ``frames_per_step`` (static) sizes ``StepLog.qpos``.
+    The first step after it stands (:attr:`SimState.fresh`: the Walker's warm-up).
+
+    Its data holds no sensor readings (``sensordata`` zeros: no physics step has run, so no contact force
+    exists yet); :func:`tick` fills them after its physics steps. The first tick reads the zeros, harmlessly:
+    the controller uses the sensors only in the ankles' damping control (:func:`ijoy_jax.sim.controller.comply`),
+    which a measured load of zero turns off, so that tick runs open loop.
+    """
+    params, cfg = sim.params, sim.cfg
+    keep = frame_ticks(sim, frames_per_step)
+    start = jnp.asarray(start, jnp.float32)
+    planned = jax.vmap(lambda p: _rest(sim, world, select.foothold(world.terrain, robot, p)))(start)
+    # the pelvis cfg.pelvis_height above the lower sole, as the controller holds it
+    qpos = model.stand_pose(
+        params, start, planned[:, 2], jnp.min(planned[:, 2]) + cfg.pelvis_height, tilt=planned[:, 3:5]
+    )[0]
+    m = world.m
+    d = mjx.make_data(m)
+    d = d.replace(qpos=qpos, ctrl=qpos[7:])
+    d = mjx.kinematics(m, d)
+    d = mjx.com_pos(m, d)
+    swing_side = jnp.asarray(first_swing, jnp.float32)
+    cs = controller.init_state(world.gains, d.subtree_com[sim.index.pelvis][:2])
+    corr = jnp.zeros((controller.correction_length(cfg), 2), jnp.float32)
+    soles = measured_soles(sim, d)
+    zero = jnp.float32(0)
+    log = StepLog(
+        soles[0],
+        zero,
+        zero,
+        zero,
+        jnp.bool_(False),
+        jnp.bool_(False),
+        jnp.float32(cfg.pelvis_height),
+        zero,
+        jnp.zeros((len(keep), m.nq), jnp.float32),
+        world.dynamics_invalid,
+    )
+    key, k_belief = jax.random.split(as_key(0 if key is None else key))
+    sent = jnp.broadcast_to(d.ctrl, (physics.max_latency_ticks(cfg.control_dt) + 1, m.nu))
+    # The first step (the loop's warm-up iteration) stands while the preview sees the first step's weight shift
+    # coming; it runs the same code as every step, so it is compiled once.
+    return SimState(
+        d,
+        cs,
+        soles,
+        planned,
+        swing_side,
+        0.5 * (planned[0, :2] + planned[1, :2]),
+        corr,
+        log,
+        jnp.bool_(True),
+        key,
+        _believed_error(world, k_belief),
+        sent,
+    )
+
+
+def stance_info(state: SimState) -> control.StanceInfo:
+    """The next decision's stance (the Walker's ``stance``): the measured stance foot and the swing foot (x, y,
+    yaw), as the robot believes them (shifted by :attr:`SimState.belief`), and the stance side."""
+    st, sw = _split(state.soles, state.swing)
+    return control.StanceInfo(_believed(st[PLANAR], state), -state.swing, _believed(sw[PLANAR], state))
+
+
+class Step(NamedTuple):
+    """A step in progress: what :func:`begin_step` planned, read by every :func:`tick` and by :func:`end_step`."""
+
+    plan: controller.StepPlan  # the step in the controller's own frame
+    target: jax.Array  # (6,) the foothold sent, resting on the physical terrain (world frame)
+    go: jax.Array  # () bool, the swing foot steps (False: the robot stands this step)
+    stance: jax.Array  # (6,) the stance sole as measured when the step began
+    planned_stance: jax.Array  # (6,) the same sole as the controller commanded it, in its own frame
+    to_plan: jax.Array  # (3, 3) world -> the plan's frame (the yaw that takes `stance` onto `planned_stance`)
+    ground: jax.Array  # () m, the lower of the stance and target soles (the pelvis height's reference)
+    corr: jax.Array  # (controller.correction_length, 2) the dynamics filter's correction for this step
+    kick_tick: jax.Array  # () int32, the control tick of the step's push
+    kick_dv: jax.Array  # (2,) m/s, the push's velocity change of the whole robot (0 without pushes)
+    key: jax.Array  # () the PRNG key of the steps after this one
+    belief_key: jax.Array  # () the PRNG key of the next decision's stance error
+
+
+class TickState(NamedTuple):
+    """What changes tick by tick during a step (:func:`tick`'s carry)."""
+
+    data: mjx.Data
+    ctrl: controller.CtrlState
+    touched: jax.Array  # () bool, a sole sphere or shin touched an obstacle cell so far in the step
+    low: jax.Array  # () m, the lowest pelvis height above `Step.ground` so far
+    tilt: jax.Array  # () rad, the largest torso tilt so far
+    sent: jax.Array  # (latency ticks + 1, nu) the last joint targets, newest first
+
+
+def begin_step(sim: Sim, world: World, state: SimState, foothold, go) -> tuple[Step, TickState]:
+    """Plan a step to the selector's ``foothold`` (6,) x, y, z, roll, pitch, yaw (stand if not ``go``): the
+    start of the Walker's ``execute``.
+
+    The foothold rests on the physical terrain; the swing path clears the swept terrain; the step, taken
+    relative to the measured stance sole (as the robot believes it), is applied to the commanded one, so the
+    plan stays in the controller's own frame; the dynamics filter's correction is warm-started from the last
+    step's; the step's push is drawn. A fallen robot, and a fresh one (the warm-up step), stands.
+
+    Returns:
+      ``(step, ticks)``: the :class:`Step` and the :class:`TickState` of its first :func:`tick`.
+    """
+    params, cfg = sim.params, sim.cfg
+    s = state
+    go = jnp.asarray(go) & ~s.last.fallen & ~s.fresh
+    st, sw = _split(s.soles, s.swing)
+    pst, psw = _split(s.planned, s.swing)
+    foothold = jnp.asarray(foothold, jnp.float32)
+    target = _rest(sim, world, foothold)
+    pose = target[PLANAR]
+    # the sole's lowest corner clears the swept terrain by the clearance, whatever the soles' tilts
+    top = swing.corridor_profile(world.phys, sw[PLANAR], pose, params.foot_length, params.foot_width) + jnp.maximum(
+        _tilt_drop(sim, psw), _tilt_drop(sim, target)
+    )
+    # The step relative to the measured stance foot, applied to the commanded one: the plan stays
+    # continuous (no jump to the measured soles' millimetres), the foot lands where the selector chose
+    # relative to where the stance foot really is (as the robot believes it: with stance noise, off by
+    # the error the decision was given).
+    rel = geometry.relative(_believed(st[PLANAR], s), pose)
+    planar = geometry.compose(pst[PLANAR], rel)
+    ptarget = jnp.concatenate([planar[:2], target[2:5], planar[2:]])
+    plan = controller.plan_step(s.anchor, pst, psw, ptarget, go, s.swing, top, cfg.clearance)
+    plan = jax.tree_util.tree_map(
+        lambda a, b: jnp.where(s.fresh, a, b), controller.prepare_plan(pst, psw, s.swing), plan
+    )
+    key, k_belief, k_tick, k_dir = jax.random.split(s.key, 4)
+    angle = jax.random.uniform(k_dir, (), jnp.float32, 0.0, 2 * jnp.pi)
+    dv = jnp.where(s.fresh, 0.0, world.push_dv) * jnp.stack([jnp.cos(angle), jnp.sin(angle)])
+    kick_tick = jax.random.randint(k_tick, (), 0, cfg.ticks_per_step)
+    ground = jnp.minimum(plan.stance[2], plan.swing_to[2])  # as the controller holds the pelvis above it
+    cs = s.ctrl._replace(t=jnp.zeros((), jnp.float32))
+    corr = s.corr
+    if cfg.filter_passes > 0:
+        corr = controller.zmp_correction(
+            world.free,
+            params,
+            cfg,
+            world.gains,
+            plan,
+            cs,
+            cfg.filter_passes,
+            init=controller.carry_correction(cfg, corr),
+        )
+    # World -> the plan's frame: the planar transform that takes the measured stance sole onto the planned one.
+    to_plan = kinematics.rot_z(pst[5] - st[5])
+    step = Step(plan, target, go, st, pst, to_plan, ground, corr, kick_tick, dv, key, k_belief)
+    return step, TickState(s.data, cs, jnp.bool_(False), jnp.float32(jnp.inf), jnp.float32(0), s.sent)
+
+
+def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
+    """One control period (``cfg.control_dt``) of a step: the controller's tick, then its physics steps.
+
+    The controller (:func:`ijoy_jax.sim.controller.control_tick`) gets the measured pelvis pose and centre of
+    mass (:func:`centre_of_mass`: the DCM feedback), mapped into the plan's frame through the stance sole,
+    and the ankles' force/torque sensors. Its joint targets reach the actuators ``world.delay`` ticks later,
+    interpolated linearly over the tick's physics steps from the previous tick's (a servo's first-order hold:
+    held as steps every 10 ms, they jolt the stiff joints and the robot falls within a few 0.2 m steps,
+    measured on the native loop; interpolated, it walks). At tick ``step.kick_tick`` the robot is pushed.
+
+    Args:
+      sim, world, step: the robot, its world and the step (:func:`begin_step`).
+      ticks: the :class:`TickState` after the previous tick (or :func:`begin_step`'s).
+      k: () int, this tick's index in the step (0 to ``cfg.ticks_per_step - 1``).
+    """
+    params, cfg = sim.params, sim.cfg
+    d, cs, touched, low, tilt, sent = ticks
+    window = None if cfg.filter_passes == 0 else lax.dynamic_slice_in_dim(step.corr, k, cfg.horizon)
+    st, pst, to_plan = step.stance, step.planned_stance, step.to_plan
+    base = (to_plan @ (d.qpos[:3] - st[:3]) + pst[:3], to_plan @ kinematics.quat_to_rot(d.qpos[3:7]))
+    c, v = centre_of_mass(sim, d)
+    com = ((to_plan @ (c - st[:3]) + pst[:3])[:2], (to_plan @ v)[:2])
+    q, cs, _ = controller.control_tick(
+        params, cfg, world.gains, step.plan, cs, window, base, ankle_wrench(sim, d), com, world.delay * cfg.control_dt
+    )
+    sent = jnp.concatenate([q[None], sent[:-1]])
+    q = sent[world.delay]  # what the actuators receive now: the targets of `delay` ticks ago
+    d = d.replace(qvel=d.qvel.at[:2].add(jnp.where(k == step.kick_tick, step.kick_dv, 0.0)))
+    q0 = d.ctrl
+    fractions = jnp.arange(1, sim.substeps + 1, dtype=jnp.float32) / sim.substeps
+
+    quiet = without_sensors(world.m)  # the controller reads the sensors once per tick: after the last step
+
+    def step_physics(c, frac):
+        d, _, touched, low, tilt = c
+        d = d.replace(ctrl=q0 + frac * (q - q0))
+        start = step_start(d)
+        d = mjx.step(quiet, d)
+        low = jnp.minimum(low, d.qpos[2] - step.ground)
+        tilt = jnp.maximum(tilt, _tilt(d.qpos[3:7]))
+        touched = touched | _obstacle_contact(sim, world.terrain, d)
+        return (d, start, touched, low, tilt), None
+
+    (d, start, touched, low, tilt), _ = lax.scan(step_physics, (d, step_start(d), touched, low, tilt), fractions)
+    return TickState(read_sensors(world.m, d, start), cs, touched, low, tilt, sent)
+
+
+def end_step(
+    sim: Sim, world: World, state: SimState, step: Step, ticks: TickState, frames: jax.Array | None = None
+) -> SimState:
+    """The robot after a step's last :func:`tick`: the measured soles, the plan's new soles, and the
+    :class:`StepLog` (``frames``: its ``qpos`` snapshots, default none). A diverged simulation (a NaN state,
+    e.g. a stiffness beyond the timestep's limit, or no friction at all) counts as a fall, and the robot is put
+    back to its state at the step's start (its last finite one): no NaN reaches the soles, the log or the
+    trajectory."""
+    s, d, target, go = state, ticks.data, step.target, step.go
+    diverged = ~(jnp.all(jnp.isfinite(d.qpos)) & jnp.all(jnp.isfinite(d.qvel)))
+    d, ctrl, sent = jax.tree_util.tree_map(
+        lambda new, old: jnp.where(diverged, old, new), (d, ticks.ctrl, ticks.sent), (s.data, s.ctrl, s.sent)
+    )
+    pst = step.planned_stance
+    soles = measured_soles(sim, d)
+    left_swings = s.swing > 0
+    landed = jnp.where(left_swings, soles[0], soles[1])
+    planned = jnp.where(left_swings, jnp.stack([step.plan.swing_to, pst]), jnp.stack([pst, step.plan.swing_to]))
+    fallen = s.last.fallen | (ticks.low < sim.fall_height) | (ticks.tilt > sim.fall_tilt) | diverged
+    err = jnp.where(go, jnp.hypot(landed[0] - target[0], landed[1] - target[1]), 0.0)
+    yaw_err = jnp.where(go, jnp.abs(geometry.wrap_angle(landed[5] - target[5])), 0.0)
+    cos_tilt = jnp.clip(jnp.dot(_normal(landed), _normal(target)), -1.0, 1.0)
+    tilt_err = jnp.where(go, jnp.arccos(cos_tilt), 0.0)
+    frames = jnp.zeros((0, sim.mj_model.nq), jnp.float32) if frames is None else frames
+    frames = jnp.where(jnp.all(jnp.isfinite(frames), axis=-1, keepdims=True), frames, d.qpos)  # a diverged one's
+    low = jnp.where(diverged | jnp.isnan(ticks.low), 0.0, ticks.low)  # the pelvis counted on the ground
+    tilt = jnp.where(diverged | jnp.isnan(ticks.tilt), jnp.pi, ticks.tilt)  # and the torso over
+    log = StepLog(landed, err, yaw_err, tilt_err, fallen, ticks.touched, low, tilt, frames, world.dynamics_invalid)
+    anchor = jnp.where(go, pst[:2], 0.5 * (planned[0, :2] + planned[1, :2]))
+    return SimState(
+        d,
+        ctrl,
+        soles,
+        planned,
+        jnp.where(go, -s.swing, s.swing),
+        anchor,
+        step.corr,
+        log,
+        jnp.bool_(False),
+        step.key,
+        _believed_error(world, step.belief_key),
+        sent,
+    )
