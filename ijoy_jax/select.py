@@ -5,8 +5,8 @@ dist(p, q) = ``|p_xy - q_xy|`` + rotation_weight * ``|wrap(p_theta - q_theta)|``
 measured in the stance foot's frame. The ideal step is p_next = p0 + dt * j for
 the joystick command j = (xdot, ydot, thetadot) in the robot's (stance foot's)
 frame; the paper quantises it to the nearest f_i of a precomputed target set F
-(:class:`Targets`, a lattice), and both selectors score against that f_i by
-default so their ``.cost`` agree.
+(:class:`~ijoy_jax.targets.Targets`, a lattice; :mod:`ijoy_jax.targets`), and both
+selectors score against that f_i by default so their ``.cost`` agree.
 
 Selectors (same step on the same inputs)::
 
@@ -46,84 +46,23 @@ from jax import lax
 
 from ijoy_jax import geometry, lookahead
 from ijoy_jax import refine as refine_mod
-from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced, pytree_dataclass, static_field
+from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
 from ijoy_jax.footcost import validate as validate_foot_cost
-from ijoy_jax.footcost.xla import footprint_blocked, plane_metrics, poses_supported, safe_poses
-from ijoy_jax.robots import Robot, check_robot, dist, mirror, side_actions, side_p0, side_sign
+from ijoy_jax.footcost.plane import plane_metrics
+from ijoy_jax.footcost.query import poses_supported, safe_poses
+from ijoy_jax.footcost.xla import footprint_blocked
+from ijoy_jax.jit_cache import compiled_count
+from ijoy_jax.robots import Robot, check_robot, mirror, side_actions, side_p0, side_sign
+from ijoy_jax.targets import Targets as Targets
+from ijoy_jax.targets import action_dists as action_dists
+from ijoy_jax.targets import ideal_step as ideal_step
+from ijoy_jax.targets import make_targets as make_targets
 from ijoy_jax.terrain import Terrain
 
 METHODS = ("exhaustive", "ordered", "naive", "lookahead")
 KERNELS = ("xla", "pallas")
 _ORDERED_CHUNK = 32  # actions per chunk of the ordered search when select_step's chunk is None
-
-
-@pytree_dataclass
-class Targets:
-    """The paper's precomputed target set F and the ordered lists L_i.
-
-    F is a lattice over (dx, dy, dtheta) of the LEFT swing foot (the right
-    foot uses the mirror image). Static: ``lo``, ``step``, ``counts`` (tuples
-    of 3). Leaves::
-
-      order: (|F|, N) int32, L_i: action indices sorted by (dist to f_i, index).
-      dist: (|F|, N) float32, dist(action, f_i) for every pair (same numbers
-        in every method, so costs agree bit for bit).
-    """
-
-    order: jax.Array
-    dist: jax.Array
-    lo: tuple = static_field()
-    step: tuple = static_field()
-    counts: tuple = static_field()
-
-    def points(self) -> jax.Array:
-        """(``|F|``, 3) the target footsteps f_i (left swing foot, stance frame)."""
-        axes = [lo + st * jnp.arange(n, dtype=jnp.float32) for lo, st, n in zip(self.lo, self.step, self.counts,
-                                                                                strict=True)]
-        return jnp.stack(jnp.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-
-    def point(self, i) -> jax.Array:
-        """(3,) the target footstep f_i of flat index ``i``."""
-        k2 = i % self.counts[2]
-        k1 = (i // self.counts[2]) % self.counts[1]
-        k0 = i // (self.counts[1] * self.counts[2])
-        return jnp.stack([lo + st * k.astype(jnp.float32)
-                          for lo, st, k in zip(self.lo, self.step, (k0, k1, k2), strict=True)])
-
-    def nearest(self, rel_left: jax.Array) -> jax.Array:
-        """Index of the f_i nearest a left-foot target (3,): rounding per axis, clamped to F.
-
-        Per-axis rounding minimises every ``|component|`` of the difference, so it
-        minimises dist for any weights.
-        """
-        idx = []
-        for k in range(3):
-            i = jnp.round((rel_left[k] - self.lo[k]) / self.step[k])
-            idx.append(jnp.clip(i, 0, self.counts[k] - 1).astype(jnp.int32))
-        return (idx[0] * self.counts[1] + idx[1]) * self.counts[2] + idx[2]
-
-
-def make_targets(robot: Robot) -> Targets:
-    """Build F and the ordered lists L_i for a robot (traceable: jit/vmap over the robot's leaves).
-
-    F is the lattice ``robot.target_grid`` (static, from
-    :func:`ijoy_jax.robots.target_lattice`): the bounding box of S extended by
-    one action spacing on each side (commands beyond S's reach map to its
-    edge), two points per action spacing along each axis. L_i depends on
-    ``robot.actions`` and ``robot.rotation_weight``: rebuild it when they
-    change (:func:`select_step` and the rollout build it when not given one).
-    """
-    lo, step, counts = robot.target_grid
-    return _targets_for(robot, lo, step, counts)
-
-
-def _targets_for(robot: Robot, lo, step, counts) -> Targets:
-    shell = Targets(order=jnp.zeros((0, 0), jnp.int32), dist=jnp.zeros((0, 0)), lo=lo, step=step, counts=counts)
-    pts = shell.points()
-    d = dist(robot.actions[None, :, :], pts[:, None, :], robot.rotation_weight)  # (|F|, N)
-    order = jnp.argsort(d, axis=-1, stable=True).astype(jnp.int32)  # ties: lower index first
-    return shell.replace(order=order, dist=d.astype(jnp.float32))
 
 
 class StepChoice(NamedTuple):
@@ -140,7 +79,7 @@ class StepChoice(NamedTuple):
         height at the foot centre and its orientation with that yaw,
         ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (as
         :func:`ijoy_jax.sim.kinematics.rpy_to_rot`; the sole's z axis is its
-        plane's upward normal: :func:`ijoy_jax.footcost.xla.sole_tilt`). z,
+        plane's upward normal: :func:`ijoy_jax.footcost.plane.sole_tilt`). z,
         roll and pitch are 0 on a 2D terrain. What a robot's footstep message
         carries; the control loop passes it to the walker.
       valid: () bool, False when no valid step exists: the caller stops walking.
@@ -155,11 +94,11 @@ class StepChoice(NamedTuple):
         ``replace`` or vmap inside a trace) are outside what FootCost supports:
         a margin or footprint beyond the static windows, a negative margin,
         weight or cost, NaN/inf, a non-finite origin or height, a map beyond
-        ``MAX_COORDINATE`` (:func:`~ijoy_jax.footcost.xla.query_supported`);
+        ``MAX_COORDINATE`` (:func:`~ijoy_jax.footcost.query_supported`);
         or when the query's own traced values are: a stance or swing pose
         that is not finite or turns beyond
         :data:`~ijoy_jax.geometry.MAX_ANGLE`, a stance side other than +1 or
-        -1 (:func:`~ijoy_jax.footcost.xla.poses_supported`; ``pose``,
+        -1 (:func:`~ijoy_jax.footcost.query.poses_supported`; ``pose``,
         ``foothold`` and ``target`` then come from finite stand-ins).
         Then no step is valid
         (``valid`` False, ``cost`` +inf): the reason a robot stops.
@@ -177,42 +116,6 @@ class StepChoice(NamedTuple):
     unsupported: jax.Array
 
 
-def ideal_step(robot: Robot, stance_side, command) -> tuple[jax.Array, jax.Array]:
-    """p_next = p0 + step_time * command in the stance frame, and whether the command was finite.
-
-    A command with NaN/inf is replaced by zero (step in place) and flagged.
-    """
-    command = jnp.asarray(command, jnp.float32)
-    ok = jnp.all(jnp.isfinite(command))
-    command = jnp.where(ok, command, 0.0)
-    swing = -side_sign(stance_side)
-    return side_p0(robot, swing) + robot.step_time * command, ok
-
-
-def action_dists(robot: Robot, stance_side, command, targets: Targets, *, quantize: bool = True):
-    """Every action's dist to the step's target, as the selectors score it: ``(dists (N,), target (3,), ok ())``.
-
-    The target is the nearest f_i of F to p_next (``quantize``, the paper's; dists then come from the
-    precomputed ``targets.dist``, the same numbers in every method) or p_next itself; it is returned in the
-    stance foot's frame, with ``ok`` False when the command had NaN/inf (treated as zero, see
-    :func:`ideal_step`). Traceable.
-
-    Example:
-      >>> import ijoy_jax as ij
-      >>> robot = ij.robots.hrp2()
-      >>> d, target, ok = ij.select.action_dists(robot, -1, [0.25, 0.0, 0.0], ij.make_targets(robot))
-      >>> d.shape, [round(float(v), 2) for v in target], float(d.min())
-      ((496,), [0.2, 0.19, 0.0], 0.0)
-    """
-    side = side_sign(stance_side)
-    swing = -side
-    p_next, ok = ideal_step(robot, side, command)
-    if quantize:
-        fi = targets.nearest(mirror(swing, p_next))  # F is stored for the left foot
-        return targets.dist[fi], mirror(swing, targets.point(fi)), ok
-    return dist(side_actions(robot, swing), p_next, robot.rotation_weight), p_next, ok
-
-
 class Prepared(NamedTuple):
     """What a selector needs of one terrain and one robot, built once for many decisions (:func:`prepare`).
 
@@ -220,7 +123,7 @@ class Prepared(NamedTuple):
       robot's static windows (height tables padded by ``index.pad`` cells,
       obstacle prefix counts, kernel window sums; float32 / int32 arrays
       sized by the terrain grid).
-    targets: the robot's :class:`Targets`: F and L_i, ``order`` (``|F|``, N)
+    targets: the robot's :class:`~ijoy_jax.targets.Targets`: F and L_i, ``order`` (``|F|``, N)
       int32 and ``dist`` (``|F|``, N) float32.
     """
 
@@ -290,9 +193,9 @@ def foothold(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None
     """(6,) float32 full world pose ``(x, y, z, roll, pitch, yaw)`` of a sole put down at ``pose`` (3,) (m, rad).
 
     x, y and yaw are the pose's; z, roll and pitch are the rested sole's
-    (:func:`ijoy_jax.footcost.xla.plane_metrics`, :mod:`ijoy_jax.footcost.sole`): the sole on the ground
+    (:func:`ijoy_jax.footcost.plane.plane_metrics`, :mod:`ijoy_jax.footcost.sole`): the sole on the ground
     under its contact points, its height at the foot centre and its orientation
-    (``R = Rz(yaw) Ry(pitch) Rx(roll)``, :func:`ijoy_jax.footcost.xla.sole_tilt`'s convention).
+    (``R = Rz(yaw) Ry(pitch) Rx(roll)``, :func:`ijoy_jax.footcost.plane.sole_tilt`'s convention).
     Zeros on a 2D terrain; finite wherever the pose is (beyond the map's
     edge its heights continue the edge's). Traceable (one FootCost plane):
     :func:`select_step` returns it as :attr:`StepChoice.foothold`.
@@ -720,3 +623,14 @@ def select_step(
 
 
 _select_jit = jax.jit(_select, static_argnames=("method", "quantize", "chunk", "kernel", "horizon", "beam"))
+
+
+def compiled_programs() -> int:
+    """How many programs :func:`select_step` and :func:`lookahead_plan` hold compiled (in this process).
+
+    Read it before and after a loop of calls to learn how many compiles the loop caused: each new input
+    shape or static option (``method``, ``quantize``, ``chunk``, ``kernel``, ``horizon``, ``beam``,
+    ``refine``'s static fields) compiles once; new terrain values, robot parameters, commands, ``discount``
+    or ``refine``'s leaves reuse the program.
+    """
+    return compiled_count(_select_jit) + compiled_count(_plan_jit)

@@ -13,7 +13,6 @@ from jax.test_util import check_grads
 import ijoy_jax as ij
 from ijoy_jax import footcost
 from ijoy_jax.footcost.xla import sole_tilt
-from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.sim.kinematics import rpy_to_rot
 from ijoy_jax.testing import foot_metrics, rect_touches_cells, sole_rpy
 
@@ -464,7 +463,7 @@ def test_no_recompile_when_parameters_or_terrain_values_change():
     steps = np.asarray(ij.action_steps(ROBOT, stance, -1))
     kw = dict(swing_from=np.array([0.6, 0.18, 0.0]), action_index=np.arange(496))
     ij.foot_cost(t, ROBOT, stance, -1, steps, **kw)
-    n = compiled_count(footcost.xla._foot_cost_terms_jit)
+    n = footcost.xla.compiled_programs()
     variants = [
         ROBOT.replace(margin=jnp.float32(0.05)),
         ROBOT.replace(w=jnp.float32(3.0), rotation_weight=jnp.float32(5.0)),
@@ -476,7 +475,7 @@ def test_no_recompile_when_parameters_or_terrain_values_change():
     for r in variants:
         ij.foot_cost(t, r, stance, -1, steps, **kw)
     ij.foot_cost(t.replace(height=t.height * 2), ROBOT, stance + 0.01, 1, steps, **kw)
-    assert compiled_count(footcost.xla._foot_cost_terms_jit) == n
+    assert footcost.xla.compiled_programs() == n
 
 
 @pytest.mark.slow
@@ -527,7 +526,7 @@ def test_fused_reductions_have_the_plain_reductions_derivatives(name):
     shape = (13,) if name == "_totals" else (7, 9)
     count = {"_row_sums": 3, "_totals": 9, "_sum_and_maxima": 7}[name]  # plane_metrics' 1 sum and 6 maxima
     args = tuple(jnp.asarray(rng.standard_normal(shape), jnp.float32) for _ in range(count))
-    fused = getattr(footcost.xla, name)
+    fused = getattr(footcost.plane, name)
     plain = {"_row_sums": lambda a, b, c: (jnp.sum(a, 1), jnp.sum(b, 1)),
              "_totals": lambda *xs: tuple(jnp.sum(x) for x in xs),
              "_sum_and_maxima": lambda a, *bs: (jnp.sum(a), *(jnp.max(b) for b in bs))}[name]

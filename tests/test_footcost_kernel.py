@@ -12,7 +12,6 @@ from hypothesis import strategies as st
 import ijoy_jax as ij
 from ijoy_jax import footcost, select
 from ijoy_jax.footcost.pallas import foot_cost_fused
-from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.testing import rest_metrics
 
 RES = 0.02
@@ -335,10 +334,10 @@ def test_public_select_step_kernel_option_and_no_recompile():
     a = ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], **kw)
     b = ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], method="exhaustive")
     assert int(a.index) == int(b.index) and bool(a.valid) == bool(b.valid)
-    n = compiled_count(select._select_jit)
+    n = select.compiled_programs()
     ij.select_step(terrain, robot.replace(w=jnp.float32(3.0), margin=jnp.float32(0.05)), [0.6, 0.4, 1.0], -1,
                    [0.0, 0.1, -0.2], **kw)
-    assert compiled_count(select._select_jit) == n
+    assert select.compiled_programs() == n
     with pytest.raises(ValueError, match="kernel must be one of"):
         ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], kernel="cuda")
 

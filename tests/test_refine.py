@@ -17,7 +17,6 @@ from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import geometry, refine, robots, select, testing
-from ijoy_jax.jit_cache import compiled_count
 
 SMALL = ij.robots.hrp2(margin=0.02, density=0.25)
 HRP2 = ij.robots.hrp2(margin=0.02)
@@ -155,12 +154,12 @@ def test_refine_options_are_traced_and_never_recompile():
     stance, side, command, _ = _decision(1)
     targets = ij.make_targets(SMALL)
     ij.select_step(terrain, SMALL, stance, side, command, targets=targets, refine=refine.params())
-    before = compiled_count(select._select_jit)
+    before = select.compiled_programs()
     for span, gain in ((0.5, 0.0), (1.0, 1e-3), (0.25, 1e-6)):
         c = ij.select_step(terrain, SMALL, stance, side, command, targets=targets,
                            refine=refine.params(span=span, min_gain=gain))
         assert bool(c.valid)
-    assert compiled_count(select._select_jit) == before
+    assert select.compiled_programs() == before
 
 
 @pytest.mark.slow

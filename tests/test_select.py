@@ -245,14 +245,14 @@ def test_no_recompile_across_parameters_and_commands():
     t = jax.tree_util.tree_map(lambda x: x[0], t)
     args = ([0.5, 0.5, 0.1], 1)
     ij.select_step(t, ROBOT, *args, [0.1, 0.0, 0.0], targets=TARGETS)
-    n = compiled_count(select._select_jit)
+    n = select.compiled_programs()
     for r, cmd in [(ROBOT.replace(w=jnp.float32(5.0)), [0.2, 0.1, 0.0]),
                    (ROBOT.replace(margin=jnp.float32(0.1)), [0.0, 0.0, 0.3]),
                    (ROBOT.replace(step_time=jnp.float32(0.5)), [np.nan, 0.0, 0.0]),
                    (ROBOT.replace(max_sole_roll=jnp.float32(0.05), max_sole_distance=jnp.float32(0.3)),
                     [0.2, 0.0, 0.1])]:
         ij.select_step(t, r, *args, cmd, targets=TARGETS)
-    assert compiled_count(select._select_jit) == n
+    assert select.compiled_programs() == n
 
 
 @pytest.mark.slow
