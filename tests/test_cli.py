@@ -45,6 +45,8 @@ CASES = [
     (["bench", "walk", "--set", "foot_length=0.3"], "--set 'foot_length=0.3': 'foot_length' is not one of ['w',"),
     (["bench", "walk", "--set", "metrics.support_limit=-1"], "robot.metrics.support_limit must be finite and >= 0"),
     (["bench", "sim", "--set", "w=2"], "--set: options of 'ijoy bench walk' only"),
+    (["bench", "sim", "--calls", "5"], "--calls: options of 'ijoy bench haptics' and 'ijoy bench cue' only"),
+    (["bench", "haptics", "--tick-only"], "--tick-only: options of 'ijoy bench cue' only, not of 'haptics'"),
     (["sweep", "run", "no_such_sweep.toml"], "cannot read"),
     (["sweep", "summarize", "no_such_results"], "no result parts"),
     (["sim", "render", "--size", "big"], "argument --size: takes WIDTHxHEIGHT in pixels, e.g. 480x320, got 'big'"),
@@ -215,12 +217,24 @@ def test_every_subcommand_has_a_description():
 
 def test_each_benchmark_has_its_own_help():
     """``ijoy bench NAME --help`` describes NAME and lists only NAME's options (walk's only under walk)."""
-    from ijoy_jax.apps import cli
+    from ijoy_jax.apps import bench_cli
 
-    for name in cli._BENCHMARKS:
+    for name in bench_cli.BENCHMARKS:
         status, out, _ = _main(["bench", name, "--help"])
         assert status == 0 and out.startswith(f"usage: ijoy bench {name} "), out
         assert ("--families" in out) == (name == "walk") and ("--ref REF" in out) == (name == "check"), out
+        assert ("--calls" in out) == (name in ("haptics", "cue")) and ("--tick-only" in out) == (name == "cue"), out
+
+
+def test_every_subcommand_is_a_module_of_its_own():
+    """``ijoy NAME`` lives in ijoy_jax/apps/NAME_cli.py: ``add_parser(sub)`` registers it, ``main(args)`` runs it."""
+    import importlib
+
+    names = [path[1] for path, _ in _commands(_parser()) if len(path) == 2]
+    assert len(names) >= 8
+    for name in names:
+        module = importlib.import_module(f"ijoy_jax.apps.{name}_cli")
+        assert callable(module.add_parser) and callable(module.main), name
 
 
 # A value each option type refuses; an option of a type not listed here fails the test below until it is added.

@@ -31,6 +31,7 @@ import numpy as np
 
 import ijoy_jax as ij
 from ijoy_jax import footcost, select
+from ijoy_jax.apps.options import output_file
 from ijoy_jax.control import rollout
 
 GRID = (200, 200)  # 4 m x 4 m
@@ -458,3 +459,14 @@ def run(name: str, quick: bool = False, chunk: int = 1024, path: str | None = No
     else:
         {"footcost": bench_footcost, "select": bench_select, "lookahead": bench_lookahead}[name](rows, quick, chunk)
     return rows
+
+
+def add_check_options(parser) -> None:
+    """``ijoy bench check``'s own option, beside every benchmark's ``--quick`` and ``--json``."""
+    parser.add_argument("--ref", default=None, type=output_file,
+                        help="npz of reference decisions: compared with where it exists, else written")
+
+
+def report(args) -> list:
+    """``ijoy bench footcost`` (``select``, ``lookahead``, ``check``) from parsed options: :func:`run`'s rows."""
+    return run(args.name, quick=args.quick, path=getattr(args, "ref", None))

@@ -73,7 +73,8 @@ def tick(calls: int, sync: bool, pin: bool = False) -> dict:
 
 
 def _tick_in_subprocess(calls: int, sync: bool, pin: bool) -> dict:
-    cmd = [sys.executable, "-m", "ijoy_jax.apps.bench_cue", "--tick-only", "--calls", str(calls)]
+    cmd = [sys.executable, "-m", "ijoy_jax.apps.cli", "--no-compile-cache", "bench", "cue", "--tick-only", "--calls",
+           str(calls)]
     if sync:
         cmd.append("--sync")
     if pin:
@@ -158,27 +159,37 @@ def format_report(r: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="fewer calls and smaller batches")
-    parser.add_argument("--json", metavar="PATH", type=output_file, help="also write the results as JSON")
+def add_options(parser) -> None:
+    """``ijoy bench cue``'s own options, beside every benchmark's ``--quick`` and ``--json``."""
     parser.add_argument("--calls", type=positive_int, help="timed ticks per dispatch mode")
     parser.add_argument("--sizes", type=positive_ints, help="comma-separated batch sizes, e.g. 1,64,1024")
     parser.add_argument("--tick-only", action="store_true", help="only the tick, in this process (JSON line)")
     parser.add_argument("--sync", action="store_true", help="with --tick-only: synchronous CPU dispatch")
     parser.add_argument("--pin", action="store_true", help="with --tick-only: pin the process to one CPU")
-    args = parser.parse_args(argv)
+
+
+def report(args) -> dict:
+    """``ijoy bench cue`` from parsed options: the result, printed by :func:`format_report` (with --tick-only:
+    :func:`tick`'s, printed as one JSON line)."""
     if args.tick_only:
         result = tick(args.calls or 2000, args.sync, args.pin)
         print(json.dumps(result))
         return result
     result = run(quick=args.quick, calls=args.calls, sizes=args.sizes)
     print(format_report(result))
+    return result
+
+
+def main(argv: list[str] | None = None) -> dict:
+    """``ijoy bench cue ARGV`` as a function: ``--quick``, ``--json PATH`` and :func:`add_options`'s options;
+    prints as :func:`report` does, writes --json's file; returns the result."""
+    parser = argparse.ArgumentParser(prog="ijoy bench cue", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="fewer calls and smaller batches")
+    parser.add_argument("--json", metavar="PATH", type=output_file, help="also write the results as JSON")
+    add_options(parser)
+    args = parser.parse_args(argv)
+    result = report(args)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(result, fh, indent=2)
     return result
-
-
-if __name__ == "__main__":
-    main()

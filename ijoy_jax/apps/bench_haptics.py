@@ -147,20 +147,29 @@ def format_report(r: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="fewer calls and smaller batches")
-    parser.add_argument("--json", metavar="PATH", type=output_file, help="also write the results as JSON")
+def add_options(parser) -> None:
+    """``ijoy bench haptics``'s own options, beside every benchmark's ``--quick`` and ``--json``."""
     parser.add_argument("--calls", type=positive_int, help="timed calls per single-call benchmark")
     parser.add_argument("--sizes", type=positive_ints, help="comma-separated batch sizes, e.g. 1,64,1024")
-    args = parser.parse_args(argv)
+
+
+def report(args) -> dict:
+    """``ijoy bench haptics`` from parsed options: the result, printed by :func:`format_report`."""
     result = run(quick=args.quick, calls=args.calls, sizes=args.sizes)
     print(format_report(result))
+    return result
+
+
+def main(argv: list[str] | None = None) -> dict:
+    """``ijoy bench haptics ARGV`` as a function: ``--quick``, ``--json PATH`` and :func:`add_options`'s options;
+    prints the report, writes --json's file; returns the result."""
+    parser = argparse.ArgumentParser(prog="ijoy bench haptics", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="fewer calls and smaller batches")
+    parser.add_argument("--json", metavar="PATH", type=output_file, help="also write the results as JSON")
+    add_options(parser)
+    args = parser.parse_args(argv)
+    result = report(args)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(result, fh, indent=2)
     return result
-
-
-if __name__ == "__main__":
-    main()

@@ -146,3 +146,10 @@ def format_report(r: dict) -> str:
         f"replies that differ from the in-process decision: {r['mismatches']}",
     ]
     return "\n".join(lines)
+
+
+def report(args) -> dict:
+    """``ijoy bench serve`` from parsed options: :func:`run`'s result, printed by :func:`format_report`."""
+    result = run(quick=args.quick)
+    print(format_report(result))
+    return result

@@ -17,6 +17,7 @@ through the device tool for the MJX figures.
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import time
@@ -162,4 +163,13 @@ def run(quick: bool = False) -> list[dict]:
     rows = [mjx_physics(b, 200 if on_gpu else 50) for b in batches]
     rows.append(cpu_rollout(1024 if on_gpu else 64, 1000 if on_gpu else 200))
     rows += [closed_loop(b, 30) for b in ((1024, 4096) if on_gpu else (4,))]
+    return rows
+
+
+def report(args) -> list[dict]:
+    """``ijoy bench sim`` from parsed options: :func:`run`'s rows, each printed as a JSON line."""
+    rows = []
+    for row in run(quick=args.quick):
+        print(json.dumps(row), flush=True)
+        rows.append(row)
     return rows
