@@ -13,12 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ijoy_jax.sim.walker import StepLog
+from ijoy_jax.sim._step import PLANAR, StepLog
 
 __all__ = ["SteppedBiped"]
-
-PLANAR = np.array([0, 1, 5])
-"""The x, y and yaw entries of a sole (6,): x, y, z, roll, pitch, yaw."""
 
 
 class SteppedBiped:
