@@ -94,9 +94,9 @@ def kill_after_first_part(sweep_file: Path, out: Path, *, chunk: int, hold_s: fl
 
 
 SPY_ON_DEVICES = """
-from ijoy_jax.sweep import execute
+from ijoy_jax.sweep import devices
 seen = []  # per chunk: the device of each slice's outputs
-_dispatch = execute._OnDevices.dispatch
+_dispatch = devices.OnDevices.dispatch
 def spy(self, run, static, shared, batch):
     where = []
     def run_and_note(*args):
@@ -106,7 +106,7 @@ def spy(self, run, static, shared, batch):
     outs = _dispatch(self, run_and_note, static, shared, batch)
     seen.append(sorted(str(d) for ds in where for d in ds))
     return outs
-execute._OnDevices.dispatch = spy
+devices.OnDevices.dispatch = spy
 """
 """Child-script code that spies on the sweep's per-device runner: ``seen`` lists, per chunk, the device that
 computed each slice (its outputs' device)."""

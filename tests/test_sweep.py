@@ -34,7 +34,7 @@ from ijoy_jax import select, stats, sweep
 from ijoy_jax.apps import cli
 from ijoy_jax.footcost import pallas as footcost_kernel
 from ijoy_jax.jit_cache import compiled_count
-from ijoy_jax.sweep import execute
+from ijoy_jax.sweep import devices, folder, programs, sizing
 from ijoy_jax.terrain import generators
 
 # Float metrics from a vmapped chunk vs a single jitted rollout: same ops, possibly fused differently (m).
@@ -262,19 +262,19 @@ def test_pallas_kernel_gives_the_same_results(reference, tmp_path, monkeypatch):
 def test_parameter_values_do_not_recompile(reference, tmp_path):
     _, stats = reference
     assert stats.compiles <= 1  # 0 if an earlier test of this module compiled the same shapes
-    cache = compiled_count(execute._run_chunk)
+    cache = compiled_count(programs._run_chunk)
     other = BASE.replace('"robot.w" = [0.5, 2.0]', '"robot.w" = [0.1, 7.0]').replace(
         '"robot.margin" = [0.0, 0.05]', '"robot.margin" = [0.02, 0.08]').replace(
         "count = 6", "count = 2").replace("vx = [0.1, 0.3]", "vx = 0.2").replace("seed = 3", "seed = 11")
     s = sweep.run(write(tmp_path, other), tmp_path / "o", chunk_size=CHUNK, progress=False)
     assert s.computed == 12 and s.compiles == 0
-    assert compiled_count(execute._run_chunk) == cache
+    assert compiled_count(programs._run_chunk) == cache
 
 
 def _log_chunk_events(monkeypatch) -> list:
     """Record the sweep's chunk loop as ("dispatch", rows) and ("write", chunk id) events."""
     events = []
-    dispatch, write_part = execute._OnDevices.dispatch, execute._write_part
+    dispatch, write_part = devices.OnDevices.dispatch, folder._write_part
 
     def logged_dispatch(self, run, static, shared, batch):
         events.append(("dispatch", len(batch[0])))  # the rows dispatched
@@ -284,8 +284,8 @@ def _log_chunk_events(monkeypatch) -> list:
         events.append(("write", int(df["chunk"].iloc[0])))
         write_part(df, path, plan_record)
 
-    monkeypatch.setattr(execute._OnDevices, "dispatch", logged_dispatch)
-    monkeypatch.setattr(execute, "_write_part", logged_write)
+    monkeypatch.setattr(devices.OnDevices, "dispatch", logged_dispatch)
+    monkeypatch.setattr(folder, "_write_part", logged_write)
     return events
 
 
@@ -430,14 +430,14 @@ def test_resume_after_sigkill(reference, base_file, tmp_path):
 def test_a_chunk_dispatched_before_an_error_is_still_written(reference, base_file, tmp_path, monkeypatch):
     ref_out, _ = reference
     events = _log_chunk_events(monkeypatch)
-    logged = execute._OnDevices.dispatch
+    logged = devices.OnDevices.dispatch
 
     def fail_fourth(self, *args):
         if sum(k == "dispatch" for k, _ in events) == 3:
             raise RuntimeError("device lost")
         return logged(self, *args)
 
-    monkeypatch.setattr(execute._OnDevices, "dispatch", fail_fourth)
+    monkeypatch.setattr(devices.OnDevices, "dispatch", fail_fourth)
     out = tmp_path / "broken"
     with pytest.raises(RuntimeError, match="device lost"):
         sweep.run(base_file, out, chunk_size=CHUNK, progress=False)
@@ -594,8 +594,8 @@ MiB = 2**20
     (1 * MiB, 64 * MiB, 1, 32),        # exactly a power of two
     (1 * MiB, 40 * MiB, 4, 64),        # per device, times the devices
     (100 * MiB, 80 * 2**30, 1, 256),   # 100 MiB per scenario on an 80 GiB GPU: 409 -> 256
-    (1 * MiB, 80 * 2**30, 1, execute.MAX_AUTO_CHUNK),   # capped
-    (1 * MiB, 80 * 2**30, 3, 3 * execute.MAX_AUTO_CHUNK),   # the cap is per device: each runs what it would alone
+    (1 * MiB, 80 * 2**30, 1, sizing.MAX_AUTO_CHUNK),   # capped
+    (1 * MiB, 80 * 2**30, 3, 3 * sizing.MAX_AUTO_CHUNK),   # the cap is per device: each runs what it would alone
     (10 * 2**30, 16 * 2**30, 2, 2),    # a scenario larger than half the memory: still one per device
 ])
 def test_auto_chunk_size(per, mem, ndev, want):
@@ -631,7 +631,7 @@ def test_balanced_chunk_size_refuses_nonsense():
 
 def test_default_chunk_size_is_the_cpu_default_here(base_file):
     cfg = sweep.load_config(base_file)
-    assert execute._device_bytes(jax.local_devices()[0]) is None  # CPU reports no memory limit
+    assert sizing._device_bytes(jax.local_devices()[0]) is None  # CPU reports no memory limit
     assert sweep.default_chunk_size(cfg, sweep.scenarios(cfg), {}, jax.local_devices()) == sweep.DEFAULT_CHUNK
 
 
@@ -639,22 +639,22 @@ def test_scenario_bytes_from_the_compiled_chunk(base_file):
     cfg = sweep.load_config(base_file)
     table = sweep.scenarios(cfg)
     traces = sweep.trace_count()
-    base = execute._base_robot(cfg, table, 0.25)
+    base = programs.base_robot(cfg, table, 0.25)
     per, shared = sweep.scenario_bytes(cfg, table, base)
     assert sweep.trace_count() == traces + 1  # lowered and compiled ahead of time, not run
     assert 1_000 < per < 10**8, per
     # The shared part (base robot, target tables, as kept by jit) is at most their leaves' bytes.
-    _, targets = execute._shared(table, base)
+    _, targets = programs.shared_inputs(table, base)
     assert 0 < shared <= sum(np.asarray(x).nbytes for x in jax.tree.leaves((base, targets)))
 
 
 def test_run_sizes_chunks_from_a_fake_device_memory(base_file, tmp_path, monkeypatch):
     # As on a GPU reporting 40 MiB with 1 MiB per scenario: 16 per chunk, and a resume keeps it.
-    monkeypatch.setattr(execute, "_device_bytes", lambda device: 40 * MiB)
-    monkeypatch.setattr(execute, "scenario_bytes", lambda cfg, table, base, sim=None: (1 * MiB, 0))
+    monkeypatch.setattr(sizing, "_device_bytes", lambda device: 40 * MiB)
+    monkeypatch.setattr(sizing, "scenario_bytes", lambda cfg, table, base, sim=None: (1 * MiB, 0))
     s = sweep.run(base_file, tmp_path / "o", max_scenarios=4, progress=False)
     assert (s.chunk_size, s.chunks) == (16, 1)
-    monkeypatch.setattr(execute, "_device_bytes", lambda device: 400 * MiB)  # another GPU on resume
+    monkeypatch.setattr(sizing, "_device_bytes", lambda device: 400 * MiB)  # another GPU on resume
     again = sweep.run(base_file, tmp_path / "o", max_scenarios=4, progress=False)
     assert (again.chunk_size, again.computed, again.skipped) == (16, 0, 1)
     man = json.loads((tmp_path / "o" / "manifest.json").read_text())
@@ -665,7 +665,7 @@ def test_run_sizes_chunks_from_a_fake_device_memory(base_file, tmp_path, monkeyp
 
 
 def test_density_axis_is_drawn_in_action_counts_with_the_papers_496(tmp_path, monkeypatch):
-    from ijoy_jax.sweep import results
+    from ijoy_jax.sweep import plots
 
     dens = [0.4, 0.5, 0.75, 1.0, 1.5, 2.0]
     assert sweep.action_counts(dens).tolist() == [52, 117, 202, 496, 1279, 3307]
@@ -673,8 +673,8 @@ def test_density_axis_is_drawn_in_action_counts_with_the_papers_496(tmp_path, mo
     for m in ("distance_along", "mean_deviation"):
         agg[f"{m}.mean"], agg[f"{m}.ci95"] = np.linspace(1, 2, 6), 0.1
     figs = []
-    finish = results._finish
-    monkeypatch.setattr(results, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
+    finish = plots._finish
+    monkeypatch.setattr(plots, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
     png = sweep.plot(agg, tmp_path / "size.png", metrics=("distance_along", "mean_deviation"), title="size")
     assert Path(png).stat().st_size > 10_000
     for ax in figs[0].axes:
@@ -694,15 +694,15 @@ def test_density_axis_is_drawn_in_action_counts_with_the_papers_496(tmp_path, mo
 def test_the_tradeoff_plot_puts_each_cell_at_its_price_and_safety(tmp_path, monkeypatch):
     """Falls against progress, one point per cell: coloured by the first swept column, labelled by the others,
     each point at the cell's means with its CIs (a rate's clipped to [0, 1])."""
-    from ijoy_jax.sweep import results
+    from ijoy_jax.sweep import plots
 
     amp, w = np.repeat([0.01, 0.03], 3), np.tile([1.0, 2.0, 4.0], 2)
     agg = pd.DataFrame({"cell": range(6), "terrain.amplitude": amp, "robot.w": w, "n": 64,
                         "fell.mean": amp * w, "fell.ci95": 0.05, "distance_along.mean": w / amp / 100,
                         "distance_along.ci95": 0.1})
     figs = []
-    finish = results._finish
-    monkeypatch.setattr(results, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
+    finish = plots._finish
+    monkeypatch.setattr(plots, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
     sweep.plot_tradeoff(agg, tmp_path / "t.png", title="rough")
     ((ax,),) = [f.axes for f in figs]
     assert len(ax.containers) == 2  # one per amplitude
@@ -725,16 +725,16 @@ def test_summary_plot_is_a_grid_of_distinct_panels(tmp_path, monkeypatch):
     and unit, one line per value of the other swept parameter."""
     from PIL import Image
 
-    from ijoy_jax.sweep import results
+    from ijoy_jax.sweep import plots
 
-    metrics = results.PLOT_METRICS
+    metrics = plots.PLOT_METRICS
     w = [0.0, 0.3, 1.0, 3.0, 10.0]
     agg = pd.DataFrame({"cell": range(10), "robot.w": w * 2, "robot.margin": [0.0] * 5 + [0.04] * 5, "n": 8})
     for i, m in enumerate(metrics):
         agg[f"{m}.mean"], agg[f"{m}.ci95"] = np.linspace(0, 1, 10) + i, 0.1
     figs = []
-    finish = results._finish
-    monkeypatch.setattr(results, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
+    finish = plots._finish
+    monkeypatch.setattr(plots, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
     png = sweep.plot(agg, tmp_path / "summary.png", title="w sweep")
     (fig,) = figs
     assert len(fig.axes) == 6
@@ -760,7 +760,7 @@ def test_summary_plot_panels_are_the_tables_metric_columns(kind, near, tmp_path,
     """``ijoy sweep summarize`` draws, panel by panel and in order, the metrics its table prints, for every
     walker kind, and for results written before ``footholds_near_obstacles`` existed (``near`` False); a
     physics sweep's fall rate and collision rate stand beside progress."""
-    from ijoy_jax.sweep import results
+    from ijoy_jax.sweep import plots
 
     metrics = sweep.METRICS + (sweep.PHYSICS_METRICS if kind == "mjx" else ())
     metrics = tuple(m for m in metrics if near or m != "footholds_near_obstacles")
@@ -771,8 +771,8 @@ def test_summary_plot_panels_are_the_tables_metric_columns(kind, near, tmp_path,
     (tmp_path / "manifest.json").write_text(json.dumps({"name": kind, "plan": {"scenarios": 24}}))
     monkeypatch.setattr(sweep, "load_aggregates", lambda path, **kw: agg)
     figs = []
-    finish = results._finish
-    monkeypatch.setattr(results, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
+    finish = plots._finish
+    monkeypatch.setattr(plots, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
     assert cli.main(["sweep", "summarize", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     header = next(line for line in printed.splitlines() if "distance_along (m)" in line)
@@ -781,8 +781,8 @@ def test_summary_plot_panels_are_the_tables_metric_columns(kind, near, tmp_path,
     columns = [m for m, _ in table]
     (fig,) = figs
     titles = [ax.get_title() for ax in fig.axes]
-    assert titles == [results._TITLES.get(m, f"{m.replace('_', ' ')} ({sweep.UNITS[m]})") for m in columns]
-    assert columns == list(results.summary_metrics(agg))
+    assert titles == [plots._TITLES.get(m, f"{m.replace('_', ' ')} ({sweep.UNITS[m]})") for m in columns]
+    assert columns == list(plots.summary_metrics(agg))
     assert ("footholds_near_obstacles" in columns) == near
     if kind == "mjx":
         assert columns[:3] == ["fell", "distance_along", "collided"]  # falls and contacts beside progress

@@ -24,6 +24,8 @@ from hypothesis import strategies as st
 from ijoy_jax import sweep
 from ijoy_jax.apps import cli
 from ijoy_jax.sweep import config as sweep_config
+from ijoy_jax.sweep import expansion as sweep_expansion
+from ijoy_jax.sweep import fits as sweep_fits
 from ijoy_jax.sweep import results as sweep_results
 from ijoy_jax.sweep import seeding
 from ijoy_jax.terrain import generators as gen
@@ -281,12 +283,12 @@ def test_sizes_are_checked_at_validation_before_any_allocation(tmp_path, text, k
 
 
 def test_tables_beyond_host_memory_are_refused(tmp_path, monkeypatch):
-    monkeypatch.setattr(sweep_config, "_host_memory", lambda: 64 * 2**20)  # a 64 MiB host
+    monkeypatch.setattr(sweep_fits, "_host_memory", lambda: 64 * 2**20)  # a 64 MiB host
     cfg_text = "[sweep]\nscenarios_per_cell = 200000\n"
     with pytest.raises(sweep.SweepConfigError, match=r"sweep.scenarios_per_cell: 2e\+05 scenarios \(1 cells x "
                                                      r"200000 per cell\) need ~.* GiB of host memory"):
         sweep.parse_config(cfg_text)
-    monkeypatch.setattr(sweep_config, "_host_memory", lambda: 64 * 2**30)
+    monkeypatch.setattr(sweep_fits, "_host_memory", lambda: 64 * 2**30)
     cfg = sweep.parse_config(cfg_text)
     assert sweep_config.table_bytes(cfg) < 0.5 * 64 * 2**30
 
@@ -295,7 +297,7 @@ def test_a_big_plan_reports_its_progress_and_builds_only_what_is_asked(monkeypat
     cfg = sweep.parse_config("[sweep]\nscenarios_per_cell = 40\n[command]\nvx = [0.1, 0.3]\n"
                              '[grid]\n"robot.w" = [1, 2]\n')
     full = sweep.scenarios(cfg)
-    monkeypatch.setattr(sweep_config, "_PROGRESS_EVERY", 10)
+    monkeypatch.setattr(sweep_expansion, "_PROGRESS_EVERY", 10)
     monkeypatch.setattr(seeding, "_BLOCK", 8)  # progress is reported per vectorised block of replicates
     head = sweep.scenarios(cfg, 13, progress=True)
     err = capsys.readouterr().err

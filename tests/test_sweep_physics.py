@@ -300,12 +300,12 @@ def test_physics_values_do_not_recompile_the_sweep(reference, physics_file, tmp_
 
 @pytest.mark.slow
 def test_summary_plot_of_a_physics_sweep_draws_falls_and_collisions_beside_progress(reference, tmp_path, monkeypatch):
-    from ijoy_jax.sweep import results
+    from ijoy_jax.sweep import plots
 
     out, _, _ = reference
     figs = []
-    finish = results._finish
-    monkeypatch.setattr(results, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
+    finish = plots._finish
+    monkeypatch.setattr(plots, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
     sweep.plot(sweep.load_aggregates(out), tmp_path / "p.png", x="robot.margin")
     (fig,) = figs
     titles = [ax.get_title() for ax in fig.axes]

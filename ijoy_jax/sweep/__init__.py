@@ -47,65 +47,46 @@ from ijoy_jax.extras import require as _require
 
 _require("sweep", "pandas", "pyarrow", "matplotlib")
 
+from ijoy_jax.limits import MAX_ACTIONS, MAX_DENSITY, MAX_MAP_CELLS, MAX_NUM_STEPS
 from ijoy_jax.sweep import distributed, export, local, recorded
-from ijoy_jax.sweep.config import (
+from ijoy_jax.sweep.columns import EXTRA_METRICS, METRICS, PHYSICS_METRICS, UNITS
+from ijoy_jax.sweep.config import load_config, parse_config
+from ijoy_jax.sweep.execute import RunStats, run
+from ijoy_jax.sweep.expansion import HOST_MEMORY_FRACTION, MAX_SCENARIOS, cells, scenarios, table_bytes
+from ijoy_jax.sweep.export import EXPORT_TERRAINS, export_drive
+from ijoy_jax.sweep.folder import IncompleteSweepError, part_plan
+from ijoy_jax.sweep.plan import plan_hash
+from ijoy_jax.sweep.plots import (
+    PAPER_ACTIONS,
+    PHYSICS_PLOT_METRICS,
+    PLOT_METRICS,
+    SELECTOR_PLOT_METRICS,
+    action_counts,
+    b_max,
+    plot,
+    plot_crossing,
+    plot_tradeoff,
+)
+from ijoy_jax.sweep.programs import Scenario, scenario, scenario_bytes, trace_count
+from ijoy_jax.sweep.results import aggregate, load, load_aggregates, paired_differences
+from ijoy_jax.sweep.schema import (
     COMMAND_KEYS,
-    HOST_MEMORY_FRACTION,
-    MAX_ACTIONS,
-    MAX_DENSITY,
-    MAX_MAP_CELLS,
-    MAX_NUM_STEPS,
     MAX_OBJECT_SLOTS,
-    MAX_SCENARIOS,
-    METRICS,
     MIN_RESOLUTION,
-    PHYSICS_METRICS,
     ROBOT_DEFAULTS,
     SELECTOR_DEFAULTS,
     SIM_MIN_RESOLUTION,
     WALKERS,
     SweepConfig,
     SweepConfigError,
-    cells,
-    load_config,
-    parse_config,
-    scenarios,
-    table_bytes,
 )
-from ijoy_jax.sweep.execute import (
+from ijoy_jax.sweep.sizing import (
     DEFAULT_CHUNK,
     MAX_AUTO_CHUNK,
     MEMORY_FRACTION,
-    RunStats,
-    Scenario,
     auto_chunk_size,
     balanced_chunk_size,
     default_chunk_size,
-    run,
-    scenario,
-    scenario_bytes,
-    trace_count,
-)
-from ijoy_jax.sweep.export import EXPORT_TERRAINS, export_drive
-from ijoy_jax.sweep.results import (
-    EXTRA_METRICS,
-    PAPER_ACTIONS,
-    PHYSICS_PLOT_METRICS,
-    PLOT_METRICS,
-    SELECTOR_PLOT_METRICS,
-    UNITS,
-    IncompleteSweepError,
-    action_counts,
-    aggregate,
-    b_max,
-    load,
-    load_aggregates,
-    paired_differences,
-    part_plan,
-    plan_hash,
-    plot,
-    plot_crossing,
-    plot_tradeoff,
 )
 
 __all__ = [

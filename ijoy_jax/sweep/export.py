@@ -18,7 +18,7 @@ from ijoy_jax import recordings, robots
 from ijoy_jax.limits import MAX_DENSITY
 from ijoy_jax.robots import Robot
 from ijoy_jax.sweep.config import ROBOT_DEFAULTS, SweepConfigError, load_config, parse_config, scenarios
-from ijoy_jax.sweep.execute import scenario
+from ijoy_jax.sweep.programs import scenario
 
 __all__ = ["EXPORT_TERRAINS", "export_drive"]
 

@@ -1,0 +1,475 @@
+"""The programs that compute a sweep's chunks, their inputs, and one scenario rebuilt on the host.
+
+Execution. Scenarios are grouped by action-set density (the only parameter
+that changes an array shape) and each group is cut into chunks of
+``chunk_size`` scenarios; a group's last chunk is padded (the padding rows are
+computed and dropped) so every chunk of a group has one shape. One chunk is
+one call of a jitted ``vmap`` over scenarios of: generate the terrain (its
+family's parameters are traced per scenario; or the recorded terrain of
+``[terrain] recording``, shared), ``robot.replace`` with the
+scenario's traced leaves (w, rotation weight, margin, step time, footprint,
+metric weights), the start stance from the terrain's start zone (or the
+recorded start feet), and :func:`ijoy_jax.control.rollout` with the
+scenario's commands, one per step: its held command repeated, or the
+``[command] file``'s sequence (:mod:`ijoy_jax.sweep.recorded`), the same
+program either way, returning
+:meth:`ijoy_jax.Trajectory.summary` plus the family's extra metrics
+(:meth:`ijoy_jax.terrain.family.Family.metrics`; bars: whether the robot got past them).
+
+Physics (``walker = "mjx"``). The MJX biped (:func:`ijoy_jax.sim.walker.make_sim`
+for the sweep's grid and footprint, built once per run) walks instead of the
+perfect robot, each scenario with its :class:`ijoy_jax.sim.physics.Dynamics`
+(the ``sim.*`` columns) and noise key (``fold_in(terrain key, 1)``: replicate r
+is pushed alike in every cell). A chunk is three programs: a vmap that
+generates the terrains, robots and starts, the batch of simulated rollouts
+through :func:`ijoy_jax.sim.walker.rollout_batch` itself (the Sim's MJX models
+are traced arguments, shared and replicated like the targets; its program
+is the one any caller of those shapes uses), and a vmap of
+:func:`ijoy_jax.sim.walker.summary` and the family metrics. Everything else
+(plan, chunk sizes, devices, parts, resume, processes, aggregates) is the
+same as for the perfect robot.
+
+Compiles (counted by :func:`trace_count`): parameter values never
+recompile (physics values and the lookahead's discount neither: they are traced leaves); each density
+value compiles once (its action-set size is a shape; no padding of action sets), and so does each value of
+the selector's static options (``selector.horizon``, ``selector.refine``): chunks are grouped by density,
+horizon and refinement. Static too: the terrain family, grid shape,
+resolution, 2D/2.5D flag, ``num_steps``, ``method``, ``kernel``, ``walker`` and the chunk shape
+``min(chunk_size, scenarios of that density)`` rounded up to a multiple of
+the device count. When ``robot.rotation_weight`` is not swept, the targets F
+and L_i are built once per density outside the jit and shared by every
+scenario; when it is, each scenario sorts its own
+(``|F|`` x N entries), a different compiled function.
+
+The inputs of a chunk are built on the host (:func:`chunk_batch`: the scenarios' rows padded to the call's
+shape; :func:`shared_inputs`: the density's base robot and targets; :func:`chunk_scene`: what every scenario
+shares), and :func:`scenario` rebuilds one scenario exactly as a run does. :func:`scenario_bytes` measures a
+chunk program's memory ahead of time for the chunk size (:mod:`ijoy_jax.sweep.sizing`).
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ijoy_jax import robots
+from ijoy_jax.control import rollout
+from ijoy_jax.select import make_targets
+from ijoy_jax.sweep.expansion import scenarios
+from ijoy_jax.sweep.schema import COMMAND_KEYS, ROBOT_DEFAULTS, SweepConfig, SweepConfigError, reach_of
+from ijoy_jax.terrain import generators
+
+__all__ = [
+    "Scenario",
+    "base_robot",
+    "chunk_batch",
+    "chunk_runner",
+    "chunk_scene",
+    "chunk_static",
+    "make_sim",
+    "physics_steps_per_scenario",
+    "scenario",
+    "scenario_bytes",
+    "shared_inputs",
+    "trace_count",
+    "value_columns",
+]
+
+
+class _Static(NamedTuple):
+    """Everything about a chunk that is static under jit (hashable)."""
+
+    family: str | None  # None: the recorded terrain of the shared _Scene
+    shape: tuple[int, int]
+    resolution: float
+    has_height: bool
+    max_count: int | None
+    num_steps: int
+    method: str
+    kernel: str
+    walker: str
+    horizon: int = 1
+    beam: int | None = None
+    refine: bool = False
+
+
+class _Scene(NamedTuple):
+    """What every scenario of a run shares besides the robot (replicated over devices like the targets)."""
+
+    first_swing: jax.Array  # () float32: +1 the left foot swings first
+    terrain: Any = None  # the recorded Terrain ([terrain] recording), or None: the family generates one each
+    start: jax.Array | None = None  # (2, 3) float32 the recorded start feet (left, right), or None
+
+
+def chunk_scene(cfg: SweepConfig) -> _Scene:
+    """The run's shared :class:`_Scene` (host arrays to the device)."""
+    rec = cfg.terrain_recording
+    first = jnp.float32(cfg.first_swing)
+    if rec is None:
+        return _Scene(first)
+    return _Scene(first, rec.terrain, jnp.asarray(rec.start, jnp.float32))
+
+
+def _setup(static: _Static, base: robots.Robot, key, scene: _Scene, seed, robot_vals, terrain_vals):
+    """One scenario's terrain key, terrain parameters (None for a recorded terrain), terrain, robot and start
+    stance."""
+    tkey = jax.random.fold_in(key, seed)
+    robot = robots.set_leaves(base, {k: robot_vals[k] for k in robots.SCALAR_LEAVES})
+    if static.family is None:  # the recorded terrain and start feet: the same for every scenario
+        return tkey, None, scene.terrain, robot, scene.start
+    fam = generators.FAMILIES[static.family]
+    params = fam.params(**terrain_vals)
+    kw = {} if static.max_count is None else {"max_count": static.max_count}
+    terrain = fam.generator(
+        tkey, params, shape=static.shape, resolution=static.resolution, has_height=static.has_height, **kw
+    )
+    centre = generators.start_point(params, shape=static.shape, resolution=static.resolution)
+    start = robots.start_stance(base, centre[0], centre[1])  # side by side at the step-in-place width, facing +x
+    return tkey, params, terrain, robot, start
+
+
+def _family_metrics(static: _Static, tkey, params, feet, robot) -> dict:
+    """The family's extra metrics (bars: whether the robot got past them), from the terrain it generated ({} for a
+    recorded terrain)."""
+    if static.family is None:
+        return {}
+    fam = generators.FAMILIES[static.family]
+    return fam.metrics(
+        tkey,
+        params,
+        feet,
+        robot.foot_length,
+        robot.foot_width,
+        shape=static.shape,
+        resolution=static.resolution,
+        max_count=static.max_count,
+    )
+
+
+def _scenario(static: _Static, base: robots.Robot, targets, key, scene, seed, robot_vals, terrain_vals, commands):
+    """One scenario of the perfect robot: terrain, robot, start and rollout of its (num_steps, 3) commands; the
+    trajectory's summary (scalars)."""
+    tkey, params, terrain, robot, start = _setup(static, base, key, scene, seed, robot_vals, terrain_vals)
+    lookahead = (
+        dict(horizon=static.horizon, beam=static.beam if static.horizon >= 3 else None, discount=robot_vals["discount"])
+        if static.method == "lookahead"
+        else {}
+    )
+    traj = rollout(
+        terrain,
+        robot,
+        start,
+        commands,
+        static.num_steps,
+        method=static.method,
+        targets=targets,
+        kernel=static.kernel,
+        first_swing=scene.first_swing,
+        refine=static.refine,
+        **lookahead,
+    )
+    return {**traj.summary(), **_family_metrics(static, tkey, params, traj.feet, robot)}
+
+
+def _counting_traces(fn):
+    """``fn`` wrapped to count its own traces, and the function that reads that count (the count lives in
+    this closure, not in module state)."""
+    traces = 0
+
+    @functools.wraps(fn)  # jit reads the wrapped signature (static_argnames)
+    def counted(*args, **kwargs):
+        nonlocal traces
+        traces += 1  # the wrapped function runs once per trace: counts compiles
+        return fn(*args, **kwargs)
+
+    return counted, lambda: traces
+
+
+def _chunk(static: _Static, base, targets, key, sim, scene, seeds, robot_vals, terrain_vals, commands, sim_vals):
+    """A chunk of the perfect robot: one vmapped program (``sim`` and ``sim_vals`` are None and {})."""
+    fn = lambda s, r, t, c: _scenario(static, base, targets, key, scene, s, r, t, c)  # noqa: E731
+    return jax.vmap(fn)(seeds, robot_vals, terrain_vals, commands)
+
+
+_counted_chunk, _chunk_traces = _counting_traces(_chunk)
+_run_chunk = jax.jit(_counted_chunk, static_argnames=("static",))
+
+
+def _prepare(static: _Static, base, key, scene, seeds, robot_vals, terrain_vals):
+    """A physics chunk's inputs of :func:`ijoy_jax.sim.walker.rollout_batch`: per scenario the terrain, robot,
+    start and the key of its stance noise and pushes (``fold_in(terrain key, 1)``: replicate r's in every cell)."""
+
+    def one(seed, r, t):
+        tkey, _, terrain, robot, start = _setup(static, base, key, scene, seed, r, t)
+        return terrain, robot, start, jax.random.fold_in(tkey, 1)
+
+    return jax.vmap(one)(seeds, robot_vals, terrain_vals)
+
+
+def _finish(static: _Static, base, key, scene, seeds, robot_vals, terrain_vals, traj) -> dict:
+    """A physics chunk's per-scenario summary (:func:`ijoy_jax.sim.walker.summary`) and family metrics."""
+    from ijoy_jax.sim import walker
+
+    def one(seed, r, t, tr):
+        tkey, params, _, robot, _ = _setup(static, base, key, scene, seed, r, t)  # the terrain itself is not used
+        return {**walker.summary(tr), **_family_metrics(static, tkey, params, tr.feet, robot)}
+
+    return jax.vmap(one)(seeds, robot_vals, terrain_vals, traj)
+
+
+_counted_prepare, _prepare_traces = _counting_traces(_prepare)
+_run_prepare = jax.jit(_counted_prepare, static_argnames=("static",))
+_run_finish = jax.jit(_finish, static_argnames=("static",))
+
+
+def _physics_chunk(
+    static: _Static, base, targets, key, sim, scene, seeds, robot_vals, terrain_vals, commands, sim_vals
+):
+    """A chunk of the MJX biped: the scenarios' terrains, robots and starts (one small program), their rollouts
+    through :func:`ijoy_jax.sim.walker.rollout_batch` (its own program, shared with any other caller of the
+    same shapes) with the scenarios' :class:`ijoy_jax.sim.physics.Dynamics`, then the summaries (another small
+    program). Traced under one jit (:func:`scenario_bytes`) the three are one program."""
+    from ijoy_jax.sim import physics, walker
+
+    terrains, robots_, starts, keys = _run_prepare(static, base, key, scene, seeds, robot_vals, terrain_vals)
+    traj = walker.rollout_batch(
+        sim,
+        terrains,
+        robots_,
+        starts,
+        commands,
+        num_steps=static.num_steps,
+        method=static.method,
+        first_swing=scene.first_swing,
+        targets=targets,
+        kernel=static.kernel,
+        dynamics=physics.Dynamics(**sim_vals),
+        key=keys,
+        refine=static.refine,
+    )
+    return _run_finish(static, base, key, scene, seeds, robot_vals, terrain_vals, traj)
+
+
+def chunk_runner(static: _Static):
+    """The function that runs a chunk: the perfect robot's jitted chunk or the physics chunk's three programs."""
+    return _run_chunk if static.walker == "perfect" else _physics_chunk
+
+
+def trace_count() -> int:
+    """How many chunk programs have been traced (compiled) in this process: the perfect robot's chunk function,
+    plus each physics chunk shape's preparation (its rollouts are :func:`ijoy_jax.sim.walker.rollout_batch`'s
+    program, counted by :func:`ijoy_jax.sim.walker.compiled_programs`)."""
+    return _chunk_traces() + _prepare_traces()
+
+
+def base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
+    """The density's robot (at the sweep's reach) with static windows covering the sweep's largest footprint and
+    margin.
+
+    Raises SweepConfigError when the largest footprint makes an action overlap the stance foot.
+    """
+    fl = float(table["robot.foot_length"].max())
+    fw = float(table["robot.foot_width"].max())
+    mm = max(float(table["robot.margin"].max()), 0.10)
+    reach = reach_of(cfg)
+    # hrp2 refuses a reach beyond max_sole_distance; the scenarios' own values replace this one, and load_config
+    # checked a sweep's reach against each (a shorter limit at the paper's reach only refuses the far steps)
+    msd = max(float(table["robot.max_sole_distance"].max()), ROBOT_DEFAULTS["max_sole_distance"])
+    try:
+        return robots.hrp2(
+            margin=0.0,
+            density=density,
+            reach=reach,
+            foot_length=fl,
+            foot_width=fw,
+            max_margin=mm,
+            max_sole_distance=msd,
+        )
+    except ValueError as e:
+        raise SweepConfigError(
+            f"{cfg.source}: robot.foot_length/robot.foot_width: a {fl} x {fw} m footprint "
+            f"does not fit HRP-2's action set at density {density} and reach {reach} m: {e}"
+        ) from None
+
+
+class Scenario(NamedTuple):
+    """One scenario of a sweep, rebuilt on the host (:func:`scenario`).
+
+    terrain: its generated :class:`~ijoy_jax.Terrain` (or the recorded one); robot: its :class:`~ijoy_jax.Robot`
+    (the density's action set, the scenario's leaves); start: (2, 3) float32 feet (left, right; m, rad);
+    command: (3,) float32 its held command (m/s, m/s, rad/s), or (num_steps, 3) one per step when the commands
+    come from ``[command] file``; cell, replicate: its cell and replicate (its terrain key is
+    ``fold_in(key(seed), replicate)``); first_swing: +1 if the left foot swings first. So
+    ``ijoy_jax.rollout(s.terrain, s.robot, s.start, s.command, num_steps, first_swing=s.first_swing)`` walks it
+    as the sweep does (the perfect robot).
+    """
+
+    terrain: Any
+    robot: robots.Robot
+    start: np.ndarray
+    command: np.ndarray
+    cell: int
+    replicate: int
+    first_swing: int = 1
+
+
+def scenario(cfg: SweepConfig, scenario_id: int) -> Scenario:
+    """The terrain, robot, start and command of scenario ``scenario_id`` of a sweep, exactly as a run builds them.
+
+    For walking one scenario by hand (``ijoy drive --scenario FILE:ID``) or looking at it. Only the rows up
+    to ``scenario_id`` are expanded (:func:`ijoy_jax.sweep.scenarios` with ``max_scenarios``).
+
+    Raises:
+      SweepConfigError: the id is not a scenario of the sweep.
+    """
+    if (
+        isinstance(scenario_id, bool)
+        or not isinstance(scenario_id, (int, np.integer))
+        or not (0 <= scenario_id < cfg.num_scenarios)
+    ):
+        raise SweepConfigError(
+            f"{cfg.source}: scenario {scenario_id!r} does not exist (the sweep has "
+            f"{cfg.num_scenarios} scenarios, ids 0 to {cfg.num_scenarios - 1})"
+        )
+    table = scenarios(cfg, max_scenarios=int(scenario_id) + 1)
+    row = table.iloc[[int(scenario_id)]]
+    density = float(row["robot.density"].iloc[0])
+    base = base_robot(cfg, table, density)
+    robot_cols, terrain_cols, _ = value_columns(table)
+    replicate, robot_vals, terrain_vals, commands, _ = chunk_batch(row, 1, robot_cols, terrain_cols, cfg=cfg)
+    one = lambda d: {k: v[0] for k, v in d.items()}  # noqa: E731
+    _, _, terrain, robot, start = _setup(
+        chunk_static(cfg),
+        base,
+        jax.random.key(cfg.seed),
+        chunk_scene(cfg),
+        replicate[0],
+        one(robot_vals),
+        one(terrain_vals),
+    )
+    command = commands[0] if cfg.command_file is not None else commands[0, 0]  # (num_steps, 3) or held (3,)
+    return Scenario(
+        terrain,
+        robot,
+        np.asarray(start, np.float32),
+        np.asarray(command, np.float32),
+        int(row["cell"].iloc[0]),
+        int(replicate[0]),
+        cfg.first_swing,
+    )
+
+
+def chunk_batch(rows, size: int, robot_cols, terrain_cols, sim_cols=(), *, cfg: SweepConfig):
+    """Per-scenario inputs of a chunk: ``rows`` padded to ``size`` by repeating the last one (NumPy): the
+    replicates, robot values, terrain values, commands (size, num_steps, 3) (each scenario's held command at
+    every step, or the ``[command] file``'s sequence, the same program either way) and physics values ({} for
+    the perfect robot)."""
+    n = len(rows)
+    pad = np.concatenate([np.arange(n), np.full(size - n, n - 1)])
+
+    def col(name, dtype):
+        return np.asarray(rows[name].to_numpy()[pad], dtype)
+
+    robot_vals = {c.partition(".")[2]: col(c, np.float32) for c in robot_cols}
+    terrain_vals = {
+        c.partition(".")[2]: col(c, np.int32 if rows[c].dtype.kind == "i" else np.float32) for c in terrain_cols
+    }
+    steps = cfg.command_steps
+    if steps is None:
+        held = np.stack([col(f"command.{k}", np.float32) for k in COMMAND_KEYS], axis=-1)
+        commands = np.repeat(held[:, None, :], cfg.num_steps, axis=1)
+    else:
+        commands = np.repeat(np.asarray(steps, np.float32)[None], size, axis=0)
+    sim_vals = {c.partition(".")[2]: col(c, np.float32) for c in sim_cols}
+    return col("replicate", np.int32), robot_vals, terrain_vals, commands, sim_vals
+
+
+def shared_inputs(table, base):
+    """Per-density inputs shared by every scenario: (base robot, targets or None when each scenario sorts)."""
+    if table["robot.rotation_weight"].nunique() > 1:
+        return base, None
+    return base, make_targets(base.replace(rotation_weight=jnp.float32(table["robot.rotation_weight"].iloc[0])))
+
+
+def value_columns(table):
+    """The scenario table's columns a chunk takes per scenario: (robot values, terrain values, physics values)."""
+    # The lookahead's discount travels with the robot values (traced per scenario, like them).
+    robot_cols = [f"robot.{k}" for k in ROBOT_DEFAULTS if k not in ("density", "reach")] + ["selector.discount"]
+    return (
+        robot_cols,
+        [c for c in table.columns if c.startswith("terrain.")],
+        [c for c in table.columns if c.startswith("sim.")],
+    )
+
+
+def chunk_static(cfg: SweepConfig) -> _Static:
+    """The chunk's static configuration (``family`` None for a recorded terrain)."""
+    return _Static(
+        cfg.family,
+        cfg.shape,
+        cfg.resolution,
+        cfg.has_height,
+        cfg.static_max_count,
+        cfg.num_steps,
+        cfg.method,
+        cfg.kernel,
+        cfg.walker,
+        cfg.horizon,
+        cfg.beam,
+        cfg.refine,
+    )
+
+
+def make_sim(cfg: SweepConfig, table):
+    """The MJX biped of a ``walker = "mjx"`` sweep (its map's grid, the sweep's fixed footprint; host-side, no
+    compile), or None for the perfect robot."""
+    if cfg.walker != "mjx":
+        return None
+    from ijoy_jax.sim import walker
+
+    size = {k: float(table[f"robot.{k}"].iloc[0]) for k in ("foot_length", "foot_width")}
+    return walker.make_sim(cfg.shape, cfg.resolution, robot=robots.hrp2(**size))
+
+
+def physics_steps_per_scenario(sim, num_steps: int) -> int:
+    """Physics steps of one simulated rollout of ``num_steps`` steps
+    (:attr:`ijoy_jax.sweep.RunStats.physics_steps`): the steps and the standing warm-up step, each of control
+    ticks of physics steps; 0 without a Sim."""
+    return 0 if sim is None else (num_steps + 1) * sim.cfg.ticks_per_step * sim.substeps
+
+
+def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot, sim=None) -> tuple[int, int]:
+    """Device bytes of a chunk, from the compiled chunk function for one scenario (AOT: nothing runs).
+
+    ``jit(...).lower(...).compile().memory_analysis()`` of a one-scenario chunk with ``base`` (pass
+    the largest action set: memory grows with it), split into what every scenario adds (its inputs,
+    outputs and XLA temporaries) and what the chunk holds once (the shared base robot, target tables
+    and key, e.g. 27 MB for 496 actions, 0.9 GB for 3307; with ``walker = "mjx"`` also the MJX models of
+    ``sim``, built when None). The per-scenario part is an upper bound of the temporaries' measured slope
+    over batch sizes (BENCHMARKS.md has the figures). A physics chunk is measured as one program (its
+    three programs traced under one jit).
+
+    Returns:
+      ``(per_scenario, shared)`` in bytes.
+    """
+    robot_cols, terrain_cols, sim_cols = value_columns(table)
+    base, targets = shared_inputs(table, base)
+    key = jax.random.key(cfg.seed)
+    sim = make_sim(cfg, table) if sim is None else sim
+    batch = chunk_batch(table.iloc[:1], 1, robot_cols, terrain_cols, sim_cols, cfg=cfg)
+    runner = _run_chunk if cfg.walker == "perfect" else jax.jit(_physics_chunk, static_argnames=("static",))
+    heaviest = chunk_static(cfg)._replace(
+        horizon=int(table["selector.horizon"].max()), refine=bool(table["selector.refine"].max())
+    )  # the most memory per scenario
+    compiled = runner.lower(heaviest, base, targets, key, sim, chunk_scene(cfg), *batch).compile()
+    mem = compiled.memory_analysis()
+    if mem is None:
+        raise RuntimeError("the backend reports no memory analysis")
+    # Arguments are the per-scenario inputs plus the shared ones jit keeps (unused leaves are pruned).
+    inputs = sum(int(x.nbytes) for x in jax.tree.leaves(batch))
+    shared = max(0, int(mem.argument_size_in_bytes) - inputs)
+    return inputs + int(mem.output_size_in_bytes + mem.temp_size_in_bytes), shared
