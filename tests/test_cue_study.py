@@ -90,7 +90,7 @@ def test_summary_metrics_against_a_hand_built_log():
     real = np.zeros((2, t, 3))
     real[0, :, 0] = [0.25, 0.125, 0.0, 0.0, 0.0]
     log = study.DriveLog(
-        feet=np.zeros((2, t, 2, 3)), command=cmd, reachable=cmd, realised=real,
+        feet=np.zeros((2, t, 2, 3)), command=cmd, reachable=cmd, realized=real,
         moved=np.array([[True, True, False, False, False], [False] * 5]),
         near=np.array([[False, True, True, True, True], [True, False, False, False, False]]), distance=dist,
         effort=np.array([[0.0, 0.5, 1.0, 1.0, 1.0], [0.2] * 5]), blocked=np.zeros((2, t), bool))

@@ -51,7 +51,7 @@ def test_discretisation_is_expm(w0, zeta):
 
     a, *_ = _ss(w0, zeta)
     with jax.enable_x64(True):
-        co = F.discretise(F.SpringDamper.create(w0, zeta), DT)
+        co = F.discretize(F.SpringDamper.create(w0, zeta), DT)
         got = np.array([[co.a11, co.a12], [co.a21, co.a22]], float)
     np.testing.assert_allclose(got, expm(a * DT), rtol=0, atol=TOL_EXPM)
 
@@ -63,7 +63,7 @@ def test_discretisation_is_expm_property(w0, zeta, dt):
 
     a, *_ = _ss(w0, zeta)
     with jax.enable_x64(True):
-        co = F.discretise(F.SpringDamper.create(w0, zeta), dt)
+        co = F.discretize(F.SpringDamper.create(w0, zeta), dt)
         got = np.array([[co.a11, co.a12], [co.a21, co.a22]], float)
     ref = expm(a * dt)
     np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
@@ -124,7 +124,7 @@ def test_unit_dc_gain_exact_in_float32(cutoff_hz):
 
 def test_step_and_scan_agree_and_output_convention():
     """filter_signal is the scan of filter_step; output[0] is the first sample (at rest)."""
-    co = F.discretise(F.SpringDamper.create(20.0, 0.7), DT)
+    co = F.discretize(F.SpringDamper.create(20.0, 0.7), DT)
     u = jnp.asarray(np.random.default_rng(3).normal(size=(50, 2)), jnp.float32)
     y, final, held = F.filter_signal(co, u)
     st_ = F.init_state(u[0])
@@ -160,7 +160,7 @@ def test_nonfinite_samples_hold_last_good_and_are_flagged():
         idx[:first] = first
         ref_in[:, j] = col[idx]
     with jax.enable_x64(True):
-        co = F.discretise(F.SpringDamper.create(30.0, 0.8), DT)
+        co = F.discretize(F.SpringDamper.create(30.0, 0.8), DT)
         y, _, held = F.filter_signal(co, x)
         y_ref, _, _ = F.filter_signal(co, ref_in)
     assert np.all(np.isfinite(np.asarray(y)))
@@ -191,7 +191,7 @@ def test_same_filter_from_either_parameterisation():
     u = jnp.asarray(np.random.default_rng(5).normal(size=300), jnp.float32)
     p = F.SpringDamper.from_physical(900.0, 42.0, 1.0)
     y1 = F.spring_damper_filter(u, DT, p.natural_frequency, p.damping_ratio)
-    y2 = F.filter_signal(F.discretise(p, DT), u)[0]
+    y2 = F.filter_signal(F.discretize(p, DT), u)[0]
     np.testing.assert_allclose(y1, y2, rtol=0, atol=0)
 
 
@@ -202,7 +202,7 @@ def test_no_recompile_for_new_parameters():
     st_ = F.init_state(jnp.zeros(2))
     sizes = []
     for w0, zeta in [(10.0, 0.5), (20.0, 0.7), (35.0, 1.0), (50.0, 2.0)]:
-        co = F.discretise(F.SpringDamper.create(w0, zeta), DT)
+        co = F.discretize(F.SpringDamper.create(w0, zeta), DT)
         st_, _ = step(co, st_, jnp.array([0.1, 0.2]))
         sizes.append(compiled_count(step))
     assert len(set(sizes)) == 1
@@ -294,7 +294,7 @@ def _expm_scaled(w0, zeta, dt):
 )
 def test_overdamped_discretisation_finite_in_float32(w0, zeta, dt):
     """cosh(r) overflowed float32 for r = w0 dt sqrt(zeta^2 - 1) > ~89 and the whole signal came out NaN."""
-    co = F.discretise(F.SpringDamper.create(w0, zeta), dt)
+    co = F.discretize(F.SpringDamper.create(w0, zeta), dt)
     got = _scaled(co[:4], float(np.float32(w0)))
     assert np.all(np.isfinite(got))
     np.testing.assert_allclose(got, _expm_scaled(w0, zeta, dt), rtol=0, atol=TOL_F32_COEFFS)
@@ -315,7 +315,7 @@ def test_discretisation_float32_over_wide_grid(log_w0, log_zeta, log_dt):
     """w0 over 1e-3..1e4 rad/s, zeta 0.05..50, dt 1e-6..10 s: float32 coefficients are finite, match the float64
     matrix exponential, keep the filter stable, and match the old closed form wherever that one was finite."""
     w0, zeta, dt = 10.0**log_w0, 10.0**log_zeta, 10.0**log_dt
-    co = F.discretise(F.SpringDamper.create(w0, zeta), dt)
+    co = F.discretize(F.SpringDamper.create(w0, zeta), dt)
     w0_32 = float(np.float32(w0))
     got = _scaled(co[:4], w0_32)
     assert np.all(np.isfinite(got)) and not bool(co.invalid)
@@ -334,7 +334,7 @@ def test_negative_dt_inside_jit_passes_the_input_through_and_flags():
     u = jnp.full(200, 0.4, jnp.float32).at[:20].set(0.0)
     y = jax.jit(F.spring_damper_filter)(u, -1e-3, 20.0, 0.7)
     np.testing.assert_array_equal(np.asarray(y), np.asarray(u))
-    co = jax.jit(F.discretise)(F.SpringDamper.create(20.0, 0.7), jnp.array([-1e-3, 0.0, jnp.nan, 1e-3]))
+    co = jax.jit(F.discretize)(F.SpringDamper.create(20.0, 0.7), jnp.array([-1e-3, 0.0, jnp.nan, 1e-3]))
     np.testing.assert_array_equal(np.asarray(co.invalid), [True, True, True, False])
     assert np.all(np.asarray(co[:4])[:, :3] == 0.0)
 
@@ -343,7 +343,7 @@ def test_negative_dt_inside_jit_passes_the_input_through_and_flags():
     "w0,zeta", [(jnp.nan, 0.7), (jnp.inf, 0.7), (-5.0, 0.7), (0.0, 0.7), (20.0, -0.5), (20.0, jnp.nan)]
 )
 def test_bad_parameters_inside_jit_are_flagged(w0, zeta):
-    co = jax.jit(F.discretise)(F.SpringDamper.create(w0, zeta), 1e-3)
+    co = jax.jit(F.discretize)(F.SpringDamper.create(w0, zeta), 1e-3)
     assert bool(co.invalid)
     u = jnp.linspace(0.0, 1.0, 30)
     y = jax.jit(F.spring_damper_filter)(u, 1e-3, w0, zeta)
@@ -353,7 +353,7 @@ def test_bad_parameters_inside_jit_are_flagged(w0, zeta):
 @pytest.mark.parametrize("dt", [-1e-3, 0.0, float("inf"), float("nan")])
 def test_discretise_refuses_concrete_bad_dt(dt):
     with pytest.raises(ValueError, match="dt"):
-        F.discretise(F.SpringDamper.create(20.0, 0.7), dt)
+        F.discretize(F.SpringDamper.create(20.0, 0.7), dt)
     with pytest.raises(ValueError, match="dt"):
         F.spring_damper_filter(np.zeros(5), dt, 20.0, 0.7)
 
@@ -363,6 +363,6 @@ def test_empty_signal_gives_an_empty_output(shape):
     """An empty signal failed inside JAX with "argmax of an empty sequence"."""
     y = F.spring_damper_filter(np.zeros(shape, np.float32), DT, 20.0, 0.7)
     assert y.shape == shape
-    y, final, held = F.filter_signal(F.discretise(F.SpringDamper.create(20.0, 0.7), DT), jnp.zeros(shape))
+    y, final, held = F.filter_signal(F.discretize(F.SpringDamper.create(20.0, 0.7), DT), jnp.zeros(shape))
     assert y.shape == shape and held.shape == shape and final.position.shape == shape[1:]
     np.testing.assert_array_equal(np.asarray(final.position), 0.0)

@@ -439,7 +439,7 @@ def test_linearise_any_forward_kinematics():
 
     q, lo, hi = rng.uniform(0.2, 0.8, 4), np.zeros(4), np.ones(4)
     with jax.enable_x64(True):
-        ws = W.linearise(fk, q, lo, hi)
+        ws = W.linearize(fk, q, lo, hi)
         h = 1e-6
         fd = np.stack([(np.asarray(fk(q + h * e)) - np.asarray(fk(q - h * e))) / (2 * h) for e in np.eye(4)], 1)
         np.testing.assert_allclose(np.asarray(ws.jacobian), fd, atol=1e-8)
@@ -449,7 +449,7 @@ def test_linearise_any_forward_kinematics():
         # Outside the stroke inside jit: clamped and flagged, never NaN.
         q_bad = q.copy()
         q_bad[1] = 1.3
-        ws_bad = jax.jit(W.linearise, static_argnums=0)(fk, q_bad, lo, hi)
+        ws_bad = jax.jit(W.linearize, static_argnums=0)(fk, q_bad, lo, hi)
         assert np.asarray(ws_bad.out_of_range).tolist() == [False, True, False, False]
         assert float(ws_bad.travel_plus[1]) == 0.0
         with pytest.raises(ValueError, match="outside their stroke"):

@@ -23,7 +23,7 @@ samples = st.one_of(st.sampled_from(SAMPLE), st.floats(-float(np.float32(1e30)),
 FAST = settings(max_examples=40, derandomize=True, deadline=None)
 
 filter_jit = jax.jit(F.spring_damper_filter)
-discretise_jit = jax.jit(F.discretise)
+discretise_jit = jax.jit(F.discretize)
 force_c2_jit = jax.jit(W.repulsive_force)
 force_decay_jit = jax.jit(W.repulsive_force_decay)
 leg_force_jit = jax.jit(H.leg_repulsive_force)
@@ -68,7 +68,7 @@ def test_filter_parameters(dt, w0, zeta):
 @FAST
 @given(hnp.arrays(np.float32, (24, 2), elements=samples))
 def test_filter_samples(x):
-    co = F.discretise(F.SpringDamper.create(20.0, 0.7), 1e-3)
+    co = F.discretize(F.SpringDamper.create(20.0, 0.7), 1e-3)
     y, final, held = F.filter_signal(co, x)
     assert _finite((y, final))
     np.testing.assert_array_equal(np.asarray(held), ~np.isfinite(x))

@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax.apps.options import output_file, positive_int, positive_ints
-from ijoy_jax.haptics.filter import SpringDamper, discretise, filter_step, init_state
+from ijoy_jax.haptics.filter import SpringDamper, discretize, filter_step, init_state
 from ijoy_jax.haptics.leg import PAPER_Q, alduro_leg, leg_repulsive_force
 
 
@@ -105,7 +105,7 @@ def run(quick: bool = False, calls: int | None = None, sizes: tuple[int, ...] | 
     out["leg_force_fixed_geometry"] = single_call(jax.jit(lambda x: leg_repulsive_force(leg, x, c1, lam)), (q,),
                                                   n_single)
 
-    coeffs = discretise(SpringDamper.create(2 * np.pi * 2.0, 0.7), 1e-3)
+    coeffs = discretize(SpringDamper.create(2 * np.pi * 2.0, 0.7), 1e-3)
     step = jax.jit(filter_step)
     out["filter_step"] = single_call(step, (coeffs, init_state(jnp.zeros(2)), jnp.array([0.1, -0.2])), n_single)
 

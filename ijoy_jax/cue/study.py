@@ -12,7 +12,7 @@ The operator (:class:`Operator`, every number a traced leaf) wants to reach a go
   the stick ``s`` (fractions of a full deflection) moves towards the aim plus the cue's push,
   ``s <- s + (dt / hand_time) (aim + compliance * f(s) - s)``; at rest ``s = aim + compliance f(s)``.
 * **watching the robot** (the only feedback without the cue, the HRP-2 paper's section VI): after each
-  step the operator sees the command the robot realised and shifts their aim by ``correction`` times the
+  step the operator sees the command the robot realized and shifts their aim by ``correction`` times the
   difference, a shift that fades by ``memory`` per step; and they judge how blocked the robot is from its
   progress towards the goal, ``seen = clip(1 - 2 progress / intended progress, 0, 1)``, a belief kept
   as ``belief = max(seen, persistence * belief)``.
@@ -31,7 +31,7 @@ program runs both conditions on the same scenarios (paired).
 Metrics per scenario (:func:`summarize`): ``time_to_goal`` (s; the feet's midpoint within
 ``goal_radius`` of the goal; ``num_steps * step_time`` if never: censored, with ``reached`` telling
 which), ``steps_in_place`` (decisions before the goal that moved nothing: no valid step or the step in
-place), ``command_error`` (mean ``|command - realised| / full_scale`` over those decisions, stick units;
+place), ``command_error`` (mean ``|command - realized| / full_scale`` over those decisions, stick units;
 the command clipped to what the step could realise, :attr:`DriveLog.reachable`),
 ``near_obstacles`` (footholds whose footprint grown by ``near_margin`` touches an obstacle) and
 ``effort`` (mean squared cue force over the ticks). :func:`compare` runs conditions on a batch and
@@ -259,7 +259,7 @@ class DriveLog(NamedTuple):
       command: (T, 3) the stick's command read at the decision (m/s, m/s, rad/s).
       reachable: (T, 3) that command clipped to the step's feasible hull (what this foot's step could
         realise: a sideways command towards the stance foot waits for the other foot).
-      realised: (T, 3) the command of the step taken (0 when nothing moved).
+      realized: (T, 3) the command of the step taken (0 when nothing moved).
       moved: (T,) bool, a step other than the step in place was taken.
       near: (T,) bool, the foothold taken is near an obstacle (:attr:`StudyConfig.near_margin`).
       distance: (T,) m, the feet's midpoint to the goal after the step.
@@ -270,7 +270,7 @@ class DriveLog(NamedTuple):
     feet: jax.Array
     command: jax.Array
     reachable: jax.Array
-    realised: jax.Array
+    realized: jax.Array
     moved: jax.Array
     near: jax.Array
     distance: jax.Array
@@ -333,12 +333,12 @@ def _drive(scenario: Scenario, robot: Robot, params: field.CueParams, op: Operat
             choice = select.select_step(terrain, robot, info.stance, info.stance_side, command, targets=targets,
                                         index=index, foot_costs=feas.cost)
             go = choice.valid
-            realised = jnp.where(go, feas.commands[jnp.maximum(choice.index, 0)], 0.0)
+            realized = jnp.where(go, feas.commands[jnp.maximum(choice.index, 0)], 0.0)
             foothold = choice.foothold
         else:
-            realised = field.force_terms(feas, command, robot_params).nearest
+            realized = field.force_terms(feas, command, robot_params).nearest
             go = feas.any_valid
-            rel = side_p0(robot, -side_sign(info.stance_side)) + robot.step_time * realised
+            rel = side_p0(robot, -side_sign(info.stance_side)) + robot.step_time * realized
             pose = geometry.compose(info.stance, rel)
             zero = jnp.zeros((), pose.dtype)
             foothold = jnp.stack([pose[0], pose[1], zero, zero, zero, pose[2]])
@@ -349,15 +349,15 @@ def _drive(scenario: Scenario, robot: Robot, params: field.CueParams, op: Operat
                                      index=index).obstacle[0] > 0)
         # What this step could realise: a sideways command towards the stance foot waits for the other foot.
         reachable = jnp.clip(command, feas.lo, feas.hi)
-        shift = op.memory * shift + op.correction * (realised - reachable) / full
+        shift = op.memory * shift + op.correction * (realized - reachable) / full
         feet = walker.feet(state)
         mid = jnp.mean(feet[:, :2], axis=0)
         after = geometry.safe_norm(mid[0] - scenario.goal[0], mid[1] - scenario.goal[1])
         intended = jnp.maximum(geometry.safe_norm(*(intent[:2] * full[:2])) * robot.step_time, 1e-3)
         seen = jnp.maximum(jnp.clip(1.0 - 2.0 * (before - after) / intended, 0.0, 1.0), op.persistence * seen)
         record = DriveLog(
-            feet=feet, command=command, reachable=reachable, realised=realised,
-            moved=go & (jnp.max(jnp.abs(realised)) > 1e-6), near=near, distance=after,
+            feet=feet, command=command, reachable=reachable, realized=realized,
+            moved=go & (jnp.max(jnp.abs(realized)) > 1e-6), near=near, distance=after,
             effort=jnp.mean(jnp.sum(forces**2, axis=1)), blocked=jnp.any(forces[-1] != 0),
         )
         return (state, stick, shift, seen, done | (after < cfg.goal_radius)), record
@@ -413,7 +413,7 @@ def summarize(log: DriveLog, robot: Robot, cfg: StudyConfig | None = None) -> di
     first = np.where(reached, reached_at.argmax(axis=1) + 1, t)  # decisions until reached (or all)
     active = np.arange(t)[None, :] < first[:, None]
     full = np.maximum(np.abs(np.asarray(field.action_commands(robot, 1))).max(0), field.MIN_UNIT)
-    err = np.linalg.norm((np.asarray(log.reachable) - np.asarray(log.realised)) / full, axis=2)
+    err = np.linalg.norm((np.asarray(log.reachable) - np.asarray(log.realized)) / full, axis=2)
     n_active = np.maximum(active.sum(1), 1)
     return {
         "time_to_goal": first * float(robot.step_time),
@@ -508,7 +508,7 @@ def relaxed_loss(u: dict, scenarios: Scenario, robot: Robot, op: Operator, targe
     params = to_params(u)
     log = _drives(scenarios, robot, params, op, jnp.float32(1.0), targets, cfg, False)
     full = jnp.maximum(jnp.max(jnp.abs(field.action_commands(robot, 1)), axis=0), field.MIN_UNIT)
-    err = jnp.mean(jnp.sum(((log.reachable - log.realised) / full) ** 2, axis=-1))
+    err = jnp.mean(jnp.sum(((log.reachable - log.realized) / full) ** 2, axis=-1))
     terms = {"distance": jnp.mean(log.distance), "error": err, "effort": jnp.mean(log.effort)}
     loss = weights.distance * terms["distance"] + weights.error * terms["error"] + weights.effort * terms["effort"]
     return loss, terms

@@ -32,7 +32,7 @@ from ijoy_jax.haptics.effects import straight_ahead as straight_ahead
 from ijoy_jax.haptics.filter import FilterCoeffs as FilterCoeffs
 from ijoy_jax.haptics.filter import FilterState as FilterState
 from ijoy_jax.haptics.filter import SpringDamper as SpringDamper
-from ijoy_jax.haptics.filter import discretise as discretise
+from ijoy_jax.haptics.filter import discretize as discretize
 from ijoy_jax.haptics.filter import filter_signal as filter_signal
 from ijoy_jax.haptics.filter import filter_step as filter_step
 from ijoy_jax.haptics.filter import init_state as init_state
@@ -55,7 +55,7 @@ from ijoy_jax.haptics.platform import yaw_limits as yaw_limits
 from ijoy_jax.haptics.workspace import Planes as Planes
 from ijoy_jax.haptics.workspace import Workspace as Workspace
 from ijoy_jax.haptics.workspace import limiting_planes as limiting_planes
-from ijoy_jax.haptics.workspace import linearise as linearise
+from ijoy_jax.haptics.workspace import linearize as linearize
 from ijoy_jax.haptics.workspace import plane_forces as plane_forces
 from ijoy_jax.haptics.workspace import repulsive_force as repulsive_force
 from ijoy_jax.haptics.workspace import repulsive_force_decay as repulsive_force_decay
@@ -84,7 +84,7 @@ __all__ = [
     "constant_centring",
     "constant_force",
     "default_joystick_config",
-    "discretise",
+    "discretize",
     "filter_signal",
     "filter_step",
     "fold",
@@ -96,7 +96,7 @@ __all__ = [
     "leg_workspace",
     "limiting_planes",
     "linear_centring",
-    "linearise",
+    "linearize",
     "linux_constant",
     "linux_spring",
     "plane_forces",

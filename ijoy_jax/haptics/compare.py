@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax.haptics.filter import SpringDamper, discretise, filter_signal, init_state
+from ijoy_jax.haptics.filter import SpringDamper, discretize, filter_signal, init_state
 
 SAMPLE_RATE = 1000.0  # Hz, the haptic loop rate
 DURATION_S = 20.0  # long enough for the slowest filter compared to settle (see SETTLE_S)
@@ -100,7 +100,7 @@ def butterworth(order: int, cutoff_hz: float, sample_rate: float = SAMPLE_RATE) 
 
 @jax.jit
 def _sd_run(w0, zeta, dt, x):
-    co = discretise(SpringDamper(w0, zeta), dt)
+    co = discretize(SpringDamper(w0, zeta), dt)
     y, _, _ = filter_signal(co, x, init_state(jnp.zeros((), x.dtype)))
     return y
 

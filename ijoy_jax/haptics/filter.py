@@ -31,12 +31,12 @@ constant input is reproduced bit for bit in float32 (unit DC gain exactly; a
 direct-form biquad loses ~1e-3 of DC gain at low cut-offs in float32).
 ``Ad`` has a closed form for 2x2 matrices, evaluated elementwise, so
 parameters broadcast against the signal's channels and can be vmapped. The
-form never overflows for a stable filter (see :func:`discretise`): overdamped,
+form never overflows for a stable filter (see :func:`discretize`): overdamped,
 it is written with the two real modes' decays ``exp(-mu dt) <= 1`` instead of
 ``e^-sigma cosh(r)`` (whose ``cosh`` overflows float32 once ``r > ~89``).
 
 Invalid parameters (``w0 <= 0``, ``zeta < 0``, ``dt <= 0`` or anything non-finite)
-are refused with a ValueError where concrete (:func:`discretise`,
+are refused with a ValueError where concrete (:func:`discretize`,
 :func:`spring_damper_filter`); inside jit they are flagged in
 ``FilterCoeffs.invalid`` and their coefficients are zero, so the filter passes
 its (last finite) input straight through: a defined, finite output, never an
@@ -199,7 +199,7 @@ def _overdamped(w0, zeta, dt):
     return FilterCoeffs(a11=e1 * (jnp.exp(-x) - mu1h * g), a12=a12, a21=-w0 * (e1 * wh * g), a22=e1 * (1.0 + mu1h * g))
 
 
-def discretise(params: SpringDamper, dt) -> FilterCoeffs:
+def discretize(params: SpringDamper, dt) -> FilterCoeffs:
     """Exact zero-order-hold transition matrix for one sample period.
 
     With ``A = [[-2 zeta w0, 1], [-w0^2, 0]]`` and ``M = A dt``,
@@ -224,18 +224,18 @@ def discretise(params: SpringDamper, dt) -> FilterCoeffs:
       ValueError: concrete (not traced) parameters or dt that are invalid.
 
     Example:
-      >>> c = discretise(SpringDamper.create(10.0, 0.7), 1e-3)
+      >>> c = discretize(SpringDamper.create(10.0, 0.7), 1e-3)
       >>> round(float(c.a12), 6)  # ~dt for w0 dt << 1
       0.000993
     """
     _check_concrete_positive("dt", dt)
     _check_concrete_positive("natural_frequency", params.natural_frequency)
     _check_concrete_positive("damping_ratio", params.damping_ratio, allow_zero=True)
-    return _discretise(params, dt)
+    return _discretize(params, dt)
 
 
 @jax.jit
-def _discretise(params: SpringDamper, dt) -> FilterCoeffs:
+def _discretize(params: SpringDamper, dt) -> FilterCoeffs:
     w0 = jnp.asarray(params.natural_frequency)
     zeta = jnp.asarray(params.damping_ratio)
     dt = jnp.asarray(dt, jnp.result_type(w0.dtype, float))
@@ -276,7 +276,7 @@ def filter_step(coeffs: FilterCoeffs, state: FilterState, sample) -> tuple[Filte
     """Consume one joystick sample: the one-sample update for a live loop.
 
     Args:
-      coeffs: from :func:`discretise` (broadcastable to the channel shape S).
+      coeffs: from :func:`discretize` (broadcastable to the channel shape S).
       state: FilterState with channel shape S.
       sample: (S) raw joystick position; NaN/inf entries hold the last finite one.
 
@@ -286,7 +286,7 @@ def filter_step(coeffs: FilterCoeffs, state: FilterState, sample) -> tuple[Filte
       True where the sample was not finite and the last good value was used.
 
     Example:
-      >>> co = discretise(SpringDamper.create(20.0, 0.7), 1e-3)
+      >>> co = discretize(SpringDamper.create(20.0, 0.7), 1e-3)
       >>> st, held = filter_step(co, init_state(jnp.zeros(2)), jnp.array([1.0, jnp.nan]))
       >>> held
       Array([False,  True], dtype=bool)
@@ -315,7 +315,7 @@ def filter_signal(coeffs: FilterCoeffs, signal, state: FilterState | None = None
     """Filter a whole signal with ``lax.scan`` over :func:`filter_step`.
 
     Args:
-      coeffs: from :func:`discretise`, broadcastable to the channel shape S.
+      coeffs: from :func:`discretize`, broadcastable to the channel shape S.
       signal: ``(T, *S)`` raw joystick samples, time on the first axis.
       state: state to continue from; default at rest at each channel's first
         finite sample (0 if a channel has none).
@@ -324,7 +324,7 @@ def filter_signal(coeffs: FilterCoeffs, signal, state: FilterState | None = None
       ``(filtered (T, *S), final_state, held (T, *S) bool)``.
 
     Example:
-      >>> co = discretise(SpringDamper.create(20.0, 0.7), 1e-3)
+      >>> co = discretize(SpringDamper.create(20.0, 0.7), 1e-3)
       >>> y, st, held = filter_signal(co, jnp.ones((5, 2)))
       >>> y.shape, bool(jnp.all(y == 1.0))
       ((5, 2), True)
@@ -406,4 +406,4 @@ def _filter(signal, dt, natural_frequency, damping_ratio):
     params = SpringDamper(
         jnp.asarray(natural_frequency, jnp.result_type(float)), jnp.asarray(damping_ratio, jnp.result_type(float))
     )
-    return filter_signal(_discretise(params, dt), signal)[0]
+    return filter_signal(_discretize(params, dt), signal)[0]

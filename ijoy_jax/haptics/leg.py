@@ -47,7 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax._struct import pytree_dataclass
-from ijoy_jax.haptics.workspace import Workspace, check_repulsion, check_stroke, decay_rate_of, linearise, plane_forces
+from ijoy_jax.haptics.workspace import Workspace, check_repulsion, check_stroke, decay_rate_of, linearize, plane_forces
 
 #: The paper's example (section 3.3): cylinder positions (m) and foot position (m), a right leg.
 PAPER_Q = (0.15875, 0.10656, 0.08319, 0.04366)
@@ -173,7 +173,7 @@ def leg_workspace(leg: LegGeometry, q) -> Workspace:
 
 @jax.jit
 def _leg_workspace(leg, q):
-    return linearise(lambda x: forward_kinematics(leg, x), q, leg.q_min, leg.q_max)
+    return linearize(lambda x: forward_kinematics(leg, x), q, leg.q_min, leg.q_max)
 
 
 def leg_repulsive_force(leg: LegGeometry, q, c1, decay_length) -> jax.Array:
@@ -197,7 +197,7 @@ def leg_repulsive_force(leg: LegGeometry, q, c1, decay_length) -> jax.Array:
       True
     """
     check_repulsion(c1, decay_length=decay_length)
-    ws = linearise(lambda x: forward_kinematics(leg, x), q, leg.q_min, leg.q_max)
+    ws = linearize(lambda x: forward_kinematics(leg, x), q, leg.q_min, leg.q_max)
     return plane_forces(ws.planes, c1, decay_rate_of(decay_length, ws.planes.offsets.dtype)).force
 
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from ijoy_jax._struct import pytree_dataclass
 from ijoy_jax.haptics.leg import PAPER_Q, LegGeometry, alduro_leg, forward_kinematics
-from ijoy_jax.haptics.workspace import Planes, check_repulsion, check_stroke, decay_rate_of, linearise, plane_forces
+from ijoy_jax.haptics.workspace import Planes, check_repulsion, check_stroke, decay_rate_of, linearize, plane_forces
 
 LEG_NAMES = ("front-left", "front-right", "rear-left", "rear-right")
 
@@ -103,7 +103,7 @@ def platform_workspace(platform: Platform, q) -> PlatformWorkspace:
 @jax.jit
 def _platform_workspace(platform, q):
     def one(leg, qi):
-        return linearise(lambda x: forward_kinematics(leg, x), qi, leg.q_min, leg.q_max)
+        return linearize(lambda x: forward_kinematics(leg, x), qi, leg.q_min, leg.q_max)
 
     ws = jax.vmap(one)(platform.legs, q)
     flipped = ws.planes._replace(normals=-ws.planes.normals)

@@ -22,7 +22,7 @@ it is exactly the intended part of the output). Without the overshoot term the
 optimum is a nearly undamped filter (zeta ~ 0.06, f0 ~ 2.6 Hz: second-order
 roll-off over the tremor band, no lag below 1 Hz) that rings at f0 after any
 jolt, which the synthetic signal happens not to excite. Gradients flow through the
-exact ZOH discretisation (:func:`ijoy_jax.haptics.filter.discretise`). Default
+exact ZOH discretisation (:func:`ijoy_jax.haptics.filter.discretize`). Default
 filter (:data:`DEFAULT_FILTER`): the paper gives no numbers, so the reference is
 the docs' matched-cut-off spring-damper, -3 dB at 2 Hz with zeta = 1/sqrt 2
 (f0 = 0.972 Hz).
@@ -59,9 +59,9 @@ import jax.numpy as jnp
 import optax
 
 from ijoy_jax import optim
-from ijoy_jax.haptics.filter import SpringDamper, discretise, filter_signal, init_state
+from ijoy_jax.haptics.filter import SpringDamper, discretize, filter_signal, init_state
 from ijoy_jax.haptics.leg import LegGeometry, alduro_leg, forward_kinematics
-from ijoy_jax.haptics.workspace import linearise, plane_forces
+from ijoy_jax.haptics.workspace import linearize, plane_forces
 from ijoy_jax.prng import as_key
 
 TREMOR_BAND_HZ = (8.0, 12.0)
@@ -149,7 +149,7 @@ def filter_objective(log_params, signal: JoystickSignal, dt: float = 1e-3, lam=1
       (see the module docstring); ``tremor`` (output/input power ratio in 8-12 Hz), ``tracking``
       (normalised MSE of the intended signal), ``overshoot`` (unit-step overshoot, fraction).
     """
-    coeffs = discretise(filter_params(log_params), dt)
+    coeffs = discretize(filter_params(log_params), dt)
     s = int(round(SETTLE_S / dt))
     step = (jnp.arange(signal.raw.shape[0]) >= s).astype(signal.raw.dtype)  # unit step at the end of settling
     x = jnp.stack([signal.raw, signal.intended, step], axis=1)  # (T, 3): output, its intended part (linearity), step
@@ -287,7 +287,7 @@ def simulate_leg(leg: LegGeometry, q0, intent, c1, decay_length, *, dt: float = 
     fk = lambda x: forward_kinematics(leg, x)  # noqa: E731
 
     def step(q, v_intent):
-        ws = linearise(fk, q, leg.q_min, leg.q_max)
+        ws = linearize(fk, q, leg.q_min, leg.q_max)
         f = plane_forces(ws.planes, c1, 1.0 / decay_length).force
         v = v_intent + admittance * f
         j = ws.jacobian

@@ -598,7 +598,7 @@ def decay_rate_of(decay_length, dtype=None) -> jax.Array:
     return jnp.where(ok, 1.0 / jnp.where(ok, lam, 1.0), jnp.nan)
 
 
-def linearise(forward_kinematics: Callable[[jax.Array], jax.Array], q, q_min, q_max) -> Workspace:
+def linearize(forward_kinematics: Callable[[jax.Array], jax.Array], q, q_min, q_max) -> Workspace:
     """Linearised workspace of any JAX forward kinematics ``x = Phi(q)`` at ``q``.
 
     ``J = jax.jacfwd(Phi)(q)``. Inside jit, ``q`` outside ``[q_min, q_max]`` is
@@ -615,7 +615,7 @@ def linearise(forward_kinematics: Callable[[jax.Array], jax.Array], q, q_min, q_
       Workspace (position, J, travels, flags, planes).
 
     Example:
-      >>> ws = linearise(lambda q: jnp.array([q[0], q[1], q[0] * q[1]]), jnp.array([0.2, 0.3]),
+      >>> ws = linearize(lambda q: jnp.array([q[0], q[1], q[0] * q[1]]), jnp.array([0.2, 0.3]),
       ...                jnp.zeros(2), jnp.ones(2))
       >>> ws.jacobian.shape, int(ws.planes.valid.sum())  # a parallelogram: 2 faces + 4 edges
       ((3, 2), 6)

@@ -13,7 +13,7 @@ the swing foot moves from ``swing_from`` to ``swing_to``. Every control tick
    the LIPM's CoM, and solves both legs' analytic inverse kinematics for the
    actuators' position targets,
 5. given the measured pelvis, stabilises: the swing leg compensates the
-   body's measured tilt so the foot lands as sent (:func:`stabilise`),
+   body's measured tilt so the foot lands as sent (:func:`stabilize`),
 6. and, given the ankles' force/torque sensors, lets each loaded sole yield
    to the ground about its ankle while steering its centre of pressure toward
    the ZMP reference (:func:`comply`, a damping control).
@@ -112,7 +112,7 @@ class WalkConfig:
         fitted to the robot by :func:`ijoy_jax.sim.walker.make_sim`; the pelvis
         is placed so that this CoM follows the LIPM.
       preview_q, preview_r: weights of the preview controller's cost.
-      land_gain: the stabiliser's swing-leg feedback (0 = off; :func:`stabilise`):
+      land_gain: the stabiliser's swing-leg feedback (0 = off; :func:`stabilize`):
         the fraction of the measured body attitude and position error the swing
         leg compensates, so the foot lands level where it was sent.
       land_ramp: fraction of the swing over which that feedback fades in (none
@@ -240,7 +240,7 @@ class CtrlState(NamedTuple):
     lipm: jax.Array  # (3, 2) CoM [position, velocity, acceleration] x, y
     err_sum: jax.Array  # (2,) integral of the ZMP tracking error
     t: jax.Array  # () seconds since the current step began
-    offset: jax.Array  # (12,) the stabiliser's joint-target offsets (rad), left leg then right (:func:`stabilise`)
+    offset: jax.Array  # (12,) the stabiliser's joint-target offsets (rad), left leg then right (:func:`stabilize`)
     ankle: jax.Array  # (2, 2) the ankles' compliance offsets (rad): row 0 left, columns pitch, roll (:func:`comply`)
 
 
@@ -408,7 +408,7 @@ def control_tick(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: St
     """One controller period: the 12 joint targets (left leg then right), the new state, the ZMP reference (2,).
 
     ``base`` = (position (3,), rotation (3, 3)) of the measured pelvis in the
-    plan's frame turns the stabiliser on (:func:`stabilise`); ``wrench`` (2, 6),
+    plan's frame turns the stabiliser on (:func:`stabilize`); ``wrench`` (2, 6),
     the ankles' measured force and torque (foot frame; what the shank exerts on
     the foot, N and N m; row 0 left), turns on the ankles' damping control
     (:func:`comply`); ``com`` = (position (2,), velocity (2,)) of the measured
@@ -423,7 +423,7 @@ def control_tick(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: St
     qpos, cs, zref = pattern(params, cfg, pgains, plan, cs, correction)
     q = qpos[7:]
     if base is not None and cfg.land_gain != 0:
-        q, cs = stabilise(params, cfg, plan, cs, qpos, base, latency)
+        q, cs = stabilize(params, cfg, plan, cs, qpos, base, latency)
     if wrench is not None and cfg.ankle_damping > 0:
         want = zref if com is None else zref + cfg.dcm_gain * dcm_error(cfg, planned_com, com)
         cs = comply(params, cfg, plan, cs, want, wrench)
@@ -491,7 +491,7 @@ def comply(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, zref, wrench)
     return cs._replace(ankle=leak * cs.ankle + cfg.control_dt * load * rate)
 
 
-def stabilise(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, qpos, base, latency=0.0
+def stabilize(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, qpos, base, latency=0.0
               ) -> tuple[jax.Array, CtrlState]:
     """The stabiliser: the swing foot lands level where it was sent, whatever the body's attitude.
 

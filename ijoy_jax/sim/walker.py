@@ -9,7 +9,7 @@ each chosen step, taken relative to the measured stance foot, is applied
 to the commanded one (``SimState.planned``), so the joint targets never jump
 to the measured soles between steps. Every control tick hands the controller's
 stabiliser the measured pelvis pose, mapped into that frame through the stance
-sole (:func:`ijoy_jax.sim.controller.stabilise`). The robot stands one step before the
+sole (:func:`ijoy_jax.sim.controller.stabilize`). The robot stands one step before the
 first decision (the Walker's ``warmup`` iteration, so that the step's
 physics and dynamics filter are traced and compiled once, not twice).
 :func:`rollout` is the control loop of :func:`ijoy_jax.rollout` (the same
