@@ -27,11 +27,13 @@ import inspect
 import io
 import os
 import pkgutil
+import sys
 import types
 from unittest import mock
 
 from docutils import nodes
 from docutils.statemachine import StringList
+from sphinx.pycode import ModuleAnalyzer, PycodeError
 from sphinx.util import logging
 from sphinx.util.docutils import SphinxDirective
 from sphinx.util.nodes import nested_parse_with_titles
@@ -241,12 +243,32 @@ def _check(app, env):
         logger.warning("public name %s is not in the API reference", name, type="ijoy", subtype="api")
 
 
+def _defining_docstring(name: str, obj) -> list[str]:
+    """The docstring under the assignment of constant ``name`` in the module that assigns it: a package that
+    re-exports a submodule's constant documents it at the package, where autodoc finds no docstring."""
+    short = name.rsplit(".", 1)[-1]
+    for modname in public_modules() + [m for m in sorted(sys.modules) if m.startswith(ROOT + ".")]:
+        module = sys.modules.get(modname)
+        if module is None or getattr(module, short, None) is not obj or short not in _constants(module):
+            continue
+        try:
+            docs = ModuleAnalyzer.for_module(modname).find_attr_docs()
+        except PycodeError:
+            continue
+        if ("", short) in docs:
+            return list(docs[("", short)])
+    return []
+
+
 def _data_docstring(app, what, name, obj, options, lines):
-    # A constant has no docstring of its own: autodoc would show its type's (dict's, tuple's).
+    # A constant has no docstring of its own: autodoc would show its type's (dict's, tuple's), or nothing
+    # when the documented module only re-exports it.
     if what in ("data", "attribute") and not inspect.isclass(obj) and not callable(obj):
         type_doc = inspect.getdoc(type(obj)) or ""
         if "\n".join(lines).strip() == type_doc.strip():
             lines.clear()
+        if what == "data" and not any(line.strip() for line in lines):
+            lines[:] = _defining_docstring(name, obj)
 
 
 def setup(app):
