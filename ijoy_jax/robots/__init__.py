@@ -9,6 +9,7 @@ Every public name is exported here; the modules, from the ground up: :mod:`~ijoy
 :class:`Robot` and :class:`TerrainMetrics` pytrees), :mod:`~ijoy_jax.robots.leaves` (the scalar leaves by
 dotted name), :mod:`~ijoy_jax.robots.lattice` (action sets on lattices), :mod:`~ijoy_jax.robots.build`
 (building a valid robot and checking one), :mod:`~ijoy_jax.robots.hrp2_model` (the paper's HRP-2),
+:mod:`~ijoy_jax.robots.g1_model` (the Unitree G1, derived from its MJCF),
 :mod:`~ijoy_jax.robots.sides` (left and right: mirroring and dist) and :mod:`~ijoy_jax.robots.commands`
 (the start stance and joystick commands).
 """
@@ -25,6 +26,9 @@ from ijoy_jax.robots.build import robot_supported as robot_supported
 from ijoy_jax.robots.commands import command_range as command_range
 from ijoy_jax.robots.commands import random_commands as random_commands
 from ijoy_jax.robots.commands import start_stance as start_stance
+from ijoy_jax.robots.g1_model import G1_P0 as G1_P0
+from ijoy_jax.robots.g1_model import g1 as g1
+from ijoy_jax.robots.g1_model import g1_actions as g1_actions
 from ijoy_jax.robots.hrp2_model import DX_SPACING as DX_SPACING
 from ijoy_jax.robots.hrp2_model import HRP2_P0 as HRP2_P0
 from ijoy_jax.robots.hrp2_model import PAPER_REACH as PAPER_REACH
@@ -55,6 +59,7 @@ from ijoy_jax.robots.sides import side_sign as side_sign
 
 __all__ = [
     "DX_SPACING",
+    "G1_P0",
     "HRP2_P0",
     "LEFT",
     "LeafSpec",
@@ -75,6 +80,8 @@ __all__ = [
     "density_counts",
     "dist",
     "footprints_overlap",
+    "g1",
+    "g1_actions",
     "get_leaf",
     "hrp2",
     "hrp2_actions",

@@ -1,0 +1,77 @@
+"""The Unitree G1 (MuJoCo Menagerie) as a selector robot: its footprint, step in place, action lattice and limits.
+
+Every number is derived from the G1's own MJCF (``unitree_g1``; :mod:`ijoy_jax.sim.menagerie`) read by
+:func:`ijoy_jax.sim.description.describe`, in the double-support posture of its ``knees_bent`` keyframe (pelvis
+0.758 m above the soles, feet 0.237 m apart); ``tests/test_robots_g1.py`` derives them again with
+:mod:`ijoy_jax.sim.reach` and holds these constants to the derivation, so the core needs no MuJoCo to build the
+robot:
+
+* footprint: the foot box geoms, 0.18 m x 0.06 m;
+* step in place: the keyframe's feet 0.237 m apart, on the action lattice's 2 cm grid: (0, 0.24 m, 0);
+* actions: dx in [-0.20, 0.20] m (9 values), dy in [0.24, 0.38] m (8 values), dtheta in [-20, 20] deg (7 values),
+  less the 8 corners: 496, HRP-2's lattice shifted to the G1's wider stance; every one is realisable by both legs
+  with every joint 0.02 rad inside its range (:func:`ijoy_jax.sim.reach.feasible`);
+* sole tilts (FootCost's ``ankle`` term): the largest pitch and roll of the swing sole realisable in every stance
+  of the set, rounded down: 10 deg and 4.4 deg. The G1's ankle rolls only +-15 deg and a stance wider than its
+  hips uses most of that to lean the legs outward, so its roll limit is far below HRP-2's 10 deg;
+* sole distance (FootCost's ``reach`` term): 0.48 m, the shortest distance the legs reach along the directions
+  the action set spans (50 to 130 deg from the stance foot's heading), level soles;
+
+The step time (0.8 s), swing clearance and highest step are the walking controller's, as for HRP-2, until the
+G1 walks in MJX.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ijoy_jax.robots.build import make_robot
+from ijoy_jax.robots.hrp2_model import PAPER_REACH, density_counts
+from ijoy_jax.robots.lattice import lattice_actions
+from ijoy_jax.robots.robot import Robot
+
+G1_P0 = (0.0, 0.24, 0.0)
+"""The G1's step in place (m, m, rad): the swing foot beside the stance foot, its standing width."""
+
+G1_FOOT = (0.18, 0.06)
+"""m: the G1's sole, (length, width): its foot box geoms."""
+
+G1_DY = (0.24, 0.38)
+"""m: the G1's lateral range of the swing foot from the stance foot (the step in place and 14 cm wider)."""
+
+G1_LIMITS = {"max_sole_pitch": math.radians(10.0), "max_sole_roll": math.radians(4.4), "max_sole_distance": 0.48}
+"""The sole tilts (rad) and sole distance (m) the G1's legs realise in every stance of its action set."""
+
+_G1_BODY = {"foot_length": G1_FOOT[0], "foot_width": G1_FOOT[1], "step_time": 0.8, "p0": G1_P0, **G1_LIMITS}
+
+
+def g1_actions(density: float = 1.0) -> np.ndarray:
+    """(M, 3) float64 host array of :func:`g1`'s actions (dx, dy, dtheta in m, m, rad) at ``density``.
+
+    Example:
+      >>> g1_actions().shape
+      (496, 3)
+    """
+    return lattice_actions(density_counts(density, PAPER_REACH), dx_range=(-PAPER_REACH, PAPER_REACH),
+                           dy_range=G1_DY)
+
+
+def g1(margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
+    """The Unitree G1: footprint 18 x 6 cm, 496 actions per foot (see the module docstring for where each
+    number comes from).
+
+    Args:
+      margin: safety margin (m).
+      density: action-set density (1.0 -> 496 actions; :func:`~ijoy_jax.robots.density_counts`).
+      **overrides: any other :func:`~ijoy_jax.robots.make_robot` keyword (w, rotation_weight, step_time,
+        clearance, max_step_height, metrics, ...).
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> robot = ij.robots.g1(margin=0.02)
+      >>> robot.actions.shape, round(float(robot.foot_length), 2)
+      ((496, 3), 0.18)
+    """
+    return make_robot(g1_actions(density), **{**_G1_BODY, "margin": margin, **overrides})
