@@ -48,6 +48,7 @@ __all__ = [
     "SIDES",
     "BipedParams",
     "ModelIndex",
+    "add_terrain",
     "biped_params",
     "build_model",
     "build_spec",
@@ -343,6 +344,25 @@ def _hfield_geometry(p: BipedParams, shape, resolution: float, origin) -> tuple[
     return size, pos
 
 
+def add_terrain(spec: mujoco.MjSpec, params: BipedParams, shape, resolution: float, origin) -> None:
+    """Add the terrain's height field (geom and asset "terrain", zero data) and a light to ``spec``, in place.
+
+    The geom collides with geoms of ``contype`` 1 (the sole spheres) and is given ``params.friction``; its
+    samples and elevation are those :func:`build_spec` describes. Any robot's spec can stand on it.
+    """
+    nx, ny = (int(v) for v in shape)
+    if nx < 2 or ny < 2:
+        raise ValueError(f"the terrain grid needs at least 2 x 2 cells for a height field, got {shape}")
+    if not (math.isfinite(resolution) and resolution > 0):
+        raise ValueError(f"resolution must be a positive finite number of metres, got {resolution!r}")
+    size, pos = _hfield_geometry(params, (nx, ny), float(resolution), origin)
+    spec.add_hfield(name="terrain", nrow=ny, ncol=nx, size=size, userdata=[0.0] * (nx * ny))
+    spec.worldbody.add_geom(name="terrain", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="terrain", pos=pos,
+                            contype=0, conaffinity=1, condim=3, friction=[params.friction, 0.005, 0.0001],
+                            rgba=[0.55, 0.6, 0.5, 1])
+    spec.worldbody.add_light(name="sun", pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+
+
 def build_spec(params: BipedParams, shape=(200, 200), resolution: float = 0.02, origin=(0.0, 0.0)) -> mujoco.MjSpec:
     """The biped and a height field of a terrain grid as an (uncompiled) :class:`mujoco.MjSpec`.
 
@@ -362,11 +382,6 @@ def build_spec(params: BipedParams, shape=(200, 200), resolution: float = 0.02, 
       The spec (options: timestep, implicitfast, Newton with ``iterations``/``ls_iterations``),
       with a keyframe "stand" (:func:`standing_qpos` at default feet, ground 0).
     """
-    nx, ny = (int(v) for v in shape)
-    if nx < 2 or ny < 2:
-        raise ValueError(f"the terrain grid needs at least 2 x 2 cells for a height field, got {shape}")
-    if not (math.isfinite(resolution) and resolution > 0):
-        raise ValueError(f"resolution must be a positive finite number of metres, got {resolution!r}")
     spec = mujoco.MjSpec()
     spec.modelname = "ijoy_biped"
     spec.compiler.degree = False  # every angle here is in radians (MjSpec defaults to degrees for ranges)
@@ -377,12 +392,7 @@ def build_spec(params: BipedParams, shape=(200, 200), resolution: float = 0.02, 
     opt.iterations = params.iterations
     opt.ls_iterations = params.ls_iterations
     opt.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
-    size, pos = _hfield_geometry(params, (nx, ny), float(resolution), origin)
-    spec.add_hfield(name="terrain", nrow=ny, ncol=nx, size=size, userdata=[0.0] * (nx * ny))
-    spec.worldbody.add_geom(name="terrain", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="terrain", pos=pos,
-                            contype=0, conaffinity=1, condim=3, friction=[params.friction, 0.005, 0.0001],
-                            rgba=[0.55, 0.6, 0.5, 1])
-    spec.worldbody.add_light(name="sun", pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    add_terrain(spec, params, shape, resolution, origin)
     _add_robot(spec, params)
     qpos = standing_qpos(params)
     spec.add_key(name="stand", qpos=qpos.tolist(), ctrl=qpos[7:].tolist())
