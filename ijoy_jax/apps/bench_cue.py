@@ -19,7 +19,6 @@ clutter map at 2 cm (the demo's scene):
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform as _host
@@ -27,7 +26,7 @@ import statistics
 import subprocess
 import sys
 
-from ijoy_jax.apps.options import output_file, positive_int, positive_ints
+from ijoy_jax.apps.options import positive_int, positive_ints
 
 SYNC_FLAG = "jax_cpu_enable_async_dispatch"
 
@@ -179,17 +178,3 @@ def report(args) -> dict:
     print(format_report(result))
     return result
 
-
-def main(argv: list[str] | None = None) -> dict:
-    """``ijoy bench cue ARGV`` as a function: ``--quick``, ``--json PATH`` and :func:`add_options`'s options;
-    prints as :func:`report` does, writes --json's file; returns the result."""
-    parser = argparse.ArgumentParser(prog="ijoy bench cue", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="fewer calls and smaller batches")
-    parser.add_argument("--json", metavar="PATH", type=output_file, help="also write the results as JSON")
-    add_options(parser)
-    args = parser.parse_args(argv)
-    result = report(args)
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(result, fh, indent=2)
-    return result

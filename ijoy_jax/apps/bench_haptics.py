@@ -19,8 +19,6 @@ JAX (no mujoco, no scipy):
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import platform as _host
 import statistics
@@ -31,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax.apps.options import output_file, positive_int, positive_ints
+from ijoy_jax.apps.options import positive_int, positive_ints
 from ijoy_jax.haptics.filter import SpringDamper, discretize, filter_step, init_state
 from ijoy_jax.haptics.leg import PAPER_Q, alduro_leg, leg_repulsive_force
 
@@ -159,17 +157,3 @@ def report(args) -> dict:
     print(format_report(result))
     return result
 
-
-def main(argv: list[str] | None = None) -> dict:
-    """``ijoy bench haptics ARGV`` as a function: ``--quick``, ``--json PATH`` and :func:`add_options`'s options;
-    prints the report, writes --json's file; returns the result."""
-    parser = argparse.ArgumentParser(prog="ijoy bench haptics", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="fewer calls and smaller batches")
-    parser.add_argument("--json", metavar="PATH", type=output_file, help="also write the results as JSON")
-    add_options(parser)
-    args = parser.parse_args(argv)
-    result = report(args)
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(result, fh, indent=2)
-    return result
