@@ -12,6 +12,7 @@ Public API:
   foot_cost, foot_cost_terms                         FootCost of candidate steps
   action_steps                                       world poses of every action
   select_step, StepChoice, make_targets              the next foothold for a command
+  SelectOptions                                      how it is searched for (method, kernel, lookahead, refinement)
   lookahead, refine                                  beyond the paper: H-step lookahead, continuous refinement
   rollout, Trajectory, perfect_walker, Walker        the control loop (Algorithm 1)
   turning                                            a turning mode that does not overshoot on release
@@ -43,6 +44,7 @@ from ijoy_jax.control import Trajectory, Walker, perfect_walker, rollout
 from ijoy_jax.footcost import FootCostTerms, foot_cost, foot_cost_terms
 from ijoy_jax.robots import LEFT, RIGHT, Robot, TerrainMetrics, action_steps
 from ijoy_jax.select import StepChoice, make_targets, select_step
+from ijoy_jax.select_options import SelectOptions
 from ijoy_jax.terrain import Terrain
 
 __all__ = [
@@ -50,6 +52,7 @@ __all__ = [
     "RIGHT",
     "FootCostTerms",
     "Robot",
+    "SelectOptions",
     "StepChoice",
     "Terrain",
     "TerrainMetrics",

@@ -32,7 +32,8 @@ from ijoy_jax import geometry, select
 from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced
 from ijoy_jax.limits import check_num_steps
 from ijoy_jax.robots import LEFT, Robot, footprints_overlap, side_actions
-from ijoy_jax.select import Targets
+from ijoy_jax.select import SelectOptions, Targets
+from ijoy_jax.select_options import checked
 from ijoy_jax.terrain import Terrain
 
 NEAR_OBSTACLE = 0.04
@@ -306,31 +307,25 @@ class Trajectory(NamedTuple):
             **near,
         }
 
-def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive", swing_path: bool = True,
-                   quantize: bool = True, targets: Targets | None = None, kernel: str = "xla",
-                   index=None, horizon: int | None = None, beam: int | None = None, discount=1.0,
-                   refine=False, supported=True) -> Selector:
+def exact_selector(terrain: Terrain, robot: Robot, options: SelectOptions | None = None, *,
+                   targets: Targets | None = None, index=None, supported=True) -> Selector:
     """The paper's GetNextStep as a :class:`Selector`: :func:`ijoy_jax.select.select_step` (its full foothold
     sent; sendable when valid, always for ``"naive"``), recording the :class:`Trajectory` fields per step.
 
-    Options as in :func:`rollout`; ``index`` and ``targets``: the terrain's index and the targets, built by
-    :func:`ijoy_jax.select.prepare` once per rollout (call it inside jit). ``supported`` (() bool, traced)
-    False flags every decision ``unsupported`` (no step valid), as a non-finite stance is: what
-    :func:`rollout` does with a traced start it cannot use.
+    ``options``: the search, as in :func:`rollout` (None: the defaults); ``index`` and ``targets``: the
+    terrain's index and the targets, built by :func:`ijoy_jax.select.prepare` once per rollout (call it
+    inside jit). ``supported`` (() bool, traced) False flags every decision ``unsupported`` (no step
+    valid), as a non-finite stance is: what :func:`rollout` does with a traced start it cannot use.
     """
-    opts = select.search_options(method, robot, horizon=horizon, beam=beam, discount=discount, refine=refine)
+    options = checked(options, robot)
     if index is None or targets is None:
         index, targets = select.prepare(terrain, robot, index=index, targets=targets)
 
     def choose(info, command, key):
         stance = jnp.where(supported, info.stance, jnp.nan)  # refused as any non-finite stance is
-        choice = select.select_step(
-            terrain, robot, stance, info.stance_side, command, method=method,
-            swing_from=info.swing_from if swing_path else None, quantize=quantize, targets=targets, index=index,
-            kernel=kernel, horizon=opts.horizon, beam=opts.beam, discount=opts.discount,
-            refine=False if opts.refine is None else opts.refine,
-        )
-        return choice.foothold, choice.valid | (method == "naive"), choice
+        choice = select.select_step(terrain, robot, stance, info.stance_side, command, options,
+                                    swing_from=info.swing_from, targets=targets, index=index)
+        return choice.foothold, choice.valid | (options.method == "naive"), choice
 
     def record(info, command, choice, go, stopped, before, after):
         swing_row = jnp.where(info.stance_side > 0, 1, 0)
@@ -381,8 +376,8 @@ def exact_selector(terrain: Terrain, robot: Robot, *, method: str = "exhaustive"
     return Selector(choose, record)
 
 
-def _rollout(terrain, robot, start, commands, first_swing, targets, discount, refine, command_filter, num_steps, method,
-             walker, swing_path, quantize, kernel, horizon, beam) -> Trajectory:
+def _rollout(terrain, robot, start, commands, first_swing, targets, options, command_filter, num_steps,
+             walker) -> Trajectory:
     """The body of :func:`rollout`, run through :data:`_rollout_jit` or inlined into a caller's trace."""
     walker = perfect_walker() if walker is None else walker
     index, targets = select.prepare(terrain, robot, targets=targets)
@@ -394,16 +389,13 @@ def _rollout(terrain, robot, start, commands, first_swing, targets, discount, re
     start = jnp.asarray(start, jnp.float32)
     start_ok = geometry.pose_supported(start)
     start = jnp.where(start_ok, start, 0.0)
-    selector = exact_selector(terrain, robot, method=method, swing_path=swing_path, quantize=quantize,
-                              targets=targets, kernel=kernel, index=index, horizon=horizon, beam=beam,
-                              discount=discount, refine=False if refine is None else refine, supported=start_ok)
+    selector = exact_selector(terrain, robot, options, targets=targets, index=index, supported=start_ok)
     state, rec = loop(walker, selector, start, jnp.asarray(first_swing, jnp.float32),
                       commands[:num_steps],
                       command_filter=None if command_filter is None else command_filter.build(robot))
     return Trajectory(feet=walker.feet(state), **rec)
 
-_rollout_jit = jax.jit(_rollout, static_argnames=("num_steps", "method", "walker", "swing_path", "quantize", "kernel",
-                                                 "horizon", "beam"))
+_rollout_jit = jax.jit(_rollout, static_argnames=("num_steps", "walker"))
 
 def _check_start(robot: Robot, start) -> None:
     """Refuse concrete start feet whose footprints overlap or that stand crossed (left foot on the right)."""
@@ -433,18 +425,11 @@ def rollout(
     start,
     commands,
     num_steps: int,
+    options: SelectOptions | None = None,
     *,
-    method: str = "exhaustive",
     first_swing=LEFT,
     walker: Walker | None = None,
-    swing_path: bool = True,
-    quantize: bool = True,
     targets: Targets | None = None,
-    kernel: str = "xla",
-    horizon: int | None = None,
-    beam: int | None = None,
-    discount=1.0,
-    refine=False,
     command_filter=None,
 ) -> Trajectory:
     """Walk the robot with the joystick for ``num_steps`` steps (Algorithm 1), jitted as one scan.
@@ -456,27 +441,25 @@ def rollout(
       commands: (3,) one command (xdot m/s, ydot m/s, thetadot rad/s, in the
         stance foot's frame) held throughout, or (num_steps, 3) one per step.
       num_steps: number of decisions (static).
-      method: "exhaustive", "ordered" (same steps), "naive" (the
+      options: each decision's search, a :class:`~ijoy_jax.SelectOptions`
+        (None: its defaults) as :func:`ijoy_jax.select_step` takes it: the
+        method ("exhaustive", "ordered" (same steps), "naive" (the
         conventional joystick: always steps to the action nearest p_next) or
         "lookahead" (the first step of the best ``horizon``-step sequence
-        under the held command, :mod:`ijoy_jax.lookahead`).
+        under the held command, :mod:`ijoy_jax.lookahead`)), the FootCost
+        kernel ("pallas": the fused kernel; the same steps), quantisation
+        against F's nearest target (the paper) or p_next, the swing corridor
+        check on 2.5D terrains, and refinement (then ``index`` is the lattice
+        action each step started from and ``footsteps`` the refined poses).
+        Its static fields key the program; ``discount`` and ``refine``'s
+        leaves are traced.
       first_swing: +1 if the left foot swings first (default), -1 the right
         (traced: a vmapped batch may mix both).
       walker: the robot executing the steps; default :func:`perfect_walker`.
-      swing_path: check the swing corridor on 2.5D terrains.
-      quantize: score against F's nearest target (the paper) or p_next.
       targets: prebuilt :func:`ijoy_jax.make_targets` of this robot (F and
         L_i); built inside the jitted rollout when None, which sorts ``|F|`` x N
         entries on every call (about 0.4 s on a 2-core CPU for HRP-2): pass
         it when calling repeatedly with the same actions and rotation weight.
-      kernel: FootCost on the GPU: "xla" (default) or "pallas", the fused
-        kernel (:func:`ijoy_jax.select_step`); the same steps.
-      horizon, beam, discount, refine: the lookahead's and the refinement's
-        options, as :func:`ijoy_jax.select_step` (``horizon`` and ``beam``
-        static, ``discount`` and the leaves of a ``refine``
-        :class:`~ijoy_jax.refine.RefineParams` traced). With ``refine``,
-        ``index`` is the lattice action each step started from and
-        ``footsteps`` the refined poses.
       command_filter: how the joystick's commands are read before each
         decision: a spec whose ``build(robot)`` makes the
         :class:`CommandFilter` (a pytree: its leaves traced), e.g.
@@ -489,9 +472,8 @@ def rollout(
 
     The public entry point and the function to call inside your own jit or
     vmap (a batch of terrains, robots, starts or commands): the checks skip
-    traced values (``num_steps``, ``method``, ``walker``, ``swing_path``,
-    ``quantize``, ``kernel``, ``horizon`` and ``beam`` are static), and the work runs through one
-    module-level jit (an eager loop compiles once; inside your jit it is
+    traced values (``num_steps``, ``walker`` and the options' static fields
+    are static), and the work runs through one module-level jit (an eager loop compiles once; inside your jit it is
     inlined), except that a ``walker`` given with traced arguments is traced
     inline (it may close over the caller's traced values).
 
@@ -505,8 +487,7 @@ def rollout(
       1.1
     """
     start, commands = as_pose("start", start), as_array("commands", commands)
-    select.validate(terrain, robot, np.zeros(3), 1, np.zeros(3), method=method, targets=targets, kernel=kernel)
-    opts = select.search_options(method, robot, horizon=horizon, beam=beam, discount=discount, refine=refine)
+    options = select.validate(terrain, robot, np.zeros(3), 1, np.zeros(3), options, targets=targets)
     if command_filter is not None and not callable(getattr(command_filter, "build", None)):
         raise TypeError(f"command_filter must be a filter spec with build(robot) -> CommandFilter (e.g. "
                         f"ijoy_jax.turning.heading_hold()), got {type(command_filter).__name__}")
@@ -527,9 +508,8 @@ def rollout(
                                                          or np.asarray(first_swing).dtype.kind not in "iuf"
                                                          or float(first_swing) not in (LEFT, -LEFT)):
         raise ValueError(f"first_swing must be +1 (left) or -1 (right), got {first_swing!r}")
-    args = (terrain, robot, start, commands, first_swing, targets, opts.discount, opts.refine, command_filter)
-    static = dict(num_steps=int(num_steps), method=method, walker=walker, swing_path=swing_path, quantize=quantize,
-                  kernel=kernel, horizon=opts.horizon, beam=opts.beam)
+    args = (terrain, robot, start, commands, first_swing, targets, options, command_filter)
+    static = dict(num_steps=int(num_steps), walker=walker)
     # A walker built inside the caller's trace may close over its values (the MJX walker holds the traced
     # terrain): it is traced inline, not made a static key of the module jit's cache.
     inline = walker is not None and is_traced(args)

@@ -54,16 +54,18 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
+from ijoy_jax._struct import is_traced
 from ijoy_jax.robots import Robot, side_actions, side_sign
 
 __all__ = ["DEFAULT_CHUNK", "CostsFrom", "Plan", "check_options", "discount_supported", "search"]
 
 DEFAULT_CHUNK = 8
 """First actions expanded per iteration of the exact search (static): 8 x 496 FootCost evaluations per
-iteration for HRP-2 on a CPU; a GPU wants more (``select_step(..., chunk=64)``)."""
+iteration for HRP-2 on a CPU; a GPU wants more (``SelectOptions(method="lookahead", chunk=64)``)."""
 
 
 class Plan(NamedTuple):
@@ -272,7 +274,8 @@ def search(c1, steps1, stance, stance_side, swing_from, costs_from: CostsFrom, r
     Example:
       >>> import ijoy_jax as ij
       >>> terrain, robot = ij.terrain.flat((100, 100), 0.02), ij.robots.hrp2()
-      >>> c = ij.select_step(terrain, robot, [1.0, 1.0, 0.0], -1, [0.25, 0.0, 0.0], method="lookahead", horizon=2)
+      >>> options = ij.SelectOptions(method="lookahead", horizon=2)
+      >>> c = ij.select_step(terrain, robot, [1.0, 1.0, 0.0], -1, [0.25, 0.0, 0.0], options)
       >>> bool(c.valid), round(float(c.pose[0]), 2)
       (True, 1.2)
     """
@@ -303,16 +306,14 @@ def search(c1, steps1, stance, stance_side, swing_from, costs_from: CostsFrom, r
                 expanded, evals)
 
 
-def check_options(method: str, horizon, beam, num_actions: int, discount) -> None:
+def check_options(method: str, horizon, beam, num_actions: int | None, discount) -> None:
     """Refuse bad lookahead options at the boundary (ValueError/TypeError naming the option).
 
-    ``horizon``: an int >= 1; ``beam``: None or an int in [1, N]; the lookahead options are accepted only with
-    ``method="lookahead"``; a concrete ``discount`` must be finite and >= 0 (a traced one is flagged instead).
+    ``horizon``: an int >= 1; ``beam``: None or an int in [1, N] (``num_actions`` None: at least 1, N
+    unchecked); the lookahead options are accepted only with ``method="lookahead"``; a concrete ``discount``
+    must be finite and >= 0 (a traced one is flagged instead; None: not checked here).
+    :class:`ijoy_jax.SelectOptions` runs it when built and again with the robot's N at the API boundary.
     """
-    import numpy as np
-
-    from ijoy_jax._struct import is_traced
-
     for name, v in (("horizon", horizon), ("beam", beam)):
         if v is None and name == "beam":
             continue
@@ -321,13 +322,14 @@ def check_options(method: str, horizon, beam, num_actions: int, discount) -> Non
     if horizon < 1:
         raise ValueError(f"horizon must be >= 1 (steps scored per decision; 1 is the one-step selector), got "
                          f"{horizon}")
-    if beam is not None and not 1 <= beam <= num_actions:
-        raise ValueError(f"beam must be in [1, {num_actions}] (sequences kept per level, at most the action set's "
-                         f"size N = {num_actions}), got {beam}")
+    if beam is not None and not 1 <= beam <= (beam if num_actions is None else num_actions):
+        n = "N" if num_actions is None else num_actions
+        raise ValueError(f"beam must be in [1, {n}] (sequences kept per level, at most the action set's "
+                         f"size N = {n}), got {beam}")
     if method != "lookahead" and (horizon != 1 or beam is not None):
         raise ValueError(f"horizon and beam are options of method='lookahead', got method={method!r} with "
                          f"horizon={horizon}, beam={beam}")
-    if not is_traced(discount):
+    if discount is not None and not is_traced(discount):
         g = np.asarray(discount, np.float64)
         if g.shape != ():
             raise ValueError(f"discount must be a scalar, got shape {g.shape}")

@@ -33,7 +33,8 @@ never returns a step costlier than that step (measured against ``p_next``), and 
 scored by the exact FootCost, so it is valid whenever its cost is finite. When no lattice step is valid the
 other starts may still find one. ``StepChoice.index`` stays the lattice action the step started from.
 
-:func:`ijoy_jax.select_step` (``refine=True`` or a :class:`RefineParams`) is the public entry point.
+:func:`ijoy_jax.select_step` (``SelectOptions(refine=True)`` or a :class:`RefineParams` as its ``refine``) is
+the public entry point.
 """
 
 from __future__ import annotations
@@ -85,7 +86,7 @@ class RefineParams:
 
 
 def params(span: float = 1.0, min_gain: float = 1e-5, *, levels: int = 5, starts: int = 4) -> RefineParams:
-    """Checked :class:`RefineParams` (what ``refine=True`` uses with the defaults).
+    """Checked :class:`RefineParams` (what ``SelectOptions(refine=True)`` uses: the defaults).
 
     Raises:
       ValueError: a span not finite and > 0, a min_gain not finite and >= 0, levels or starts not an int >= 1.
@@ -182,7 +183,7 @@ def refine_step(terrain: Terrain, robot: Robot, stance, stance_side, target, cho
       >>> terrain = ij.terrain.from_arrays(None, free, 0.02)
       >>> robot = ij.robots.hrp2(margin=0.02)
       >>> lattice = ij.select_step(terrain, robot, [0.77, 1.0, 0.0], -1, [0.25, 0.0, 0.0])
-      >>> fine = ij.select_step(terrain, robot, [0.77, 1.0, 0.0], -1, [0.25, 0.0, 0.0], refine=True)
+      >>> fine = ij.select_step(terrain, robot, [0.77, 1.0, 0.0], -1, [0.25, 0.0, 0.0], ij.SelectOptions(refine=True))
       >>> round(float(lattice.pose[0]), 3), round(float(fine.pose[0]), 3), int(fine.index) == int(lattice.index)
       (0.92, 0.957, True)
     """

@@ -23,10 +23,12 @@ Selectors (same step on the same inputs)::
   "lookahead":  beyond the paper: the first step of the best sequence of
                 ``horizon`` steps under the held command, feet alternating
                 (:mod:`ijoy_jax.lookahead`: exact for any horizon, or a beam);
-                ``horizon=1`` is "exhaustive".
+                a horizon of 1 is "exhaustive".
 
+The method and the rest of the search's options are one value, a
+:class:`~ijoy_jax.SelectOptions` (``ij.SelectOptions(method="ordered")``).
 Any of the terrain-aware methods can be followed by a continuous refinement of
-the chosen step (``refine=True``, :mod:`ijoy_jax.refine`): (dx, dy, dtheta) off
+the chosen step (``SelectOptions(refine=True)``, :mod:`ijoy_jax.refine`): (dx, dy, dtheta) off
 the lattice, on the exact cost against p_next, never costlier than the lattice
 step; ``index`` stays the lattice action it started from.
 
@@ -44,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ijoy_jax import geometry, lookahead
+from ijoy_jax import geometry, lookahead, select_options
 from ijoy_jax import refine as refine_mod
 from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
@@ -54,14 +56,18 @@ from ijoy_jax.footcost.query import poses_supported, safe_poses
 from ijoy_jax.footcost.xla import footprint_blocked
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.robots import Robot, check_robot, mirror, side_actions, side_p0, side_sign
+from ijoy_jax.select_options import SelectOptions as SelectOptions
+from ijoy_jax.select_options import checked
 from ijoy_jax.targets import Targets as Targets
 from ijoy_jax.targets import action_dists as action_dists
 from ijoy_jax.targets import ideal_step as ideal_step
 from ijoy_jax.targets import make_targets as make_targets
 from ijoy_jax.terrain import Terrain
 
-METHODS = ("exhaustive", "ordered", "naive", "lookahead")
-KERNELS = ("xla", "pallas")
+METHODS = select_options.METHODS
+"""The selectors (:class:`~ijoy_jax.SelectOptions` ``method``; the module docstring describes each)."""
+KERNELS = select_options.KERNELS
+"""How FootCost is computed (:class:`~ijoy_jax.SelectOptions` ``kernel``): XLA, or the fused Pallas kernel."""
 _ORDERED_CHUNK = 32  # actions per chunk of the ordered search when select_step's chunk is None
 
 
@@ -213,30 +219,26 @@ def foothold(terrain: Terrain, robot: Robot, pose, *, index: TerrainIndex | None
     return jnp.stack([pose[0], pose[1], z, roll, pitch, pose[2]])
 
 
-def validate(terrain, robot, stance, stance_side, command, *, method="exhaustive", swing_from=None, targets=None,
-             index=None, kernel="xla", foot_costs=None, chunk=None):
-    """Check the arguments of :func:`select_step` (raises ValueError / TypeError).
+def validate(terrain, robot, stance, stance_side, command, options: SelectOptions | None = None, *, swing_from=None,
+             targets=None, index=None, foot_costs=None) -> SelectOptions:
+    """Check the arguments of :func:`select_step` (raises ValueError / TypeError); returns the options (None:
+    the defaults) checked against the robot: the beam and the refinement's starts at most its N, no
+    refinement with the naive method.
 
     Values of tracers are not checked (their shapes are), so it costs nothing
-    inside a trace; :func:`ijoy_jax.rollout` runs it on its own arguments. The
-    lookahead and refinement options are checked by :func:`search_options`.
+    inside a trace; :func:`ijoy_jax.rollout` runs it on its own arguments.
     """
+    options = checked(options, robot)
     validate_foot_cost(terrain, robot, stance, stance_side, np.zeros((1, 3)), swing_from, index)
     check_numeric("command", command)
     if np.shape(command) != (3,):
         raise ValueError(f"command must have shape (3,) (xdot, ydot, thetadot), got {np.shape(command)}")
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    if kernel not in KERNELS:
-        raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
-    if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1):
-        raise ValueError(f"chunk must be an int >= 1 or None (the method's default), got {chunk!r}")
     if targets is not None and not isinstance(targets, Targets):
         raise TypeError(f"targets must be an ijoy_jax.select.Targets (make_targets), got {type(targets).__name__}")
     if foot_costs is not None:
-        if method not in ("exhaustive", "lookahead"):
+        if options.method not in ("exhaustive", "lookahead"):
             raise ValueError(f"foot_costs (every action's FootCost) serve method='exhaustive' or 'lookahead' only, "
-                             f"got {method!r}")
+                             f"got {options.method!r}")
         check_numeric("foot_costs", foot_costs)
         if np.shape(foot_costs) != (robot.num_actions,):
             raise ValueError(f"foot_costs must have shape ({robot.num_actions},) (one FootCost per action), "
@@ -245,51 +247,7 @@ def validate(terrain, robot, stance, stance_side, command, *, method="exhaustive
                                                 | (np.asarray(foot_costs, np.float64) < 0)):
             raise ValueError("foot_costs must be >= 0 or +inf (FootCost of each action; action_foot_costs), "
                              "got NaN or a negative value")
-
-
-class SearchOptions(NamedTuple):
-    """The lookahead and refinement options of a decision, checked and normalised (:func:`search_options`).
-
-    horizon: int >= 1 (static; 1 for every method but "lookahead"). beam: None or int (static).
-    discount: () float32 gamma (traced). refine: a :class:`ijoy_jax.refine.RefineParams` (traced leaves) or
-    None (no refinement).
-    """
-
-    horizon: int
-    beam: int | None
-    discount: jax.Array
-    refine: refine_mod.RefineParams | None
-
-
-def search_options(method: str, robot: Robot, *, horizon=None, beam=None, discount=1.0,
-                   refine=False) -> SearchOptions:
-    """Check and normalise :func:`select_step`'s lookahead and refinement options (at the boundary).
-
-    ``horizon`` None is 2 for ``method="lookahead"`` and 1 otherwise; ``refine`` True is
-    :func:`ijoy_jax.refine.params`'s defaults, False/None no refinement, a
-    :class:`~ijoy_jax.refine.RefineParams` is used as given.
-
-    Raises:
-      ValueError / TypeError: a horizon < 1, a beam outside [1, N], lookahead options with another method, a
-        bad discount or refinement option, or ``refine`` with ``method="naive"`` (the naive joystick ignores
-        the terrain; refinement is on the terrain's cost).
-    """
-    if horizon is None:
-        horizon = 2 if method == "lookahead" else 1
-    lookahead.check_options(method, horizon, beam, robot.num_actions, discount)
-    if refine is None or refine is False:
-        params = None
-    elif refine is True:
-        params = refine_mod.params()
-    else:
-        params = refine
-    if params is not None and method == "naive":
-        raise ValueError("refine applies to the terrain-aware methods (exhaustive, ordered, lookahead); "
-                         "method='naive' is the conventional joystick, which ignores the terrain")
-    if params is not None:
-        refine_mod.check_params(params, robot.num_actions)
-    return SearchOptions(int(horizon), None if beam is None else int(beam), jnp.asarray(discount, jnp.float32),
-                         params)
+    return options
 
 
 def _costs_of(terrain, robot, stance, side, steps, idx, swing_from, index, kernel) -> jax.Array:
@@ -313,9 +271,10 @@ def action_foot_costs(terrain: Terrain, robot: Robot, stance, stance_side, *, sw
     FootCost runs through its own module-level jit).
 
     Args:
-      terrain, robot, stance, stance_side, swing_from, index, kernel: as
+      terrain, robot, stance, stance_side, swing_from, index: as
         :func:`select_step` (stance (3,) world pose in m, rad; stance_side +1
-        left, -1 right; kernel "xla" or "pallas", static).
+        left, -1 right).
+      kernel: "xla" or "pallas" (static), as a :class:`~ijoy_jax.SelectOptions`' ``kernel``.
 
     Returns:
       (N,) float32 FootCost, ``>= 0`` or ``+inf``.
@@ -338,9 +297,11 @@ def action_foot_costs(terrain: Terrain, robot: Robot, stance, stance_side, *, sw
     return jnp.where(ok, _costs_of(terrain, robot, stance, side, steps, idx, swing_from, index, kernel), jnp.inf)
 
 
-def _select(terrain, robot, stance, stance_side, command, swing_from, targets, index, foot_costs, discount, refine,
-            method, quantize, chunk, kernel, horizon, beam) -> StepChoice:
+def _select(terrain, robot, stance, stance_side, command, swing_from, targets, index, foot_costs,
+            options: SelectOptions) -> StepChoice:
     """The body of :func:`select_step` (always run through :data:`_select_jit`)."""
+    method, kernel, chunk, discount, refine = (options.method, options.kernel, options.chunk, options.discount,
+                                               options.refine)
     if index is None:
         index = index_terrain(terrain, robot)
     # A traced stance or swing pose that is not finite (or turns beyond MAX_ANGLE), or a side other than +-1:
@@ -350,7 +311,8 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     side = side_sign(stance_side)
     swing = -side
     n = robot.num_actions
-    dists, target_rel, ok = action_dists(robot, side, command, targets, quantize=quantize or method == "ordered")
+    quantize = options.quantize or method == "ordered"
+    dists, target_rel, ok = action_dists(robot, side, command, targets, quantize=quantize)
     steps = geometry.compose(stance, side_actions(robot, swing))  # (N, 3)
 
     def terms_of(idx):
@@ -367,9 +329,9 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
         fc_all = terms_of(jnp.arange(n, dtype=jnp.int32)) if foot_costs is None else foot_costs.astype(jnp.float32)
         cost_all = fc_all + robot.w * dists
         evaluated = jnp.int32(n)
-        if method == "lookahead" and horizon > 1:
-            plan = _search(terrain, robot, stance, side, command, swing_from, targets, index, kernel, quantize,
-                           cost_all, dists, steps, discount, horizon, beam, chunk)
+        if method == "lookahead" and options.horizon > 1:
+            plan = _search(terrain, robot, stance, side, command, swing_from, targets, index, options, cost_all,
+                           dists, steps)
             best = jnp.maximum(plan.first, 0)
             plan_rest = plan.sequence[1:]
             evaluated = evaluated + plan.evaluated
@@ -412,24 +374,25 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     )
 
 
-def _search(terrain, robot, stance, side, command, swing_from, targets, index, kernel, quantize, cost_all, dists,
-            steps, discount, horizon, beam, chunk) -> lookahead.Plan:
+def _search(terrain, robot, stance, side, command, swing_from, targets, index, options: SelectOptions, cost_all,
+            dists, steps) -> lookahead.Plan:
     """The lookahead's search from the first level's costs: its FootCost oracle is this module's (either
     kernel), its second level's dists those of the other foot for the same command."""
-    n = robot.num_actions
+    n, kernel, chunk = robot.num_actions, options.kernel, options.chunk
 
     def costs_from(st, sd, sf):
         at = geometry.compose(st, side_actions(robot, -sd))
         return _costs_of(terrain, robot, st, sd, at, jnp.arange(n, dtype=jnp.int32),
                          None if swing_from is None else sf, index, kernel)
 
-    dists2, _, _ = action_dists(robot, -side, command, targets, quantize=quantize)
-    return lookahead.search(cost_all, steps, stance, side, swing_from, costs_from, robot, (dists, dists2), discount,
-                            horizon=horizon, beam=beam, chunk=lookahead.DEFAULT_CHUNK if chunk is None else chunk)
+    dists2, _, _ = action_dists(robot, -side, command, targets, quantize=options.quantize)
+    return lookahead.search(cost_all, steps, stance, side, swing_from, costs_from, robot, (dists, dists2),
+                            options.discount, horizon=options.horizon, beam=options.beam,
+                            chunk=lookahead.DEFAULT_CHUNK if chunk is None else chunk)
 
 
-def _plan(terrain, robot, stance, stance_side, command, swing_from, targets, index, discount, quantize, chunk, kernel,
-          horizon, beam) -> lookahead.Plan:
+def _plan(terrain, robot, stance, stance_side, command, swing_from, targets, index,
+          options: SelectOptions) -> lookahead.Plan:
     """The body of :func:`lookahead_plan` (run through :data:`_plan_jit`)."""
     if index is None:
         index = index_terrain(terrain, robot)
@@ -437,26 +400,28 @@ def _plan(terrain, robot, stance, stance_side, command, swing_from, targets, ind
     stance, swing_from = safe_poses(stance, swing_from)
     side = side_sign(stance_side)
     n = robot.num_actions
-    dists, _, _ = action_dists(robot, side, command, targets, quantize=quantize)
+    dists, _, _ = action_dists(robot, side, command, targets, quantize=options.quantize)
     steps = geometry.compose(stance, side_actions(robot, -side))
-    fc = _costs_of(terrain, robot, stance, side, steps, jnp.arange(n, dtype=jnp.int32), swing_from, index, kernel)
+    fc = _costs_of(terrain, robot, stance, side, steps, jnp.arange(n, dtype=jnp.int32), swing_from, index,
+                   options.kernel)
     fc = jnp.where(poses_ok, fc, jnp.inf)  # an unsupported query plans nothing (Plan.valid False)
-    return _search(terrain, robot, stance, side, command, swing_from, targets, index, kernel, quantize,
-                   fc + robot.w * dists, dists, steps, discount, horizon, beam, chunk)
+    return _search(terrain, robot, stance, side, command, swing_from, targets, index, options,
+                   fc + robot.w * dists, dists, steps)
 
 
-_plan_jit = jax.jit(_plan, static_argnames=("quantize", "chunk", "kernel", "horizon", "beam"))
+_plan_jit = jax.jit(_plan)
 
 
-def lookahead_plan(terrain: Terrain, robot: Robot, stance, stance_side, command, *, horizon: int = 2,
-                   beam: int | None = None, discount=1.0, swing_from=None, quantize: bool = True,
-                   targets: Targets | None = None, index: TerrainIndex | None = None, chunk: int | None = None,
-                   kernel: str = "xla") -> lookahead.Plan:
+def lookahead_plan(terrain: Terrain, robot: Robot, stance, stance_side, command, options: SelectOptions | None = None,
+                   *, swing_from=None, targets: Targets | None = None,
+                   index: TerrainIndex | None = None) -> lookahead.Plan:
     """The lookahead's whole plan for one decision: its best sequence, score and whether it fell back.
 
     What :func:`select_step` with ``method="lookahead"`` decides from (its ``index`` is ``plan.first``), for
     a caller that wants the planned steps or the sequence's score (:class:`ijoy_jax.lookahead.Plan`). Same
-    arguments and checks as :func:`select_step`; ``horizon`` at least 2 (1 has no plan).
+    arguments and checks as :func:`select_step`; ``options`` (None: ``SelectOptions(method="lookahead")``,
+    horizon 2) has ``method="lookahead"`` and a horizon of at least 2 (1 has no plan); its ``refine`` is
+    not used (the plan is the lattice search's).
 
     Example:
       >>> import ijoy_jax as ij
@@ -467,15 +432,18 @@ def lookahead_plan(terrain: Terrain, robot: Robot, stance, stance_side, command,
     """
     stance, swing_from = as_pose("stance", stance), as_pose("swing_from", swing_from)
     command = as_array("command", command)
-    validate(terrain, robot, stance, stance_side, command, method="lookahead", swing_from=swing_from,
-             targets=targets, index=index, kernel=kernel, chunk=chunk)
-    opts = search_options("lookahead", robot, horizon=horizon, beam=beam, discount=discount)
-    if opts.horizon < 2:
+    options = SelectOptions(method="lookahead") if options is None else options
+    options = validate(terrain, robot, stance, stance_side, command, options, swing_from=swing_from,
+                       targets=targets, index=index)
+    if options.method != "lookahead":
+        raise ValueError(f"lookahead_plan needs options with method='lookahead', got {options.method!r}")
+    if options.horizon < 2:
         raise ValueError(f"lookahead_plan needs a horizon of at least 2 (1 is the one-step selector), got "
-                         f"{opts.horizon}")
+                         f"{options.horizon}")
     targets = make_targets(robot) if targets is None else targets
-    return _plan_jit(terrain, robot, stance, stance_side, command, swing_from, targets, index, opts.discount,
-                     quantize=quantize, chunk=chunk, kernel=kernel, horizon=opts.horizon, beam=opts.beam)
+    swing_from = swing_from if options.swing_path else None
+    return _plan_jit(terrain, robot, stance, stance_side, command, swing_from, targets, index,
+                     options.replace(refine=None))
 
 
 def _lexmin(cost, dists):
@@ -524,19 +492,12 @@ def select_step(
     stance,
     stance_side,
     command,
+    options: SelectOptions | None = None,
     *,
-    method: str = "exhaustive",
     swing_from=None,
-    quantize: bool = True,
     targets: Targets | None = None,
     index: TerrainIndex | None = None,
-    chunk: int | None = None,
-    kernel: str = "xla",
     foot_costs=None,
-    horizon: int | None = None,
-    beam: int | None = None,
-    discount=1.0,
-    refine=False,
 ) -> StepChoice:
     """Choose the next swing-foot placement for a joystick command.
 
@@ -554,52 +515,35 @@ def select_step(
         swings), -1 if it is the right one (traced: anything else is flagged).
       command: (3,) joystick command (xdot m/s, ydot m/s, thetadot rad/s) in
         the stance foot's frame. NaN/inf: treated as zero and flagged.
-      method: "exhaustive", "ordered" (the paper's search), "naive" or
-        "lookahead" (the first step of the best ``horizon``-step sequence,
-        :mod:`ijoy_jax.lookahead`).
+      options: how the step is searched for, a :class:`~ijoy_jax.SelectOptions`
+        (None: its defaults, the exhaustive method): the method ("exhaustive",
+        "ordered" (the paper's search), "naive" or "lookahead", the first step
+        of the best ``horizon``-step sequence, :mod:`ijoy_jax.lookahead`), the
+        FootCost kernel, quantisation, the swing-path check, the lookahead's
+        horizon, beam and discount, and refinement: with ``refine``,
+        ``pose`` is the refined step, ``index`` the lattice action it started
+        from, ``cost`` and ``target`` are against p_next (:mod:`ijoy_jax.refine`).
       swing_from: (3,) current world pose of the swing foot, for the swing-path
-        check on 2.5D terrains (None: no check).
-      quantize: score against the nearest f_i of F (default, as the paper);
-        False scores the exhaustive/naive methods against p_next itself.
+        check on 2.5D terrains (None, or ``options.swing_path`` False: no check).
       targets: a prebuilt :func:`make_targets` (F and L_i); built if None.
       index: the terrain's prebuilt :class:`~ijoy_jax.footcost.TerrainIndex`;
         built if None. For many decisions on one terrain build both once
         with :func:`prepare`.
-      chunk: actions per chunk of the ordered search (static; None: 32), or
-        first actions expanded per iteration of the exact lookahead (None:
-        :data:`ijoy_jax.lookahead.DEFAULT_CHUNK`; more on a GPU).
-      kernel: how FootCost is computed (static): "xla" (default) or "pallas",
-        one fused kernel per decision (:mod:`ijoy_jax.footcost.pallas`): the
-        same costs to float32 rounding, about 30x faster on a GPU
-        (BENCHMARKS.md); on a CPU it is interpreted (slow, for checks).
       foot_costs: (N,) every action's FootCost from this stance, already
         evaluated (:func:`action_foot_costs`, or the ``cost`` of
         :func:`ijoy_jax.cue.feasible_commands`): the exhaustive method decides
         from them instead of evaluating FootCost again (the same choice).
-        None: evaluated here. Only with ``method="exhaustive"`` or
-        ``"lookahead"`` (its first level).
-      horizon: steps scored per decision by ``method="lookahead"`` (static;
-        None: 2). 1 is the exhaustive selector exactly.
-      beam: None: the exact lookahead (branch and bound; for ``horizon >= 3``
-        its worst case is N^horizon FootCost evaluations); K: a beam of K
-        sequences per level (static, 1 <= K <= N).
-      discount: gamma >= 0, the weight of each later step relative to the
-        one before (traced: changing it never recompiles).
-      refine: True (:func:`ijoy_jax.refine.params`' defaults) or a
-        :class:`~ijoy_jax.refine.RefineParams` refines the chosen step in
-        continuous (dx, dy, dtheta) on the exact cost against p_next
-        (:mod:`ijoy_jax.refine`): ``pose`` is the refined step, ``index`` the
-        lattice action it started from, ``cost`` and ``target`` are against
-        p_next. Not with ``method="naive"``.
+        None: evaluated here. Only with the methods "exhaustive" and
+        "lookahead" (its first level).
 
     Returns:
       :class:`StepChoice`.
 
     The public entry point and the function to call inside your own jit or
-    vmap: the checks skip traced values (``method``, ``quantize``, ``chunk``,
-    ``kernel``, ``horizon``, ``beam`` and ``refine``'s static fields are
-    static; ``discount`` and ``refine``'s leaves traced), and the work runs through one module-level
-    jit (an eager loop compiles once; inside your jit it is inlined).
+    vmap: the checks skip traced values (the options' static fields key the
+    program; ``discount`` and ``refine``'s leaves are traced: changing them
+    never recompiles), and the work runs through one module-level jit (an
+    eager loop compiles once; inside your jit it is inlined).
 
     Example:
       >>> import numpy as np, ijoy_jax as ij
@@ -613,24 +557,22 @@ def select_step(
     stance, swing_from = as_pose("stance", stance), as_pose("swing_from", swing_from)
     command = as_array("command", command)
     foot_costs = as_array("foot_costs", foot_costs)
-    validate(terrain, robot, stance, stance_side, command, method=method, swing_from=swing_from, targets=targets,
-             index=index, kernel=kernel, foot_costs=foot_costs, chunk=chunk)
-    opts = search_options(method, robot, horizon=horizon, beam=beam, discount=discount, refine=refine)
+    options = validate(terrain, robot, stance, stance_side, command, options, swing_from=swing_from,
+                       targets=targets, index=index, foot_costs=foot_costs)
     targets = make_targets(robot) if targets is None else targets  # outside the jit: one program with or without
-    return _select_jit(terrain, robot, stance, stance_side, command, swing_from, targets, index, foot_costs,
-                       opts.discount, opts.refine, method=method, quantize=quantize, chunk=chunk, kernel=kernel,
-                       horizon=opts.horizon, beam=opts.beam)
+    swing_from = swing_from if options.swing_path else None
+    return _select_jit(terrain, robot, stance, stance_side, command, swing_from, targets, index, foot_costs, options)
 
 
-_select_jit = jax.jit(_select, static_argnames=("method", "quantize", "chunk", "kernel", "horizon", "beam"))
+_select_jit = jax.jit(_select)
 
 
 def compiled_programs() -> int:
     """How many programs :func:`select_step` and :func:`lookahead_plan` hold compiled (in this process).
 
     Read it before and after a loop of calls to learn how many compiles the loop caused: each new input
-    shape or static option (``method``, ``quantize``, ``chunk``, ``kernel``, ``horizon``, ``beam``,
-    ``refine``'s static fields) compiles once; new terrain values, robot parameters, commands, ``discount``
-    or ``refine``'s leaves reuse the program.
+    shape or static option (:class:`~ijoy_jax.SelectOptions`' static fields, ``refine``'s included) compiles
+    once; new terrain values, robot parameters, commands, ``discount`` or ``refine``'s leaves reuse the
+    program.
     """
     return compiled_count(_select_jit) + compiled_count(_plan_jit)

@@ -18,9 +18,9 @@ let go (``|thetadot|`` at most ``deadband``) it holds the heading the robot show
 yaw of the feet ``latency`` decisions before the decision that reads the release (when the operator let go),
 and replaces the turn by the rate that puts each swing foot at that heading: the foot that had turned
 furthest is brought back, and the robot settles on the heading the operator saw (within the action set's
-rotation spacing, 6.7 deg for HRP-2 at the lattice; exactly with ``refine=True``). A command's forward and
-sideways parts are untouched. It is a :class:`ijoy_jax.control.CommandFilter`, so it works with any method
-and walker: ``ij.rollout(..., command_filter=ij.turning.heading_hold())``.
+rotation spacing, 6.7 deg for HRP-2 at the lattice; exactly with refinement, ``SelectOptions(refine=True)``).
+A command's forward and sideways parts are untouched. It is a :class:`ijoy_jax.control.CommandFilter`, so it
+works with any method and walker: ``ij.rollout(..., command_filter=ij.turning.heading_hold())``.
 
 :func:`overshoot_study` measures both modes with a simulated operator (turn at a held rate until the heading
 shown reaches a goal, then let go) on flat ground, with and without the paper's one-step latency.
@@ -205,7 +205,8 @@ def _study(terrain: Terrain, robot: Robot, start, goals, rates, forward, mode: H
            latency: int, refine):
     def one(goal, rate):
         index, targets = select.prepare(terrain, robot)
-        selector = control.exact_selector(terrain, robot, targets=targets, index=index, refine=refine)
+        selector = control.exact_selector(terrain, robot, select.SelectOptions(refine=refine), targets=targets,
+                                          index=index)
         cf = _chain(_operator(goal, rate, forward, latency), None if mode is None else mode.build(robot))
         _, rec = control.loop(control.perfect_walker(), selector, start, jnp.float32(1.0),
                               jnp.zeros((num_steps, 3), jnp.float32), command_filter=cf)

@@ -454,12 +454,12 @@ def test_the_fused_kernel_reaches_the_selector_chooses_as_xla_and_is_recorded():
     terrains = B.FAMILIES["rough"].maps(jax.random.key(3), BATCH, shape=SHAPE, resolution=RES)
 
     def program(kernel):
-        return str(jax.make_jaxpr(lambda t: B.perfect_rollouts(t, robot, starts, cmd, num_steps=3,
-                                                               kernel=kernel))(terrains))
+        return str(jax.make_jaxpr(lambda t: B.perfect_rollouts(t, robot, starts, cmd, B.walk_options(kernel=kernel),
+                                                               num_steps=3))(terrains))
 
     assert "pallas_call" in program("pallas") and "pallas_call" not in program("xla")
     xla = B.perfect_rollouts(terrains, robot, starts, cmd, num_steps=3)
-    fused = B.perfect_rollouts(terrains, robot, starts, cmd, num_steps=3, kernel="pallas")
+    fused = B.perfect_rollouts(terrains, robot, starts, cmd, B.walk_options(kernel="pallas"), num_steps=3)
     same_feet = np.all(np.abs(np.asarray(fused.footsteps) - np.asarray(xla.footsteps)) < 1e-5, axis=-1)
     before = np.cumprod(np.concatenate([np.ones((BATCH, 1), bool), same_feet[:, :-1]], axis=1), axis=1) > 0
     assert before.sum() >= 0.75 * before.size  # (the decisions up to and including each robot's first difference)

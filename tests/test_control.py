@@ -226,9 +226,9 @@ def test_the_same_checks_run_inside_a_users_jit_and_vmap():
     with pytest.raises(ValueError, match="commands"):
         jax.jit(jax.vmap(lambda s: ij.rollout(t, ROBOT, s, jnp.zeros(2), 3)))(jnp.stack([START] * 2))
     with pytest.raises(ValueError, match="method"):
-        jax.jit(lambda s: ij.rollout(t, ROBOT, s, jnp.zeros(3), 3, method="astar"))(START)
+        jax.jit(lambda s: ij.rollout(t, ROBOT, s, jnp.zeros(3), 3, options=ij.SelectOptions(method="astar")))(START)
     with pytest.raises(ValueError, match="kernel"):
-        jax.jit(lambda s: ij.rollout(t, ROBOT, s, jnp.zeros(3), 3, kernel="cuda"))(START)
+        jax.jit(lambda s: ij.rollout(t, ROBOT, s, jnp.zeros(3), 3, options=ij.SelectOptions(kernel="cuda")))(START)
 
 
 @pytest.mark.slow
@@ -283,7 +283,7 @@ def test_naive_summary_does_not_average_invalid_footholds_away():
     free[50:56, :50] = False
     t = ij.terrain.from_arrays(None, free, RES)
     start = np.array([[0.3, 1.095, 0.0], [0.3, 0.905, 0.0]])
-    naive = ij.rollout(t, ROBOT, start, [0.25, 0.0, 0.0], 16, method="naive")
+    naive = ij.rollout(t, ROBOT, start, [0.25, 0.0, 0.0], 16, options=ij.SelectOptions(method="naive"))
     s = naive.summary()
     taken, valid = np.asarray(naive.taken), np.asarray(naive.valid)
     assert int(s["invalid_footholds"]) == int(np.sum(taken & ~valid)) > 0

@@ -577,7 +577,8 @@ def test_bad_feasible_sets_and_reach_arguments_are_refused():
     with pytest.raises(ValueError, match="foot_costs"):
         ij.select_step(WALL, ROBOT, STANCE, -1, [0.1, 0.0, 0.0], foot_costs=f.cost[:5])
     with pytest.raises(ValueError, match="exhaustive"):
-        ij.select_step(WALL, ROBOT, STANCE, -1, [0.1, 0.0, 0.0], foot_costs=f.cost, method="ordered")
+        ij.select_step(WALL, ROBOT, STANCE, -1, [0.1, 0.0, 0.0], foot_costs=f.cost,
+                       options=ij.SelectOptions(method="ordered"))
     with pytest.raises(ValueError, match="foot_costs"):
         ij.select_step(WALL, ROBOT, STANCE, -1, [0.1, 0.0, 0.0], foot_costs=np.full(N, -1.0))
     out, cfg = cue.force_terms(f, [0.2, 0.0, 0.0]), haptics.default_joystick_config()

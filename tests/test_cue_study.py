@@ -67,7 +67,7 @@ def test_the_drive_is_the_control_loop_fed_the_operators_commands():
     for i in (0, 4):
         terrain = jax.tree_util.tree_map(lambda x, i=i: x[i], sc.terrain)
         traj = ij.rollout(terrain, ROBOT, np.asarray(sc.start[i]), np.asarray(log.command[i]), CFG.num_steps,
-                          targets=TARGETS, swing_path=False)
+                          targets=TARGETS, options=ij.SelectOptions(swing_path=False))
         np.testing.assert_allclose(np.asarray(traj.feet), np.asarray(log.feet[i, -1]), atol=1e-5)
         moved = np.asarray(traj.taken) & ~np.asarray(traj.in_place)
         np.testing.assert_array_equal(moved, np.asarray(log.moved[i]))

@@ -300,7 +300,7 @@ def _rollouts(terrains, margins, ws, starts, commands, targets, num_steps, metho
     robots = ROBOT.replace(margin=margins, w=ws)
 
     def run(t, r, s, c):
-        return rollout(t, r, s, c, num_steps, method=method, targets=targets)
+        return rollout(t, r, s, c, num_steps, options=ij.SelectOptions(method=method), targets=targets)
 
     return jax.vmap(run, in_axes=(0, ROBOT_AXES, 0, 0))(terrains, robots, starts, commands)
 

@@ -314,7 +314,8 @@ def test_select_step_with_the_kernel_chooses_the_same_steps(method):
     command = jnp.asarray(rng.uniform(-0.3, 0.3, (n, 3)), jnp.float32)
 
     def one(s, c, kernel):
-        ch = select.select_step(terrain, robot, s, -1, c, method=method, targets=targets, index=index, kernel=kernel)
+        ch = select.select_step(terrain, robot, s, -1, c, options=ij.SelectOptions(method=method, kernel=kernel),
+                                targets=targets, index=index)
         return ch.index, ch.cost, ch.valid, ch.foothold
 
     run = jax.jit(jax.vmap(one, in_axes=(0, 0, None)), static_argnums=2)
@@ -330,16 +331,17 @@ def test_select_step_with_the_kernel_chooses_the_same_steps(method):
 def test_public_select_step_kernel_option_and_no_recompile():
     robot = ij.robots.hrp2(margin=0.02)
     terrain = _terrain("2d", seed=9)
-    kw = dict(method="exhaustive", kernel="pallas")
-    a = ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], **kw)
-    b = ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], method="exhaustive")
+    fused = ij.SelectOptions(method="exhaustive", kernel="pallas")
+    a = ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], fused)
+    b = ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0],
+                       options=ij.SelectOptions(method="exhaustive"))
     assert int(a.index) == int(b.index) and bool(a.valid) == bool(b.valid)
     n = select.compiled_programs()
     ij.select_step(terrain, robot.replace(w=jnp.float32(3.0), margin=jnp.float32(0.05)), [0.6, 0.4, 1.0], -1,
-                   [0.0, 0.1, -0.2], **kw)
+                   [0.0, 0.1, -0.2], fused)
     assert select.compiled_programs() == n
     with pytest.raises(ValueError, match="kernel must be one of"):
-        ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], kernel="cuda")
+        ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], options=ij.SelectOptions(kernel="cuda"))
 
 
 def test_block_must_be_a_power_of_two():
@@ -355,14 +357,14 @@ def test_rollout_with_the_kernel_walks_the_same_steps():
     robot = ij.robots.hrp2(margin=0.02)
     terrain = _terrain("25d", seed=10)
     start = np.array([[0.3, 0.495, 0.0], [0.3, 0.305, 0.0]])
-    kw = dict(commands=[0.25, 0.05, 0.2], num_steps=4, method="ordered")
-    a = ij.rollout(terrain, robot, start, **kw)
-    b = ij.rollout(terrain, robot, start, kernel="pallas", **kw)
+    kw = dict(commands=[0.25, 0.05, 0.2], num_steps=4)
+    a = ij.rollout(terrain, robot, start, options=ij.SelectOptions(method="ordered"), **kw)
+    b = ij.rollout(terrain, robot, start, options=ij.SelectOptions(method="ordered", kernel="pallas"), **kw)
     assert np.asarray(a.valid).sum() >= 2  # the walk really moves
     np.testing.assert_array_equal(np.asarray(b.valid), np.asarray(a.valid))
     np.testing.assert_allclose(np.asarray(b.footsteps), np.asarray(a.footsteps), atol=1e-6)
     with pytest.raises(ValueError, match="kernel must be one of"):
-        ij.rollout(terrain, robot, start, kernel="triton", **kw)
+        ij.rollout(terrain, robot, start, options=ij.SelectOptions(method="ordered", kernel="triton"), **kw)
 
 
 @pytest.mark.slow
@@ -573,7 +575,7 @@ def test_non_finite_heights_inside_jit_flag_every_step_on_both_paths(value, wher
 @jax.jit
 def _select_traced(terrain, robot):
     return select.select_step(terrain, robot, STANCE, -1, jnp.array([0.1, 0.0, 0.0]), swing_from=SWING,
-                              targets=ij.make_targets(SMALL), method="exhaustive")
+                              targets=ij.make_targets(SMALL), options=ij.SelectOptions(method="exhaustive"))
 
 
 @pytest.mark.slow

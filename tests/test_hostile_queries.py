@@ -30,7 +30,8 @@ BAD = [math.nan, math.inf, -math.inf]
 def _decide(methods):
     """The methods on one traced query, one program for them all."""
     return jax.jit(lambda stance, side, swing_from: {
-        m: ij.select_step(ROUGH, ROBOT, stance, side, COMMAND, method=m, swing_from=swing_from, targets=TARGETS)
+        m: ij.select_step(ROUGH, ROBOT, stance, side, COMMAND, options=ij.SelectOptions(method=m),
+                          swing_from=swing_from, targets=TARGETS)
         for m in methods})
 
 

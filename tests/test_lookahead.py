@@ -60,8 +60,8 @@ def _decision(seed: int):
 
 def _check_against_brute_force(terrain, robot, stance, side, command, swing_from, horizon, discount, **kw):
     targets = ij.make_targets(robot)
-    c = ij.select_step(terrain, robot, stance, side, command, method="lookahead", horizon=horizon,
-                       swing_from=swing_from, discount=discount, targets=targets, **kw)
+    options = ij.SelectOptions(method="lookahead", horizon=horizon, discount=discount, **kw)
+    c = ij.select_step(terrain, robot, stance, side, command, options, swing_from=swing_from, targets=targets)
     fc = testing.NumpyFootCost(terrain, robot)
     v, c1, d1 = testing.lookahead_values(fc, targets, stance, side, command, swing_from, horizon, discount)
     if not np.isfinite(c1).any():
@@ -106,9 +106,9 @@ def test_beam_of_the_whole_action_set_is_exact_at_horizon_two():
     for seed in range(4):
         stance, side, command, swing_from = _decision(seed)
         terrain = _map(seed, True)
-        kw = dict(method="lookahead", horizon=2, swing_from=swing_from)
-        exact = ij.select_step(terrain, SMALL, stance, side, command, **kw)
-        beam = ij.select_step(terrain, SMALL, stance, side, command, beam=n, **kw)
+        options = ij.SelectOptions(method="lookahead", horizon=2)
+        exact = ij.select_step(terrain, SMALL, stance, side, command, options, swing_from=swing_from)
+        beam = ij.select_step(terrain, SMALL, stance, side, command, options.replace(beam=n), swing_from=swing_from)
         assert int(beam.index) == int(exact.index)
         np.testing.assert_array_equal(np.asarray(beam.pose), np.asarray(exact.pose))
 
@@ -119,8 +119,8 @@ def test_horizon_one_is_the_exhaustive_selector_exactly():
         stance, side, command, swing_from = _decision(seed)
         terrain = _map(seed, True)
         a = ij.select_step(terrain, SMALL, stance, side, command, swing_from=swing_from)
-        b = ij.select_step(terrain, SMALL, stance, side, command, swing_from=swing_from, method="lookahead",
-                           horizon=1)
+        b = ij.select_step(terrain, SMALL, stance, side, command, swing_from=swing_from,
+                           options=ij.SelectOptions(method="lookahead", horizon=1))
         for x, y in zip(a, b, strict=True):
             np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
 
@@ -146,18 +146,22 @@ def test_on_the_dead_end_map_one_step_walks_in_and_stops_and_lookahead_does_not(
     one = ij.rollout(terrain, HRP2, start, command, num_steps=4)
     assert np.allclose(one.footsteps[0], a, atol=1e-5)
     assert bool(one.taken[0]) and bool(one.stopped[1]) and not bool(one.valid[1])
-    ahead = ij.rollout(terrain, HRP2, start, command, num_steps=4, method="lookahead", horizon=2)
+    ahead = ij.rollout(terrain, HRP2, start, command, num_steps=4, options=ij.SelectOptions(method="lookahead",
+                                                                                            horizon=2))
     assert not bool(ahead.stopped.any()) and bool(ahead.taken.all())
     assert np.allclose(ahead.footsteps[0], b, atol=1e-5)  # the step whose continuation exists
     # Refined after the lookahead, the steps leave the lattice (towards the commanded turn) but keep the plan's
     # next step valid, so the robot never stops either; refined alone, it walks into the dead end as before.
-    fine = ij.rollout(terrain, HRP2, start, command, num_steps=4, method="lookahead", refine=True)
+    fine = ij.rollout(terrain, HRP2, start, command, num_steps=4, options=ij.SelectOptions(method="lookahead",
+                                                                                           refine=True))
     assert not bool(fine.stopped.any()) and float(fine.footsteps[0, 2]) > 1e-3
-    assert bool(ij.rollout(terrain, HRP2, start, command, num_steps=4, refine=True).stopped[1])
+    assert bool(ij.rollout(terrain, HRP2, start, command, num_steps=4,
+                           options=ij.SelectOptions(refine=True)).stopped[1])
     # The dead end is FootCost's verdict: no action of the right foot from A is valid, and there the lookahead
     # reports no step as the one-step selector does (index -1, the step-in-place pose, the robot stops).
     assert not np.isfinite(np.asarray(select.action_foot_costs(terrain, HRP2, a, ij.LEFT))).any()
-    stuck = ij.select_step(terrain, HRP2, a, ij.LEFT, command, method="lookahead", swing_from=start[1])
+    stuck = ij.select_step(terrain, HRP2, a, ij.LEFT, command, options=ij.SelectOptions(method="lookahead"),
+                           swing_from=start[1])
     assert not bool(stuck.valid) and int(stuck.index) == -1 and math.isinf(float(stuck.cost))
     in_place = geometry.compose(jnp.asarray(a, jnp.float32), jnp.asarray([0.0, -0.19, 0.0], jnp.float32))
     np.testing.assert_allclose(np.asarray(stuck.pose), np.asarray(in_place), atol=1e-6)
@@ -214,25 +218,28 @@ def test_discount_is_traced_and_never_recompiles():
     terrain = _map(5, False)
     stance, side, command, _ = _decision(5)
     targets = ij.make_targets(SMALL)
-    kw = dict(method="lookahead", horizon=2, targets=targets)
-    ij.select_step(terrain, SMALL, stance, side, command, discount=1.0, **kw)
+    options = ij.SelectOptions(method="lookahead", horizon=2)
+    ij.select_step(terrain, SMALL, stance, side, command, options.replace(discount=1.0), targets=targets)
     before = select.compiled_programs()
     for g in (0.0, 0.3, 2.0):
-        ij.select_step(terrain, SMALL, stance, side, command, discount=g, **kw)
+        ij.select_step(terrain, SMALL, stance, side, command, options.replace(discount=g), targets=targets)
     assert select.compiled_programs() == before
     # Nor in the rollout, which users call in loops.
     start = ij.robots.start_stance(SMALL, 0.25, 0.5)
-    ij.rollout(terrain, SMALL, start, command, 3, method="lookahead", targets=targets, discount=1.0)
+    ij.rollout(terrain, SMALL, start, command, 3, options=ij.SelectOptions(method="lookahead", discount=1.0),
+               targets=targets)
     before = compiled_count(control._rollout_jit)
     for g in (0.0, 0.7):
-        ij.rollout(terrain, SMALL, start, command, 3, method="lookahead", targets=targets, discount=g)
+        ij.rollout(terrain, SMALL, start, command, 3, options=ij.SelectOptions(method="lookahead", discount=g),
+                   targets=targets)
     assert compiled_count(control._rollout_jit) == before
 
 
 def test_an_invalid_traced_discount_is_flagged_not_silent():
     terrain = _map(6, False)
     stance, side, command, _ = _decision(6)
-    f = jax.jit(lambda g: ij.select_step(terrain, SMALL, stance, side, command, method="lookahead", discount=g))
+    f = jax.jit(lambda g: ij.select_step(terrain, SMALL, stance, side, command,
+                                         options=ij.SelectOptions(method="lookahead", discount=g)))
     for g in (jnp.nan, -1.0, jnp.inf):
         c = f(jnp.float32(g))
         assert not bool(c.valid) and bool(c.unsupported) and int(c.index) == -1 and math.isinf(float(c.cost))
@@ -243,10 +250,11 @@ def test_lookahead_under_vmap_over_terrains_is_each_terrain_alone():
     terrains = [_map(s, False) for s in (7, 8, 9)]
     stance, side, command, _ = _decision(7)
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *terrains)
-    f = jax.jit(jax.vmap(lambda t: ij.select_step(t, SMALL, stance, side, command, method="lookahead")))
+    f = jax.jit(jax.vmap(lambda t: ij.select_step(t, SMALL, stance, side, command,
+                                                  options=ij.SelectOptions(method="lookahead"))))
     out = f(batch)
     for i, t in enumerate(terrains):
-        one = ij.select_step(t, SMALL, stance, side, command, method="lookahead")
+        one = ij.select_step(t, SMALL, stance, side, command, options=ij.SelectOptions(method="lookahead"))
         assert int(out.index[i]) == int(one.index)
         np.testing.assert_allclose(np.asarray(out.pose[i]), np.asarray(one.pose), atol=1e-6)
 
@@ -256,7 +264,7 @@ def test_lookahead_under_vmap_over_terrains_is_each_terrain_alone():
     (dict(method="lookahead", horizon=-2), "horizon must be >= 1"),
     (dict(method="lookahead", horizon=2.0), "horizon must be an int"),
     (dict(method="lookahead", horizon=True), "horizon must be an int"),
-    (dict(method="lookahead", beam=0), r"beam must be in \[1, 19\]"),
+    (dict(method="lookahead", beam=0), r"beam must be in \[1, N\]"),  # refused as built, before N is known
     (dict(method="lookahead", beam=20), r"beam must be in \[1, 19\]"),
     (dict(method="lookahead", beam=4.5), "beam must be an int"),
     (dict(method="lookahed"), "method must be one of"),
@@ -270,7 +278,6 @@ def test_lookahead_under_vmap_over_terrains_is_each_terrain_alone():
 def test_hostile_lookahead_options_get_one_clear_error(kwargs, match):
     terrain = _map(0, False)
     with pytest.raises((ValueError, TypeError), match=match):
-        ij.select_step(terrain, SMALL, [0.25, 0.5, 0.0], -1, [0.2, 0.0, 0.0], **kwargs)
-    if "chunk" not in kwargs:  # the rollout has no chunk option
-        with pytest.raises((ValueError, TypeError), match=match):
-            ij.rollout(terrain, SMALL, [[0.25, 0.6, 0.0], [0.25, 0.4, 0.0]], [0.2, 0.0, 0.0], 2, **kwargs)
+        ij.select_step(terrain, SMALL, [0.25, 0.5, 0.0], -1, [0.2, 0.0, 0.0], ij.SelectOptions(**kwargs))
+    with pytest.raises((ValueError, TypeError), match=match):
+        ij.rollout(terrain, SMALL, [[0.25, 0.6, 0.0], [0.25, 0.4, 0.0]], [0.2, 0.0, 0.0], 2, ij.SelectOptions(**kwargs))

@@ -76,8 +76,10 @@ def test_refinement_is_never_costlier_than_its_lattice_step_and_always_valid(see
     terrain = _map(seed, has_height)
     stance, side, command, swing_from = _decision(seed)
     sf = swing_from if has_height else None
-    lattice = ij.select_step(terrain, SMALL, stance, side, command, method=method, swing_from=sf)
-    fine = ij.select_step(terrain, SMALL, stance, side, command, method=method, swing_from=sf, refine=True)
+    lattice = ij.select_step(terrain, SMALL, stance, side, command, options=ij.SelectOptions(method=method),
+                             swing_from=sf)
+    fine = ij.select_step(terrain, SMALL, stance, side, command, options=ij.SelectOptions(method=method, refine=True),
+                          swing_from=sf)
     if bool(lattice.valid):
         start, _, _ = _cost_against_p_next(terrain, SMALL, stance, side, command, lattice.pose,
                                            int(lattice.index), sf)
@@ -111,7 +113,7 @@ def test_a_step_between_lattice_points_up_to_a_wall():
     terrain = ij.terrain.from_arrays(None, free, RES)
     args = (terrain, HRP2, [0.77, 0.8, 0.0], ij.RIGHT, [0.25, 0.0, 0.0])
     lattice = ij.select_step(*args, swing_from=[0.77, 0.99, 0.0])
-    fine = ij.select_step(*args, swing_from=[0.77, 0.99, 0.0], refine=True)
+    fine = ij.select_step(*args, swing_from=[0.77, 0.99, 0.0], options=ij.SelectOptions(refine=True))
     assert bool(fine.valid) and int(fine.index) == int(lattice.index)
     # The lattice stops 5 cm steps short (0.92 m); the refined foot's grown front (0.141 m ahead) is within a
     # cell of the wall, the closest the conservative cell coverage allows.
@@ -135,7 +137,7 @@ def test_a_foothold_no_lattice_step_reaches_is_found():
     terrain, s0, f0 = _island_map()
     command = [0.25, 0.0, 0.0]  # p_next: 0.2 m ahead
     lattice = ij.select_step(terrain, HRP2, s0, ij.RIGHT, command, swing_from=f0)
-    fine = ij.select_step(terrain, HRP2, s0, ij.RIGHT, command, swing_from=f0, refine=True)
+    fine = ij.select_step(terrain, HRP2, s0, ij.RIGHT, command, swing_from=f0, options=ij.SelectOptions(refine=True))
     # The lattice's only valid step puts the left foot back where it stands (0.2 m behind): it marks time.
     assert bool(lattice.valid) and np.allclose(np.asarray(lattice.pose), f0, atol=POSE_TOL)
     assert bool(fine.valid) and float(fine.pose[0]) == pytest.approx(0.675, abs=0.011)
@@ -143,7 +145,7 @@ def test_a_foothold_no_lattice_step_reaches_is_found():
     ahead = np.asarray(ij.action_steps(HRP2, s0, ij.RIGHT))[:, 0] > 0.55
     assert not np.isfinite(np.asarray(select.action_foot_costs(terrain, HRP2, s0, ij.RIGHT))[ahead]).any()
     # The rollout walks onto it and records the refined pose with the lattice action it started from.
-    traj = ij.rollout(terrain, HRP2, np.stack([f0, s0]), command, num_steps=4, refine=True)
+    traj = ij.rollout(terrain, HRP2, np.stack([f0, s0]), command, num_steps=4, options=ij.SelectOptions(refine=True))
     assert float(traj.footsteps[0, 0]) == pytest.approx(float(fine.pose[0]), abs=POSE_TOL)
     assert int(traj.index[0]) == int(fine.index) and not bool(traj.in_place[0])
     assert int(traj.summary()["footholds_on_obstacles"]) == 0
@@ -153,11 +155,12 @@ def test_refine_options_are_traced_and_never_recompile():
     terrain = _map(1, False)
     stance, side, command, _ = _decision(1)
     targets = ij.make_targets(SMALL)
-    ij.select_step(terrain, SMALL, stance, side, command, targets=targets, refine=refine.params())
+    ij.select_step(terrain, SMALL, stance, side, command, targets=targets,
+                   options=ij.SelectOptions(refine=refine.params()))
     before = select.compiled_programs()
     for span, gain in ((0.5, 0.0), (1.0, 1e-3), (0.25, 1e-6)):
         c = ij.select_step(terrain, SMALL, stance, side, command, targets=targets,
-                           refine=refine.params(span=span, min_gain=gain))
+                           options=ij.SelectOptions(refine=refine.params(span=span, min_gain=gain)))
         assert bool(c.valid)
     assert select.compiled_programs() == before
 
@@ -167,7 +170,8 @@ def test_traced_invalid_refine_options_are_flagged():
     terrain = _map(2, False)
     stance, side, command, _ = _decision(2)
     p = refine.params()
-    f = jax.jit(lambda s: ij.select_step(terrain, SMALL, stance, side, command, refine=p.replace(span=s)))
+    f = jax.jit(lambda s: ij.select_step(terrain, SMALL, stance, side, command,
+                                         options=ij.SelectOptions(refine=p.replace(span=s))))
     for bad in (jnp.nan, -1.0, 0.0):
         c = f(jnp.float32(bad))
         assert not bool(c.valid) and bool(c.unsupported) and int(c.index) == -1
@@ -179,10 +183,11 @@ def test_refinement_under_vmap_inside_a_users_jit_is_each_decision_alone():
     terrains = [_map(s, False) for s in (3, 4)]
     stance, side, command, _ = _decision(3)
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *terrains)
-    f = jax.jit(jax.vmap(lambda t: ij.select_step(t, SMALL, stance, side, command, refine=True)))
+    f = jax.jit(jax.vmap(lambda t: ij.select_step(t, SMALL, stance, side, command,
+                                                  options=ij.SelectOptions(refine=True))))
     out = f(batch)
     for i, t in enumerate(terrains):
-        one = ij.select_step(t, SMALL, stance, side, command, refine=True)
+        one = ij.select_step(t, SMALL, stance, side, command, options=ij.SelectOptions(refine=True))
         assert int(out.index[i]) == int(one.index)
         np.testing.assert_allclose(np.asarray(out.pose[i]), np.asarray(one.pose), atol=POSE_TOL)
 
@@ -197,9 +202,9 @@ def test_refinement_under_vmap_inside_a_users_jit_is_each_decision_alone():
 def test_hostile_refine_options_get_one_clear_error(kwargs, match):
     terrain = _map(0, False)
     with pytest.raises((ValueError, TypeError), match=match):
-        ij.select_step(terrain, SMALL, [0.25, 0.5, 0.0], -1, [0.2, 0.0, 0.0], **kwargs)
+        ij.select_step(terrain, SMALL, [0.25, 0.5, 0.0], -1, [0.2, 0.0, 0.0], ij.SelectOptions(**kwargs))
     with pytest.raises((ValueError, TypeError), match=match):
-        ij.rollout(terrain, SMALL, [[0.25, 0.6, 0.0], [0.25, 0.4, 0.0]], [0.2, 0.0, 0.0], 2, **kwargs)
+        ij.rollout(terrain, SMALL, [[0.25, 0.6, 0.0], [0.25, 0.4, 0.0]], [0.2, 0.0, 0.0], 2, ij.SelectOptions(**kwargs))
 
 
 @pytest.mark.parametrize("kwargs, match", [

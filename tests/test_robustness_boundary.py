@@ -170,7 +170,7 @@ def test_replace_beyond_the_static_windows_names_the_field_and_is_flagged_inside
 
 def _one(robot, terrain, stance, command):
     return ij.select_step(terrain, robot, stance, -1, command, swing_from=stance + jnp.array([0.0, 0.19, 0.0]),
-                          targets=TARGETS, method="ordered")
+                          targets=TARGETS, options=ij.SelectOptions(method="ordered"))
 
 
 _select_jit = jax.jit(lambda t, r, s, c: _one(r, t, s, c))
@@ -256,7 +256,8 @@ def test_select_step_wrong_arguments(kwargs, name):
     args.update(kwargs)
     stance, side, command = args.pop("stance"), args.pop("stance_side"), args.pop("command")
     with pytest.raises(ERRORS, match=name):
-        ij.select_step(TERRAIN_25D, ROBOT, stance, side, command, **args)
+        options = {k: args.pop(k) for k in ("method",) if k in args}  # the search's options are one value
+        ij.select_step(TERRAIN_25D, ROBOT, stance, side, command, ij.SelectOptions(**options), **args)
 
 
 _terms_jit = jax.jit(lambda r, steps: ij.foot_cost_terms(TERRAIN_25D, r, STANCE, -1, steps,
@@ -318,8 +319,9 @@ def test_rollout_wrong_arguments(kwargs, name):
     args = dict(start=START, commands=[0.1, 0.0, 0.0], num_steps=3)
     args.update(kwargs)
     with pytest.raises(ERRORS, match=name):
+        options = {k: args.pop(k) for k in ("method",) if k in args}  # the search's options are one value
         ij.rollout(TERRAIN_2D, ROBOT, args.pop("start"), args.pop("commands"), args.pop("num_steps"),
-                   targets=TARGETS, **args)
+                   ij.SelectOptions(**options), targets=TARGETS, **args)
 
 
 _rollout_jit = jax.jit(lambda r, c: ij.rollout(TERRAIN_2D, r, START, c, 4, targets=TARGETS).summary())

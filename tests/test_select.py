@@ -55,7 +55,8 @@ def _random_queries(seed, n):
 
 def _batched(method, with_path):
     def one(t, st, sd, cmd, sw):
-        return ij.select_step(t, ROBOT, st, sd, cmd, method=method, swing_from=sw if with_path else None,
+        return ij.select_step(t, ROBOT, st, sd, cmd, options=ij.SelectOptions(method=method),
+                              swing_from=sw if with_path else None,
                               targets=TARGETS)
 
     # lax.map in vmapped chunks: 2.5D windows of thousands of decisions at once would not fit in memory.
@@ -121,7 +122,8 @@ def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost_and_of_action_
     t = jax.tree_util.tree_map(lambda x: x[0], terrains)
     stance, side, command, swing_from = _random_queries(12, 20)
     for q in range(20):
-        ch = ij.select_step(t, ROBOT, stance[q], side[q], command[q], swing_from=swing_from[q], quantize=False)
+        ch = ij.select_step(t, ROBOT, stance[q], side[q], command[q], swing_from=swing_from[q],
+                            options=ij.SelectOptions(quantize=False))
         steps = ij.action_steps(ROBOT, stance[q], side[q])
         fc = np.asarray(ij.foot_cost(t, ROBOT, stance[q], side[q], steps, swing_from=swing_from[q],
                                      action_index=np.arange(496)), np.float64)
@@ -133,7 +135,8 @@ def test_exhaustive_is_the_brute_force_argmin_of_public_foot_cost_and_of_action_
         every = select.action_foot_costs(t, ROBOT, stance[q], side[q], swing_from=swing_from[q])
         np.testing.assert_array_equal(np.asarray(every, np.float64), fc)
         if q < 6:
-            again = ij.select_step(t, ROBOT, stance[q], side[q], command[q], swing_from=swing_from[q], quantize=False,
+            again = ij.select_step(t, ROBOT, stance[q], side[q], command[q], swing_from=swing_from[q],
+                                   options=ij.SelectOptions(quantize=False),
                                    foot_costs=every)
             assert int(again.index) == int(ch.index) and float(again.cost) == float(ch.cost)
         if np.isinf(total).all():
@@ -167,7 +170,7 @@ def test_a_shifted_world_frame_gives_the_same_steps_shifted_and_a_utm_frame_is_r
 def test_no_valid_step_is_explicit_and_finite():
     t = ij.terrain.from_arrays(None, np.zeros(SHAPE, bool), RES)  # all obstacle
     for method in select.METHODS:
-        ch = ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], method=method)
+        ch = ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], options=ij.SelectOptions(method=method))
         assert not bool(ch.valid) and np.isinf(float(ch.cost))
         assert np.all(np.isfinite(np.asarray(ch.pose)))
         # the foothold is the reported pose's, level on a 2D map
@@ -222,7 +225,7 @@ def test_quantize_scores_against_f_or_p_next():
     t = ij.terrain.flat(SHAPE, RES)
     cmd = np.array([0.113, 0.031, 0.0])
     q = ij.select_step(t, ROBOT, [0.4, 0.4, 0.0], -1, cmd)
-    p = ij.select_step(t, ROBOT, [0.4, 0.4, 0.0], -1, cmd, quantize=False)
+    p = ij.select_step(t, ROBOT, [0.4, 0.4, 0.0], -1, cmd, options=ij.SelectOptions(quantize=False))
     p_next = np.array([0.4, 0.4 + 0.19, 0.0]) + 0.8 * cmd
     np.testing.assert_allclose(np.asarray(p.target), p_next, atol=1e-6)
     f = np.asarray(q.target)
@@ -235,7 +238,7 @@ def test_naive_takes_the_nearest_action_whatever_the_terrain():
     free = np.ones(SHAPE, bool)
     free[int(0.55 / RES):int(0.7 / RES), :] = False
     t = ij.terrain.from_arrays(None, free, RES)
-    ch = ij.select_step(t, ROBOT, [0.4, 0.4, 0.0], -1, [0.25, 0.0, 0.0], method="naive")
+    ch = ij.select_step(t, ROBOT, [0.4, 0.4, 0.0], -1, [0.25, 0.0, 0.0], options=ij.SelectOptions(method="naive"))
     np.testing.assert_allclose(np.asarray(ch.pose), [0.6, 0.59, 0.0], atol=1e-6)
     assert not bool(ch.valid) and int(ch.index) >= 0
 
@@ -262,15 +265,17 @@ def test_prepared_tables_give_the_same_choice_and_checks_run_inside_jit():
     p = select.prepare(t, ROBOT)
     assert isinstance(p.index, ij.footcost.TerrainIndex) and p.targets.order.shape == TARGETS.order.shape
     args = ([0.5, 0.5, 0.1], -1, [0.2, 0.05, 0.1])
-    a = ij.select_step(t, ROBOT, *args, method="ordered", swing_from=[0.45, 0.7, 0.0])
-    b = ij.select_step(t, ROBOT, *args, method="ordered", swing_from=[0.45, 0.7, 0.0], index=p.index,
+    a = ij.select_step(t, ROBOT, *args, options=ij.SelectOptions(method="ordered"), swing_from=[0.45, 0.7, 0.0])
+    b = ij.select_step(t, ROBOT, *args, options=ij.SelectOptions(method="ordered"), swing_from=[0.45, 0.7, 0.0],
+                       index=p.index,
                        targets=p.targets)
     for x, y in zip(a, b, strict=True):
         np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
     with pytest.raises(ValueError, match="command"):
         jax.jit(lambda s: ij.select_step(t, ROBOT, s, -1, jnp.zeros(2)))(jnp.zeros(3))
     with pytest.raises(ValueError, match="method"):
-        jax.jit(lambda s: ij.select_step(t, ROBOT, s, -1, jnp.zeros(3), method="astar"))(jnp.zeros(3))
+        jax.jit(lambda s: ij.select_step(t, ROBOT, s, -1, jnp.zeros(3),
+                                         options=ij.SelectOptions(method="astar")))(jnp.zeros(3))
     with pytest.raises(TypeError, match="index"):
         ij.select_step(t, ROBOT, *args, index=p.targets)
 
@@ -348,7 +353,7 @@ def test_on_obstacle_refuses_bad_input_and_flags_a_bad_traced_margin():
 def test_bad_input_at_the_boundary():
     t = ij.terrain.flat(SHAPE, RES)
     with pytest.raises(ValueError, match="method"):
-        ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.1, 0.0, 0.0], method="astar")
+        ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.1, 0.0, 0.0], options=ij.SelectOptions(method="astar"))
     with pytest.raises(ValueError, match="command"):
         ij.select_step(t, ROBOT, [0.5, 0.5, 0.0], -1, [0.1, 0.0])
     with pytest.raises(ValueError, match="stance_side"):
@@ -384,7 +389,8 @@ def test_unsupported_robot_values_inside_jit_are_flagged_not_silent(method, chan
     """Traced (a user's jit or vmap): no check can raise, so the choice is invalid WITH a reason, and its cost is
     +inf, never negative."""
     t = _wall_terrain()
-    f = jax.jit(lambda r: ij.select_step(t, r, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], method=method,
+    f = jax.jit(lambda r: ij.select_step(t, r, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0],
+                                         options=ij.SelectOptions(method=method),
                                          targets=TARGETS))
     ok = f(ROBOT)
     assert bool(ok.valid) and not bool(ok.unsupported)
@@ -487,7 +493,8 @@ def test_foothold_of_every_method_is_that_of_its_pose(method):
     t = jax.tree_util.tree_map(lambda x: x[0], terrains)
     stance, side, command, _ = _random_queries(34, 8)
     for q in range(8):
-        ch = ij.select_step(t, ROBOT, stance[q], side[q], command[q], method=method, targets=TARGETS)
+        ch = ij.select_step(t, ROBOT, stance[q], side[q], command[q], options=ij.SelectOptions(method=method),
+                            targets=TARGETS)
         want = select.foothold(t, ROBOT, ch.pose)
         np.testing.assert_allclose(np.asarray(ch.foothold), np.asarray(want), atol=1e-6)
 

@@ -125,8 +125,7 @@ def test_a_nan_terrain_is_refused_where_concrete_and_stands_flagged_where_traced
     dyn = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float32), (2,)), dyn)  # as given
     traj = W._rollout_batch(_tiny_walk.sim(), bad, robots, jnp.asarray(starts, jnp.float32),
                             jnp.asarray(commands, jnp.float32), first, None, dyn, _checks.rollout_keys(0, 2),
-                            num_steps=_tiny_walk.STEPS, method="exhaustive", swing_path=True, quantize=True,
-                            frames_per_step=_tiny_walk.FRAMES, kernel="xla", refine=False)
+                            ij.SelectOptions(), num_steps=_tiny_walk.STEPS, frames_per_step=_tiny_walk.FRAMES)
     traj = jax.tree_util.tree_map(np.asarray, traj)
     assert traj.unsupported[0].all() and not traj.taken[0].any() and not traj.unsupported[1].any()
     for path, leaf in jax.tree_util.tree_leaves_with_path(traj):
@@ -167,7 +166,8 @@ def runs(sim):
     scs = scenarios_2d()
     scs = {k: scs[k] for k in NAMES[:3]}
     scs["flat-forward"] = scenario(np.ones(SHAPE_2D, bool), start=_start(), command=FORWARD_CMDS)
-    traj = W.rollout_batch(sim, *_batch(scs.values()), num_steps=STEPS_2D, method="ordered", frames_per_step=FRAMES)
+    traj = W.rollout_batch(sim, *_batch(scs.values()), num_steps=STEPS_2D, options=ij.SelectOptions(method="ordered"),
+                           frames_per_step=FRAMES)
     traj = jax.tree_util.tree_map(np.asarray, traj)
     return {k: (sc, jax.tree_util.tree_map(lambda a, i=i: a[i], traj)) for i, (k, sc) in enumerate(scs.items())}
 
@@ -308,7 +308,7 @@ def test_margins_in_clutter_reuse_the_compiled_rollout(runs, sim):
     commands = jnp.broadcast_to(jnp.asarray([0.2, 0.0, 0.0], jnp.float32), (4, STEPS_2D, 3))
     before = W.compiled_programs()
     traj = jax.tree_util.tree_map(np.asarray, W.rollout_batch(sim, terrains, robots, starts, commands,
-                                                              num_steps=STEPS_2D, method="ordered",
+                                                              ij.SelectOptions(method="ordered"), num_steps=STEPS_2D,
                                                               frames_per_step=FRAMES))
     assert W.compiled_programs() == before
     s = {k: np.asarray(v) for k, v in W.summary(traj).items()}
@@ -389,15 +389,17 @@ def test_gif_and_filmstrip(tmp_path):
 def test_refine_reaches_the_simulated_walker(sim):
     """``refine=True`` puts the continuous refinement (:mod:`ijoy_jax.refine`, tested with the perfect robot in
     tests/test_refine.py) into the MJX rollout's decisions: traced, not compiled (a compile costs ~75 s here),
-    the program gains the refinement's search and keeps the same outputs; a non-bool is refused at the boundary."""
+    the program gains the refinement's search and keeps the same outputs; a refine that is neither a bool nor a
+    RefineParams is refused as the options are built."""
     sc = scenario(np.ones(SHAPE_2D, bool), start=_start(), command=FORWARD_CMDS)
     args = (sim, sc.terrain(), ij.robots.hrp2(margin=sc.margin), jnp.asarray(sc.start), jnp.asarray(sc.commands[:2]))
 
     def traced(refine):
-        return jax.make_jaxpr(lambda *a: W.rollout(sim, *a, num_steps=2, method="ordered", refine=refine))(*args[1:])
+        options = ij.SelectOptions(method="ordered", refine=refine)
+        return jax.make_jaxpr(lambda *a: W.rollout(sim, *a, options, num_steps=2))(*args[1:])
 
     plain, refined = traced(False), traced(True)
     assert len(str(refined)) > len(str(plain)) + 1000  # the refinement's local search is in the program
     assert jax.tree_util.tree_structure(refined.out_avals) == jax.tree_util.tree_structure(plain.out_avals)
-    with pytest.raises(ValueError, match="refine must be True or False"):
-        W.rollout(*args, num_steps=2, refine="yes")
+    with pytest.raises(TypeError, match="refine must be a bool or an ijoy_jax.refine.RefineParams"):
+        W.rollout(*args, ij.SelectOptions(refine="yes"), num_steps=2)

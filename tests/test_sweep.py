@@ -333,8 +333,9 @@ def test_selector_options_sweep_match_direct_rollouts_and_compile_once_per_horiz
         c = np.asarray(generators.start_point(params, shape=(60, 50), resolution=0.04))
         start = np.array([[c[0], c[1] + 0.095, 0.0], [c[0], c[1] - 0.095, 0.0]])
         command = row[["command.vx", "command.vy", "command.wz"]].to_numpy(np.float64)
-        want = ij.rollout(terrain, robot, start, command, num_steps=6, method="lookahead",
-                          horizon=int(row["selector.horizon"]), discount=float(row["selector.discount"])).summary()
+        options = ij.SelectOptions(method="lookahead", horizon=int(row["selector.horizon"]),
+                                   discount=float(row["selector.discount"]))
+        want = ij.rollout(terrain, robot, start, command, num_steps=6, options=options).summary()
         for k, v in want.items():
             assert row[k] == pytest.approx(float(v), abs=FLOAT_TOL), k
     diffs = sweep.paired_differences(df, {"selector.horizon": 1, "selector.discount": 0.5})

@@ -128,7 +128,7 @@ def test_held_out_evaluation_matches_brute_force_numpy():
     ev = forward.evaluate(robot, d, cfg)
     for b in range(5):  # the choice is the public exact selector's
         t = jax.tree.map(lambda x, b=b: x[b], d.terrains)
-        c = ij.select_step(t, robot, d.stances[b], d.sides[b], d.commands[b], quantize=False)
+        c = ij.select_step(t, robot, d.stances[b], d.sides[b], d.commands[b], options=ij.SelectOptions(quantize=False))
         assert int(c.index) == int(ev.index[b])
     near, on, trans = [], [], []
     for b in range(5):

@@ -72,7 +72,8 @@ def _batch(has_height):
 def _exact_all(terrain, robot, stance, command):
     """Exact choice (quantize=False) and the exact cost of every action of one query."""
     index, targets = prepare(terrain, robot)
-    choice = select_step(terrain, robot, stance, -1.0, command, quantize=False, targets=targets, index=index)
+    choice = select_step(terrain, robot, stance, -1.0, command, options=ij.SelectOptions(quantize=False),
+                         targets=targets, index=index)
     acts = ij.robots.side_actions(robot, 1.0)
     steps = ij.geometry.compose(stance, acts)
     n = acts.shape[0]
@@ -394,8 +395,9 @@ def test_relaxed_select_with_swing_from_matches_exact(robot):
     for seed in range(NUM_POST_QUERIES):
         terrain = _post_terrain(seed)
         command = np.random.default_rng(100 + seed).uniform([0.1, -0.1, -0.3], [0.3, 0.1, 0.3]).astype(np.float32)
-        e = ij.select_step(terrain, robot, stance, -1, command, swing_from=swing_from, quantize=False)
-        e0 = ij.select_step(terrain, robot, stance, -1, command, quantize=False)
+        e = ij.select_step(terrain, robot, stance, -1, command, swing_from=swing_from,
+                           options=ij.SelectOptions(quantize=False))
+        e0 = ij.select_step(terrain, robot, stance, -1, command, options=ij.SelectOptions(quantize=False))
         r = relax.relaxed_select_jit(
             terrain, robot, stance, -1, command, sharpness=300.0, tau=0.01, swing_from=swing_from
         )

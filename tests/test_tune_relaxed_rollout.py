@@ -45,7 +45,7 @@ def test_relaxed_rollout_tends_to_exact_rollout(robot):
     """As tau -> 0 at a large sharpness, the relaxed footsteps equal ``ij.rollout``'s (perfect walker)."""
     terrain = _walk_terrain()
     cmd = np.array([0.25, 0.0, 0.0], np.float32)
-    exact = ij.rollout(terrain, robot, START, cmd, 8, quantize=False)
+    exact = ij.rollout(terrain, robot, START, cmd, 8, options=ij.SelectOptions(quantize=False))
     assert bool(np.all(exact.valid))
     assert len(set(np.asarray(exact.index).tolist())) > 2  # not a plain straight walk: the block matters
     ref = np.asarray(exact.footsteps)

@@ -176,9 +176,11 @@ def bench_select(rows, quick: bool, chunk: int):
         posts_index = jax.jit(lambda t: footcost.index_terrain(t, robot))(posts)
         cases += [("2.5D posts", posts, "exhaustive", "pallas", robot, posts_index, sizes[-2:])]
     for terrain_name, tmap, method, kernel, rb, ix, batches in cases:
-        def one(stance, command, swing, tmap=tmap, method=method, kernel=kernel, rb=rb, ix=ix):
-            c = select.select_step(tmap, rb, stance, -1, command, method=method, swing_from=swing, targets=targets,
-                                   index=ix, kernel=kernel)
+        options = ij.SelectOptions(method=method, kernel=kernel)
+
+        def one(stance, command, swing, tmap=tmap, options=options, rb=rb, ix=ix):
+            c = select.select_step(tmap, rb, stance, -1, command, options, swing_from=swing, targets=targets,
+                                   index=ix)
             return c.index, c.cost
 
         # The kernel keeps its intermediates on chip, so a whole batch fits at once.
@@ -204,8 +206,8 @@ def bench_select(rows, quick: bool, chunk: int):
             if kernel == "xla" and b > 8192:
                 continue  # XLA materialises per-candidate windows: its rows stop at the sizes of earlier runs
             starts = _starts(robot, b, 1.0, 1.0, 50)
-            f = jax.jit(jax.vmap(lambda s, method=method, kernel=kernel: rollout(
-                terrain, robot, s, cmd, steps, method=method, targets=targets, kernel=kernel).footsteps))
+            f = jax.jit(jax.vmap(lambda s, options=ij.SelectOptions(method=method, kernel=kernel): rollout(
+                terrain, robot, s, cmd, steps, options, targets=targets).footsteps))
             comp, run, _, _ = _time(f, starts, repeats=3, min_seconds=0.2)
             _emit(rows, dict(_env(), bench="rollout", method=method, kernel=kernel, terrain="2.5D", batch=b,
                              steps=steps, compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
@@ -220,8 +222,8 @@ def bench_select(rows, quick: bool, chunk: int):
         terrains = jax.vmap(lambda h: flat.replace(height=h))(heights)
         starts = _starts(robot, b, 0.5, 0.8, 40)
         for method, kernel in loops:
-            f = jax.jit(jax.vmap(lambda t, s, method=method, kernel=kernel: rollout(
-                t, robot, s, cmd, steps, method=method, targets=targets, kernel=kernel).footsteps))
+            f = jax.jit(jax.vmap(lambda t, s, options=ij.SelectOptions(method=method, kernel=kernel): rollout(
+                t, robot, s, cmd, steps, options, targets=targets).footsteps))
             comp, run, _, _ = _time(f, terrains, starts, repeats=3, min_seconds=0.2)
             _emit(rows, dict(_env(), bench="rollout", method=method, kernel=kernel, terrain="2.5D, one per robot",
                              batch=b, steps=steps, compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
@@ -252,7 +254,7 @@ LOOKAHEAD_SELECTORS = (
     ("refine", dict(method="exhaustive", refine=True)),
     ("lookahead H=2 exact + refine", dict(method="lookahead", horizon=2, refine=True)),
 )
-"""The selectors ``ijoy bench lookahead`` times: name and :func:`ijoy_jax.select_step` options."""
+"""The selectors ``ijoy bench lookahead`` times: name and the fields of its :class:`ijoy_jax.SelectOptions`."""
 
 
 def _constrained_decisions(robot, per_family: int, steps: int, seed: int = 0):
@@ -313,9 +315,9 @@ def bench_lookahead(rows, quick: bool, chunk: int):
             else:
                 sizes = [1, 16] if cpu else [1, 256, 4096]
 
-            def one(stance, command, swing, kw=kw, terrain=terrain, index=index):
-                c = select.select_step(terrain, robot, stance, -1, command, swing_from=swing, targets=targets,
-                                       index=index, **kw)
+            def one(stance, command, swing, options=ij.SelectOptions(**kw), terrain=terrain, index=index):
+                c = select.select_step(terrain, robot, stance, -1, command, options, swing_from=swing,
+                                       targets=targets, index=index)
                 return c.index, c.evaluated
 
             # Vmapped chunks of about the one-step's FootCost evaluations at once (``chunk`` decisions of N):
@@ -340,8 +342,8 @@ def bench_lookahead(rows, quick: bool, chunk: int):
                                         for j in (1, 2, 3, 4))
 
         def plan(st, t, sd, sw, cmd, horizon, beam):  # stance first: _batched reads the batch size from it
-            return select.lookahead_plan(t, robot, st, sd, cmd, horizon=horizon, beam=beam, swing_from=sw,
-                                         targets=targets)
+            options = ij.SelectOptions(method="lookahead", horizon=horizon, beam=beam)
+            return select.lookahead_plan(t, robot, st, sd, cmd, options, swing_from=sw, targets=targets)
 
         exact = {}
         for horizon in (2, 3):
@@ -413,9 +415,10 @@ def check(rows, quick: bool, chunk: int, path: str | None = None):
         stance, command, swing = workload_queries(256 if quick else 2048, seed=4)
         for method in ("exhaustive", "ordered"):
             for kernel in kernels:
-                def one(st, cmd, sw, method=method, kernel=kernel, terrain=terrain, index=index):
-                    c = select.select_step(terrain, robot, st, -1, cmd, method=method, swing_from=sw,
-                                           targets=targets, index=index, kernel=kernel)
+                def one(st, cmd, sw, options=ij.SelectOptions(method=method, kernel=kernel), terrain=terrain,
+                        index=index):
+                    c = select.select_step(terrain, robot, st, -1, cmd, options, swing_from=sw, targets=targets,
+                                           index=index)
                     return c.index, c.cost
 
                 i, c = _batched(one, chunk)(stance, command, swing)
@@ -424,9 +427,9 @@ def check(rows, quick: bool, chunk: int, path: str | None = None):
         # Beyond the paper (#25), XLA FootCost: the two-step lookahead and the refinement, on fewer queries.
         few = 64 if quick else 256
         for name, kw in (("lookahead2", dict(method="lookahead", horizon=2)), ("refine", dict(refine=True))):
-            def one(st, cmd, sw, kw=kw, terrain=terrain, index=index):
-                c = select.select_step(terrain, robot, st, -1, cmd, swing_from=sw, targets=targets, index=index,
-                                       **kw)
+            def one(st, cmd, sw, options=ij.SelectOptions(**kw), terrain=terrain, index=index):
+                c = select.select_step(terrain, robot, st, -1, cmd, options, swing_from=sw, targets=targets,
+                                       index=index)
                 return c.index, c.cost
 
             i, c = _batched(one, max(1, chunk // 16))(stance[:few], command[:few], swing[:few])

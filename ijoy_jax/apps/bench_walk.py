@@ -58,6 +58,7 @@ import numpy as np
 from ijoy_jax import control, robots, select
 from ijoy_jax.extras import require
 from ijoy_jax.jit_cache import compiled_count
+from ijoy_jax.select import SelectOptions
 from ijoy_jax.sim import model
 from ijoy_jax.sim import walker as W
 from ijoy_jax.terrain import Terrain
@@ -254,26 +255,30 @@ def _stack_robot(robot: robots.Robot, batch: int) -> robots.Robot:
     return jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (batch, *np.shape(x))), robot)
 
 
-def perfect_rollouts(terrains: Terrain, robot: robots.Robot, starts, commands, *, num_steps: int,
-                     targets=None, refine: bool = False, kernel: str = "xla") -> control.Trajectory:
-    """The perfect robot on B maps: one jitted ``vmap`` of :func:`ijoy_jax.control.rollout` (``method="ordered"``).
+def walk_options(*, refine: bool = False, kernel: str = "xla") -> SelectOptions:
+    """Both walkers' search: the paper's ordered selector with FootCost's ``kernel`` ("xla" or "pallas"), each
+    lattice choice refined to a continuous foothold when ``refine`` (:mod:`ijoy_jax.refine`)."""
+    return SelectOptions(method="ordered", kernel=kernel, refine=refine)
+
+
+def perfect_rollouts(terrains: Terrain, robot: robots.Robot, starts, commands, options: SelectOptions | None = None,
+                     *, num_steps: int, targets=None) -> control.Trajectory:
+    """The perfect robot on B maps: one jitted ``vmap`` of :func:`ijoy_jax.control.rollout`.
 
     ``terrains``, ``starts`` (B, 2, 3) and ``commands`` (B, num_steps, 3) are batched; the robot and its
     targets (:func:`ijoy_jax.make_targets`, built when None) are shared, and traced: new maps, commands or
-    robot values reuse the compiled program. ``refine``: each lattice choice refined to a continuous foothold
-    (:mod:`ijoy_jax.refine`; one more program). ``kernel``: FootCost's implementation (``select_step``'s).
+    robot values reuse the compiled program. ``options``: the search (None: :func:`walk_options`' default,
+    the ordered selector; refinement is one more program).
     """
     targets = select.make_targets(robot) if targets is None else targets
-    return _perfect_jit(terrains, robot, starts, commands, targets, num_steps=int(num_steps), refine=bool(refine),
-                        kernel=kernel)
+    options = walk_options() if options is None else options
+    return _perfect_jit(terrains, robot, starts, commands, targets, options, num_steps=int(num_steps))
 
 
-@functools.partial(jax.jit, static_argnames=("num_steps", "refine", "kernel"))
-def _perfect_jit(terrains, robot, starts, commands, targets, *, num_steps: int, refine: bool = False,
-                 kernel: str = "xla"):
+@functools.partial(jax.jit, static_argnames=("num_steps",))
+def _perfect_jit(terrains, robot, starts, commands, targets, options, *, num_steps: int):
     def one(t, s, c):
-        return control.rollout(t, robot, s, c, num_steps, method="ordered", targets=targets, refine=refine,
-                               kernel=kernel)
+        return control.rollout(t, robot, s, c, num_steps, options, targets=targets)
 
     return jax.vmap(one)(terrains, starts, commands)
 
@@ -287,10 +292,10 @@ def _timed(fn, *args, **kwargs):
     return _to_host(out), compiled[0], max(wall - compiled[0], 0.0)
 
 
-def simulated_rollouts(sim: W.Sim, terrains: Terrain, robot: robots.Robot, starts, commands, *, num_steps: int,
-                       chunk: int, targets=None, refine: bool = False, kernel: str = "xla"):
+def simulated_rollouts(sim: W.Sim, terrains: Terrain, robot: robots.Robot, starts, commands,
+                       options: SelectOptions | None = None, *, num_steps: int, chunk: int, targets=None):
     """The MJX biped on B maps, ``chunk`` rollouts per :func:`ijoy_jax.sim.walker.rollout_batch` call
-    (``kernel``: FootCost's implementation in its selector).
+    (``options``: its selector's search, as :func:`perfect_rollouts`).
 
     Every call has ``chunk`` rollouts (the last chunk wraps round to the first maps, its extra rollouts
     dropped), so all calls share one compiled program. Returns (trajectory on the host with leading axis B,
@@ -298,13 +303,13 @@ def simulated_rollouts(sim: W.Sim, terrains: Terrain, robot: robots.Robot, start
     """
     total = int(np.shape(starts)[0])
     targets = select.make_targets(robot) if targets is None else targets
+    options = walk_options() if options is None else options
     stacked = _stack_robot(robot, chunk)
     parts, comp, run_s = [], 0.0, 0.0
     for lo in range(0, total, chunk):
         idx = np.arange(lo, lo + chunk) % total
         part, c, r = _timed(W.rollout_batch, sim, jax.tree_util.tree_map(lambda x, idx=idx: x[idx], terrains),
-                            stacked, starts[idx], commands[idx], num_steps=num_steps, method="ordered",
-                            targets=targets, refine=refine, kernel=kernel)
+                            stacked, starts[idx], commands[idx], options, num_steps=num_steps, targets=targets)
         parts.append(jax.tree_util.tree_map(lambda a, n=min(chunk, total - lo): a[:n], part))
         comp, run_s = comp + c, run_s + r
     return jax.tree_util.tree_map(lambda *a: np.concatenate(a), *parts), comp, run_s
@@ -317,8 +322,7 @@ def _device_info() -> dict[str, str]:
 
 
 def check_options(families: Sequence[str] | None, *, batch: int, steps: int, commands: Sequence[str],
-                  resolution: float, chunk: int | None, walkers: Sequence[str], forward: float,
-                  kernel: str = "xla") -> list[str]:
+                  resolution: float, chunk: int | None, walkers: Sequence[str], forward: float) -> list[str]:
     """Validate :func:`run`'s options before any compute; returns the family names in table order."""
     names = list(FAMILIES) if families is None else list(families)
     unknown = [n for n in names if n not in FAMILIES]
@@ -335,8 +339,6 @@ def check_options(families: Sequence[str] | None, *, batch: int, steps: int, com
         raise ValueError(f"walkers must be some of {WALKERS}, got {list(walkers)}")
     if not (math.isfinite(forward) and 0 <= forward):
         raise ValueError(f"forward speed must be a finite number of m/s >= 0, got {forward!r}")
-    if kernel not in select.KERNELS:
-        raise ValueError(f"kernel must be one of {select.KERNELS}, got {kernel!r}")
     grid_shape(resolution)
     return [n for n in FAMILIES if n in names]
 
@@ -376,7 +378,8 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
       walkers: some of :data:`WALKERS`.
       forward: the held forward command (m/s) of families without their own (:attr:`WalkFamily.forward`).
       refine: both walkers refine each lattice choice to a continuous foothold (:mod:`ijoy_jax.refine`,
-        ``refine=True`` of :func:`ijoy_jax.control.rollout` and :func:`ijoy_jax.sim.walker.rollout_batch`).
+        ``SelectOptions(refine=True)`` of :func:`ijoy_jax.control.rollout` and
+        :func:`ijoy_jax.sim.walker.rollout_batch`).
       kernel: FootCost's implementation in both walkers' selector (:data:`ijoy_jax.select.KERNELS`): "xla", or
         "pallas", the fused kernel (on a GPU it compiles the MJX program several seconds faster, BENCHMARKS.md;
         on a CPU it is interpreted, slowly). Recorded in each row.
@@ -395,11 +398,12 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
       "walk_compiles" with the totals.
     """
     names = check_options(families, batch=batch, steps=steps, commands=commands, resolution=resolution,
-                          chunk=chunk, walkers=walkers, forward=forward, kernel=kernel)
+                          chunk=chunk, walkers=walkers, forward=forward)
     leaves = check_robot_leaves(robot_leaves)
     if not isinstance(refine, (bool, np.bool_)):
         raise ValueError(f"refine must be True or False, got {refine!r}")
     refine = bool(refine)
+    options = walk_options(refine=refine, kernel=kernel)  # the strings of the command line, as one object
     shape = grid_shape(resolution)
     if chunk is None:
         chunk = min(batch, 32 if jax.default_backend() == "cpu" else 1024)
@@ -445,15 +449,15 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
             common = dict(name="walk", family=name, commands=kind, robot=robot_name, ranges=fam.ranges,
                           maps_s=round(maps_s, 3), **dict(setup, forward_m_s=speed))
             if "perfect" in walkers:
-                traj, comp, run_s = _timed(perfect_rollouts, maps, robot, starts, cmd, num_steps=steps,
-                                           targets=targets, refine=refine, kernel=kernel)
+                traj, comp, run_s = _timed(perfect_rollouts, maps, robot, starts, cmd, options, num_steps=steps,
+                                           targets=targets)
                 perfect_compile += comp
                 record(dict(common, walker="perfect", **aggregate(traj, starts), compile_s=round(comp, 3),
                             run_s=round(run_s, 4), decisions_per_s=batch * steps / max(run_s, 1e-9)))
             if sim is not None:
                 before = W.compiled_programs()
-                traj, comp, run_s = simulated_rollouts(sim, maps, robot, starts, cmd, num_steps=steps, chunk=chunk,
-                                                       targets=targets, refine=refine, kernel=kernel)
+                traj, comp, run_s = simulated_rollouts(sim, maps, robot, starts, cmd, options, num_steps=steps,
+                                                       chunk=chunk, targets=targets)
                 physics = batch * (steps + 1) * sim.substeps * sim.cfg.ticks_per_step
                 record(dict(common, walker="mjx", **aggregate(traj, starts), compile_s=round(comp, 3),
                             run_s=round(run_s, 4), physics_steps_per_s=physics / max(run_s, 1e-9),

@@ -60,7 +60,7 @@ def run(out: str = "ijoy_demo.png", num_steps: int = 24, margin: float = 0.02) -
     what = f"the two rollouts ({num_steps} steps, the intelligent and the naive joystick)"
     with compiling(what, prefix="ijoy demo: "):
         smart = ij.rollout(terrain, robot, start, command, num_steps)  # the compile; each runs in milliseconds
-        naive = ij.rollout(terrain, robot, start, command, num_steps, method="naive")
+        naive = ij.rollout(terrain, robot, start, command, num_steps, ij.SelectOptions(method="naive"))
     seconds = time.perf_counter() - t0
     fig, axes = plt.subplots(2, 1, figsize=(10, 9), sharex=True)
     length, width = float(robot.foot_length), float(robot.foot_width)

@@ -182,7 +182,7 @@ def feasible_commands(
         (None: no check), as :func:`ijoy_jax.select_step`.
       index: the terrain's prebuilt :class:`~ijoy_jax.footcost.TerrainIndex` (:func:`ijoy_jax.select.prepare`),
         built inside when None.
-      kernel: "xla" or "pallas" (static), as :func:`ijoy_jax.select_step`.
+      kernel: "xla" or "pallas" (static), as a :class:`~ijoy_jax.SelectOptions`' ``kernel``.
 
     Returns:
       :class:`FeasibleCommands`.
@@ -200,7 +200,8 @@ def feasible_commands(
       ((496, 3), 412)
     """
     stance, swing_from = as_pose("stance", stance), as_pose("swing_from", swing_from)
-    select.validate(terrain, robot, stance, stance_side, np.zeros(3), swing_from=swing_from, index=index, kernel=kernel)
+    select.validate(terrain, robot, stance, stance_side, np.zeros(3), select.SelectOptions(kernel=kernel),
+                    swing_from=swing_from, index=index)
     # One program whatever the caller's array types (lists, NumPy float64, Python ints).
     stance = jnp.asarray(stance, jnp.float32)
     swing_from = None if swing_from is None else jnp.asarray(swing_from, jnp.float32)

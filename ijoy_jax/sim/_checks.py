@@ -1,6 +1,7 @@
 """The checks of a simulated rollout's inputs, made once at the boundary of :func:`ijoy_jax.sim.walker.rollout`.
 
-Shapes and static options are always checked; values only where they are
+Shapes and static settings are always checked (the selector's options are
+checked as they are built, :class:`ijoy_jax.SelectOptions`); values only where they are
 concrete, so the checks pass through a caller's ``jax.jit`` or ``jax.vmap``.
 :func:`rollout_keys` turns the ``key`` argument into one typed PRNG key per
 rollout, and :func:`as_flag` refuses a static boolean option that is not one.
@@ -13,12 +14,10 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from ijoy_jax import select
 from ijoy_jax._struct import is_traced
 from ijoy_jax.limits import check_num_steps
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
-from ijoy_jax.select import METHODS
 from ijoy_jax.sim import physics
 from ijoy_jax.sim._simulator import Sim, check_robot_for_sim
 from ijoy_jax.sim._step import frame_ticks
@@ -33,12 +32,10 @@ def check_rollout_inputs(
     commands,
     *,
     num_steps,
-    method: str,
     first_swing,
     frames_per_step: int,
     batch: int | None,
     dynamics,
-    kernel: str,
 ) -> None:
     """The inputs of one rollout (``batch`` None) or of ``batch`` rollouts: shapes and static options always,
     values only where they are concrete (so the checks pass through a caller's jit or vmap)."""
@@ -56,10 +53,6 @@ def check_rollout_inputs(
         if not is_traced(leaf) and not np.all(np.isfinite(np.asarray(leaf))):  # NumPy: no op staged into a trace
             raise ValueError(f"terrain.{name} must be finite (no NaN or inf)")
     check_num_steps(num_steps)
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    if kernel not in select.KERNELS:
-        raise ValueError(f"kernel must be one of {select.KERNELS}, got {kernel!r}")
     frame_ticks(sim, frames_per_step)
     if dynamics is not None:
         physics.check(dynamics, batch)
@@ -100,8 +93,3 @@ def as_flag(name: str, value) -> bool:
         raise ValueError(f"{name} must be True or False, got {value!r}")
     return bool(value)
 
-
-def as_refine(refine) -> bool:
-    """``refine`` is a static option here: True or False (:func:`ijoy_jax.rollout` also takes a
-    :class:`~ijoy_jax.refine.RefineParams`; its method check applies, in ``select.search_options``)."""
-    return as_flag("refine", refine)

@@ -47,8 +47,9 @@ from ijoy_jax.prng import as_key
 from ijoy_jax.progress import compile_and_call
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select import Targets
+from ijoy_jax.select_options import SelectOptions, checked
 from ijoy_jax.sim import physics
-from ijoy_jax.sim._checks import as_flag, as_refine, check_rollout_inputs, rollout_keys
+from ijoy_jax.sim._checks import as_flag, check_rollout_inputs, rollout_keys
 from ijoy_jax.sim._metrics import summary
 from ijoy_jax.sim._sensors import (
     ankle_wrench,
@@ -150,13 +151,12 @@ def mjx_walker(sim: Sim, terrain: Terrain, m: mjx.Model | None = None, frames_pe
     return control.Walker(init, stance_info, execute, lambda s: s.soles[:, PLANAR], lambda s: s.last, warmup=1)
 
 
-_OPTIONS = ("num_steps", "method", "swing_path", "quantize", "frames_per_step", "kernel", "refine")
+_OPTIONS = ("num_steps", "frames_per_step")
 
 
 @functools.partial(jax.jit, static_argnames=_OPTIONS)
-def _rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, first_swing, targets, dynamics, key, *,
-             num_steps: int, method: str, swing_path: bool, quantize: bool, frames_per_step: int,
-             kernel: str, refine: bool = False) -> control.Trajectory:
+def _rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, first_swing, targets, dynamics, key,
+             options: SelectOptions, *, num_steps: int, frames_per_step: int) -> control.Trajectory:
     """The loop of :func:`rollout`, jitted (the Sim's models are traced arguments), its inputs checked by the
     caller; inside a caller's trace it is inlined."""
     # The physics stands on finite heights: a traced NaN height or origin (refused where concrete,
@@ -164,9 +164,8 @@ def _rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, first_sw
     # the robot stands.
     walker = mjx_walker(sim, _finite_terrain(terrain), frames_per_step=frames_per_step, robot=robot,
                         dynamics=dynamics, key=key)
-    return control.rollout(terrain, robot, start, commands, num_steps, method=method, first_swing=first_swing,
-                           walker=walker, swing_path=swing_path, quantize=quantize, targets=targets, kernel=kernel,
-                           refine=refine)
+    return control.rollout(terrain, robot, start, commands, num_steps, options, first_swing=first_swing,
+                           walker=walker, targets=targets)
 
 
 def _finite_terrain(terrain: Terrain) -> Terrain:
@@ -177,14 +176,13 @@ def _finite_terrain(terrain: Terrain) -> Terrain:
 
 @functools.partial(jax.jit, static_argnames=_OPTIONS)
 def _rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, first_swing, targets, dynamics,
-                   keys, *, num_steps: int, method: str, swing_path: bool, quantize: bool, frames_per_step: int,
-                   kernel: str, refine: bool = False) -> control.Trajectory:
+                   keys, options: SelectOptions, *, num_steps: int, frames_per_step: int) -> control.Trajectory:
     """:func:`_rollout` vmapped over terrains, robots, starts, commands, first swings, dynamics and keys, as one
     jitted program (the Sim's models shared)."""
 
     def one(t, r, s, c, f, d, k):
-        return _rollout(sim, t, r, s, c, f, targets, d, k, num_steps=num_steps, method=method, swing_path=swing_path,
-                        quantize=quantize, frames_per_step=frames_per_step, kernel=kernel, refine=refine)
+        return _rollout(sim, t, r, s, c, f, targets, d, k, options, num_steps=num_steps,
+                        frames_per_step=frames_per_step)
 
     return jax.vmap(one)(terrains, robots, starts, commands, first_swing, dynamics, keys)
 
@@ -203,10 +201,9 @@ def compiled_programs() -> int:
     return compiled_count(_rollout) + compiled_count(_rollout_batch)
 
 
-def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_steps: int, method: str = "exhaustive",
-            first_swing: int = LEFT, targets: Targets | None = None, swing_path: bool = True,
-            quantize: bool = True, frames_per_step: int = 0, dynamics: physics.Dynamics | None = None, key=None,
-            kernel: str = "xla", refine: bool = False, progress: bool = False) -> control.Trajectory:
+def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, options: SelectOptions | None = None, *,
+            num_steps: int, first_swing: int = LEFT, targets: Targets | None = None, frames_per_step: int = 0,
+            dynamics: physics.Dynamics | None = None, key=None, progress: bool = False) -> control.Trajectory:
     """Walk the simulated biped with the joystick for ``num_steps`` steps (jitted as one scan).
 
     Same arguments and result as :func:`ijoy_jax.rollout`, with the physics in
@@ -229,8 +226,10 @@ def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_st
       start: (2, 3) world foot poses, row 0 left, row 1 right (m, rad; :func:`ijoy_jax.robots.start_stance`).
       commands: (3,) or (num_steps, 3) joystick commands (m/s, m/s, rad/s).
       num_steps: steps (static).
-      method, first_swing, targets, swing_path, quantize, kernel, refine: as in :func:`ijoy_jax.rollout`
-        (``refine``: each chosen step refined in continuous (dx, dy, dtheta), :mod:`ijoy_jax.refine`; static).
+      options: each decision's search, a :class:`~ijoy_jax.SelectOptions` (None: its defaults), as in
+        :func:`ijoy_jax.rollout` (e.g. ``SelectOptions(refine=True)``: each chosen step refined in continuous
+        (dx, dy, dtheta), :mod:`ijoy_jax.refine`).
+      first_swing, targets: as in :func:`ijoy_jax.rollout`.
       frames_per_step: states kept per step in ``log.qpos`` (static; at most the control ticks per step).
       dynamics: the robot's :class:`~ijoy_jax.sim.physics.Dynamics` (scalar leaves; traced: new values never
         recompile); None: :func:`nominal_dynamics`.
@@ -243,22 +242,20 @@ def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, *, num_st
       A :class:`ijoy_jax.control.Trajectory` whose ``log`` is a :class:`StepLog` per step.
     """
     progress = as_flag("progress", progress)
-    check_rollout_inputs(sim, terrain, robot, start, commands, num_steps=num_steps, method=method,
-                         first_swing=first_swing, frames_per_step=frames_per_step, batch=None, dynamics=dynamics,
-                         kernel=kernel)
+    options = checked(options, robot)
+    check_rollout_inputs(sim, terrain, robot, start, commands, num_steps=num_steps, first_swing=first_swing,
+                         frames_per_step=frames_per_step, batch=None, dynamics=dynamics)
     dyn = jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32),
                                  nominal_dynamics(sim) if dynamics is None else dynamics)
-    args = (sim, terrain, robot, start, commands, first_swing, targets, dyn, rollout_keys(key, None))
-    static = dict(num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
-                  frames_per_step=int(frames_per_step), kernel=kernel, refine=as_refine(refine))
+    args = (sim, terrain, robot, start, commands, first_swing, targets, dyn, rollout_keys(key, None), options)
+    static = dict(num_steps=int(num_steps), frames_per_step=int(frames_per_step))
     return _run(_rollout, args, static, progress=progress, batch=None)
 
 
-def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, *, num_steps: int,
-                  method: str = "exhaustive", first_swing=LEFT, targets: Targets | None = None,
-                  swing_path: bool = True, quantize: bool = True, frames_per_step: int = 0,
-                  dynamics: physics.Dynamics | None = None, key=None, kernel: str = "xla",
-                  refine: bool = False, progress: bool = False) -> control.Trajectory:
+def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands,
+                  options: SelectOptions | None = None, *, num_steps: int, first_swing=LEFT,
+                  targets: Targets | None = None, frames_per_step: int = 0,
+                  dynamics: physics.Dynamics | None = None, key=None, progress: bool = False) -> control.Trajectory:
     """:func:`rollout` for B robots at once: one jitted ``vmap`` of the simulated joystick loop.
 
     Args:
@@ -274,7 +271,7 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, 
         :func:`nominal_dynamics` for all.
       key: PRNG key or int seed, split into B keys, or (B,) keys: each robot's stance noise and pushes
         (default 0).
-      method, targets, swing_path, quantize, frames_per_step, kernel, refine, progress: as in :func:`rollout`.
+      options, targets, frames_per_step, progress: as in :func:`rollout` (one ``options`` for all B).
 
     Returns:
       A :class:`ijoy_jax.control.Trajectory` with a leading axis B on every leaf.
@@ -293,15 +290,14 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands, 
     b = np.shape(terrains.free)[0] if np.ndim(terrains.free) == 3 else None
     if b is None:
         raise ValueError(f"terrains must have a leading batch axis, got a grid of shape {np.shape(terrains.free)}")
-    check_rollout_inputs(sim, terrains, robots, starts, commands, num_steps=num_steps, method=method,
-                         first_swing=first_swing, frames_per_step=frames_per_step, batch=b, dynamics=dynamics,
-                         kernel=kernel)
+    options = checked(options, robots)
+    check_rollout_inputs(sim, terrains, robots, starts, commands, num_steps=num_steps, first_swing=first_swing,
+                         frames_per_step=frames_per_step, batch=b, dynamics=dynamics)
     first = jnp.broadcast_to(jnp.asarray(first_swing, jnp.float32), (b,))
     dyn = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float32), (b,)),
                                  nominal_dynamics(sim) if dynamics is None else dynamics)
-    args = (sim, terrains, robots, starts, commands, first, targets, dyn, rollout_keys(key, b))
-    static = dict(num_steps=int(num_steps), method=method, swing_path=swing_path, quantize=quantize,
-                  frames_per_step=int(frames_per_step), kernel=kernel, refine=as_refine(refine))
+    args = (sim, terrains, robots, starts, commands, first, targets, dyn, rollout_keys(key, b), options)
+    static = dict(num_steps=int(num_steps), frames_per_step=int(frames_per_step))
     return _run(_rollout_batch, args, static, progress=progress, batch=b)
 
 

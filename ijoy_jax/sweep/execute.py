@@ -488,7 +488,7 @@ def _compute(cfg: SweepConfig, calls: list, table, cell_rows, bases: dict, sim, 
     try:
         for index, (group, size, ids, chunk_of) in enumerate(calls):
             density = group[0]
-            static_g = static._replace(horizon=group[1], refine=group[2])
+            static_g = chunk_static(cfg, group[1], group[2])
             label = _group_label(cfg, group)
             if pending is not None and label not in stats.first_chunk_s and label != pending[1]:
                 finish_pending()

@@ -59,6 +59,7 @@ import numpy as np
 from ijoy_jax import robots
 from ijoy_jax.control import rollout
 from ijoy_jax.select import make_targets
+from ijoy_jax.select_options import SelectOptions
 from ijoy_jax.sweep.expansion import scenarios
 from ijoy_jax.sweep.schema import COMMAND_KEYS, ROBOT_DEFAULTS, SweepConfig, SweepConfigError, reach_of
 from ijoy_jax.terrain import generators
@@ -69,6 +70,7 @@ __all__ = [
     "chunk_batch",
     "chunk_runner",
     "chunk_scene",
+    "chunk_selector",
     "chunk_static",
     "make_sim",
     "physics_steps_per_scenario",
@@ -89,12 +91,8 @@ class _Static(NamedTuple):
     has_height: bool
     max_count: int | None
     num_steps: int
-    method: str
-    kernel: str
     walker: str
-    horizon: int = 1
-    beam: int | None = None
-    refine: bool = False
+    selector: SelectOptions  # the chunk group's search (chunk_selector); its discount is each scenario's
 
 
 class _Scene(NamedTuple):
@@ -154,24 +152,11 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, scene, seed, ro
     """One scenario of the perfect robot: terrain, robot, start and rollout of its (num_steps, 3) commands; the
     trajectory's summary (scalars)."""
     tkey, params, terrain, robot, start = _setup(static, base, key, scene, seed, robot_vals, terrain_vals)
-    lookahead = (
-        dict(horizon=static.horizon, beam=static.beam if static.horizon >= 3 else None, discount=robot_vals["discount"])
-        if static.method == "lookahead"
-        else {}
-    )
-    traj = rollout(
-        terrain,
-        robot,
-        start,
-        commands,
-        static.num_steps,
-        method=static.method,
-        targets=targets,
-        kernel=static.kernel,
-        first_swing=scene.first_swing,
-        refine=static.refine,
-        **lookahead,
-    )
+    options = static.selector
+    if options.method == "lookahead":  # the scenario's discount, traced (the other methods do not read it)
+        options = options.replace(discount=robot_vals["discount"])
+    traj = rollout(terrain, robot, start, commands, static.num_steps, options, targets=targets,
+                   first_swing=scene.first_swing)
     return {**traj.summary(), **_family_metrics(static, tkey, params, traj.feet, robot)}
 
 
@@ -242,14 +227,12 @@ def _physics_chunk(
         robots_,
         starts,
         commands,
+        static.selector,
         num_steps=static.num_steps,
-        method=static.method,
         first_swing=scene.first_swing,
         targets=targets,
-        kernel=static.kernel,
         dynamics=physics.Dynamics(**sim_vals),
         key=keys,
-        refine=static.refine,
     )
     return _run_finish(static, base, key, scene, seeds, robot_vals, terrain_vals, traj)
 
@@ -406,8 +389,23 @@ def value_columns(table):
     )
 
 
-def chunk_static(cfg: SweepConfig) -> _Static:
-    """The chunk's static configuration (``family`` None for a recorded terrain)."""
+def chunk_selector(cfg: SweepConfig, horizon: int, refine: bool) -> SelectOptions:
+    """The search of a chunk group: the sweep's method and kernel with that group's ``horizon`` and ``refine``
+    (``selector.horizon``, ``selector.refine``), and the sweep's beam for horizons of 3 or more (2 is searched
+    exactly). Its discount is the default: each scenario sets its own (``selector.discount``, traced)."""
+    lookahead = cfg.method == "lookahead"
+    return SelectOptions(
+        method=cfg.method,
+        kernel=cfg.kernel,
+        horizon=int(horizon) if lookahead else 1,
+        beam=cfg.beam if lookahead and horizon >= 3 else None,
+        refine=bool(refine),
+    )
+
+
+def chunk_static(cfg: SweepConfig, horizon: int | None = None, refine: bool | None = None) -> _Static:
+    """The chunk's static configuration (``family`` None for a recorded terrain), for the chunk group of
+    ``horizon`` and ``refine`` (None: the sweep's fixed ``horizon`` and ``refine``)."""
     return _Static(
         cfg.family,
         cfg.shape,
@@ -415,12 +413,8 @@ def chunk_static(cfg: SweepConfig) -> _Static:
         cfg.has_height,
         cfg.static_max_count,
         cfg.num_steps,
-        cfg.method,
-        cfg.kernel,
         cfg.walker,
-        cfg.horizon,
-        cfg.beam,
-        cfg.refine,
+        chunk_selector(cfg, cfg.horizon if horizon is None else horizon, cfg.refine if refine is None else refine),
     )
 
 
@@ -462,8 +456,8 @@ def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot, sim=None) -> tup
     sim = make_sim(cfg, table) if sim is None else sim
     batch = chunk_batch(table.iloc[:1], 1, robot_cols, terrain_cols, sim_cols, cfg=cfg)
     runner = _run_chunk if cfg.walker == "perfect" else jax.jit(_physics_chunk, static_argnames=("static",))
-    heaviest = chunk_static(cfg)._replace(
-        horizon=int(table["selector.horizon"].max()), refine=bool(table["selector.refine"].max())
+    heaviest = chunk_static(
+        cfg, int(table["selector.horizon"].max()), bool(table["selector.refine"].max())
     )  # the most memory per scenario
     compiled = runner.lower(heaviest, base, targets, key, sim, chunk_scene(cfg), *batch).compile()
     mem = compiled.memory_analysis()

@@ -77,7 +77,7 @@ from ijoy_jax.footcost import foot_cost_terms, index_terrain
 from ijoy_jax.limits import check_map_shape
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
-from ijoy_jax.select import make_targets, prepare, select_step
+from ijoy_jax.select import SelectOptions, make_targets, prepare, select_step
 from ijoy_jax.terrain import Terrain, generators
 from ijoy_jax.terrain.family import ParamError
 from ijoy_jax.tune import loop, relax
@@ -575,7 +575,8 @@ def _evaluate(robot, probe_near, probe_on, decisions, cfg):
 
     def one(t, stance, side, command, noise):
         p = prepare(t, robot, targets=targets)
-        c = select_step(t, robot, stance, side, command, quantize=False, targets=p.targets, index=p.index)
+        c = select_step(t, robot, stance, side, command, SelectOptions(quantize=False), targets=p.targets,
+                        index=p.index)
         et, er = _errors(robot, side, command, geometry.relative(stance, c.pose)[None])
         poses = _noisy(c.pose, noise, cfg)  # (K, 3)
         near = _near(t, index_terrain(t, probe_near), probe_near, stance, side, poses)

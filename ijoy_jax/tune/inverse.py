@@ -27,7 +27,6 @@ Example:
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import jax
@@ -37,7 +36,8 @@ import optax
 
 from ijoy_jax import geometry, optim
 from ijoy_jax.robots import Robot, dist, get_leaf, set_leaf, side_actions, side_p0, side_sign
-from ijoy_jax.select import make_targets, prepare, select_step
+from ijoy_jax.select import SelectOptions, make_targets, prepare, select_step
+from ijoy_jax.select_options import checked
 from ijoy_jax.terrain import Terrain
 from ijoy_jax.tune import relax
 
@@ -88,27 +88,34 @@ def stack_terrains(terrains) -> Terrain:
     return jax.tree.map(lambda *x: jnp.stack(x), *terrains)
 
 
-@functools.partial(jax.jit, static_argnames=("quantize",))
-def _exact_actions(terrains, robot, stances, sides, commands, quantize):
+@jax.jit
+def _exact_actions(terrains, robot, stances, sides, commands, options):
     targets = make_targets(robot)
 
     def one(t, s, side, c):
         p = prepare(t, robot, targets=targets)
-        return select_step(t, robot, s, side, c, quantize=quantize, targets=p.targets, index=p.index).index
+        return select_step(t, robot, s, side, c, options, targets=p.targets, index=p.index).index
 
     return jax.vmap(one)(terrains, stances, sides, commands)
 
 
+def _exact_options(options: SelectOptions | None, robot: Robot) -> SelectOptions:
+    """The exact selector's options here: None is the exhaustive search scored against p_next
+    (``quantize=False``, as :func:`fit` scores), checked against ``robot``."""
+    return checked(SelectOptions(quantize=False) if options is None else options, robot)
+
+
 def make_demonstrations(
-    terrains: Terrain, robot: Robot, stances, sides, commands, *, quantize: bool = False
+    terrains: Terrain, robot: Robot, stances, sides, commands, options: SelectOptions | None = None
 ) -> Demonstrations:
-    """Label decisions with the exact exhaustive selector at ``robot``'s parameters.
+    """Label decisions with the exact selector at ``robot``'s parameters.
 
     Args:
       terrains: batched Terrain (D, nx, ny); stances (D, 3); sides (D,); commands (D, 3).
       robot: the (hidden) parameters that generate the choices.
-      quantize: score against F's nearest target (the exact selector's
-        default) or p_next (default here, as :func:`fit` scores).
+      options: the exact selector's :class:`~ijoy_jax.SelectOptions`; None: the exhaustive search scored
+        against p_next (``SelectOptions(quantize=False)``, as :func:`fit` scores; the selector's own
+        default quantises to F's nearest target).
 
     Returns:
       :class:`Demonstrations` (actions -1 where no step is valid).
@@ -116,13 +123,15 @@ def make_demonstrations(
     stances = jnp.asarray(stances, jnp.float32)
     sides = jnp.asarray(sides, jnp.float32)
     commands = jnp.asarray(commands, jnp.float32)
-    actions = _exact_actions(terrains, robot, stances, sides, commands, quantize)
+    actions = _exact_actions(terrains, robot, stances, sides, commands, _exact_options(options, robot))
     return Demonstrations(terrains, stances, sides, commands, actions)
 
 
-def exact_agreement(demos: Demonstrations, robot: Robot, *, quantize: bool = False) -> float:
-    """Fraction of demonstrations (with a valid step) whose exact choice at ``robot`` is the demonstrated one."""
-    pred = np.asarray(_exact_actions(demos.terrains, robot, demos.stances, demos.sides, demos.commands, quantize))
+def exact_agreement(demos: Demonstrations, robot: Robot, options: SelectOptions | None = None) -> float:
+    """Fraction of demonstrations (with a valid step) whose exact choice at ``robot`` is the demonstrated one
+    (``options``: as :func:`make_demonstrations`)."""
+    pred = np.asarray(_exact_actions(demos.terrains, robot, demos.stances, demos.sides, demos.commands,
+                                     _exact_options(options, robot)))
     act = np.asarray(demos.actions)
     ok = act >= 0
     return float(np.mean(pred[ok] == act[ok]))

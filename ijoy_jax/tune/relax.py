@@ -530,7 +530,7 @@ def relaxed_select(
       >>> robot = ij.robots.hrp2(margin=0.02, density=0.5)
       >>> r = relax.relaxed_select(t, robot, np.array([0.45, 0.5, 0.0]), -1, np.array([0.25, 0.0, 0.0]),
       ...                          sharpness=50.0, tau=0.05)
-      >>> e = ij.select_step(t, robot, [0.45, 0.5, 0.0], -1, [0.25, 0.0, 0.0], quantize=False)
+      >>> e = ij.select_step(t, robot, [0.45, 0.5, 0.0], -1, [0.25, 0.0, 0.0], ij.SelectOptions(quantize=False))
       >>> int(r.mode) == int(e.index), float(r.invalid_mass) < 1e-3
       (True, True)
     """
