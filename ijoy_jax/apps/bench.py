@@ -7,7 +7,7 @@ default JAX device, so the same command measures the CPU here and a GPU on
 the lent machine.
 
   footcost  candidate foothold evaluations per second (HRP-2, 2 cm grid, 2D and 2.5D)
-  lookahead decision time of the selectors beyond the paper (#25): one-step exhaustive, the exact two-step
+  lookahead decision time of the selectors beyond the paper: one-step exhaustive, the exact two-step
             lookahead, all 246 k pairs of HRP-2 (a beam of the whole action set), the three-step beam, and
             continuous refinement alone and after the lookahead, on 2D and 2.5D maps; then the beam's loss
             against the exact search on decisions met by one-step walks on the constrained families.
@@ -424,7 +424,7 @@ def check(rows, quick: bool, chunk: int, path: str | None = None):
                 i, c = _batched(one, chunk)(stance, command, swing)
                 key = f"{'25d' if has_height else '2d'}_{method}" + ("" if kernel == "xla" else "_pallas")
                 out[key + "_index"], out[key + "_cost"] = np.asarray(i), np.asarray(c)
-        # Beyond the paper (#25), XLA FootCost: the two-step lookahead and the refinement, on fewer queries.
+        # Beyond the paper, XLA FootCost: the two-step lookahead and the refinement, on fewer queries.
         few = 64 if quick else 256
         for name, kw in (("lookahead2", dict(method="lookahead", horizon=2)), ("refine", dict(refine=True))):
             def one(st, cmd, sw, options=ij.SelectOptions(**kw), terrain=terrain, index=index):

@@ -1,4 +1,4 @@
-"""Walking benchmark per terrain family (issue #20): ``ijoy bench walk``, the perfect robot next to the MJX biped.
+"""Walking benchmark per terrain family: ``ijoy bench walk``, the perfect robot next to the MJX biped.
 
 On one GPU (H100 or H200), the whole default run (11 families x 2 command kinds x 1024 robots x 30 steps,
 one MJX compile; 0.28 G physics steps, several minutes)::

@@ -69,8 +69,8 @@ _NUM_PAR = 31
 # Rows of the per-candidate block ``cand``.
 _X, _Y, _T, _COST, _STEP_LIMIT, _CLEARANCE = range(6)
 _NUM_CAND = 8
-# Row loops run four rows per iteration (one loop test per four rows; LLVM unrolls further). On an H100, side by
-# side (2026-11-25), 1, 2 and 4 ran 5.07, 5.37 and 5.53 M exhaustive decisions/s.
+# Row loops run four rows per iteration (one loop test per four rows; LLVM unrolls further): the fastest of 1, 2
+# and 4 measured side by side on a GPU (docs/benchmarks_history.md).
 _UNROLL = 4
 
 

@@ -1,4 +1,4 @@
-"""Live drives: a person (or a scripted stick) on the intelligent joystick, in real time (issue #24).
+"""Live drives: a person (or a scripted stick) on the intelligent joystick, in real time.
 
 The paper's Algorithm 1 and Fig. 6 as a running system on a CPU: a stick (:mod:`.inputs`: a trace
 file, :mod:`ijoy_jax.stick`; the terminal's keys, a gamepad through SDL, or the browser view's keyboard and

@@ -34,8 +34,8 @@ __all__ = ["BODIES", "DriveSettings", "ReplayInput", "build_body", "export_trace
 BODIES = ("perfect", "native", "mjx")
 """The robots a drive can step: the paper's perfect walker, the MuJoCo biped on native MuJoCo, or the same biped
 on MJX (:class:`ijoy_jax.sim.mjx_biped.MjxBiped`), which a drive runs on the CPU whatever the machine: one robot's
-10 ms tick took 2.8 ms on a 2-core CPU but 10.2 ms (2D map) and 12.5 ms (2.5D) on an H200, where each of its many
-small kernels waits for a launch (2026-11-26), so on a GPU it fell behind the wall clock."""
+tick is many small kernels, and on a GPU each waits for its launch, so there it falls behind the wall clock
+(measured in docs/drive.md)."""
 @dataclasses.dataclass(frozen=True)
 class DriveSettings:
     """What a drive is (recorded as the ``ijoy.drive`` metadata; every field JSON-ready).

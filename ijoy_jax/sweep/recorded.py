@@ -1,6 +1,6 @@
 """Sweep inputs read from files: a person's commands (a recorded drive or a trace file) and a recorded terrain.
 
-A recorded drive becomes a sweep scenario (issue #24): its commands, one per decision, take the place of the
+A recorded drive becomes a sweep scenario: its commands, one per decision, take the place of the
 ``[command]`` distribution and are replayed step by step (step ``k`` of every rollout gets the ``k``-th
 command) by the sweep's walker, the perfect robot or the MJX biped (``walker = "mjx"``), on the sweep's
 generated terrains or on the recording's own terrain:
