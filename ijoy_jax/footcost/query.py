@@ -21,13 +21,13 @@ from ijoy_jax.footcost.index import TerrainIndex
 from ijoy_jax.robots import Robot, check_robot, robot_supported
 from ijoy_jax.terrain import Terrain, check_terrain, terrain_supported
 
-# m: the largest world coordinate a map may reach (its origin and far corner). FootCost runs in float32
-# (also under x64: poses are cast), whose spacing at 2**13 m is 2**-10 m (0.98 mm), so within it every
-# coordinate rounds by under half a millimetre; beyond, a footprint lands on the wrong cells (at a UTM
-# northing of 5.2e6 m, y rounds to 0.5 m). Such frames are refused, not shifted internally: the results are
-# world poses in float32 too, and would round the same way on the way out. Subtract your map's origin (in
-# float64, on your side) from every pose and add it back to the returned ones.
 MAX_COORDINATE = 8192.0
+"""m: the largest world coordinate a map may reach (its origin and far corner). FootCost runs in float32 (also
+under x64: poses are cast), whose spacing at 2**13 m is 2**-10 m (0.98 mm), so within it every coordinate rounds
+by under half a millimetre; beyond, a footprint lands on the wrong cells (at a UTM northing of 5.2e6 m, y rounds
+to 0.5 m). Such frames are refused, not shifted internally: the results are world poses in float32 too, and
+would round the same way on the way out. Subtract your map's origin (in float64, on your side) from every pose
+and add it back to the returned ones."""
 
 
 def frame_extent(terrain: Terrain):
