@@ -251,8 +251,8 @@ def test_a_refined_physics_sweep_passes_refine_to_the_walker(physics_file, tmp_p
     class Reached(Exception):
         pass
 
-    def rollout_batch(*args, **kwargs):
-        seen.append((kwargs["refine"], kwargs["method"]))
+    def rollout_batch(sim, terrains, robots, starts, commands, options, **kwargs):
+        seen.append((options.refine is not None, options.method))
         raise Reached
 
     monkeypatch.setattr(W, "rollout_batch", rollout_batch)
