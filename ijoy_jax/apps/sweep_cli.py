@@ -1,5 +1,5 @@
 """``ijoy sweep run`` and ``ijoy sweep summarize``: run a sweep declared in TOML, or summarise a finished one
-(the sweep engine: :mod:`ijoy_jax.sweep`; its schema: ``ijoy_jax/sweep/config.py``; examples in ``sweeps/``).
+(the sweep engine: :mod:`ijoy_jax.sweep`; its schema: ``ijoy_jax/sweep/schema.py``; examples in ``sweeps/``).
 
 ``run`` checks its flags and the layout of processes first (no compute, no network), starts ``jax.distributed``
 where several processes share the run, and only then loads and validates the sweep file; ``--local-processes N``
@@ -22,7 +22,7 @@ def add_parser(sub) -> None:
         "sweep",
         help="run a sweep declared in TOML, or summarise a finished one",
         description="Sweeps over robot/selector parameters, terrains and commands "
-        "(schema: ijoy_jax/sweep/config.py; examples in sweeps/).",
+        "(schema: ijoy_jax/sweep/schema.py; examples in sweeps/).",
     )
     sweep_sub = sweep.add_subparsers(dest="sweep_command", required=True)
     srun = sweep_sub.add_parser(
