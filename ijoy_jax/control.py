@@ -30,6 +30,7 @@ from jax import lax
 
 from ijoy_jax import geometry, select
 from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.limits import check_num_steps
 from ijoy_jax.robots import LEFT, Robot, footprints_overlap, side_actions
 from ijoy_jax.select import SelectOptions, Targets
@@ -396,6 +397,17 @@ def _rollout(terrain, robot, start, commands, first_swing, targets, options, com
     return Trajectory(feet=walker.feet(state), **rec)
 
 _rollout_jit = jax.jit(_rollout, static_argnames=("num_steps", "walker"))
+
+
+def compiled_programs() -> int:
+    """How many programs :func:`rollout` holds compiled (in this process).
+
+    Read it before and after a loop of rollouts to learn how many compiles the loop caused: each new input
+    shape, ``num_steps``, walker or static option (:class:`~ijoy_jax.SelectOptions`' static fields) compiles
+    once; new terrain values, robot parameters, starts, commands, ``discount`` or ``refine``'s leaves reuse the
+    program.
+    """
+    return compiled_count(_rollout_jit)
 
 def _check_start(robot: Robot, start) -> None:
     """Refuse concrete start feet whose footprints overlap or that stand crossed (left foot on the right)."""

@@ -7,7 +7,6 @@ import pytest
 
 import ijoy_jax as ij
 from ijoy_jax import control
-from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.testing import enable_x64
 
 RES = 0.02
@@ -94,12 +93,12 @@ def test_vmaps_over_terrains_commands_starts_and_robot_parameters():
 def test_rollout_does_not_recompile_for_new_values():
     t = ij.terrain.flat(SHAPE, RES)
     ij.rollout(t, ROBOT, START, [0.25, 0.0, 0.0], STEPS)
-    n = compiled_count(control._rollout_jit)
+    n = control.compiled_programs()
     ij.rollout(t.replace(free=t.free.at[110, 30].set(False)), ROBOT.replace(w=jnp.float32(2.0)),
                START + 0.01, [0.1, 0.05, 0.1], STEPS)
     ij.rollout(t, ROBOT.replace(max_sole_pitch=jnp.float32(0.1), max_sole_roll=jnp.float32(0.05),
                                 max_sole_distance=jnp.float32(0.3)), START, [0.1, 0.05, 0.1], STEPS)
-    assert compiled_count(control._rollout_jit) == n
+    assert control.compiled_programs() == n
 
 
 def test_custom_walker_replaces_the_robot_without_touching_the_selector():

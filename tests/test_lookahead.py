@@ -18,7 +18,6 @@ from hypothesis import strategies as st
 
 import ijoy_jax as ij
 from ijoy_jax import control, geometry, lookahead, select, testing
-from ijoy_jax.jit_cache import compiled_count
 
 SMALL = ij.robots.hrp2(margin=0.02, density=0.25)  # 19 actions
 TINY = ij.robots.hrp2(margin=0.02, density=0.1)  # 10 actions
@@ -228,11 +227,11 @@ def test_discount_is_traced_and_never_recompiles():
     start = ij.robots.start_stance(SMALL, 0.25, 0.5)
     ij.rollout(terrain, SMALL, start, command, 3, options=ij.SelectOptions(method="lookahead", discount=1.0),
                targets=targets)
-    before = compiled_count(control._rollout_jit)
+    before = control.compiled_programs()
     for g in (0.0, 0.7):
         ij.rollout(terrain, SMALL, start, command, 3, options=ij.SelectOptions(method="lookahead", discount=g),
                    targets=targets)
-    assert compiled_count(control._rollout_jit) == before
+    assert control.compiled_programs() == before
 
 
 def test_an_invalid_traced_discount_is_flagged_not_silent():
