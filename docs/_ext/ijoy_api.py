@@ -264,11 +264,11 @@ def _data_docstring(app, what, name, obj, options, lines):
     # A constant has no docstring of its own: autodoc would show its type's (dict's, tuple's), or nothing
     # when the documented module only re-exports it.
     if what in ("data", "attribute") and not inspect.isclass(obj) and not callable(obj):
-        type_doc = inspect.getdoc(type(obj)) or ""
-        if "\n".join(lines).strip() == type_doc.strip():
+        own = _defining_docstring(name, obj) if what == "data" else []
+        if own:  # the docstring under its assignment, wherever that is (autodoc may have shown its type's)
+            lines[:] = own
+        elif "\n".join(lines).strip() == (inspect.getdoc(type(obj)) or "").strip():
             lines.clear()
-        if what == "data" and not any(line.strip() for line in lines):
-            lines[:] = _defining_docstring(name, obj)
 
 
 def setup(app):

@@ -58,9 +58,8 @@ from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import physics, walker
-from ijoy_jax.sim._step import PLANAR
 from ijoy_jax.sim.stepped import SteppedBiped
-from ijoy_jax.sim.walker import Sim, StepLog
+from ijoy_jax.sim.walker import PLANAR, Sim, StepLog
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["MjxBiped", "compiled_programs"]

@@ -78,6 +78,7 @@ from ijoy_jax.sim._step import (
 from ijoy_jax.terrain import Terrain
 
 __all__ = [
+    "PLANAR",
     "Sim",
     "make_sim",
     "check_robot_for_sim",
