@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-__all__ = ["BipedDescription", "LegChain", "LegSolution", "describe", "leg_fk", "leg_ik"]
+__all__ = ["BipedDescription", "LegChain", "LegSolution", "describe", "leg_fk", "leg_ik", "quat_matrix"]
 
 SIDES = ("left", "right")
 LEG_DOF = 6
@@ -135,9 +135,10 @@ class BipedDescription:
         return self.stand_qpos[self.qpos_adr]
 
 
-def _quat_to_rot(q) -> np.ndarray:
+def quat_matrix(quat) -> np.ndarray:
+    """(3, 3) float64 rotation matrix of a MuJoCo quaternion (w, x, y, z), on the host (model reading)."""
     m = np.zeros(9)
-    mujoco.mju_quat2Mat(m, np.asarray(q, np.float64))
+    mujoco.mju_quat2Mat(m, np.asarray(quat, np.float64))
     return m.reshape(3, 3)
 
 
@@ -164,7 +165,7 @@ def _chain(m: mujoco.MjModel, root: int, geom: int, geom_name: str) -> tuple[Leg
     pre_pos, pre_rot, anchor, axis, joints = [], [], [], [], []
     acc_pos, acc_rot = np.zeros(3), np.eye(3)  # the transform since the last joint
     for b in path:
-        acc_pos, acc_rot = acc_pos + acc_rot @ m.body_pos[b], acc_rot @ _quat_to_rot(m.body_quat[b])
+        acc_pos, acc_rot = acc_pos + acc_rot @ m.body_pos[b], acc_rot @ quat_matrix(m.body_quat[b])
         for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b]):
             if m.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE:
                 raise ValueError(
@@ -182,7 +183,7 @@ def _chain(m: mujoco.MjModel, root: int, geom: int, geom_name: str) -> tuple[Leg
             f"the leg to sole {geom_name!r} has {len(joints)} hinge joints; the walking controller "
             f"drives legs of {LEG_DOF}"
         )
-    g_rot = _quat_to_rot(m.geom_quat[geom])
+    g_rot = quat_matrix(m.geom_quat[geom])
     size = m.geom_size[geom]
     sole_pos = acc_pos + acc_rot @ (m.geom_pos[geom] + g_rot @ np.array([0.0, 0.0, -size[2]]))
     limited = m.jnt_limited[joints].astype(bool)

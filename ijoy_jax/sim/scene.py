@@ -17,16 +17,11 @@ import mujoco
 import numpy as np
 
 from ijoy_jax.sim import model
+from ijoy_jax.sim.description import quat_matrix
 
 __all__ = ["terrain_scene"]
 
 SIDES = ("left", "right")
-
-
-def _rot(quat) -> np.ndarray:
-    m = np.zeros(9)
-    mujoco.mju_quat2Mat(m, np.asarray(quat, np.float64))
-    return m.reshape(3, 3)
 
 
 def _drop_floors(spec: mujoco.MjSpec) -> None:
@@ -70,7 +65,7 @@ def terrain_scene(robot: mujoco.MjSpec, *, soles: tuple[str, str] = ("left_foot"
             raise ValueError(f"sole geom {name!r} must be a box geom of the robot")
         body = box.parent
         half = np.asarray(box.size[:3], np.float64)
-        rot, centre = _rot(box.quat), np.asarray(box.pos, np.float64)
+        rot, centre = quat_matrix(box.quat), np.asarray(box.pos, np.float64)
         xs = np.linspace(half[0] - r, -(half[0] - r), nx) if nx > 1 else np.zeros(1)
         ys = np.linspace(half[1] - r, -(half[1] - r), ny) if ny > 1 else np.zeros(1)
         for k, (x, y) in enumerate((x, y) for x in xs for y in ys):
