@@ -366,11 +366,11 @@ def test_the_force_feedback_line_only_when_a_device_was_asked_for_or_found(monke
     default = next(a.default for a in drive._actions if "--ff" in a.option_strings)
     monkeypatch.setattr(forcefeedback, "open_device", lambda path=None: forcefeedback.NoFeedback("no device"))
     for spec, said in ((default, False), ("auto", True), ("/dev/input/event9", True)):
-        drive_cli._feedback(spec)
+        drive_cli.feedback_device(spec)
         err = capsys.readouterr().err
         assert ("force feedback: off (no device)" in err) == said, (spec, err)
-    assert drive_cli._feedback("off") is None and capsys.readouterr().err == ""
+    assert drive_cli.feedback_device("off") is None and capsys.readouterr().err == ""
     found = mock.Mock(description="Pad (/dev/input/event3: constant)")
     monkeypatch.setattr(forcefeedback, "open_device", lambda path=None: found)
-    assert drive_cli._feedback(default) is found
+    assert drive_cli.feedback_device(default) is found
     assert "force feedback: Pad (/dev/input/event3: constant)" in capsys.readouterr().err

@@ -17,7 +17,6 @@ from jax.test_util import check_grads
 
 import ijoy_jax as ij
 from ijoy_jax import cue, haptics, select
-from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.robots import dist
 from ijoy_jax.testing import NumpyFootCost
 
@@ -305,15 +304,14 @@ def test_no_valid_action_is_a_flagged_full_force_towards_the_centre():
         assert np.all(np.isfinite(np.asarray(grad)))
     assert np.all(np.asarray(cue.force(f, [0.0, 0.0, 0.0])) == 0.0)  # at the centre: nowhere to push
     # An unsupported robot (margin beyond its window, set inside a trace) blocks everything the same way.
-    wide = ROBOT.replace(margin=jnp.float32(0.5))  # the module's jit, as called inside a trace: not checked
-    g = cue.feasible._feasible_jit(FLAT, wide, jnp.asarray(STANCE, jnp.float32), jnp.int32(-1), None, None,
-                                   kernel="xla")
+    wide = ROBOT.replace(margin=jnp.float32(0.5))  # inside a trace the robot's values are not checked
+    g = jax.jit(lambda robot: cue.feasible_commands(FLAT, robot, STANCE, -1))(wide)
     assert bool(g.unsupported) and not bool(g.any_valid)
 
 
 def test_nonfinite_command_and_bad_params_inside_jit_give_a_flagged_zero_force():
     f = _wall_feasible()
-    run = cue.forces._force_jit  # what force() calls: the checks above it skip traced values
+    run = jax.jit(cue.force_terms)  # the checks skip traced values
     out = run(f, jnp.array([np.nan, 0.0, 0.0]), PARAMS)
     assert bool(out.nonfinite_command) and np.all(np.asarray(out.force) == 0)
     for bad in (dict(c1=jnp.float32(1.5)), dict(decay=jnp.float32(0.0)), dict(temperature=jnp.float32(np.nan)),
@@ -439,21 +437,21 @@ def test_gradients_match_finite_differences_in_float64():
 def test_parameters_are_traced_leaves_no_recompile():
     f = _wall_feasible()
     cue.force(f, [0.25, 0.0, 0.0])
-    n_force = compiled_count(cue.forces._force_jit)
+    n_force = cue.forces.compiled_programs()
     for kw in (dict(c1=0.3), dict(decay=0.02), dict(c2=0.5), dict(scales=[1.0, 2.0, 0.5]), dict(temperature=0.01)):
         cue.force(f, [0.2, 0.1, 0.0], **kw)
         cue.force(f, [0.2, 0.1, 0.0], cue.make_params(**kw))
-    assert compiled_count(cue.forces._force_jit) == n_force
+    assert cue.forces.compiled_programs() == n_force
     cue.feasible_commands(WALL, ROBOT, STANCE, -1)
-    n_feas = compiled_count(cue.feasible._feasible_jit)
+    n_feas = cue.feasible.compiled_programs()
     for stance, side, robot in (([1.0, 1.1, 0.3], 1, ROBOT), (STANCE, -1, ROBOT.replace(margin=jnp.float32(0.05))),
                                 (STANCE, 1, ROBOT.replace(w=jnp.float32(3.0), step_time=jnp.float32(0.6)))):
         cue.feasible_commands(WALL, robot, stance, side)
-    assert compiled_count(cue.feasible._feasible_jit) == n_feas
+    assert cue.feasible.compiled_programs() == n_feas
     cue.reach(f, 8)
-    n_reach = compiled_count(cue.reachable._reach_jit)
+    n_reach = cue.reachable.compiled_programs()
     cue.reach(_flat_feasible(), 8, turn_rate=0.3)
-    assert compiled_count(cue.reachable._reach_jit) == n_reach
+    assert cue.reachable.compiled_programs() == n_reach
 
 
 def test_c2_is_aldurós_factor_per_unit_of_depth():
@@ -487,8 +485,8 @@ def test_reach_is_where_the_force_starts():
     assert np.all((r >= 0) & (r <= box + 1e-6)) and np.any(r < box - 0.01)
     inside = np.stack([0.999 * r * np.cos(phi), 0.999 * r * np.sin(phi), np.full(32, 0.1)], 1)
     beyond = np.stack([(r + 0.01) * np.cos(phi), (r + 0.01) * np.sin(phi), np.full(32, 0.1)], 1)
-    hard_in = cue.reachable._hard_open(f, jnp.asarray(inside, jnp.float32))
-    hard_out = cue.reachable._hard_open(f, jnp.asarray(beyond, jnp.float32))
+    hard_in = cue.is_open(f, jnp.asarray(inside, jnp.float32))
+    hard_out = cue.is_open(f, jnp.asarray(beyond, jnp.float32))
     assert np.all(np.asarray(hard_in)[r > 0])
     short = r < box - 0.01
     assert np.all(~np.asarray(hard_out)[short])  # the first blocked speed follows the largest open one
@@ -605,10 +603,10 @@ def test_the_prepared_tick_is_the_force_split_at_the_rate_boundary():
     np.testing.assert_array_equal(got, want)
     assert np.any(want != 0)
     cue.tick_force(tick, cmds[0])
-    n = compiled_count(cue.forces._tick_jit)
+    n = cue.forces.compiled_programs()
     for kw in (dict(c1=0.1), dict(decay=0.3), dict(temperature=0.003)):
         cue.tick_force(cue.prepare_tick(f, **kw), cmds[1])
-    assert compiled_count(cue.forces._tick_jit) == n  # the parameters live in the tick's arrays: no recompile
+    assert cue.forces.compiled_programs() == n  # the parameters live in the tick's arrays: no recompile
     with pytest.raises(TypeError, match="CueTick"):
         cue.tick_force(f, cmds[0])
     with pytest.raises(ValueError, match="command"):

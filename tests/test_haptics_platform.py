@@ -130,14 +130,14 @@ def test_yaw_limits_symmetric_for_a_symmetric_stance():
 def test_yaw_plane_edge_cases():
     """A plane the circle never reaches gives inf; a foot on a plane moving outward gives 0; never NaN."""
     foot = jnp.array([1.0, 0.5, -1.2])
-    far = P._plane_yaw_limits(jnp.array([0.0, 0.0, 1.0]), jnp.asarray(0.1), jnp.asarray(True), foot)
+    far = P.plane_yaw_limits(jnp.array([0.0, 0.0, 1.0]), jnp.asarray(0.1), jnp.asarray(True), foot)
     assert far == (np.inf, -np.inf)
     # Normal along the foot's tangent direction for positive yaw (-z x f), at distance 0.
     t = np.cross([0.0, 0.0, -1.0], np.asarray(foot))
     t /= np.linalg.norm(t)
-    pos, neg = P._plane_yaw_limits(jnp.asarray(t), jnp.asarray(0.0), jnp.asarray(True), foot)
+    pos, neg = P.plane_yaw_limits(jnp.asarray(t), jnp.asarray(0.0), jnp.asarray(True), foot)
     assert float(pos) == 0.0 and np.isfinite(float(neg)) and float(neg) < 0
-    invalid = P._plane_yaw_limits(jnp.zeros(3), jnp.asarray(0.0), jnp.asarray(False), foot)
+    invalid = P.plane_yaw_limits(jnp.zeros(3), jnp.asarray(0.0), jnp.asarray(False), foot)
     assert invalid == (np.inf, -np.inf)
 
 

@@ -14,10 +14,15 @@ G = 9.81
 ZMP_TOL = 2e-3  # m: float32 inverse dynamics of a 58 kg robot, accelerations from differences at 10 ms
 
 
+def _robot_model(params):
+    """The robot over a small flat height field: its masses and kinematics, no terrain to speak of."""
+    return model.build_spec(params, (2, 2), 1.0).compile()
+
+
 @pytest.fixture(scope="module")
 def setup():
     params = model.biped_params()
-    mj_model = model._robot_model(params)
+    mj_model = _robot_model(params)
     qpos = model.standing_qpos(params)
     data = mujoco.MjData(mj_model)
     data.qpos[:] = qpos
@@ -91,7 +96,7 @@ def _inverse_dynamics_zmp(m, qpos, dt):
     """The reference: the ZMP from the free joint's rows of ``mjx.inverse`` (the full inverse dynamics)."""
     from mujoco import mjx
 
-    v = jax.vmap(lambda a, b: dynamics._free_velocity(a, b, dt))(qpos[:-1], qpos[1:])
+    v = jax.vmap(lambda a, b: dynamics.free_velocity(a, b, dt))(qpos[:-1], qpos[1:])
     qvel, qacc = 0.5 * (v[1:] + v[:-1]), (v[1:] - v[:-1]) / dt
 
     def one(q, qv, qa):
@@ -121,7 +126,7 @@ def test_the_zmp_matches_full_inverse_dynamics_on_a_swinging_turning_motion(setu
     also with the passive forces no_contact_model allows (damping enters with mjx.inverse's sign)."""
     m, qpos, com, mass = setup
     if passive:
-        m = dynamics.no_contact_model(_with_passive_forces(model._robot_model(model.biped_params())))
+        m = dynamics.no_contact_model(_with_passive_forces(_robot_model(model.biped_params())))
     rng = np.random.default_rng(3)
     n = 30
     t = np.arange(n) * 0.01
@@ -155,7 +160,7 @@ _TENDON_XML = """<mujoco><worldbody><body><freejoint/><geom size="0.1" mass="1"/
     (lambda mm: mm.jnt_type.__setitem__(0, mujoco.mjtJoint.mjJNT_BALL), "first joint must be its free joint"),
 ])
 def test_no_contact_model_refuses_forces_the_zmp_leaves_out(change, match):
-    mj_model = model._robot_model(model.biped_params())
+    mj_model = _robot_model(model.biped_params())
     change(mj_model)
     with pytest.raises(ValueError, match=match):
         dynamics.no_contact_model(mj_model)

@@ -33,7 +33,6 @@ import ijoy_jax as ij
 from ijoy_jax import select, stats, sweep
 from ijoy_jax.apps import cli
 from ijoy_jax.footcost import pallas as footcost_kernel
-from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.sweep import devices, folder, programs, sizing
 from ijoy_jax.terrain import generators
 
@@ -262,19 +261,19 @@ def test_pallas_kernel_gives_the_same_results(reference, tmp_path, monkeypatch):
 def test_parameter_values_do_not_recompile(reference, tmp_path):
     _, stats = reference
     assert stats.compiles <= 1  # 0 if an earlier test of this module compiled the same shapes
-    cache = compiled_count(programs._run_chunk)
+    cache = programs.compiled_programs()
     other = BASE.replace('"robot.w" = [0.5, 2.0]', '"robot.w" = [0.1, 7.0]').replace(
         '"robot.margin" = [0.0, 0.05]', '"robot.margin" = [0.02, 0.08]').replace(
         "count = 6", "count = 2").replace("vx = [0.1, 0.3]", "vx = 0.2").replace("seed = 3", "seed = 11")
     s = sweep.run(write(tmp_path, other), tmp_path / "o", chunk_size=CHUNK, progress=False)
     assert s.computed == 12 and s.compiles == 0
-    assert compiled_count(programs._run_chunk) == cache
+    assert programs.compiled_programs() == cache
 
 
 def _log_chunk_events(monkeypatch) -> list:
     """Record the sweep's chunk loop as ("dispatch", rows) and ("write", chunk id) events."""
     events = []
-    dispatch, write_part = devices.OnDevices.dispatch, folder._write_part
+    dispatch, write_part = devices.OnDevices.dispatch, folder.write_part
 
     def logged_dispatch(self, run, static, shared, batch):
         events.append(("dispatch", len(batch[0])))  # the rows dispatched
@@ -285,7 +284,7 @@ def _log_chunk_events(monkeypatch) -> list:
         write_part(df, path, plan_record)
 
     monkeypatch.setattr(devices.OnDevices, "dispatch", logged_dispatch)
-    monkeypatch.setattr(folder, "_write_part", logged_write)
+    monkeypatch.setattr(folder, "write_part", logged_write)
     return events
 
 
@@ -632,7 +631,7 @@ def test_balanced_chunk_size_refuses_nonsense():
 
 def test_default_chunk_size_is_the_cpu_default_here(base_file):
     cfg = sweep.load_config(base_file)
-    assert sizing._device_bytes(jax.local_devices()[0]) is None  # CPU reports no memory limit
+    assert sizing.device_memory(jax.local_devices()[0]) is None  # CPU reports no memory limit
     assert sweep.default_chunk_size(cfg, sweep.scenarios(cfg), {}, jax.local_devices()) == sweep.DEFAULT_CHUNK
 
 
@@ -651,11 +650,11 @@ def test_scenario_bytes_from_the_compiled_chunk(base_file):
 
 def test_run_sizes_chunks_from_a_fake_device_memory(base_file, tmp_path, monkeypatch):
     # As on a GPU reporting 40 MiB with 1 MiB per scenario: 16 per chunk, and a resume keeps it.
-    monkeypatch.setattr(sizing, "_device_bytes", lambda device: 40 * MiB)
+    monkeypatch.setattr(sizing, "device_memory", lambda device: 40 * MiB)
     monkeypatch.setattr(sizing, "scenario_bytes", lambda cfg, table, base, sim=None: (1 * MiB, 0))
     s = sweep.run(base_file, tmp_path / "o", max_scenarios=4, progress=False)
     assert (s.chunk_size, s.chunks) == (16, 1)
-    monkeypatch.setattr(sizing, "_device_bytes", lambda device: 400 * MiB)  # another GPU on resume
+    monkeypatch.setattr(sizing, "device_memory", lambda device: 400 * MiB)  # another GPU on resume
     again = sweep.run(base_file, tmp_path / "o", max_scenarios=4, progress=False)
     assert (again.chunk_size, again.computed, again.skipped) == (16, 0, 1)
     man = json.loads((tmp_path / "o" / "manifest.json").read_text())
@@ -665,47 +664,37 @@ def test_run_sizes_chunks_from_a_fake_device_memory(base_file, tmp_path, monkeyp
 # --------------------------------------------------------------------------- action-set size plot
 
 
-def test_density_axis_is_drawn_in_action_counts_with_the_papers_496(tmp_path, monkeypatch):
-    from ijoy_jax.sweep import plots
-
+def test_density_axis_is_drawn_in_action_counts_with_the_papers_496(tmp_path):
     dens = [0.4, 0.5, 0.75, 1.0, 1.5, 2.0]
     assert sweep.action_counts(dens).tolist() == [52, 117, 202, 496, 1279, 3307]
     agg = pd.DataFrame({"cell": range(6), "robot.density": dens, "n": 4})
     for m in ("distance_along", "mean_deviation"):
         agg[f"{m}.mean"], agg[f"{m}.ci95"] = np.linspace(1, 2, 6), 0.1
-    figs = []
-    finish = plots._finish
-    monkeypatch.setattr(plots, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
-    png = sweep.plot(agg, tmp_path / "size.png", metrics=("distance_along", "mean_deviation"), title="size")
-    assert Path(png).stat().st_size > 10_000
-    for ax in figs[0].axes:
+    fig = sweep.plot(agg, tmp_path / "size.png", metrics=("distance_along", "mean_deviation"), title="size")
+    assert (tmp_path / "size.png").stat().st_size > 10_000
+    for ax in fig.axes:
         assert ax.get_xscale() == "log" and "actions" in ax.get_xlabel()
         assert ax.lines[0].get_xdata().tolist() == [52, 117, 202, 496, 1279, 3307]
         marks = [ln for ln in ax.lines if "496" in str(ln.get_label())]
         assert len(marks) == 1 and marks[0].get_xdata()[0] == sweep.PAPER_ACTIONS
         assert "496" in [t.get_text() for t in ax.get_xticklabels()]
     # A sweep at a longer reach (its aggregates keep robot.reach): the same densities are larger action sets
-    figs.clear()
-    sweep.plot(agg.assign(**{"robot.reach": 0.30}), tmp_path / "reach.png", metrics=("distance_along",))
+    fig = sweep.plot(agg.assign(**{"robot.reach": 0.30}), tmp_path / "reach.png", metrics=("distance_along",))
     want = sweep.action_counts(dens, reach=0.30).tolist()
-    assert want[3] == 720 and figs[0].axes[0].lines[0].get_xdata().tolist() == want
-    assert figs[0].axes[0].containers[0].get_label() == "reach = 0.3"  # the line says which reach
+    assert want[3] == 720 and fig.axes[0].lines[0].get_xdata().tolist() == want
+    assert fig.axes[0].containers[0].get_label() == "reach = 0.3"  # the line says which reach
 
 
-def test_the_tradeoff_plot_puts_each_cell_at_its_price_and_safety(tmp_path, monkeypatch):
+def test_the_tradeoff_plot_puts_each_cell_at_its_price_and_safety(tmp_path):
     """Falls against progress, one point per cell: coloured by the first swept column, labelled by the others,
     each point at the cell's means with its CIs (a rate's clipped to [0, 1])."""
-    from ijoy_jax.sweep import plots
-
     amp, w = np.repeat([0.01, 0.03], 3), np.tile([1.0, 2.0, 4.0], 2)
     agg = pd.DataFrame({"cell": range(6), "terrain.amplitude": amp, "robot.w": w, "n": 64,
                         "fell.mean": amp * w, "fell.ci95": 0.05, "distance_along.mean": w / amp / 100,
                         "distance_along.ci95": 0.1})
-    figs = []
-    finish = plots._finish
-    monkeypatch.setattr(plots, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
-    sweep.plot_tradeoff(agg, tmp_path / "t.png", title="rough")
-    ((ax,),) = [f.axes for f in figs]
+    fig = sweep.plot_tradeoff(agg, tmp_path / "t.png", title="rough")
+    assert (tmp_path / "t.png").stat().st_size > 0
+    (ax,) = fig.axes
     assert len(ax.containers) == 2  # one per amplitude
     for container, a in zip(ax.containers, (0.01, 0.03), strict=True):
         xy = container.lines[0].get_xydata()
@@ -721,7 +710,7 @@ def test_the_tradeoff_plot_puts_each_cell_at_its_price_and_safety(tmp_path, monk
         sweep.plot_tradeoff(agg, tmp_path / "u.png", safety="collided")
 
 
-def test_summary_plot_is_a_grid_of_distinct_panels(tmp_path, monkeypatch):
+def test_summary_plot_is_a_grid_of_distinct_panels(tmp_path):
     """The default six metrics: 2 rows x 3 columns (not one 2772 px row), each panel titled with its metric
     and unit, one line per value of the other swept parameter."""
     from PIL import Image
@@ -733,11 +722,8 @@ def test_summary_plot_is_a_grid_of_distinct_panels(tmp_path, monkeypatch):
     agg = pd.DataFrame({"cell": range(10), "robot.w": w * 2, "robot.margin": [0.0] * 5 + [0.04] * 5, "n": 8})
     for i, m in enumerate(metrics):
         agg[f"{m}.mean"], agg[f"{m}.ci95"] = np.linspace(0, 1, 10) + i, 0.1
-    figs = []
-    finish = plots._finish
-    monkeypatch.setattr(plots, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
-    png = sweep.plot(agg, tmp_path / "summary.png", title="w sweep")
-    (fig,) = figs
+    png = tmp_path / "summary.png"
+    fig = sweep.plot(agg, png, title="w sweep")
     assert len(fig.axes) == 6
     assert [ax.get_subplotspec().get_geometry()[:2] for ax in fig.axes] == [(2, 3)] * 6
     titles = [ax.get_title() for ax in fig.axes]
@@ -772,8 +758,8 @@ def test_summary_plot_panels_are_the_tables_metric_columns(kind, near, tmp_path,
     (tmp_path / "manifest.json").write_text(json.dumps({"name": kind, "plan": {"scenarios": 24}}))
     monkeypatch.setattr(sweep, "load_aggregates", lambda path, **kw: agg)
     figs = []
-    finish = plots._finish
-    monkeypatch.setattr(plots, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
+    draw = sweep.plot
+    monkeypatch.setattr(sweep, "plot", lambda *a, **kw: figs.append(draw(*a, **kw)) or figs[-1])  # what it drew
     assert cli.main(["sweep", "summarize", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     header = next(line for line in printed.splitlines() if "distance_along (m)" in line)
@@ -782,7 +768,8 @@ def test_summary_plot_panels_are_the_tables_metric_columns(kind, near, tmp_path,
     columns = [m for m, _ in table]
     (fig,) = figs
     titles = [ax.get_title() for ax in fig.axes]
-    assert titles == [plots._TITLES.get(m, f"{m.replace('_', ' ')} ({sweep.UNITS[m]})") for m in columns]
+    rates = {"collided": "collision rate (rollouts touching an obstacle)", "fell": "fall rate (rollouts that fell)"}
+    assert titles == [rates.get(m, f"{m.replace('_', ' ')} ({sweep.UNITS[m]})") for m in columns]
     assert columns == list(plots.summary_metrics(agg))
     assert ("footholds_near_obstacles" in columns) == near
     if kind == "mjx":

@@ -87,5 +87,6 @@ def test_short_bars_are_crossed_and_long_ones_are_not_at_a_2cm_margin(tmp_path):
     assert (stuck["steps_stationary"] >= 4).all() and (stuck["distance_along"] < 0.8).all()
     agg = sweep.load_aggregates(tmp_path / "out")
     assert "crossed.mean" in agg and "crossed.ci95" in agg
-    png = sweep.plot(agg, tmp_path / "summary.png", title="margin")
+    png = tmp_path / "summary.png"
+    sweep.plot(agg, png, title="margin")
     assert Path(png).stat().st_size > 10_000

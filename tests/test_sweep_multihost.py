@@ -321,8 +321,8 @@ def test_local_processes_forward_every_sweep_run_option(tmp_path, monkeypatch, c
              "--devices": "1",
              "--num-processes": "2", "--process-id": "1", "--coordinator": "localhost:1234",
              "--barrier-timeout": "5.5", "--distributed": None}
-    assert options == set(given), f"sweep run's options changed: forward {sorted(options - set(given))} in " \
-        "sweep_cli._sweep_local and list them here"
+    assert options == set(given), f"sweep run's options changed: forward {sorted(options - set(given))} to " \
+        "the children in ijoy_jax/apps/sweep_cli.py (--local-processes) and list them here"
     seen = {}
 
     def fake_run(sweep_args, num_processes, *, env=None, **_):

@@ -36,8 +36,7 @@ def test_uniform_draws_equal_one_numpy_generator_per_replicate(entropy):
 def test_first_doubles_of_any_replicate_equal_pcg64s(seed, reps, k):
     """The vectorised SeedSequence -> PCG64 -> next_double at replicates over all of uint32 (uniform_draws only
     reaches its first num_reps; the same function serves every row)."""
-    rows = np.array([[*seeding._words(seed), 2, r] for r in reps], np.uint32)
-    got = seeding._doubles(rows, k)
+    got = seeding.first_doubles([seed, 2], reps, k)
     for row, r in zip(got, reps, strict=True):
         rng = np.random.default_rng([seed, 2, r])
         np.testing.assert_array_equal(row, rng.random(k))
@@ -46,14 +45,14 @@ def test_first_doubles_of_any_replicate_equal_pcg64s(seed, reps, k):
 def test_a_numpy_that_draws_differently_falls_back_to_its_own_generators(monkeypatch):
     """Where the vectorised draws differ from NumPy's on a checked replicate (a changed NumPy, a fused
     multiply-add), every replicate is drawn by NumPy itself, with a warning: the plan stays NumPy's."""
-    true = seeding._doubles
+    true = seeding.first_doubles
 
-    def off_by_one_ulp(rows, count):
-        out = true(rows, count)
+    def off_by_one_ulp(entropy, reps, count):
+        out = true(entropy, reps, count)
         out[-1, 0] = np.nextafter(out[-1, 0], 2.0)  # the last replicate, which is always checked
         return out
 
-    monkeypatch.setattr(seeding, "_doubles", off_by_one_ulp)
+    monkeypatch.setattr(seeding, "first_doubles", off_by_one_ulp)
     done = []
     with pytest.warns(RuntimeWarning, match="differ from NumPy's own"):
         got = seeding.uniform_draws([5, 2], RANGES, 40, on_replicate=done.append)

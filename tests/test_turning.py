@@ -15,7 +15,6 @@ import pytest
 
 import ijoy_jax as ij
 from ijoy_jax import control, turning
-from ijoy_jax.jit_cache import compiled_count
 
 ROBOT = ij.robots.hrp2(margin=0.02)
 STEP_TURN = 20.0  # deg: the action set's largest rotation per step
@@ -61,10 +60,10 @@ def test_heading_hold_in_a_rollout_only_changes_steps_after_the_release():
     assert abs(feet[0] - feet[1]) < ANGLE_TOL and abs(feet[0] - shown) <= 0.5 * SPACING + ANGLE_TOL
     assert np.allclose(np.degrees(np.asarray(rate.feet[:, 2])), 60.0, atol=ANGLE_TOL)  # the rate mode: 60
     # The deadband and tolerance are traced: new values never recompile the rollout.
-    before = compiled_count(control._rollout_jit)
+    before = control.compiled_programs()
     for deadband, tol in ((0.01, 0.4), (0.2, 0.6)):
         ij.rollout(terrain, ROBOT, start, turn, num_steps=7, command_filter=turning.heading_hold(deadband, tol))
-    assert compiled_count(control._rollout_jit) == before
+    assert control.compiled_programs() == before
 
 
 def test_a_non_finite_command_passes_through_and_is_flagged():

@@ -285,10 +285,14 @@ def main(args) -> int:
     with pd.option_context("display.width", 200, "display.max_columns", 50):
         print(table.to_string(index=False))
     png = args.png or str(Path(args.dir) / "summary.png")
-    sweep.plot(agg, png, x=args.x, metrics=metrics, title=name)
+    figs = [sweep.plot(agg, png, x=args.x, metrics=metrics, title=name)]
     print(f"plot: {png}")
     if tradeoff is not None:
         out = str(Path(png).with_name("tradeoff.png"))
-        sweep.plot_tradeoff(agg, out, safety=tradeoff[0], price=tradeoff[1], title=name)
+        figs.append(sweep.plot_tradeoff(agg, out, safety=tradeoff[0], price=tradeoff[1], title=name))
         print(f"plot: {out}")
+    import matplotlib.pyplot as plt
+
+    for fig in figs:  # written: the figures are done
+        plt.close(fig)
     return 0

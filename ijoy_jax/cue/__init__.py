@@ -9,7 +9,8 @@ terrain blocks, toward the nearest one the robot can carry out.
   joystick command, and whether the terrain allows it.
 * :mod:`~ijoy_jax.cue.forces`: the force at one command (per haptic tick), and the prepared tick that splits
   it at the rate boundary.
-* :mod:`~ijoy_jax.cue.reachable`: the reach per direction, the polar picture of the feasible commands.
+* :mod:`~ijoy_jax.cue.reachable`: the reach per direction, the polar picture of the feasible commands, and
+  whether a command is open in the hard geometry.
 * :mod:`~ijoy_jax.cue.effects`: the force as force-feedback effects (a constant force, a spring).
 * :mod:`~ijoy_jax.cue.field`: all of the above under one module name.
 * :mod:`~ijoy_jax.cue.study`: a simulated operator driving the perfect robot through clutter with the
@@ -44,6 +45,7 @@ from ijoy_jax.cue.params import DEFAULT_TEMPERATURE as DEFAULT_TEMPERATURE
 from ijoy_jax.cue.params import CueParams as CueParams
 from ijoy_jax.cue.params import check_params as check_params
 from ijoy_jax.cue.params import make_params as make_params
+from ijoy_jax.cue.reachable import is_open as is_open
 from ijoy_jax.cue.reachable import reach as reach
 
 __all__ = [
@@ -65,6 +67,7 @@ __all__ = [
     "force",
     "force_terms",
     "forces",
+    "is_open",
     "make_params",
     "params",
     "prepare_tick",

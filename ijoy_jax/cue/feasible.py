@@ -28,6 +28,7 @@ from ijoy_jax import select
 from ijoy_jax._struct import as_pose, check_numeric, is_traced, pytree_dataclass
 from ijoy_jax.footcost import TerrainIndex, query_supported
 from ijoy_jax.footcost.xla import poses_supported
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.robots import Robot, side_actions, side_p0, side_sign
 from ijoy_jax.terrain import Terrain
 
@@ -154,6 +155,16 @@ def _feasible(terrain, robot, stance, stance_side, swing_from, index, kernel) ->
 
 
 _feasible_jit = jax.jit(_feasible, static_argnames=("kernel",))
+
+
+def compiled_programs() -> int:
+    """How many programs :func:`feasible_commands` holds compiled (in this process).
+
+    Read it before and after a loop of calls to learn how many compiles the loop caused: each new input
+    shape (terrain grid, action set, a ``swing_from`` or ``index`` given or not), static field or
+    ``kernel`` compiles once; new terrain values, robot parameters, stances and sides reuse the program.
+    """
+    return compiled_count(_feasible_jit)
 
 
 def feasible_commands(

@@ -11,7 +11,8 @@ same objects). Each name is documented at its home:
 * :mod:`~ijoy_jax.cue.forces`: the force at one command (:func:`~ijoy_jax.cue.force_terms`,
   :func:`~ijoy_jax.cue.force`) and the same split at the rate boundary (:func:`~ijoy_jax.cue.prepare_tick`,
   :func:`~ijoy_jax.cue.tick_force`), per haptic tick.
-* :mod:`~ijoy_jax.cue.reachable`: the largest open speed per direction (:func:`~ijoy_jax.cue.reach`).
+* :mod:`~ijoy_jax.cue.reachable`: the largest open speed per direction (:func:`~ijoy_jax.cue.reach`) and
+  whether a command is open (:func:`~ijoy_jax.cue.is_open`).
 * :mod:`~ijoy_jax.cue.effects`: the force as force-feedback effects (:func:`~ijoy_jax.cue.device_effects`).
 """
 
@@ -40,4 +41,5 @@ from ijoy_jax.cue.params import CueParams as CueParams
 from ijoy_jax.cue.params import check_params as check_params
 from ijoy_jax.cue.params import make_params as make_params
 from ijoy_jax.cue.reachable import REACH_BISECTIONS as REACH_BISECTIONS
+from ijoy_jax.cue.reachable import is_open as is_open
 from ijoy_jax.cue.reachable import reach as reach

@@ -63,6 +63,7 @@ import numpy as np
 from ijoy_jax._struct import as_array, pytree_dataclass
 from ijoy_jax.cue.feasible import MIN_UNIT, FeasibleCommands, check_command, check_feasible
 from ijoy_jax.cue.params import DEFAULT_C1, DEFAULT_DECAY, DEFAULT_TEMPERATURE, CueParams, check_params, make_params
+from ijoy_jax.jit_cache import compiled_count
 
 CLIP_SLACK = 1.0
 """Distance units: commands further than this outside the cells' hull are clipped hard before the soft clip
@@ -346,6 +347,17 @@ def force(
 
 _prepare_jit = jax.jit(_prepare)
 _tick_jit = jax.jit(lambda tick, command: _tick(tick, command).force)
+
+
+def compiled_programs() -> int:
+    """How many programs :func:`force_terms`, :func:`prepare_tick` and :func:`tick_force` hold compiled in this process.
+
+    :func:`force` runs through :func:`force_terms`' program. Read it before and after a loop of calls to learn
+    how many compiles the loop caused: each new number of actions or dtype compiles once; new commands,
+    feasible sets and parameters (traced leaves of :class:`~ijoy_jax.cue.CueParams` and :class:`CueTick`)
+    reuse the program.
+    """
+    return compiled_count(_force_jit) + compiled_count(_prepare_jit) + compiled_count(_tick_jit)
 
 
 def prepare_tick(

@@ -18,10 +18,29 @@ import numpy as np
 
 from ijoy_jax._struct import check_numeric, is_traced
 from ijoy_jax.cue.feasible import MIN_UNIT, FeasibleCommands, check_feasible
+from ijoy_jax.jit_cache import compiled_count
 
 
-def _hard_open(feasible: FeasibleCommands, commands) -> jax.Array:
-    """(...,) bool: the command's nearest cell (hard geometry, after a hard clip into the hull) is valid."""
+def is_open(feasible: FeasibleCommands, commands) -> jax.Array:
+    """(...,) bool: each command is open, its nearest cell a valid action's (the hard geometry of the force).
+
+    The force's distances (:mod:`ijoy_jax.cue.forces`) without their smoothing: the command is clipped hard
+    into the cells' hull and its nearest cell found by the exact min, so this is the line :func:`reach`
+    draws and the one the force starts from. False for every command when no action is valid. Traceable;
+    no checks (pass a :func:`feasible_commands` result).
+
+    Args:
+      feasible: :func:`feasible_commands` of one stance.
+      commands: (..., 3) commands (forward m/s, sideways m/s, turn rad/s; stance frame).
+
+    Example:
+      >>> import numpy as np, ijoy_jax as ij
+      >>> from ijoy_jax import cue
+      >>> free = np.ones((100, 100), bool); free[55:, :] = False        # a wall at x = 1.1 m
+      >>> f = cue.feasible_commands(ij.terrain.from_arrays(None, free, 0.02), ij.robots.hrp2(), [0.8, 1.0, 0.0], -1)
+      >>> cue.is_open(f, np.array([[0.1, 0.0, 0.0], [0.25, 0.0, 0.0]])).tolist()
+      [True, False]
+    """
     u = feasible.unit
     z = jnp.clip(commands, feasible.lo, feasible.hi) / u  # (..., 3)
     x = jnp.abs(z[..., None, :] - feasible.commands / u)  # (..., N, 3)
@@ -54,7 +73,7 @@ def _reach(feasible: FeasibleCommands, turn_rate, num_directions: int, samples: 
 
     frac = jnp.linspace(0.0, 1.0, samples, dtype=jnp.float32)
     r = r_max[:, None] * frac[None, :]  # (K, S)
-    open_ = _hard_open(feasible, cmd(r))  # (K, S)
+    open_ = is_open(feasible, cmd(r))  # (K, S)
     last = jnp.max(jnp.where(open_, jnp.arange(samples), -1), axis=1)  # (K,) -1: none open
     lo = jnp.take_along_axis(r, jnp.maximum(last, 0)[:, None], axis=1)[:, 0]
     hi = jnp.take_along_axis(r, jnp.minimum(last + 1, samples - 1)[:, None], axis=1)[:, 0]
@@ -62,7 +81,7 @@ def _reach(feasible: FeasibleCommands, turn_rate, num_directions: int, samples: 
     def bisect(_, bounds):
         lo, hi = bounds
         mid = 0.5 * (lo + hi)
-        ok = _hard_open(feasible, cmd(mid))
+        ok = is_open(feasible, cmd(mid))
         return jnp.where(ok, mid, lo), jnp.where(ok, hi, mid)
 
     lo, _ = jax.lax.fori_loop(0, REACH_BISECTIONS, bisect, (lo, hi))
@@ -70,6 +89,16 @@ def _reach(feasible: FeasibleCommands, turn_rate, num_directions: int, samples: 
 
 
 _reach_jit = jax.jit(_reach, static_argnames=("num_directions", "samples"))
+
+
+def compiled_programs() -> int:
+    """How many programs :func:`reach` holds compiled (in this process).
+
+    Read it before and after a loop of calls to learn how many compiles the loop caused: each new number of
+    actions, ``num_directions`` or ``samples`` compiles once; new feasible sets and turn rates reuse the
+    program.
+    """
+    return compiled_count(_reach_jit)
 
 
 def reach(feasible: FeasibleCommands, num_directions: int, *, turn_rate=0.0, samples: int = 64) -> jax.Array:

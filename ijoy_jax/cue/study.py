@@ -66,6 +66,7 @@ from ijoy_jax._struct import pytree_dataclass, static_field
 from ijoy_jax.control import perfect_walker
 from ijoy_jax.cue import field
 from ijoy_jax.footcost import foot_cost_terms, index_terrain
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, side_p0, side_sign, start_stance
 from ijoy_jax.stats import mean_ci
@@ -565,3 +566,14 @@ def _tune_jit(u0, scenarios, robot, operator, targets, cfg, weights, steps, lear
     tuner = optim.make_tuner(lambda u, _: relaxed_loss(u, scenarios, robot, operator, targets, cfg, weights),
                             optax.adam(learning_rate), has_aux=True)
     return optim.run_steps(tuner, tuner.init(u0), steps, trace_params=True)
+
+
+def compiled_programs() -> int:
+    """How many programs :func:`drive` (and :func:`compare`) and :func:`tune_cue` hold compiled (in this process).
+
+    Read it before and after a loop of calls to learn how many compiles the loop caused: each new batch or
+    terrain shape, :class:`StudyConfig`, :class:`Weights`, ``steps`` or ``learning_rate`` compiles once; new
+    scenarios, robot parameters, operators, cue parameters (and starting values) and the cue's gate reuse the
+    program.
+    """
+    return compiled_count(_drives_jit) + compiled_count(_tune_jit)

@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax.haptics.filter import SpringDamper, discretize, filter_signal, init_state
+from ijoy_jax.jit_cache import compiled_count
 
 SAMPLE_RATE = 1000.0  # Hz, the haptic loop rate
 DURATION_S = 20.0  # long enough for the slowest filter compared to settle (see SETTLE_S)
@@ -112,6 +113,15 @@ def spring_damper(natural_frequency: float, damping_ratio: float, sample_rate: f
     """
     w0, zeta, dt = (jnp.float32(v) for v in (natural_frequency, damping_ratio, 1.0 / sample_rate))
     return lambda x: np.asarray(_sd_run(w0, zeta, dt, jnp.asarray(x, jnp.float32)), np.float64)
+
+
+def compiled_programs() -> int:
+    """How many programs the :func:`spring_damper` filters hold compiled (in this process).
+
+    Read it before and after a loop of filters to learn how many compiles the loop caused: each new signal
+    length compiles once; new natural frequencies, damping ratios and sample rates reuse the program.
+    """
+    return compiled_count(_sd_run)
 
 
 def metrics(filt: Filter, signals: dict[str, np.ndarray], sample_rate: float = SAMPLE_RATE) -> dict[str, float]:

@@ -178,8 +178,30 @@ class YawLimits(NamedTuple):
     per_leg: jax.Array
 
 
-def _plane_yaw_limits(normal, offset, valid, foot):
-    """First exit angles (positive, negative) of the circle ``R_z(-a) f - f`` through one plane."""
+def plane_yaw_limits(normal, offset, valid, foot) -> tuple[jax.Array, jax.Array]:
+    """First exit angles (positive, negative) of the circle ``R_z(-a) f - f`` through one plane.
+
+    The closed form :func:`yaw_limits` takes over every leg's planes (module docstring): the smallest yaw each
+    way at which a foot fixed on the ground leaves the half-space ``n . dx <= d`` of its leg. One plane, one
+    foot; vmap for more.
+
+    Args:
+      normal: (3,) the plane's unit normal ``n`` (hip frame).
+      offset: () its offset ``d`` (m; >= 0 while the foot is inside, 0 on the plane).
+      valid: () bool, the plane exists (an invalid one is never left).
+      foot: (3,) the foot relative to the platform centre (m, platform frame).
+
+    Returns:
+      ``(positive, negative)``: () the first exit yaw counter-clockwise (rad, >= 0) and clockwise (rad, <= 0);
+      +inf and -inf where the circle never reaches the plane, 0 where the foot is on the plane and moving out.
+
+    Example:
+      >>> import jax.numpy as jnp
+      >>> from ijoy_jax.haptics import platform
+      >>> foot = jnp.array([1.0, 0.5, -1.2])
+      >>> [float(a) for a in platform.plane_yaw_limits(jnp.array([0.0, 0.0, 1.0]), 0.1, True, foot)]  # level
+      [inf, -inf]
+    """
     a_coef = normal[0] * foot[0] + normal[1] * foot[1]
     b_coef = normal[0] * foot[1] - normal[1] * foot[0]
     radius = jnp.sqrt(a_coef**2 + b_coef**2)
@@ -210,7 +232,7 @@ def yaw_limits(pw: PlatformWorkspace) -> YawLimits:
       True
     """
     lp = pw.leg_planes
-    pos, neg = jax.vmap(jax.vmap(_plane_yaw_limits, in_axes=(0, 0, 0, None)))(lp.normals, lp.offsets, lp.valid, pw.feet)
+    pos, neg = jax.vmap(jax.vmap(plane_yaw_limits, in_axes=(0, 0, 0, None)))(lp.normals, lp.offsets, lp.valid, pw.feet)
     leg_pos, leg_neg = jnp.min(pos, axis=1), jnp.max(neg, axis=1)
     ip, ineg = jnp.argmin(leg_pos), jnp.argmax(leg_neg)
     return YawLimits(

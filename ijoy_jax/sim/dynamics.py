@@ -57,8 +57,28 @@ def _quat_mul(a, b):
                       w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=-1)
 
 
-def _free_velocity(q0, q1, dt):
-    """(6 + n,) qvel taking qpos q0 to q1 in dt: world linear velocity, body-frame angular velocity, joint rates."""
+def free_velocity(q0, q1, dt) -> jax.Array:
+    """(6 + n,) qvel taking qpos q0 to q1 in dt: world linear velocity, body-frame angular velocity, joint rates.
+
+    The finite difference :func:`motion_zmp` differentiates a trajectory with, for a robot whose qpos is a
+    free joint (position m, unit quaternion wxyz) followed by n hinges (rad): what MuJoCo's
+    ``mj_differentiatePos`` gives for such a model, in JAX (jit/vmap/grad-able; the shortest rotation).
+
+    Args:
+      q0, q1: (7 + n,) qpos at the start and end of the interval.
+      dt: the interval (s).
+
+    Returns:
+      (6 + n,) linear velocity (m/s, world frame), angular velocity (rad/s, body frame), joint rates (rad/s).
+
+    Example:
+      >>> import math, jax.numpy as jnp
+      >>> from ijoy_jax.sim import dynamics
+      >>> q0 = jnp.array([0.0, 0.0, 0.7, 1.0, 0.0, 0.0, 0.0, 0.1])
+      >>> q1 = jnp.array([0.01, 0.0, 0.7, math.cos(0.005), 0.0, 0.0, math.sin(0.005), 0.12])  # yaw 0.01 rad
+      >>> [round(float(v), 3) for v in dynamics.free_velocity(q0, q1, 0.01)]
+      [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 2.0]
+    """
     lin = (q1[:3] - q0[:3]) / dt
     conj = q0[3:7] * jnp.array([1.0, -1.0, -1.0, -1.0], q0.dtype)
     rel = _quat_mul(conj, q1[3:7])
@@ -90,7 +110,7 @@ def motion_zmp(m: mjx.Model, qpos: jax.Array, dt: float, ground=None) -> tuple[j
       ground force (N) at samples 1 .. T - 2, from central differences.
     """
     ground = jnp.zeros(qpos.shape[0] - 2, qpos.dtype) if ground is None else jnp.asarray(ground, qpos.dtype)
-    v = jax.vmap(lambda a, b: _free_velocity(a, b, dt))(qpos[:-1], qpos[1:])  # (T - 1, nv), at half samples
+    v = jax.vmap(lambda a, b: free_velocity(a, b, dt))(qpos[:-1], qpos[1:])  # (T - 1, nv), at half samples
     qvel = 0.5 * (v[1:] + v[:-1])
     qacc = (v[1:] - v[:-1]) / dt
 

@@ -52,6 +52,7 @@ __all__ = [
     "read_record",
     "read_records",
     "start_session",
+    "write_part",
     "write_record",
     "write_rows",
 ]
@@ -387,8 +388,14 @@ def write_record(path: Path, obj) -> None:
     os.replace(tmp, path)
 
 
-def _write_part(df, path: Path, plan_record: dict) -> None:
-    """Write one chunk's results as parquet, its plan record in the file's metadata (:data:`PLAN_KEY`)."""
+def write_part(df, path: Path, plan_record: dict) -> None:
+    """Write one chunk's results as parquet, its plan record in the file's metadata (:data:`PLAN_KEY`).
+
+    The writer :func:`read_part` and :func:`part_plan` read back. ``df``: the chunk's rows (a pandas.DataFrame,
+    its index not written); ``plan_record``: a JSON-able dict (the sweep name, chunk plan and plan hash). It
+    writes ``path`` in place: :func:`write_rows` writes to a temporary name and renames it, so that a part is
+    either complete or absent.
+    """
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -507,6 +514,6 @@ def write_rows(out: Path, result, held: dict, plan_record: dict) -> None:
         if len(held[c]):  # an earlier slice's rows of this chunk: kept, the new ones added
             rows = pd.concat([read_part(path), rows], ignore_index=True).sort_values("scenario", kind="stable")
         tmp = path.with_name(f"{path.name}.{_WHO}.tmp")  # per process: members never share a temp file
-        _write_part(rows.reset_index(drop=True), tmp, plan_record)
+        write_part(rows.reset_index(drop=True), tmp, plan_record)
         os.replace(tmp, path)
         held[c] = rows["scenario"].to_numpy(np.int64)

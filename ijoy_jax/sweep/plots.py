@@ -2,7 +2,8 @@
 bars' crossing rate against the paper's bound; and the metrics a sweep's summary shows by default.
 
 Every plot draws the per-cell means of :func:`ijoy_jax.sweep.aggregate` with their 95% confidence intervals
-and writes a PNG; ``ijoy sweep summarize`` prints the same metrics (:func:`summary_metrics`) as a table.
+and returns the matplotlib figure (drawn in a notebook; inspect its axes), writing it as a PNG when given a
+path; ``ijoy sweep summarize`` prints the same metrics (:func:`summary_metrics`) as a table.
 """
 
 from __future__ import annotations
@@ -98,13 +99,13 @@ def summary_metrics(agg) -> tuple[str, ...]:
 _TITLES = {"collided": "collision rate (rollouts touching an obstacle)", "fell": "fall rate (rollouts that fell)"}
 
 
-def plot(agg, out, x=None, metrics=None, title: str = ""):
+def plot(agg, out=None, x=None, metrics=None, title: str = ""):
     """Plot aggregates against one swept parameter, one panel per metric (up to 3 columns, titled with the
     metric and its unit), points at the mean over scenarios with 95% CI error bars.
 
     Args:
       agg: :func:`aggregate` output.
-      out: PNG path.
+      out: PNG path to write (None: only return the figure).
       x: the parameter on the x axis (default: the swept column with most values).
       metrics: the metrics to plot (one panel each; default :func:`summary_metrics`, the columns of the
         summary table: :data:`PHYSICS_PLOT_METRICS` for a physics sweep, else :data:`PLOT_METRICS`).
@@ -114,7 +115,7 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
     library default (:data:`ijoy_jax.sweep.ROBOT_DEFAULTS`) is marked by a
     dashed line; values spanning 20x or more get a symlog axis. Action-set
     density is drawn as the number of actions per foot (:func:`action_counts`)
-    on a log axis with the paper's 496 (:data:`PAPER_ACTIONS`) marked. Returns ``out``.
+    on a log axis with the paper's 496 (:data:`PAPER_ACTIONS`) marked.
 
     A physics parameter (``sim.*``) on the x axis has its nominal value
     marked; a rate's interval (a ``fraction`` metric) is clipped to [0, 1].
@@ -124,6 +125,9 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
     Aggregates of a bar-crossing sweep (a ``crossed`` metric and a swept
     ``terrain.width``) with the default ``metrics`` and ``x`` go to
     :func:`plot_crossing` instead.
+
+    Returns:
+      The matplotlib figure (to show in a notebook, or to inspect: one axes per metric, in order).
     """
     if "crossed.mean" in agg and "terrain.width" in agg and x in (None, "terrain.width") and metrics is None:
         return plot_crossing(agg, out, title=title)
@@ -194,15 +198,13 @@ def plot(agg, out, x=None, metrics=None, title: str = ""):
 
 
 def _finish(fig, agg, title, out):
-    """Title a sweep figure with its scenarios per point, save it to ``out`` and close it."""
-    import matplotlib.pyplot as plt
-
+    """Title a sweep figure with its scenarios per point, save it to ``out`` (unless None) and return it."""
     n = int(agg["n"].min()) if len(agg) else 0
     fig.suptitle(f"{title}  (mean and 95% CI over {n} scenarios per point)".strip())
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    if out is not None:
+        fig.savefig(out, dpi=110)
+    return fig
 
 
 def _short(column: str) -> str:
@@ -211,20 +213,23 @@ def _short(column: str) -> str:
     return column.rsplit(".", 1)[-1]
 
 
-def plot_tradeoff(agg, out, safety: str = "fell", price: str = "distance_along", title: str = ""):
+def plot_tradeoff(agg, out=None, safety: str = "fell", price: str = "distance_along", title: str = ""):
     """The price of safety: one point per cell, a safety metric (up) against what it costs (across), each with
     its 95% CI.
 
     Args:
       agg: :func:`aggregate` output with ``{safety}.mean`` and ``{price}.mean`` (e.g. a physics sweep's fall
         rate and progress).
-      out: PNG path.
+      out: PNG path to write (None: only return the figure).
       safety, price: the metrics on the y and x axes (:data:`UNITS` gives their units).
       title: figure title.
 
     The first swept column (e.g. the terrain's amplitude, or the family's parameter) picks each point's
     colour; the other swept columns label the point, so a reader sees which settings buy safety with
-    progress. A fraction metric's interval is clipped to [0, 1]. Returns ``out``.
+    progress. A fraction metric's interval is clipped to [0, 1].
+
+    Returns:
+      The matplotlib figure (one axes).
     """
     import matplotlib
 
@@ -286,21 +291,24 @@ def b_max(margin, step_length: float = 0.20, foot_length: float = 0.242):
     return float(out) if out.ndim == 0 else out
 
 
-def plot_crossing(agg, out, title: str = "", step_length: float = 0.20, foot_length: float = 0.242):
+def plot_crossing(agg, out=None, title: str = "", step_length: float = 0.20, foot_length: float = 0.242):
     """Crossing rate against bar length, one line per safety margin, the paper's bound marked.
 
     Args:
       agg: :func:`aggregate` output of a sweep over ``terrain.width`` (bar
         length along the walk) and optionally ``robot.margin``, with the
         ``crossed`` metric (bars family).
-      out: PNG path.
+      out: PNG path to write (None: only return the figure).
       title: figure title.
       step_length, foot_length: L and the foot length in :func:`b_max` (HRP-2's by default).
 
     Each margin m is drawn in its own colour with the fraction of scenarios
     that crossed (95% CI error bars, clipped to [0, 1]) and a dashed vertical
     line at ``b_max(m)`` (in the legend; a margin with ``b_max <= 0`` admits
-    no bar and is noted there). Returns ``out``.
+    no bar and is noted there).
+
+    Returns:
+      The matplotlib figure (one axes).
     """
     import matplotlib
 

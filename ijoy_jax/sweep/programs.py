@@ -58,6 +58,7 @@ import numpy as np
 
 from ijoy_jax import robots
 from ijoy_jax.control import rollout
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.select import make_targets
 from ijoy_jax.select_options import SelectOptions
 from ijoy_jax.sweep.expansion import scenarios
@@ -72,6 +73,7 @@ __all__ = [
     "chunk_scene",
     "chunk_selector",
     "chunk_static",
+    "compiled_programs",
     "make_sim",
     "physics_steps_per_scenario",
     "scenario",
@@ -247,6 +249,17 @@ def trace_count() -> int:
     plus each physics chunk shape's preparation (its rollouts are :func:`ijoy_jax.sim.walker.rollout_batch`'s
     program, counted by :func:`ijoy_jax.sim.walker.compiled_programs`)."""
     return _chunk_traces() + _prepare_traces()
+
+
+def compiled_programs() -> int:
+    """How many programs the chunk functions of :func:`chunk_runner` hold compiled (in this process).
+
+    The perfect robot's chunk and a physics chunk's preparation and summaries (its rollouts are counted by
+    :func:`ijoy_jax.sim.walker.compiled_programs`). Read it before and after a run to learn how many compiles
+    the run caused: each new static setting (:func:`chunk_static`) or chunk shape compiles once; new parameter
+    values, seeds and commands reuse the program (:func:`trace_count` counts the traces behind them).
+    """
+    return compiled_count(_run_chunk) + compiled_count(_run_prepare) + compiled_count(_run_finish)
 
 
 def base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:

@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["CHECKED_REPLICATES", "reference_draws", "uniform_draws"]
+__all__ = ["CHECKED_REPLICATES", "first_doubles", "reference_draws", "uniform_draws"]
 
 CHECKED_REPLICATES = 64
 """Replicates (spread evenly, first and last included) whose vectorised draws are compared with NumPy's own
@@ -133,6 +133,34 @@ def _doubles(entropy: np.ndarray, count: int) -> np.ndarray:
     return out
 
 
+def first_doubles(entropy: Sequence[int], reps, count: int) -> np.ndarray:
+    """(len(reps), count) float64: ``np.random.default_rng([*entropy, r]).random(count)`` for each replicate r.
+
+    The vectorised generators :func:`uniform_draws` draws with (SeedSequence, PCG64, ``next_double``), for any
+    replicates, unchecked: :func:`uniform_draws` is the call that compares them with NumPy's own.
+
+    Args:
+      entropy: the non-negative integers before the replicate in the seed list (e.g. ``[seed, 2]``).
+      reps: (n,) replicate numbers in [0, 2**32).
+      count: doubles per replicate (>= 0).
+
+    Example:
+      >>> import numpy as np
+      >>> got = first_doubles([7, 2], [0, 4_000_000_000], 2)
+      >>> bool(np.all(got[1] == np.random.default_rng([7, 2, 4_000_000_000]).random(2)))
+      True
+    """
+    r = np.asarray(reps, np.int64).reshape(-1)
+    if r.size and (r.min() < 0 or r.max() >= 2**32):
+        raise ValueError(f"replicates must be in [0, 2**32), got {r.min()} .. {r.max()}")
+    prefix = [w for e in entropy for w in _words(int(e))]
+    rows = np.empty((r.size, len(prefix) + 1), np.uint32)
+    rows[:, :-1] = prefix
+    rows[:, -1] = r
+    with np.errstate(over="ignore"):
+        return _doubles(rows, int(count))
+
+
 def reference_draws(entropy: Sequence[int], ranges: Sequence[tuple[float, float]], reps,
                     on_replicate: Callable[[int], None] | None = None) -> np.ndarray:
     """(len(reps), K) float64: ``rng.uniform(lo, hi)`` for each (lo, hi) of ``ranges`` in turn, with
@@ -175,18 +203,13 @@ def uniform_draws(entropy: Sequence[int], ranges: Sequence[tuple[float, float]],
         raise ValueError(f"num_reps must be in [0, 2**32), got {num_reps}")
     lo = np.array([a for a, _ in ranges], np.float64)
     span = np.array([b for _, b in ranges], np.float64) - lo  # Generator.uniform's range: high - low, float64
-    prefix = [w for e in entropy for w in _words(int(e))]
     out = np.empty((num_reps, len(ranges)))
-    with np.errstate(over="ignore"):
-        for start in range(0, num_reps, _BLOCK):
-            r = np.arange(start, min(start + _BLOCK, num_reps), dtype=np.uint32)
-            rows = np.empty((r.size, len(prefix) + 1), np.uint32)
-            rows[:, :-1] = prefix
-            rows[:, -1] = r
-            u = _doubles(rows, len(ranges))
-            out[start:start + r.size] = lo + span * u  # random_uniform: lower + range * next_double, unfused
-            if on_block is not None:
-                on_block(start + r.size)
+    for start in range(0, num_reps, _BLOCK):
+        r = np.arange(start, min(start + _BLOCK, num_reps), dtype=np.uint32)
+        u = first_doubles(entropy, r, len(ranges))
+        out[start:start + r.size] = lo + span * u  # random_uniform: lower + range * next_double, unfused
+        if on_block is not None:
+            on_block(start + r.size)
     probe = np.unique(np.linspace(0, num_reps - 1, min(CHECKED_REPLICATES, num_reps)).astype(np.int64))
     if probe.size and not np.array_equal(out[probe], reference_draws(entropy, ranges, probe)):
         warnings.warn("the vectorised draws of numpy.random.default_rng differ from NumPy's own on this build; "

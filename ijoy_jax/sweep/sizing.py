@@ -22,6 +22,7 @@ __all__ = [
     "auto_chunk_size",
     "balanced_chunk_size",
     "default_chunk_size",
+    "device_memory",
 ]
 
 DEFAULT_CHUNK = 32
@@ -33,8 +34,12 @@ MAX_AUTO_CHUNK = 4096
 (the MJX walker's physics steps/s still grow from 1024 to 4096 robots), small enough to resume often."""
 
 
-def _device_bytes(device) -> int | None:
-    """Memory an accelerator lets XLA allocate (``memory_stats()["bytes_limit"]``); None on CPU or unknown."""
+def device_memory(device) -> int | None:
+    """Bytes an accelerator lets XLA allocate (``memory_stats()["bytes_limit"]``); None on CPU or unknown.
+
+    What :func:`default_chunk_size` sizes chunks to: ``device`` is a ``jax.Device`` (e.g.
+    ``jax.local_devices()[0]``); None means the backend reports no limit and the chunk is :data:`DEFAULT_CHUNK`.
+    """
     if device.platform == "cpu":
         return None
     try:
@@ -105,7 +110,7 @@ def default_chunk_size(cfg: SweepConfig, table, bases: dict, devices: list, sim=
     each); a physics sweep's chunks are balanced over the whole sweep's scenarios, so a slice of it plans the
     chunks the whole sweep does.
     """
-    mem = _device_bytes(devices[0])
+    mem = device_memory(devices[0])
     if mem is None:
         return DEFAULT_CHUNK
     base = max(bases.values(), key=lambda b: b.num_actions)
