@@ -88,6 +88,8 @@ def as_array(name: str, value):
     try:
         with np.errstate(over="ignore"):  # a number beyond float32 becomes inf: the caller's finite check names it
             return jnp.asarray(value, jnp.float32)
+    except OverflowError:  # a Python int beyond float64 (10**400): no float holds it
+        raise ValueError(f"{name} must be finite numbers, got an integer beyond float64 in {value!r:.80}") from None
     except (TypeError, ValueError) as e:
         raise ValueError(f"{name} must be an array of numbers, got {value!r}") from e
 
@@ -95,16 +97,24 @@ def as_array(name: str, value):
 def as_pose(name: str, value):
     """A pose argument (``(..., 3)``: x, y, theta) as :func:`as_array` gives it, except that a concrete one whose
     heading lies beyond :data:`ijoy_jax.geometry.MAX_ANGLE` is first reduced by whole turns in float64
-    (:func:`ijoy_jax.geometry.reduce_turns`): ``2 pi 1e7`` becomes 0, not a float32 whose spacing is 4 rad."""
+    (:func:`ijoy_jax.geometry.reduce_turns`): ``2 pi 1e7`` becomes 0, not a float32 whose spacing is 4 rad.
+    A heading beyond :data:`ijoy_jax.geometry.MAX_HEADING` (``1e300``), which float64 cannot place, is refused.
+
+    Raises:
+      ValueError: naming ``name``: a heading beyond ``MAX_HEADING``, an integer beyond float64.
+    """
     if value is None or is_traced(value):
         return as_array(name, value)
     try:
         with np.errstate(over="ignore", invalid="ignore"):
             poses = np.asarray(value, np.float64)
+    except OverflowError:  # a Python int beyond float64 (10**400)
+        raise ValueError(f"{name} must be finite numbers, got an integer beyond float64 in {value!r:.80}") from None
     except (TypeError, ValueError):  # a list of tracers, strings: as_array and the checks name what is wrong
         return as_array(name, value)
     if poses.ndim == 0 or poses.shape[-1] != 3:
         return as_array(name, value)
+    geometry.check_headings(name, poses)
     reduced = geometry.reduce_turns(poses)
     if np.array_equal(reduced, poses, equal_nan=True):
         return as_array(name, value)

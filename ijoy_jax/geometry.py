@@ -26,6 +26,12 @@ MAX_ANGLE = 1024.0
 are reduced by whole turns in float64 at the public functions' boundary (:func:`reduce_turns`); traced ones
 beyond it are flagged (:func:`pose_supported`)."""
 
+MAX_HEADING = 2.0**39
+"""rad: the largest concrete heading the boundary reduces by whole turns (:func:`reduce_turns`). Up to it the
+float64 reduction lands within 1e-4 rad of the exact direction (float32's own rounding at :data:`MAX_ANGLE`);
+beyond it the error grows with the heading (3e-3 rad at 2**45) until float64 holds no direction at all (its
+spacing at 1e17 is 16 rad), so :func:`check_headings` refuses it rather than return a step turned anywhere."""
+
 
 def wrap_angle(theta: jax.Array) -> jax.Array:
     """Wrap angles (radians) to ``[-pi, pi)``."""
@@ -41,6 +47,17 @@ def reduce_turns(poses) -> np.ndarray:
         far = np.isfinite(yaw) & (np.abs(yaw) > MAX_ANGLE)
     out[..., 2] = np.where(far, yaw - 2.0 * np.pi * np.round(yaw / (2.0 * np.pi)), yaw)
     return out
+
+
+def check_headings(name: str, poses) -> None:
+    """Raise ValueError naming ``name`` if a concrete ``(..., 3)`` pose has a finite heading beyond
+    :data:`MAX_HEADING` (one no reduction by whole turns can place); NaN and inf are left to the finite checks."""
+    yaw = np.asarray(poses, np.float64)[..., 2]
+    with np.errstate(invalid="ignore"):
+        far = np.isfinite(yaw) & (np.abs(yaw) > MAX_HEADING)
+    if far.any():
+        raise ValueError(f"{name} heading {float(yaw[far].flat[0])!r} rad is beyond geometry.MAX_HEADING = 2**39 rad, "
+                         f"where float64 no longer says which way it points: give it within a few turns")
 
 
 def pose_supported(pose) -> jax.Array:

@@ -12,6 +12,8 @@ kill. What each bound costs at its limit, on one device (float32):
   the density's sixth power: ~8 GB at 3);
 - a rollout of :data:`MAX_NUM_STEPS` steps: its trajectory, ~100 bytes per step with the perfect robot
   (~10 MB), more with the MJX walker's log;
+- a lookahead of :data:`MAX_HORIZON` steps: one search level per step in the compiled program, and up to
+  ``(horizon - 1) x beam x N`` FootCost evaluations per decision;
 - a footprint or swing window of :data:`MAX_WINDOW_CELLS` cells across: the per-candidate windows FootCost
   reads, ``(cells)**2`` per candidate.
 
@@ -27,6 +29,7 @@ import operator
 __all__ = [
     "MAX_ACTIONS",
     "MAX_DENSITY",
+    "MAX_HORIZON",
     "MAX_MAP_CELLS",
     "MAX_NUM_STEPS",
     "MAX_WINDOW_CELLS",
@@ -43,6 +46,9 @@ MAX_DENSITY = 2.0
 """Largest action-set density (:func:`ijoy_jax.robots.hrp2`'s ``density``: 3307 actions at the paper's reach)."""
 MAX_ACTIONS = 3307
 """Most actions per foot (HRP-2's at :data:`MAX_DENSITY` and the paper's reach): the targets table's bound."""
+MAX_HORIZON = 8
+"""Most steps a lookahead scores per decision (:class:`ijoy_jax.SelectOptions`' ``horizon``, a sweep's): the
+program holds one search level per step, so a horizon of a million traced for hours before compiling."""
 MAX_NUM_STEPS = 100_000
 """Most decisions per rollout: the trajectory holds every step (a 22-hour walk at 0.8 s per step)."""
 MAX_WINDOW_CELLS = 256

@@ -57,7 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ijoy_jax import geometry
+from ijoy_jax import geometry, limits
 from ijoy_jax._struct import is_traced
 from ijoy_jax.robots import Robot, side_actions, side_sign
 
@@ -322,6 +322,9 @@ def check_options(method: str, horizon, beam, num_actions: int | None, discount)
     if horizon < 1:
         raise ValueError(f"horizon must be >= 1 (steps scored per decision; 1 is the one-step selector), got "
                          f"{horizon}")
+    if horizon > limits.MAX_HORIZON:  # one search level per step in the program: refused before it is traced
+        raise ValueError(f"horizon must be <= ijoy_jax.limits.MAX_HORIZON = {limits.MAX_HORIZON} (one search level "
+                         f"per step in the compiled program), got {horizon}")
     if beam is not None and not 1 <= beam <= (beam if num_actions is None else num_actions):
         n = "N" if num_actions is None else num_actions
         raise ValueError(f"beam must be in [1, {n}] (sequences kept per level, at most the action set's "

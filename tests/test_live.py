@@ -535,7 +535,7 @@ def test_a_drive_says_what_its_warm_up_compiles_only_when_asked(open_map, monkey
 
 
 def test_a_recording_without_decisions_exports_no_trace(tmp_path):
-    """A drive stopped before its first decision (``--steps 0``) has no trace: with ``decide_at`` 0 a scripted
+    """A drive stopped before its first decision (by Ctrl-C) has no trace: with ``decide_at`` 0 a scripted
     drive reads its first decision at 0 s, before any trace's last time (> 0 s). One line naming the file, and no
     file written."""
     rec = _loop_recording(lambda k: [1.0, 0.0, 0.0], ticks=80, dt=0.01, dispatch=0, decisions=0, interrupted=False,

@@ -156,6 +156,32 @@ def test_the_boundary_checks_pass_through_a_callers_trace_with_traced_and_concre
             jnp.ones(2))
 
 
+
+def test_a_dynamics_leaf_written_as_a_list_is_one_leaf_per_rollout():
+    """``Dynamics(friction=[f, 0.5])`` with a traced ``f`` reached NumPy at the boundary
+    (TracerArrayConversionError), and ``kp_scale=[1.0, 1.1]`` for two rollouts was mapped value by value into a
+    broadcasting error deep in MJX: a list is a pytree node, not a leaf. The rollouts take it as one (B,) array:
+    the traced one passes the boundary to the next check, a concrete one is checked and batched as an array."""
+    fields, robots, starts, commands, _ = _tiny_walk.inputs()
+    sim = _tiny_walk.sim()
+
+    def walk(f):
+        dyn = physics.Dynamics(friction=[f[0], 0.5], kp_scale=[1.0, 1.1])
+        return W.rollout_batch(sim, fields, robots, starts, commands[:, :2], num_steps=_tiny_walk.STEPS,
+                               frames_per_step=_tiny_walk.FRAMES, dynamics=dyn, key=0)
+
+    with pytest.raises(ValueError, match="commands must have shape"):
+        jax.make_jaxpr(walk)(jnp.ones(2))
+    with pytest.raises(ValueError, match="dynamics.kp_scale must be finite"):  # each value still checked
+        W.rollout_batch(sim, fields, robots, starts, commands, num_steps=_tiny_walk.STEPS,
+                        frames_per_step=_tiny_walk.FRAMES, dynamics=physics.Dynamics(kp_scale=[1.0, 20.0]), key=0)
+    dyn = physics.array_leaves(physics.Dynamics(friction=[1.0, 0.6], kp_scale=(1.0, 1.1), latency=0.01))
+    for name in ("friction", "kp_scale"):
+        leaf = getattr(dyn, name)
+        assert jax.tree_util.tree_structure(leaf).num_leaves == 1 and leaf.shape == (2,) and leaf.dtype == jnp.float32
+    assert dyn.latency == 0.01  # anything else as given
+    assert len(jax.tree_util.tree_leaves(dyn)) == len(physics.FIELDS)  # one leaf per field, as an array's
+
 @pytest.fixture(scope="module")
 def sim():
     return W.make_sim(SHAPE_2D, RES, robot=ij.robots.hrp2())

@@ -50,8 +50,17 @@ def check_frame(terrain: Terrain) -> None:
     extent = float(frame_extent(terrain))
     if not np.isfinite(extent):
         raise ValueError(f"terrain origin must be finite, got {np.asarray(terrain.origin).tolist()}")
+    nx, ny = terrain.shape
+    size = max(nx, ny) * float(terrain.resolution)
+    if size > MAX_COORDINATE:  # no frame shift helps: the map itself is wider than float32's millimetres
+        raise ValueError(
+            f"the map is {size:.6g} m across ({nx} x {ny} cells of {float(terrain.resolution):g} m), beyond the "
+            f"{MAX_COORDINATE:g} m where float32 holds millimetres (ijoy_jax.footcost.MAX_COORDINATE): use a finer "
+            "resolution or fewer cells"
+        )
     if extent > MAX_COORDINATE:
-        lost = float(np.spacing(np.float32(extent))) / 2
+        with np.errstate(over="ignore"):
+            lost = float(np.spacing(np.float32(extent))) / 2  # inf beyond float32: say so, not nan
         raise ValueError(
             f"shift your world frame: the map reaches {extent:.6g} m from the origin, where float32 rounds "
             f"coordinates by up to {lost:.3g} m (millimetres hold within {MAX_COORDINATE:g} m); subtract the "

@@ -81,7 +81,11 @@ class SharedAxes:
         self.updates = 0
 
     def set(self, axes, source: str = "view") -> None:
-        a = np.asarray(axes, np.float64).reshape(-1)
+        """Raises ValueError or TypeError for axes that are not 3 numbers (the view ignores such a message)."""
+        try:
+            a = np.asarray(axes, np.float64).reshape(-1)
+        except OverflowError:  # a JSON integer beyond float64 (400 digits): refused as any bad value is
+            raise ValueError("axes must be numbers a float holds, got an integer beyond float64") from None
         if a.shape != (3,):
             raise ValueError(f"axes must have 3 values (forward, left, turn), got {a.shape}")
         a = np.where(np.isfinite(a), np.clip(a, -1.0, 1.0), 0.0)

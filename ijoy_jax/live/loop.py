@@ -40,7 +40,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax import cue, footcost, robots, select
+from ijoy_jax import cue, footcost, limits, robots, select
 from ijoy_jax.live.deciders import Decision
 from ijoy_jax.progress import compiling
 from ijoy_jax.robots import Robot
@@ -165,7 +165,8 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
       deadzone: of :func:`~ijoy_jax.live.axes_to_command`.
       decide_at: in [0, 1): how far into a step the stick is read and the next decision made.
       realtime: pace the ticks to the wall clock (False: as fast as possible, virtual time).
-      num_steps: decisions to make (None: until ``duration``, the source's ``duration``, or ``stop``).
+      num_steps: decisions to make, 1 to :data:`ijoy_jax.limits.MAX_NUM_STEPS` (None: until ``duration``, the
+        source's ``duration``, or ``stop``).
       duration: s, no decision is made at or after it (default: the source's ``duration`` if it has one).
       recorder: a :class:`~ijoy_jax.live.Recorder`, or None.
       on_tick: called about every ``view_every`` s of drive time with the live state (a dict; the view's
@@ -183,12 +184,22 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
     """
     if not 0.0 <= decide_at < 1.0:
         raise ValueError(f"decide_at must be in [0, 1) (a fraction of the step), got {decide_at!r}")
-    if num_steps is not None and (isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 0):
-        raise ValueError(f"num_steps must be a whole number >= 0, got {num_steps!r}")
+    # at least one decision (0 compiled everything, drove nothing and exited 0, as a NaN duration did), and at
+    # most the library's rollout bound: every decision is kept for the result and the recording
+    if num_steps is not None and (isinstance(num_steps, bool) or not isinstance(num_steps, (int, float, np.number))
+                                  or not 1 <= num_steps <= limits.MAX_NUM_STEPS or int(num_steps) != num_steps):
+        raise ValueError(f"num_steps must be a whole number in [1, ijoy_jax.limits.MAX_NUM_STEPS = "
+                         f"{limits.MAX_NUM_STEPS}] (decisions to make), got {num_steps!r}")
     given = duration is not None
     duration = getattr(source, "duration", None) if duration is None else float(duration)
     if duration is not None:
         check_duration(duration, "duration" if given else "the source's duration (its last time)")
+        # the first decision is made decide_at into the first step: a drive that ends before it drives nothing
+        first = math.floor(decide_at * int(body.ticks_per_step)) * float(body.control_dt)
+        if not first < duration - 1e-9:  # the loop's own test for making a decision
+            raise ValueError(f"{'duration' if given else 'the source duration (its last time)'} {duration!r} s ends "
+                             f"before the first decision, {first:g} s into the drive (decide_at of the step): "
+                             f"nothing would be driven")
     if num_steps is None and duration is None and stop is None:
         raise ValueError("a drive without num_steps, duration or a stop event would never end")
     prepared = select.prepare(terrain, robot) if prepared is None else prepared

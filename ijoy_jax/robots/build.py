@@ -51,7 +51,10 @@ def _is_concrete(x) -> bool:
 def _check_scalar(name, value, positive=False, nonneg=False):
     if not _is_concrete(value):
         return
-    v = np.asarray(value, np.float64)
+    try:
+        v = np.asarray(value, np.float64)
+    except OverflowError:  # a Python int beyond float64 (10**400)
+        raise ValueError(f"{name} must be finite, got an integer beyond float64") from None
     if v.shape != ():
         raise ValueError(f"{name} must be a scalar, got shape {v.shape}")
     if not np.isfinite(v):

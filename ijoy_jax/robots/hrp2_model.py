@@ -40,7 +40,7 @@ def density_counts(density: float, reach: float = PAPER_REACH) -> tuple[int, int
     half width: at density 1 the dx values stay :data:`DX_SPACING` apart,
     ``1 + 2 round(reach / 0.05)`` of them (reach 0.30 -> 13: (13, 8, 7) -> 720 actions).
     """
-    if not np.isfinite(density) or density <= 0:
+    if not _positive_finite(density):
         raise ValueError(f"density must be a positive finite number, got {density!r}")
     _check_reach(reach)
     half = max(1, round(reach / DX_SPACING))  # dx values either side of 0 at density 1 (4 for the paper's 0.2 m)
@@ -50,10 +50,19 @@ def density_counts(density: float, reach: float = PAPER_REACH) -> tuple[int, int
     return n_dx, n_dy, n_dt
 
 
+def _positive_finite(x) -> bool:
+    """Whether ``x`` is a number > 0 that a float holds (a Python int beyond float64, 10**400, is not one)."""
+    try:
+        v = float(x)
+    except (TypeError, ValueError, OverflowError):
+        return False
+    return math.isfinite(v) and v > 0
+
+
 def _check_reach(reach) -> None:
     if isinstance(reach, bool) or not isinstance(reach, (int, float, np.integer, np.floating)):
         raise ValueError(f"reach must be a number (the largest forward/backward step, m), got {reach!r}")
-    if not (np.isfinite(reach) and reach > 0):
+    if not _positive_finite(reach):
         raise ValueError(
             f"reach must be a positive finite number (the largest forward/backward step, m), got {reach!r}"
         )

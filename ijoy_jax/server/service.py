@@ -229,6 +229,7 @@ def _f32(name: str, values, *, pose: bool = False) -> np.ndarray:
     float64 first, as select_step's boundary does (a float32 of 2 pi 1e7 rad is 4 rad coarse)."""
     a64 = np.asarray(values, np.float64)
     if pose and a64.shape[-1:] == (3,):
+        geometry.check_headings(name, a64)  # beyond what float64 can place: invalid_value, as select_step refuses
         a64 = geometry.reduce_turns(a64)
     with np.errstate(over="ignore"):
         a = a64.astype(np.float32)

@@ -60,9 +60,9 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from ijoy_jax._struct import is_traced, pytree_dataclass
+from ijoy_jax._struct import as_array, is_traced, pytree_dataclass
 
-__all__ = ["BOUNDS", "FIELDS", "MAX_LATENCY", "NOMINAL", "Bound", "Dynamics", "check", "latency_ticks",
+__all__ = ["BOUNDS", "FIELDS", "MAX_LATENCY", "NOMINAL", "Bound", "Dynamics", "array_leaves", "check", "latency_ticks",
            "max_latency_ticks", "put_dynamics", "put_dynamics_batch", "sanitize"]
 
 MAX_LATENCY = 0.1
@@ -126,6 +126,19 @@ def _out_of_bounds(name: str, x, xp=jnp):
     b = BOUNDS[name]
     low = x <= b.lo if b.strict else x < b.lo
     return ~xp.isfinite(x) | low | (x > b.hi)
+
+
+def array_leaves(dynamics):
+    """``dynamics`` with each list or tuple leaf as one float32 array, anything else as given.
+
+    A list is a pytree node, not a leaf: ``Dynamics(kp_scale=[1.0, 1.1])`` for two rollouts was mapped value by
+    value (one list of two broadcast arrays, then a broadcasting error deep in MJX), and ``[f, 0.5]`` with a
+    traced ``f`` reached NumPy (TracerArrayConversionError). The rollouts call this before :func:`check`, so a
+    list is one leaf of shape (B,), checked and batched as an array is.
+    """
+    if not isinstance(dynamics, Dynamics):
+        return dynamics  # check() names the type
+    return dataclasses.replace(dynamics, **{n: as_array(f"dynamics.{n}", getattr(dynamics, n)) for n in FIELDS})
 
 
 def check(dynamics: Dynamics, batch: int | None = None) -> None:

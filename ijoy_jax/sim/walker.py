@@ -244,6 +244,7 @@ def rollout(sim: Sim, terrain: Terrain, robot: Robot, start, commands, options: 
     """
     progress = as_flag("progress", progress)
     options = checked(options, robot)
+    dynamics = physics.array_leaves(dynamics)  # a list leaf is one array, as for rollout_batch
     check_rollout_inputs(sim, terrain, robot, start, commands, num_steps=num_steps, first_swing=first_swing,
                          frames_per_step=frames_per_step, batch=None, dynamics=dynamics)
     dyn = jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32),
@@ -292,6 +293,7 @@ def rollout_batch(sim: Sim, terrains: Terrain, robots: Robot, starts, commands,
     if b is None:
         raise ValueError(f"terrains must have a leading batch axis, got a grid of shape {np.shape(terrains.free)}")
     options = checked(options, robots)
+    dynamics = physics.array_leaves(dynamics)  # [1.0, 1.1] or [traced, 0.5]: one (B,) leaf, not B leaves
     check_rollout_inputs(sim, terrains, robots, starts, commands, num_steps=num_steps, first_swing=first_swing,
                          frames_per_step=frames_per_step, batch=b, dynamics=dynamics)
     first = jnp.broadcast_to(jnp.asarray(first_swing, jnp.float32), (b,))

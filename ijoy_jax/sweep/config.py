@@ -20,7 +20,7 @@ import numpy as np
 
 from ijoy_jax import robots
 from ijoy_jax.footcost import MAX_COORDINATE
-from ijoy_jax.limits import MAX_ACTIONS, MAX_DENSITY, MAX_MAP_CELLS, MAX_NUM_STEPS
+from ijoy_jax.limits import MAX_ACTIONS, MAX_DENSITY, MAX_HORIZON, MAX_MAP_CELLS, MAX_NUM_STEPS
 from ijoy_jax.select import KERNELS, METHODS
 from ijoy_jax.sweep import recorded
 from ijoy_jax.sweep.columns import METRICS, PHYSICS_METRICS
@@ -494,8 +494,9 @@ def _blame(fam: Family, field: str, kw: dict) -> str:
     return f"terrain.params.{field}"
 
 
-_MAX_HORIZON = 8
-"""Longest lookahead a sweep accepts: a beam search costs (horizon - 1) x beam x N FootCost evaluations per step."""
+_MAX_HORIZON = MAX_HORIZON
+"""Longest lookahead a sweep accepts, the library's: a beam search costs (horizon - 1) x beam x N FootCost
+evaluations per step."""
 
 
 def _bool(chk: Checker, key: str, value) -> bool:
