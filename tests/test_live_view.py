@@ -43,7 +43,8 @@ def _browser():
 
 @pytest.fixture(scope="module")
 def drive_with_view():
-    """A real-time drive of the perfect robot on a clutter map, its stick the view's, and the view's server."""
+    """A real-time drive of the perfect robot on a clutter map, its stick the view's, and the view's server (its
+    3D body the robot's soles)."""
     settings = live.DriveSettings(terrain={"kind": "family", "family": "obstacles", "seed": 3, "shape": list(SHAPE),
                                            "resolution": RES})
     terrain, robot, start = live.open_terrain(settings.terrain)
@@ -59,7 +60,7 @@ def drive_with_view():
 
     def run():
         out["result"] = live.run(settings, view.axes, realtime=True, on_tick=on_tick, stop=stop, terrain=terrain,
-                                 robot=robot, start=start)
+                                 robot=robot, start=start, on_body=view.set_body)
 
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
@@ -290,3 +291,267 @@ def _view_js():
     from importlib import resources
 
     return (resources.files("ijoy_jax.live") / "static" / "view.js").read_text()
+
+
+# ------------------------------------------------------------------------------------------------- the 3D view
+
+def _strict(text):
+    """JSON text parsed as a browser's JSON.parse would: NaN, Infinity and -Infinity are not JSON."""
+
+    def refuse(token):
+        raise ValueError(f"not JSON: {token}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def _small_scene():
+    import ijoy_jax as ij
+
+    robot = ij.robots.hrp2()
+    return ij.terrain.flat((20, 16), 0.05), robot
+
+
+def test_published_states_and_scene_are_strict_json_with_nan_as_null():
+    # a diverged simulation or an invalid candidate's cost (NaN, inf) in a state, a NaN in the scene: every text
+    # the view sends parses as strict JSON, each non-finite number null, the finite ones unchanged
+    terrain, robot = _small_scene()
+    view = ViewServer(port=0)  # not started: publish and the page need no server
+    view.set_scene(terrain, robot, np.array([[0.5, 0.6, np.nan], [0.5, 0.4, 0.0]]))
+    nan, inf = float("nan"), float("inf")
+    view.publish({"t": np.float32(0.5), "latency_s": nan, "candidate_cost": np.array([1.5, inf, -inf, np.nan]),
+                  "feet": np.array([[0.5, 0.6, 0.0], [np.nan, 0.4, 0.0]], np.float32), "nested": {"x": [inf, (nan, 2)]},
+                  "flags": np.array([True, False]), "step": np.int64(3)})
+    with view._lock:
+        text = view._state
+    got = _strict(text)
+    assert got["latency_s"] is None and got["candidate_cost"] == [1.5, None, None, None]
+    assert got["feet"] == [[0.5, pytest.approx(0.6), 0.0], [None, pytest.approx(0.4), 0.0]]
+    assert got["nested"] == {"x": [None, [None, 2]]} and got["flags"] == [True, False] and got["step"] == 3
+    assert got["t"] == 0.5 and view.state() == got
+    parser = _Initial()
+    parser.feed(page_html(view._scene, text))
+    page = _strict(parser.text)
+    assert page["scene"]["start"] == [[0.5, 0.6, None], [0.5, 0.4, 0.0]] and page["state"] == got
+
+
+@given(value=st.recursive(st.floats() | st.integers(-(10**6), 10**6) | st.booleans() | st.none() | st.text(max_size=4),
+                          lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=3), inner,
+                                                                                       max_size=3), max_leaves=10))
+@settings(derandomize=True, deadline=None, max_examples=80)
+def test_finite_json_is_strict_json_of_the_same_finite_values(value):
+    from ijoy_jax.live.view import finite_json
+
+    def expect(x):  # the value with every NaN and infinity as None
+        if isinstance(x, dict):
+            return {k: expect(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [expect(v) for v in x]
+        if isinstance(x, float) and not np.isfinite(x):
+            return None
+        return x
+
+    assert _strict(finite_json(value)) == expect(value)
+
+
+def test_perfect_body_geoms_are_its_soles_on_the_ground():
+    # the perfect robot's 3D bodies: two boxes of its footprint at its feet, standing on a 2.5D map's heights
+    import ijoy_jax as ij
+    from ijoy_jax.live.bodies import SOLE_THICKNESS, BodyGeoms
+
+    robot = ij.robots.hrp2()
+    height = np.zeros((20, 16), np.float32)
+    height[10:] = 0.07  # a 7 cm step from x = 0.5 m on
+    terrain = ij.terrain.from_arrays(height, resolution=0.05)
+    start = np.array([[0.3, 0.5, 0.2], [0.7, 0.3, -0.4]], np.float32)
+    geoms = BodyGeoms(live.PerfectBody(robot, start), terrain, robot)
+    assert geoms.names == ("left_sole", "right_sole") and geoms.types == ("box", "box")
+    np.testing.assert_allclose(geoms.sizes[0], [robot.foot_length / 2, robot.foot_width / 2, SOLE_THICKNESS / 2])
+    pos, quat = geoms.poses()
+    np.testing.assert_allclose(pos, [[0.3, 0.5, SOLE_THICKNESS / 2], [0.7, 0.3, 0.07 + SOLE_THICKNESS / 2]],
+                               atol=1e-6)
+    np.testing.assert_allclose(quat, [[np.cos(0.1), 0, 0, np.sin(0.1)], [np.cos(-0.2), 0, 0, np.sin(-0.2)]],
+                               atol=1e-6)
+    described = geoms.describe()
+    assert described["types"] == ["box", "box"] and np.shape(described["rgba"]) == (2, 4)
+    assert geoms.obstacle_height is None
+
+
+def test_terrain_mesh_has_a_vertex_per_cell_and_samples_large_maps():
+    from ijoy_jax import terrain as terrain_mod
+    from ijoy_jax.live.view import MAX_MESH_SIDE, terrain_mesh
+
+    height = np.arange(6 * 4, dtype=np.float32).reshape(6, 4) / 100
+    free = np.ones((6, 4), bool)
+    free[2, 3] = False
+    mesh = terrain_mesh(terrain_mod.from_arrays(height, free, resolution=0.1, origin=(1.0, -1.0)))
+    assert (mesh["nx"], mesh["ny"], mesh["stride"]) == (6, 4, 1) and mesh["step"] == pytest.approx(0.1)
+    assert mesh["origin"] == pytest.approx([1.05, -0.95])  # cell (0, 0)'s centre
+    z = np.array(mesh["z"]).reshape(4, 6)  # row j along y, vertex i of row j at j * nx + i
+    np.testing.assert_allclose(z, height.T, atol=5e-4)
+    assert np.flatnonzero(mesh["obstacle"]).tolist() == [3 * 6 + 2]
+    n = MAX_MESH_SIDE * 2 + 1  # a map wider than the mesh's limit: every third cell, a wall kept where it is thin
+    free = np.ones((n, 3), bool)
+    free[4, :] = False
+    big = terrain_mesh(terrain_mod.flat((n, 3), 0.02).replace(free=free))
+    assert big["stride"] == 3 and big["nx"] == (n + 2) // 3 and big["ny"] == 1
+    assert np.flatnonzero(big["obstacle"]).tolist() == [1]
+
+
+def test_published_states_carry_past_footholds():
+    # a decision's foothold joins the past ones when the next decision arrives, if it was valid; its side is the
+    # swing foot's (the decision's stance side negated)
+    terrain, robot = _small_scene()
+    view = ViewServer(port=0)
+    view.set_scene(terrain, robot)
+    f = lambda x: np.array([x, 0.5, 0.0, 0.0, 0.0, 0.1], np.float32)  # noqa: E731
+    decisions = [(1, f(0.2), True, -1.0), (1, f(0.2), True, -1.0), (2, f(0.4), True, 1.0), (3, f(np.nan), False, -1.0),
+                 (4, f(0.6), True, -1.0), (5, f(0.8), True, 1.0)]
+    seen = []
+    for j, foothold, valid, side in decisions:
+        view.publish({"decision": j, "foothold": foothold, "valid": valid, "stance_side": side})
+        seen.append(view.state()["footholds"])
+    assert seen[0] == seen[1] == []
+    assert seen[2] == [[0.2, 0.5, 0.0, pytest.approx(0.1), 1.0]]
+    assert seen[3] == seen[2] + [[0.4, 0.5, 0.0, pytest.approx(0.1), -1.0]]
+    assert seen[4] == seen[3]  # the invalid decision 3 stood: no foothold
+    assert [p[0] for p in seen[5]] == [0.2, 0.4, 0.6]
+
+
+LEG_RGB = (0.5, 0.5, 0.9)  # the MuJoCo biped's thighs and shins (sim.model's geom rgba): the one blue on screen
+BLUE_OVER = 25  # a leg pixel: blue above red and green by this much (lit and shaded, still blue)
+
+
+@pytest.fixture(scope="module")
+def native_drive_with_view():
+    """A real-time drive of the MuJoCo biped on native MuJoCo on the small clutter map, the view's stick, and
+    the view's server with its 3D body."""
+    settings = live.DriveSettings(terrain={"kind": "family", "family": "obstacles", "seed": 3, "shape": list(SHAPE),
+                                           "resolution": RES}, body="native")
+    terrain, robot, start = live.open_terrain(settings.terrain)
+    view = ViewServer(port=0).start()
+    view.set_scene(terrain, robot, start)
+    stop = threading.Event()
+    out = {}
+    ready = threading.Event()
+
+    def on_tick(state):
+        view.publish(state)
+        ready.set()
+
+    def run():
+        out["result"] = live.run(settings, view.axes, realtime=True, on_tick=on_tick, on_body=view.set_body,
+                                 stop=stop, terrain=terrain, robot=robot, start=start)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    assert ready.wait(300), "the drive never ticked"
+    yield view
+    stop.set()
+    thread.join(timeout=60)
+    view.close()
+    assert out["result"].decisions, "the drive made no decision"
+
+
+def _robot_x(view):
+    """m: the mean x of the robot's geoms in the latest published state."""
+    return float(np.mean(np.reshape(view.state()["bodies"]["pos"], (-1, 3))[:, 0]))
+
+
+def _legs_on_screen(img, pixels):
+    """Per leg geom (thigh, shin), the blue pixels in a 15 px square at its projected centre."""
+    out = {}
+    for name, x, y, front in pixels:
+        if not any(part in name for part in ("thigh", "shin")):
+            continue
+        x, y = int(round(x)), int(round(y))
+        assert front and 0 <= x < img.shape[1] and 0 <= y < img.shape[0], (name, x, y)  # in view
+        patch = img[max(0, y - 7) : y + 8, max(0, x - 7) : x + 8].reshape(-1, 3)
+        blue = (patch[:, 2] > patch[:, 0] + BLUE_OVER) & (patch[:, 2] > patch[:, 1] + BLUE_OVER)
+        out[name] = int(blue.sum())
+    return out
+
+
+@slow
+def test_3d_view_shows_the_robot_and_follows_it(native_drive_with_view, tmp_path):
+    # /3d in Chromium (WebGL): the terrain mesh and every geom of the MuJoCo biped at its simulated pose; its
+    # legs' blue is on screen where the page projects them; held forward, the robot walks and the camera follows
+    # it, so the legs are still in view after it walked
+    view = native_drive_with_view
+    scene = json.load(urllib.request.urlopen(view.url + "scene.json", timeout=10))
+    bodies = scene["bodies"]
+    assert len(bodies["names"]) == len(bodies["types"]) >= 10 and "torso" in bodies["names"]
+    assert set(bodies["types"]) <= {"box", "sphere", "capsule", "cylinder", "ellipsoid"}
+    legs = [n for n in bodies["names"] if "thigh" in n or "shin" in n]
+    for name in legs:
+        assert bodies["rgba"][bodies["names"].index(name)][:3] == pytest.approx(LEG_RGB)
+    state = view.state()
+    n = len(bodies["names"])
+    assert len(state["bodies"]["pos"]) == 3 * n and len(state["bodies"]["quat"]) == 4 * n
+    shots = [tmp_path / "view3d_start.png", tmp_path / "view3d_walked.png"]
+    from PIL import Image
+
+    with _browser() as p:
+        browser = _launch(p)
+        page = browser.new_page(viewport={"width": 1200, "height": 760})
+        errors = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(view.url + "3d")
+        page.wait_for_function("window.ijoy3d && ijoy3d.terrain && ijoy3d.bodies > 0 && ijoy3d.frames > 3",
+                               timeout=60000)
+        assert page.evaluate("ijoy3d.bodies") == len(bodies["names"])
+        page.screenshot(path=str(shots[0]))
+        before = page.evaluate("({pixels: ijoy3d.bodyPixels(), follow: ijoy3d.follow})")
+        x0 = _robot_x(view)
+        view.axes.set([1.0, 0.0, 0.0], "test")  # full forward
+        deadline = time.monotonic() + 40
+        while time.monotonic() < deadline and _robot_x(view) < x0 + 0.3:
+            time.sleep(0.1)
+        view.axes.set([0.0, 0.0, 0.0], "test")
+        walked = _robot_x(view) - x0
+        time.sleep(1.0)  # the camera's target catches up (a fraction of the way each frame)
+        page.screenshot(path=str(shots[1]))
+        after = page.evaluate("({pixels: ijoy3d.bodyPixels(), follow: ijoy3d.follow})")
+        box = page.locator("#view3d canvas").bounding_box()
+        browser.close()
+    assert not errors, errors
+    assert walked > 0.3, walked
+    assert after["follow"][0] - before["follow"][0] > 0.25, (before["follow"], after["follow"])  # the camera followed
+    for shot, seen in zip(shots, (before, after), strict=True):
+        img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+        canvas = img[int(box["y"]) : int(box["y"] + box["height"]), int(box["x"]) : int(box["x"] + box["width"])]
+        assert len(np.unique(canvas.reshape(-1, 3) // 16, axis=0)) > 30, shot  # a picture, not a blank canvas
+        dark = np.all(np.abs(canvas.reshape(-1, 3) - [70, 40, 36]) < 30, axis=1).sum()
+        assert dark > 50, (shot, dark)  # the map's obstacles, dark on the mesh
+        on_screen = _legs_on_screen(img, seen["pixels"])
+        assert len(on_screen) == len(legs) == 4, on_screen
+        assert sum(n > 20 for n in on_screen.values()) >= 3, (shot, on_screen)  # the legs' blue where they are drawn
+    print(f"3D view screenshots: {shots[0]} {shots[1]}")
+
+
+@slow
+def test_3d_view_of_the_perfect_robot_shows_its_soles(drive_with_view, tmp_path):
+    # the perfect robot in 3D: its two soles, boxes in the feet's colours (left blue, right orange), drawn where
+    # the page projects them
+    view = drive_with_view
+    shot = tmp_path / "view3d_perfect.png"
+    with _browser() as p:
+        browser = _launch(p)
+        page = browser.new_page(viewport={"width": 1200, "height": 760})
+        page.goto(view.url + "3d")
+        page.wait_for_function("window.ijoy3d && ijoy3d.terrain && ijoy3d.bodies === 2 && ijoy3d.frames > 3",
+                               timeout=60000)
+        page.screenshot(path=str(shot))
+        pixels = page.evaluate("ijoy3d.bodyPixels()")
+        browser.close()
+    from PIL import Image
+
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    assert [px[0] for px in pixels] == ["left_sole", "right_sole"]
+    for (name, x, y, front), rgb in zip(pixels, FEET_RGB.values(), strict=True):
+        x, y = int(round(x)), int(round(y))
+        assert front and 0 <= x < img.shape[1] and 0 <= y < img.shape[0], (name, x, y)
+        patch = img[y - 6 : y + 7, x - 6 : x + 7].reshape(-1, 3)
+        # lit from above, a sole's top is its colour, somewhat brighter or darker
+        hue = np.all(np.abs(patch / np.maximum(patch.sum(1, keepdims=True), 1) - np.array(rgb) / sum(rgb)) < 0.06,
+                     axis=1)
+        assert hue.sum() > 40, (name, int(hue.sum()))

@@ -193,13 +193,14 @@ def main(args) -> int:
               file=sys.stderr, flush=True)
     if source is None:
         source = _live_source(kind, view)
-    feedback = _feedback(args.ff)
+    feedback = feedback_device(args.ff)
     realtime = not args.headless or args.realtime or not args.script
     if args.robot == "mjx":
         _say_where_mjx_runs(realtime)
     try:
         result = live.run(settings, source, realtime=realtime, num_steps=args.steps, duration=args.duration,
-                          record_to=args.record, on_tick=None if view is None else view.publish, feedback=feedback,
+                          record_to=args.record, on_tick=None if view is None else view.publish,
+                          on_body=None if view is None else view.set_body, feedback=feedback,
                           stop=None if (args.steps is not None or args.duration is not None or args.script)
                           else _never(), terrain=terrain, robot=robot, start=start, progress=True)
     finally:
@@ -240,8 +241,11 @@ def _live_source(kind, view):
     return inputs.Gamepad()
 
 
-def _feedback(spec):
+def feedback_device(spec: str | None):
     """The force-feedback device of ``--ff`` (None: not given, the first one found), or None for ``off``.
+
+    ``spec`` is ``--ff``'s value: None, ``"auto"``, ``"off"`` or an evdev path; the result is what
+    :func:`ijoy_jax.live.forcefeedback.open_device` opens (a ``NoFeedback`` that says why when none is found).
 
     Its line on stderr says which device plays the forces; that none does only where one was asked for (``--ff
     auto`` or a path): a drive without a joystick that pushes back is the usual case, not news.
@@ -284,7 +288,8 @@ def _replay(args) -> int:
             print(json.dumps(sweep.export_drive(rec, args.export_sweep, args.replay, terrain=args.sweep_terrain)))
         return 0
     if not Path(args.replay).is_file():
-        raise ValueError(f"recording {args.replay!r} does not exist")
+        what = "is a folder, not a file" if Path(args.replay).is_dir() else "does not exist"
+        raise ValueError(f"recording {args.replay!r} {what}")
     result, rec, mismatches = live.replay(args.replay, server=args.server,
                                           decider="server" if args.server else "local")
     summary = {**result.summary(), "replayed": args.replay, "identical": not mismatches,

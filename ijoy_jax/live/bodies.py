@@ -7,6 +7,9 @@ A live robot (a *body*) has the host protocol of :class:`ijoy_jax.sim.native.Nat
 step's end), ``end()``, ``feet()``, ``ticks_per_step`` and ``control_dt``. :class:`PerfectBody` is
 :func:`ijoy_jax.control.perfect_walker` with that protocol: each step lands exactly where it was
 sent, ``step_time`` after it began (the same float32 feet as the scanned rollout's).
+
+:class:`BodyGeoms` reads any of these bodies' geoms for the live view's 3D scene: every geom of a MuJoCo
+biped at its world pose, or the perfect body's two soles.
 """
 
 from __future__ import annotations
@@ -19,8 +22,9 @@ import numpy as np
 from ijoy_jax import control
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.stick import DEFAULT_CONTROL_DT
+from ijoy_jax.terrain import Terrain
 
-__all__ = ["MIN_CONTROL_DT", "PerfectBody"]
+__all__ = ["GEOM_TYPES", "MIN_CONTROL_DT", "SOLE_THICKNESS", "BodyGeoms", "PerfectBody"]
 
 MIN_CONTROL_DT = 1e-4
 """Shortest control period (s) of the perfect body: a shorter one ticks without end in real time."""
@@ -123,3 +127,129 @@ class PerfectBody:
         while self.tick():
             pass
         return self.end()
+
+
+GEOM_TYPES = {2: "sphere", 3: "capsule", 4: "ellipsoid", 5: "cylinder", 6: "box"}
+"""MuJoCo's geom types (``mjtGeom``) a 3D view draws as themselves; a robot's other geoms (a mesh) are drawn as
+their bounding box, its planes and height fields not at all."""
+_SKIPPED_TYPES = (0, 1)  # mjGEOM_PLANE, mjGEOM_HFIELD
+SOLE_THICKNESS = 0.03
+"""m: the height of the box the perfect body's soles are drawn as (the robot has no sole thickness)."""
+_SOLE_RGBA = {"left_sole": (58 / 255, 123 / 255, 213 / 255, 1.0), "right_sole": (232 / 255, 163 / 255, 61 / 255, 1.0)}
+"""The perfect body's soles in the 2D view's feet colours (left blue, right orange)."""
+
+
+class BodyGeoms:
+    """A live body's geoms for a 3D view: what each one is (:meth:`describe`, once) and where it is (:meth:`poses`,
+    every frame).
+
+    For a MuJoCo biped (:class:`ijoy_jax.sim.native.NativeBiped`, whose ``m`` and ``d`` are read directly, or
+    :class:`ijoy_jax.sim.mjx_biped.MjxBiped`, whose ``qpos()`` is put through MuJoCo's forward kinematics on the
+    host model of its Sim, ``sim.mj_model``): every geom of the robot (those on a body other than the world),
+    in MuJoCo's order, less invisible ones (alpha 0). For :class:`PerfectBody`: its two soles as boxes of the
+    robot's footprint, :data:`SOLE_THICKNESS` thick, standing on the terrain.
+
+    Call :meth:`poses` from the thread that steps the body (the drive's ``on_tick``), so that it reads a whole
+    tick's state.
+
+    Args:
+      body: a live body (:mod:`ijoy_jax.live.bodies`' protocol).
+      terrain: the ground (the perfect body's soles stand on its heights).
+      robot: the robot (the perfect body's footprint).
+
+    Attributes:
+      names: G geom names.
+      types: G type names (:data:`GEOM_TYPES`' values).
+      sizes: (G, 3) float64 MuJoCo's geom sizes (m): a box's half extents; a sphere's radius; a capsule's and
+        a cylinder's radius and half length (along the geom's z); an ellipsoid's radii.
+      rgba: (G, 4) float64 colours in [0, 1].
+      obstacle_height: m, how high the body meets a 2D map's obstacle cells (its physics' walls), or None (no
+        physics: the perfect body).
+
+    Example:
+      >>> import ijoy_jax as ij
+      >>> from ijoy_jax.live import PerfectBody
+      >>> from ijoy_jax.live.bodies import BodyGeoms
+      >>> robot, field = ij.robots.hrp2(), ij.terrain.flat((20, 20), 0.05)
+      >>> geoms = BodyGeoms(PerfectBody(robot, ij.robots.start_stance(robot, 0.5, 0.5)), field, robot)
+      >>> geoms.names, geoms.poses()[0].shape
+      (('left_sole', 'right_sole'), (2, 3))
+    """
+
+    def __init__(self, body, terrain: Terrain, robot: Robot):
+        self._body = body
+        self.obstacle_height = None
+        if isinstance(body, PerfectBody):
+            self._kind = "soles"
+            self.names = ("left_sole", "right_sole")
+            self.types = ("box", "box")
+            half = [0.5 * float(robot.foot_length), 0.5 * float(robot.foot_width), 0.5 * SOLE_THICKNESS]
+            self.sizes = np.array([half, half], np.float64)
+            self.rgba = np.array([_SOLE_RGBA[n] for n in self.names], np.float64)
+            self._terrain = terrain
+            return
+        import mujoco
+
+        if isinstance(getattr(body, "d", None), mujoco.MjData):
+            self._kind, self._m, self._d = "native", body.m, body.d
+        elif callable(getattr(body, "qpos", None)) and hasattr(getattr(body, "sim", None), "mj_model"):
+            self._kind, self._m = "mjx", body.sim.mj_model
+            self._d = mujoco.MjData(self._m)
+        else:
+            raise TypeError(f"no geoms to read from a {type(body).__name__}: a live body is a PerfectBody, a "
+                            "MuJoCo biped with its model and data (m, d) or one on MJX (qpos(), sim.mj_model)")
+        params = getattr(body.sim, "params", None)
+        if params is not None and hasattr(params, "obstacle_height"):
+            self.obstacle_height = float(params.obstacle_height)
+        m = self._m
+        keep = [g for g in range(m.ngeom) if m.geom_bodyid[g] != 0 and int(m.geom_type[g]) not in _SKIPPED_TYPES
+                and m.geom_rgba[g, 3] > 0]
+        self._ids = np.asarray(keep, int)
+        types = [int(m.geom_type[g]) for g in keep]
+        self.names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom{g}" for g in keep)
+        self.types = tuple(GEOM_TYPES.get(t, "box") for t in types)
+        aabb = np.asarray(m.geom_aabb, np.float64)[self._ids]  # (G, 6) centre (geom frame) and half extents
+        as_box = np.array([t not in GEOM_TYPES for t in types], bool)
+        self.sizes = np.where(as_box[:, None], aabb[:, 3:], np.asarray(m.geom_size, np.float64)[self._ids])
+        self._offset = np.where(as_box[:, None], aabb[:, :3], 0.0)  # a bounding box's centre in its geom's frame
+        self.rgba = np.asarray(m.geom_rgba, np.float64)[self._ids].copy()
+
+    def describe(self) -> dict:
+        """What the geoms are, JSON-ready: ``{"names", "types", "sizes": (G, 3), "rgba": (G, 4)}`` (lists)."""
+        return {"names": list(self.names), "types": list(self.types), "sizes": self.sizes.tolist(),
+                "rgba": self.rgba.tolist()}
+
+    def poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where the geoms are now: (G, 3) float64 world positions (m) and (G, 4) float64 unit quaternions (w, x,
+        y, z; geom frame to world)."""
+        if self._kind == "soles":
+            feet = np.asarray(self._body.feet(), np.float64)
+            z = _ground(self._terrain, feet[:, :2]) + 0.5 * SOLE_THICKNESS
+            half = 0.5 * feet[:, 2]
+            quat = np.stack([np.cos(half), np.zeros(2), np.zeros(2), np.sin(half)], 1)
+            return np.concatenate([feet[:, :2], z[:, None]], 1), quat
+        import mujoco
+
+        d = self._d
+        if self._kind == "mjx":
+            d.qpos[:] = np.asarray(self._body.qpos(), np.float64)
+            mujoco.mj_kinematics(self._m, d)
+        mats = np.asarray(d.geom_xmat, np.float64)[self._ids].reshape(-1, 3, 3)
+        pos = np.asarray(d.geom_xpos, np.float64)[self._ids] + np.einsum("gij,gj->gi", mats, self._offset)
+        quat = np.empty((len(self._ids), 4))
+        for k, mat in enumerate(mats):
+            mujoco.mju_mat2Quat(quat[k], mat.ravel())
+        return pos, quat
+
+
+def _ground(terrain: Terrain, xy) -> np.ndarray:
+    """(n,) float64 the terrain's height (m) at the cells under ``xy`` (n, 2) (0 on a 2D map; the nearest cell at
+    the map's edge)."""
+    if not terrain.has_height:
+        return np.zeros(len(xy))
+    h = np.asarray(terrain.height, np.float64)
+    ij = np.floor((np.asarray(xy, np.float64) - np.asarray(terrain.origin, np.float64)) / float(terrain.resolution))
+    ij = np.nan_to_num(ij, nan=0.0, posinf=0.0, neginf=0.0)
+    i = np.clip(ij[:, 0], 0, h.shape[0] - 1).astype(int)
+    j = np.clip(ij[:, 1], 0, h.shape[1] - 1).astype(int)
+    return h[i, j]

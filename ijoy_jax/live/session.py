@@ -106,7 +106,8 @@ def open_terrain(spec: dict, margin: float = 0.02) -> tuple[Terrain, Robot, np.n
     if kind == "image":
         path = Path(spec.get("path", ""))
         if not path.is_file():
-            raise ValueError(f"height map image {str(path)!r} does not exist")
+            what = "is a folder, not a file" if path.is_dir() else "does not exist"
+            raise ValueError(f"height map image {str(path)!r} {what}")
         try:
             terrain = terrain_mod.from_image(path, float(spec.get("resolution", 0.02)),
                                              float(spec.get("height_scale", 0.5 / 255)),
@@ -207,11 +208,12 @@ def _versions() -> dict:
 
 def run(settings: DriveSettings, source, *, realtime: bool = True, num_steps=None, duration=None, record_to=None,
         on_tick=None, feedback=None, stop=None, terrain=None, robot=None, start=None, on_ready=None,
-        progress: bool = False) -> DriveResult:
+        on_body=None, progress: bool = False) -> DriveResult:
     """Open the terrain, build the body and decider, and drive (:func:`ijoy_jax.live.drive`; ``progress``: say
     what its warm-up compiles, on stderr), recording to ``record_to`` (an MCAP path) when given. ``terrain``,
     ``robot``, ``start`` override the spec's (a replay); ``on_ready(terrain, robot, start)`` is called once they
-    exist (the view's scene)."""
+    exist (the view's scene); ``on_body(body)`` once the body is built, before the drive starts (the view's 3D
+    robot: :meth:`ijoy_jax.live.view.ViewServer.set_body`)."""
     if terrain is None:
         terrain, robot_spec, start_spec = open_terrain(settings.terrain, settings.margin)
         robot = robot_spec if robot is None else robot
@@ -220,6 +222,8 @@ def run(settings: DriveSettings, source, *, realtime: bool = True, num_steps=Non
         on_ready(terrain, robot, start)
     prepared = select.prepare(terrain, robot)
     body = build_body(settings.body, terrain, robot, start, settings.first_swing, settings.control_dt)
+    if on_body is not None:
+        on_body(body)
     decider = _decider(settings, terrain, robot, prepared)
     recorder = None
     if record_to is not None:
@@ -320,7 +324,7 @@ def export_trace(recording: recordings.Recording, path) -> int:
 
     Raises:
       ValueError: (one line, naming ``path``) the recording holds no decision (a drive stopped before its
-        first, ``--steps 0``): no trace makes no decision (with ``decide_at`` 0 a scripted drive reads its
+        first, by Ctrl-C): no trace makes no decision (with ``decide_at`` 0 a scripted drive reads its
         first at 0 s, before any trace's last time, which is > 0 s).
     """
     decisions, states = recording.decisions, recording.states

@@ -12,6 +12,15 @@ decision against the step time). Keys w/s, a/d, q/e (or the arrow keys, with shi
 gamepad through the browser's Gamepad API send stick axes back over the WebSocket into a
 :class:`ijoy_jax.live.SharedAxes` the drive reads.
 
+The same page at ``/3d`` (or its "3D view" button) shows the drive in 3D instead of the map (``static/view3d.js``,
+three.js vendored in ``static/``, no network needed): the terrain as a height-field mesh (obstacles dark), the
+robot's bodies at their simulated poses (every geom of a MuJoCo biped; the perfect robot's soles), the chosen
+foothold and the past ones, and a camera that follows the robot and orbits with the mouse. The bodies come
+from :meth:`ViewServer.set_body`; their poses travel in every published state.
+
+Every JSON text the server sends is strict JSON (:func:`finite_json`): a NaN or an infinity (a diverged
+simulation, an invalid candidate's cost) arrives as ``null``.
+
 On a remote GPU machine: ``ijoy drive --port 8765`` there, ``ssh -L 8765:localhost:8765 HOST`` here, and
 open http://localhost:8765 (docs/drive.md). The server binds 127.0.0.1 by default.
 """
@@ -21,24 +30,83 @@ from __future__ import annotations
 import asyncio
 import io
 import json
+import math
+import numbers
 import threading
 from importlib import resources
 
 import numpy as np
 
 from ijoy_jax import robots
+from ijoy_jax.live.bodies import BodyGeoms
 from ijoy_jax.live.inputs import SharedAxes
-from ijoy_jax.recordings import json_ready
 from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
-__all__ = ["DEFAULT_PORT", "MAX_MESSAGE_BYTES", "ViewServer", "page_html", "page_message", "terrain_image"]
+__all__ = ["DEFAULT_OBSTACLE_HEIGHT", "DEFAULT_PORT", "MAX_FOOTHOLDS", "MAX_MESH_SIDE", "MAX_MESSAGE_BYTES",
+           "ViewServer", "finite_json", "page_html", "page_message", "terrain_image", "terrain_mesh"]
 
 DEFAULT_PORT = 8765
 """The view's default TCP port."""
 MAX_MESSAGE_BYTES = 4096
 """Largest WebSocket message a page may send (a stick message is under 100 bytes); aiohttp closes a connection
 that sends more."""
+DEFAULT_OBSTACLE_HEIGHT = 0.1
+"""m: how high the 3D view raises a 2D map's obstacle cells when the body has no physics (the perfect robot); a
+MuJoCo biped's own walls' height replaces it (:attr:`ijoy_jax.live.bodies.BodyGeoms.obstacle_height`)."""
+MAX_MESH_SIDE = 512
+"""Most vertices along either side of the 3D view's terrain mesh: a larger map is sampled every few cells."""
+MAX_FOOTHOLDS = 100
+"""Past chosen footholds a published state carries (the latest ones)."""
+_POSE_DECIMALS = 4
+"""A published geom pose's decimals: 0.1 mm, and 1e-4 of a unit quaternion's components."""
+_VENDORED = {"view3d.js": "application/javascript", "three.module.min.js": "application/javascript",
+             "three.core.min.js": "application/javascript", "OrbitControls.js": "application/javascript",
+             "three.LICENSE": "text/plain"}
+"""The 3D view's files in ``static/``, served under their names (three.js r176 and its orbit controls, MIT
+licence in ``three.LICENSE``)."""
+
+
+def _finite(x):
+    """``x`` as plain JSON values: arrays and NumPy scalars as lists and Python numbers, every NaN or infinity as
+    None."""
+    if isinstance(x, dict):
+        return {str(k): _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, (np.ndarray, np.generic)) or (hasattr(x, "__array__") and not isinstance(x, (str, bytes))):
+        a = np.asarray(x)
+        if a.dtype.kind in "biu":
+            return a.tolist()
+        if a.dtype.kind == "f":  # whole arrays at once: a state's candidates are hundreds of numbers
+            finite = np.isfinite(a)
+            if finite.all():
+                return a.tolist()
+            out = a.astype(object)
+            out[~finite] = None
+            return out.tolist()
+        return _finite(a.tolist())
+    if isinstance(x, bool):
+        return x
+    if isinstance(x, numbers.Integral):
+        return int(x)
+    if isinstance(x, numbers.Real):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    return x
+
+
+def finite_json(value) -> str:
+    """Strict JSON text of ``value`` (dicts, lists, arrays, numbers, strings): every NaN or infinity written as
+    ``null``, so a browser's ``JSON.parse`` reads whatever a drive publishes (Python's ``json.dumps`` writes
+    ``NaN``, which is not JSON).
+
+    Example:
+      >>> import numpy as np
+      >>> finite_json({"pos": np.array([1.0, np.nan]), "cost": float("inf")})
+      '{"pos":[1.0,null],"cost":null}'
+    """
+    return json.dumps(_finite(value), allow_nan=False, separators=(",", ":"))
 
 
 def page_message(text: str) -> dict | None:
@@ -73,7 +141,7 @@ def page_html(scene: dict, state: str) -> str:
       a state (``</script>``, ``<!--``) can end the script element early.
     """
     template = (resources.files("ijoy_jax.live") / "static" / "index.html").read_text()
-    data = '{"scene": ' + json.dumps(scene) + ', "state": ' + state + "}"
+    data = '{"scene": ' + finite_json(scene) + ', "state": ' + state + "}"
     data = data.replace("<", "\\u003c")
     return template.replace(_INITIAL, f'<script id="ijoy-initial" type="application/json">{data}</script>', 1)
 
@@ -100,8 +168,34 @@ def terrain_image(terrain: Terrain) -> bytes:
     return buf.getvalue()
 
 
+def terrain_mesh(terrain: Terrain) -> dict:
+    """The terrain as the 3D view's height-field mesh, JSON-ready: one vertex per cell centre (every
+    ``stride``-th cell where a side has more than :data:`MAX_MESH_SIDE` cells).
+
+    Returns:
+      ``{"nx", "ny"}`` vertices along x and y; ``"origin"`` (x, y) of vertex (0, 0), m; ``"step"`` m between
+      vertices; ``"stride"`` cells per vertex; ``"z"`` (ny * nx,) heights (m, mm precision; 0 on a 2D map) and
+      ``"obstacle"`` (ny * nx,) 1 where any cell a vertex stands for is not free, both row j (along y) after
+      row j - 1, vertex i of row j at ``j * nx + i``; ``"has_height"``.
+    """
+    free = np.asarray(terrain.free, bool)
+    nx, ny = free.shape
+    stride = max(1, math.ceil(max(nx, ny) / MAX_MESH_SIDE))
+    mx, my = math.ceil(nx / stride), math.ceil(ny / stride)
+    blocked = np.zeros((mx * stride, my * stride), bool)  # padding counts as free: only real cells block
+    blocked[:nx, :ny] = ~free
+    obstacle = blocked.reshape(mx, stride, my, stride).any(axis=(1, 3))
+    h = np.asarray(terrain.height, np.float64)[::stride, ::stride] if terrain.has_height else np.zeros((mx, my))
+    h = np.where(np.isfinite(h), h, 0.0)
+    res = float(terrain.resolution)
+    origin = np.asarray(terrain.origin, np.float64) + 0.5 * res
+    return {"nx": int(mx), "ny": int(my), "origin": origin.tolist(), "step": res * stride, "stride": int(stride),
+            "z": np.round(h.T.ravel(), 3).tolist(), "obstacle": obstacle.T.ravel().astype(int).tolist(),
+            "has_height": bool(terrain.has_height)}
+
+
 class ViewServer:
-    """The live view's web server (start it, give it the scene, publish states; it fills ``axes``).
+    """The live view's web server (start it, give it the scene and the body, publish states; it fills ``axes``).
 
     Args:
       host, port: where to listen (port 0: any free port; :attr:`url` tells which).
@@ -115,6 +209,13 @@ class ViewServer:
         self._png = b""
         self._state = "{}"
         self._version = 0
+        self._terrain = None
+        self._mesh = "null"
+        self._geoms: BodyGeoms | None = None
+        self._bodies_version = 0
+        self._footholds: list = []  # past chosen footholds: [x, y, z, yaw, side] (side +1 left)
+        self._chosen = None  # the latest decision's foothold, until the next decision
+        self._decision = None
         self._lock = threading.Lock()
         self._ready = threading.Event()
         self._loop = None
@@ -135,11 +236,31 @@ class ViewServer:
         scene = {"origin": np.asarray(terrain.origin, np.float64).tolist(), "resolution": float(terrain.resolution),
                  "shape": [int(nx), int(ny)], "foot": [float(robot.foot_length), float(robot.foot_width)],
                  "step_time": float(robot.step_time), "p0": p0.tolist(), "has_height": bool(terrain.has_height),
-                 "start": None if start is None else np.asarray(start, np.float64).tolist()}
+                 "start": None if start is None else np.asarray(start, np.float64).tolist(),
+                 "obstacle_height": DEFAULT_OBSTACLE_HEIGHT, "bodies": None}
         png = terrain_image(terrain)
+        mesh = finite_json(terrain_mesh(terrain))
         with self._lock:
-            self._scene, self._png = scene, png
-            self._robot = robot
+            self._scene, self._png, self._mesh = scene, png, mesh
+            self._robot, self._terrain = robot, terrain
+            self._geoms, self._footholds, self._chosen, self._decision = None, [], None, None
+
+    def set_body(self, body) -> None:
+        """The robot that walks (once per drive, after :meth:`set_scene`; :func:`ijoy_jax.live.run`'s
+        ``on_body``): the 3D view draws its geoms (:class:`~ijoy_jax.live.bodies.BodyGeoms`), their sizes in the
+        scene and their poses in every state :meth:`publish` sends. Publish from the thread that steps the body."""
+        with self._lock:
+            terrain, robot = self._terrain, getattr(self, "_robot", None)
+        if terrain is None:
+            raise RuntimeError("set_scene(terrain, robot) first: the body stands on the scene's terrain")
+        geoms = BodyGeoms(body, terrain, robot)
+        with self._lock:
+            self._bodies_version += 1
+            scene = dict(self._scene)
+            scene["bodies"] = {"version": self._bodies_version, **geoms.describe()}
+            if geoms.obstacle_height is not None:
+                scene["obstacle_height"] = geoms.obstacle_height
+            self._scene, self._geoms = scene, geoms
 
     def publish(self, state: dict) -> None:
         """The drive's latest state (:func:`ijoy_jax.live.drive`'s ``on_tick``); sent to every page."""
@@ -149,10 +270,32 @@ class ViewServer:
             state["reach_world"] = _reach_polygon(robot, state["next_stance"], state["next_side"], state["reach"],
                                                   state.get("reach_turn", 0.0))
         state["input_source"] = self.axes.source
-        text = json.dumps(json_ready(state))
+        with self._lock:
+            geoms, version = self._geoms, self._bodies_version
+        if geoms is not None:
+            pos, quat = geoms.poses()
+            state["bodies"] = {"version": version, "pos": np.round(pos, _POSE_DECIMALS).ravel(),
+                               "quat": np.round(quat, _POSE_DECIMALS).ravel()}
+        state["footholds"] = self._past_footholds(state)
+        text = finite_json(state)
         with self._lock:
             self._state = text
             self._version += 1
+
+    def _past_footholds(self, state: dict) -> list:
+        """The chosen footholds before the latest decision's, oldest first (at most :data:`MAX_FOOTHOLDS`), each
+        [x, y, z, yaw, side] (m, rad; side +1 for the left foot): a decision's foothold joins them when the
+        next decision arrives, if it was valid."""
+        decision = state.get("decision")
+        if decision is not None and decision != self._decision:
+            if self._chosen is not None:
+                self._footholds = (self._footholds + [self._chosen])[-MAX_FOOTHOLDS:]
+            self._decision, self._chosen = decision, None
+            f = np.asarray(state.get("foothold", np.full(6, np.nan)), np.float64).ravel()
+            if state.get("valid") and f.shape == (6,) and np.all(np.isfinite(f)):
+                side = -float(state.get("stance_side", 0.0))
+                self._chosen = [round(float(v), 4) for v in (f[0], f[1], f[2], f[5])] + [side]
+        return list(self._footholds)
 
     def state(self) -> dict:
         """The latest published state (as the page receives it)."""
@@ -204,6 +347,20 @@ class ViewServer:
         async def script(_):
             return web.Response(text=(static / "view.js").read_text(), content_type="application/javascript")
 
+        vendored = {name: (static / name).read_bytes() for name in _VENDORED}
+
+        def static_file(name):
+            async def handler(_):
+                return web.Response(body=vendored[name], content_type=_VENDORED[name],
+                                    headers={"Cache-Control": "max-age=3600"})
+
+            return handler
+
+        async def mesh(_):
+            with self._lock:
+                return web.Response(text=self._mesh, content_type="application/json",
+                                    headers={"Cache-Control": "no-store"})
+
         async def png(_):
             with self._lock:
                 data = self._png
@@ -211,7 +368,8 @@ class ViewServer:
 
         async def scene(_):
             with self._lock:
-                return web.json_response(self._scene)
+                return web.Response(text=finite_json(self._scene), content_type="application/json",
+                                    headers={"Cache-Control": "no-store"})
 
         async def state(_):
             with self._lock:
@@ -253,8 +411,10 @@ class ViewServer:
             return ws
 
         app = web.Application()
-        app.add_routes([web.get("/", page), web.get("/view.js", script), web.get("/terrain.png", png),
-                        web.get("/scene.json", scene), web.get("/state.json", state), web.get("/ws", socket)])
+        app.add_routes([web.get("/", page), web.get("/3d", page), web.get("/view.js", script),
+                        web.get("/terrain.png", png), web.get("/terrain3d.json", mesh), web.get("/scene.json", scene),
+                        web.get("/state.json", state), web.get("/ws", socket)]
+                       + [web.get("/" + name, static_file(name)) for name in _VENDORED])
         runner = web.AppRunner(app, access_log=None)
         await runner.setup()
         site = web.TCPSite(runner, self.host, self.port)

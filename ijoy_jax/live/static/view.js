@@ -5,6 +5,9 @@ const ctx = mapCanvas.getContext("2d");
 const status = document.getElementById("status");
 let scene = null, terrainImg = null, state = null, ws = null;
 window.ijoy = { frames: 0, states: 0, sent: 0, axes: [0, 0, 0], initial: false };
+// the scene and the latest state, for the 3D view (view3d.js, a module loaded when it is first shown)
+window.ijoy.current = () => ({ scene, state });
+let mode3d = false;
 
 // The scene and latest state the server wrote into the page (#ijoy-initial), so the first paint shows the robot
 // before the WebSocket connects; null where the page came without them (the drive had not started).
@@ -206,8 +209,27 @@ function drawLatency() {
   g.setLineDash([]);
 }
 
+// The 3D view in place of the map (the side panel, the keys and the gamepad stay): at /3d, or by the button.
+function setMode(three) {
+  mode3d = three;
+  document.getElementById("map").hidden = three;
+  mapCanvas.style.display = three ? "none" : "";
+  const el = document.getElementById("view3d");
+  el.hidden = !three;
+  el.style.display = three ? "block" : "none";
+  if (modeButton) modeButton.textContent = three ? "2D map" : "3D view";
+  history.replaceState(null, "", three ? "3d" : "./");
+  if (three && !window.ijoy.view3d) {
+    window.ijoy.view3d = import("./view3d.js").then(m => m.start(el, window.ijoy.current))
+      .catch(e => { status.textContent = "the 3D view failed: " + e; });
+  }
+}
+const modeButton = document.getElementById("mode");
+if (modeButton) modeButton.addEventListener("click", () => setMode(!mode3d));
+
 function frame() {
-  drawMap(); drawStick(); drawLatency();
+  if (!mode3d) drawMap();
+  drawStick(); drawLatency();
   if (state && state.feet) {
     const lat = state.latency_s === undefined ? "-" : (1000 * state.latency_s).toFixed(1) + " ms";
     status.textContent = `step ${state.step}  decision ${lat}  ${state.valid === false ? "STOP: no valid step" : ""}  input: ${state.input_source}`;
@@ -258,6 +280,7 @@ setInterval(() => { if (pressed.size) send(keyAxes(), "keyboard"); }, 200);
 // loaded with (#terrain), draw them as the page's load event fires (a screenshot taken then shows the robot);
 // without them, wait for the scene as the drive sets it. Then the WebSocket brings every new state.
 function start() {
+  if (/\/3d$/.test(location.pathname)) setMode(true);
   const init = initialData(), img = document.getElementById("terrain");
   if (init && init.scene && init.scene.shape && img && img.complete && img.naturalWidth > 0) {
     scene = init.scene; terrainImg = img;
