@@ -43,6 +43,8 @@ __all__ = [
     "IMAGE_RMS",
     "IMAGE_SCALE",
     "IMAGE_WAVELENGTHS",
+    "NATURAL_RANGE",
+    "NATURAL_SEED",
     "PAD_FRONT",
     "PLATFORM_HEIGHT_MAX",
     "PLATFORM_HEIGHT_MIN",
@@ -68,6 +70,7 @@ __all__ = [
     "grid_shape",
     "ground_image",
     "image",
+    "natural",
     "load_ground",
     "platforms",
     "rough",
@@ -476,6 +479,30 @@ def image(key, batch: int, *, shape, resolution: float, ground: Terrain | None =
     )
 
 
+NATURAL_RANGE = 0.06
+"""Height range (m) of each :func:`natural` map: 0-6 cm from its lowest to its highest cell, as MuJoCo
+Playground's rough-terrain height field spans 0-5 cm (its humanoids' rough-ground training scene)."""
+NATURAL_SEED = 1
+"""Seed of the ground image :func:`natural` cuts its windows from (:func:`ground_image`)."""
+
+
+def natural(key, batch: int, *, shape, resolution: float) -> Terrain:
+    """Natural rough ground spanning :data:`NATURAL_RANGE`: windows of a second fractal ground image.
+
+    The windows are :func:`image`'s (the start pad included) from the ground image of seed
+    :data:`NATURAL_SEED`, each scaled so its heights span :data:`NATURAL_RANGE` from lowest to highest cell
+    (about 0.8 cm RMS).
+    """
+    with tempfile.TemporaryDirectory() as tmp:
+        ground = grid.from_image(
+            write_ground_png(os.path.join(tmp, "ground.png"), seed=NATURAL_SEED), resolution, height_scale=IMAGE_SCALE
+        )
+    maps = image(key, batch, shape=shape, resolution=resolution, ground=ground)
+    h = maps.height
+    span = jnp.max(h, axis=(1, 2), keepdims=True) - jnp.min(h, axis=(1, 2), keepdims=True)
+    return maps.replace(height=h * (NATURAL_RANGE / jnp.maximum(span, 1e-6)))
+
+
 FAMILIES: Mapping[str, WalkFamily] = MappingProxyType(
     {
         f.name: f
@@ -499,6 +526,7 @@ FAMILIES: Mapping[str, WalkFamily] = MappingProxyType(
                 forward=STAIR_FORWARD,
             ),
             WalkFamily("image", image, "fractal ground image (PNG), 1.5 cm RMS"),
+            WalkFamily("natural", natural, "fractal ground, 0-6 cm per map (Playground-like)"),
         )
     }
 )
