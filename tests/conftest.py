@@ -1,4 +1,5 @@
 import gc
+import json
 import os
 import subprocess
 import sys
@@ -77,6 +78,7 @@ def pytest_sessionfinish(session):
     leaves the late collection nothing to do.
     """
     _free_compiled_programs()
+    _write_durations(session.config)
 
 
 def _free_compiled_programs():
@@ -126,19 +128,73 @@ def pytest_runtest_teardown(item, nextitem):
         _free_compiled_programs()
 
 
+def work_unit(nodeid: str) -> str:
+    """The unit of work a test belongs to: its file (``--dist loadfile``), or :data:`ONE_WORKER_SCOPE`."""
+    file = nodeid.split("::", 1)[0]
+    return ONE_WORKER_SCOPE if Path(file).name in ONE_WORKER else file
+
+
 @pytest.hookimpl(optionalhook=True)  # xdist's hook: without xdist (-p no:xdist) it is never called
 def pytest_xdist_make_scheduler(config, log):
-    """``--dist loadfile`` (pyproject's addopts), with the files of :data:`ONE_WORKER` one unit of work."""
+    """``--dist loadfile`` (pyproject's addopts), with the files of :data:`ONE_WORKER` one unit of work, handed
+    out in the order of the collection, which :func:`heaviest_first` sets. xdist would otherwise re-sort the
+    units by their count of tests (its ``--loadscope-reorder``, on by default), which hands out a file of one
+    long test (the README's examples, the notebooks) last."""
     if config.getvalue("dist") != "loadfile":
         return None
     from xdist.scheduler import LoadFileScheduling
 
+    config.option.loadscopereorder = False
+
     class Scheduling(LoadFileScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            file = super()._split_scope(nodeid)
-            return ONE_WORKER_SCOPE if Path(file).name in ONE_WORKER else file
+            return work_unit(nodeid)
 
     return Scheduling(config, log)
+
+
+# The order in which the files run: heaviest first. xdist's LoadFile scheduler starts each worker on the next file
+# in the collection's order (and on one more where that file has at most 2 tests), then hands a worker the next
+# file whenever at most 2 of its tests are still to run (xdist/scheduler/loadscope.py). Ordering the collection
+# by cost, largest first, makes that longest-processing-time-first scheduling: the two workers start on the
+# heaviest files and the small ones fill in at the end, where they even out the finishing times. Costs are the
+# worker-seconds (setup, call and teardown) each file's tests took in a full run of each tier, kept in
+# tests/durations.json; `--update-durations` rewrites the entries of the files a run ran (refresh after changing a
+# heavy file: `python -m pytest -q --update-durations`, then the same with `-m slow`). A file missing from the
+# table counts as DEFAULT_FILE_S per tier, and each run names such files.
+DURATIONS = Path(__file__).with_name("durations.json")
+DEFAULT_FILE_S = 60.0
+TIERS = ("fast", "slow")
+
+
+def tier_of(item) -> str:
+    return "slow" if item.get_closest_marker("slow") is not None else "fast"
+
+
+def load_durations(path: Path = DURATIONS) -> dict[str, dict[str, float]]:
+    """``{tier: {file: worker-seconds}}`` from ``path`` (empty tiers where the file is absent)."""
+    table = json.loads(path.read_text()) if path.exists() else {}
+    return {tier: dict(table.get(tier, {})) for tier in TIERS}
+
+
+def heaviest_first(items, durations: dict[str, dict[str, float]]) -> list:
+    """``items`` reordered by work unit (:func:`work_unit`), the unit of the largest estimated cost first.
+
+    A unit's cost is the sum over its files, and over the tiers of the file's selected tests, of ``durations``'
+    worker-seconds (:data:`DEFAULT_FILE_S` where the table has no entry). Items keep their order within a unit,
+    and units of equal cost the order of their first items.
+    """
+    tiers: dict[str, set[str]] = {}
+    first: dict[str, int] = {}
+    for i, item in enumerate(items):
+        file = item.nodeid.split("::", 1)[0]
+        tiers.setdefault(file, set()).add(tier_of(item))
+        first.setdefault(work_unit(item.nodeid), i)
+    cost = dict.fromkeys(first, 0.0)
+    for file, present in tiers.items():
+        cost[work_unit(file)] += sum(durations[t].get(file, DEFAULT_FILE_S) for t in present)
+    order = {unit: rank for rank, unit in enumerate(sorted(first, key=lambda u: (-cost[u], first[u])))}
+    return sorted(items, key=lambda item: order[work_unit(item.nodeid)])
 
 
 # The two tiers (pyproject's addopts and its ``slow`` marker): test files mark their slow tests themselves; the
@@ -146,29 +202,74 @@ def pytest_xdist_make_scheduler(config, log):
 # program it shows (20 s to 2 minutes each on 2 cores; simulated_walking compiles the MJX biped's rollout).
 
 
-@pytest.hookimpl(tryfirst=True)  # before the mark plugin deselects by -m
+@pytest.hookimpl(wrapper=True)
 def pytest_collection_modifyitems(config, items):
+    """Around every other plugin's hook: the notebooks are marked slow before the mark plugin deselects by -m, and
+    the tests left after -m and -k are ordered heaviest file first (:func:`heaviest_first`)."""
     for item in items:
         if item.path.suffix == ".ipynb":
             item.add_marker(pytest.mark.slow)
+    result = yield
+    items[:] = heaviest_first(items, load_durations())
+    return result
 
 
 class _WorkerTime:
     """The sum of every test's setup, call and teardown durations (seconds), over all xdist workers: the
-    worker-minutes a run costs, whatever the wall time (the controller receives every worker's reports)."""
+    worker-minutes a run costs, whatever the wall time (the controller receives every worker's reports), in
+    all and by tier and file (``{tier: {file: seconds}}``, what tests/durations.json holds)."""
 
     total = 0.0
+    by_file: dict[str, dict[str, float]] = {tier: {} for tier in TIERS}
 
 
 def pytest_runtest_logreport(report):
     _WorkerTime.total += report.duration
+    files = _WorkerTime.by_file["slow" if "slow" in report.keywords else "fast"]
+    file = report.nodeid.split("::", 1)[0]
+    files[file] = files.get(file, 0.0) + report.duration
+
+
+def pytest_addoption(parser):
+    parser.addoption("--update-durations", action="store_true",
+                     help="write the worker-seconds each file's tests took in this run into tests/durations.json "
+                          "(the costs that order the files, heaviest first); other files' entries are kept")
+
+
+def updated_durations(durations: dict[str, dict[str, float]], measured: dict[str, dict[str, float]],
+                      root: Path) -> dict[str, dict[str, float]]:
+    """``durations`` with the entries of ``measured`` (seconds, rounded to 1 s) in their place, less the files
+    that no longer exist under ``root``; each tier sorted by file."""
+    out = {}
+    for tier in TIERS:
+        merged = {**durations[tier], **{f: round(s) for f, s in measured[tier].items()}}
+        out[tier] = {f: merged[f] for f in sorted(merged) if (root / f).exists()}
+    return out
+
+
+def _controller(config) -> bool:
+    return not hasattr(config, "workerinput")  # an xdist worker has workerinput; the controller reports
+
+
+def _write_durations(config):
+    if _controller(config) and config.getoption("update_durations", False):
+        table = updated_durations(load_durations(), _WorkerTime.by_file, config.rootpath)
+        DURATIONS.write_text(json.dumps(table, indent=1) + "\n")
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
-    if hasattr(config, "workerinput"):  # an xdist worker: the controller reports
+    if not _controller(config):
         return
     terminalreporter.write_line(f"worker time: {_WorkerTime.total / 60:.1f} worker-minutes "
                                 "(the sum of every test's setup, call and teardown)")
+    durations = load_durations()
+    missing = sorted(f for tier in TIERS for f in _WorkerTime.by_file[tier] if f not in durations[tier])
+    if missing:
+        terminalreporter.write_line(f"{len(missing)} files ran without a cost in {DURATIONS.name} and were "
+                                    f"ordered as {DEFAULT_FILE_S:.0f} s each: {', '.join(missing[:5])}"
+                                    f"{' ...' if len(missing) > 5 else ''} (refresh it with --update-durations)")
+    elif config.getoption("update_durations", False):
+        terminalreporter.write_line(f"wrote this run's worker-seconds per file into {DURATIONS}")
     if config.getoption("markexpr") == "not slow":
         terminalreporter.write_line("this was the fast tier: `python -m pytest -m slow` runs the slow tier, "
                                     "`-m \"slow or not slow\"` both")

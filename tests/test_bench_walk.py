@@ -2,6 +2,11 @@
 (measured from the maps with NumPy), the aggregation equals a NumPy count over the trajectories, the table and
 plot writers, and one tiny run of both walkers that compiles the MJX rollout once for two families and both
 command kinds (about a minute on a 2-core CPU, most of it that compile).
+
+The perfect robot's rollouts are compiled programs too, one per robot, batch and step count: the tests walk HRP-2
+on BATCH maps for STEPS steps wherever the property does not need a length of its own, so that they share one
+program; the 2D maps, the stairs' longer robot and walk, the fused kernel and the MJX run's batch of 2 have their
+own.
 """
 
 from typing import Any
@@ -22,6 +27,8 @@ from ijoy_jax.terrain import walk_families
 SHAPE = B.grid_shape()
 RES = B.RESOLUTION
 BATCH = 4
+STEPS = 5
+"""Steps of the perfect robot's rollouts that share one compiled program."""
 CELL = RES
 """Geometry read off the grid is exact to one cell (m)."""
 FLOAT_TOL = 1e-5
@@ -301,7 +308,7 @@ def test_the_perfect_robot_climbs_and_descends_the_stairs():
     slow = B.run(["stairs_up"], batch=BATCH, steps=20, commands=("forward",), walkers=("perfect",),
                  forward=B.FORWARD)
     assert slow[0]["forward_m_s"] == B.STAIR_FORWARD  # the family's own command wins over the run's
-    flat = B.run(["flat"], batch=BATCH, steps=2, commands=("forward",), walkers=("perfect",), forward=0.1)
+    flat = B.run(["flat"], batch=BATCH, steps=STEPS, commands=("forward",), walkers=("perfect",), forward=0.1)
     assert flat[0]["forward_m_s"] == 0.1
 
 
@@ -329,8 +336,8 @@ def test_aggregate_perfect_robot_equals_numpy():
     key = jax.random.key(1)
     terrains = B.clutter2d(key, BATCH, shape=SHAPE, resolution=RES)
     starts = B.start_stances(robot, BATCH)
-    cmd = B.commands_for("random", key, robot, BATCH, 5)
-    traj = jax.tree_util.tree_map(np.asarray, B.perfect_rollouts(terrains, robot, starts, cmd, num_steps=5))
+    cmd = B.commands_for("random", key, robot, BATCH, STEPS)
+    traj = jax.tree_util.tree_map(np.asarray, B.perfect_rollouts(terrains, robot, starts, cmd, num_steps=STEPS))
     got = B.aggregate(traj, starts)
     ref = numpy_reference(traj, starts)
     for k, v in ref.items():
@@ -345,15 +352,16 @@ def test_aggregate_forward_on_flat_is_the_closed_form_and_does_not_recompile():
     robot = robots.hrp2()
     starts = B.start_stances(robot, BATCH)
     terrains = B.flat_maps(0, BATCH, shape=SHAPE, resolution=RES)
-    traj = B.perfect_rollouts(terrains, robot, starts, B.forward_commands(BATCH, 5), num_steps=5)
+    traj = B.perfect_rollouts(terrains, robot, starts, B.forward_commands(BATCH, STEPS), num_steps=STEPS)
     got = B.aggregate(jax.tree_util.tree_map(np.asarray, traj), starts)
+    assert STEPS == 5  # 0.9 m = 0.1 + 4 * 0.2
     assert got["progress_mean_m"] == pytest.approx(0.1 + 4 * 0.2, abs=1e-5)
     assert got["progress_min_m"] == pytest.approx(0.9, abs=1e-5) and got["stops"] == 0
     assert got["steps_made_mean"] == 5
     np.testing.assert_allclose(np.asarray(traj.summary()["distance_along"]), 0.9, atol=1e-5)
     before = B.compiled_perfect_programs()
     B.perfect_rollouts(B.uphill(1, BATCH, shape=SHAPE, resolution=RES), robot, starts,
-                       B.commands_for("random", 2, robot, BATCH, 5), num_steps=5)
+                       B.commands_for("random", 2, robot, BATCH, STEPS), num_steps=STEPS)
     assert B.compiled_perfect_programs() == before
 
 
@@ -412,8 +420,8 @@ def test_aggregate_simulated_by_hand():
 def test_touchdown_feet_of_the_perfect_robot_are_its_final_feet():
     robot = robots.hrp2()
     starts = B.start_stances(robot, BATCH)
-    cmd = B.commands_for("random", 5, robot, BATCH, 6)
-    traj = B.perfect_rollouts(B.stones(2, BATCH, shape=SHAPE, resolution=RES), robot, starts, cmd, num_steps=6)
+    cmd = B.commands_for("random", 5, robot, BATCH, STEPS)
+    traj = B.perfect_rollouts(B.stones(2, BATCH, shape=SHAPE, resolution=RES), robot, starts, cmd, num_steps=STEPS)
     np.testing.assert_allclose(B.touchdown_feet(traj, starts, traj.taken), np.asarray(traj.feet), atol=1e-6)
 
 
@@ -465,7 +473,7 @@ def test_the_fused_kernel_reaches_the_selector_chooses_as_xla_and_is_recorded():
     assert before.sum() >= 0.75 * before.size  # (the decisions up to and including each robot's first difference)
     np.testing.assert_allclose(np.asarray(fused.cost)[before], np.asarray(xla.cost)[before], rtol=1e-6, atol=1e-6)
     assert np.all(np.isfinite(np.asarray(xla.cost)[before]))
-    rows = B.run(["flat"], batch=BATCH, steps=2, commands=("forward",), walkers=("perfect",), kernel="pallas")
+    rows = B.run(["flat"], batch=BATCH, steps=3, commands=("forward",), walkers=("perfect",), kernel="pallas")
     assert [r["kernel"] for r in rows] == ["pallas", "pallas"]
 
 
@@ -476,9 +484,9 @@ def test_robot_leaves_reach_the_choice_and_are_recorded(maps):
     support limit refuses every foothold whose contact polygon is smaller than the sole, so other footholds are
     chosen: farther or shorter, as the greedy choice goes on), and in every row."""
     leaves = {"metrics.support_limit": 0.0, "w": 2}
-    rows = B.run(["rough"], batch=BATCH, steps=4, commands=("forward",), walkers=("perfect",), seed=5,
+    rows = B.run(["rough"], batch=BATCH, steps=STEPS, commands=("forward",), walkers=("perfect",), seed=5,
                  robot_leaves=leaves)
-    base = B.run(["rough"], batch=BATCH, steps=4, commands=("forward",), walkers=("perfect",), seed=5)
+    base = B.run(["rough"], batch=BATCH, steps=STEPS, commands=("forward",), walkers=("perfect",), seed=5)
     row, row0 = rows[0], base[0]
     assert row["robot_leaves"] == {"metrics.support_limit": 0.0, "w": 2.0} and row0["robot_leaves"] == {}
     assert rows[-1]["robot_leaves"] == row["robot_leaves"]
@@ -487,9 +495,9 @@ def test_robot_leaves_reach_the_choice_and_are_recorded(maps):
     k_map, k_cmd = jax.random.split(jax.random.fold_in(jax.random.key(5), list(B.FAMILIES).index("rough")))
     terr = B.FAMILIES["rough"].maps(k_map, BATCH, shape=SHAPE, resolution=RES)  # as run draws them
     starts = B.start_stances(robot, BATCH)
-    cmd = B.commands_for("forward", jax.random.fold_in(k_cmd, B.COMMANDS.index("forward")), robot, BATCH, 4,
+    cmd = B.commands_for("forward", jax.random.fold_in(k_cmd, B.COMMANDS.index("forward")), robot, BATCH, STEPS,
                          B.FORWARD)
-    direct = B.aggregate(jax.device_get(B.perfect_rollouts(terr, robot, starts, cmd, num_steps=4)), starts)
+    direct = B.aggregate(jax.device_get(B.perfect_rollouts(terr, robot, starts, cmd, num_steps=STEPS)), starts)
     assert direct["progress_mean_m"] == pytest.approx(row["progress_mean_m"], abs=1e-6)
     assert direct["steps_made_mean"] == row["steps_made_mean"] and direct["stops"] == row["stops"]
 
