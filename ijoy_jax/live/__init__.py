@@ -9,7 +9,8 @@ MuJoCo biped on native MuJoCo; :mod:`ijoy_jax.sim.mjx_biped`: the same biped on 
 loop (:mod:`.loop`) that makes the decision for the future stance while the current step executes and
 measures its latency; a recording in MCAP
 (:mod:`ijoy_jax.recordings`) that :func:`replay` reproduces bit for bit; the live view in a browser
-(:mod:`.view`); force feedback on a Linux device (:mod:`.forcefeedback`).
+(:mod:`.view`: a top-down map at ``/`` and the robot's bodies in 3D at ``/3d``, from :class:`.bodies.BodyGeoms`);
+force feedback on a Linux device (:mod:`.forcefeedback`).
 
 Command line: ``ijoy drive`` (docs/drive.md).
 """
@@ -24,6 +25,7 @@ from ijoy_jax.live import deciders as deciders
 from ijoy_jax.live import inputs as inputs
 from ijoy_jax.live import loop as loop
 from ijoy_jax.live import session as session
+from ijoy_jax.live.bodies import BodyGeoms as BodyGeoms
 from ijoy_jax.live.bodies import PerfectBody as PerfectBody
 from ijoy_jax.live.deciders import Decision as Decision
 from ijoy_jax.live.deciders import LocalDecider as LocalDecider
@@ -47,6 +49,7 @@ from ijoy_jax.stick import axes_to_command as axes_to_command
 from ijoy_jax.stick import read_trace as read_trace
 
 __all__ = [
+    "BodyGeoms",
     "Decision",
     "DriveResult",
     "DriveSettings",
