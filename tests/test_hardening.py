@@ -221,3 +221,104 @@ def test_a_map_wider_than_float32s_millimetres_is_told_to_shrink_not_to_shift(re
     message = str(e.value)
     assert message.startswith("the map is ") and "use a finer resolution or fewer cells" in message, message
     assert "nan" not in message and "shift" not in message, message
+
+
+def test_drive_steps_out_of_range_name_the_flag_before_the_terrain_is_read():
+    """``ijoy drive --steps 0`` was refused by the drive, after the terrain, its tables and the body were built,
+    with the library's name ``num_steps``; the CLI names ``--steps``. The malformed ``--shape`` is read after it:
+    the refusal comes first (and the library keeps its own name, tested above)."""
+    for steps in ("0", "-1", str(limits.MAX_NUM_STEPS + 1)):
+        rc, out, err = _cli("drive", "--headless", "--steps", steps, "--shape", "not-a-shape")
+        assert rc == 2 and out == "", (out, err)
+        assert err.strip().splitlines()[-1] == (
+            f"ijoy: error: --steps must be a whole number in [1, ijoy_jax.limits.MAX_NUM_STEPS = "
+            f"{limits.MAX_NUM_STEPS}] (decisions to make), got {steps}"
+        ), err
+
+
+@pytest.mark.parametrize("case", ["--duration", "trace"])
+def test_a_cli_drive_that_ends_before_its_first_decision_names_the_flag_or_the_trace(tmp_path, case):
+    """The first decision's time needs the body (its ticks), so the drive refused ``--duration 1e-10`` only once
+    the body existed, naming ``duration``; the CLI checks as the body is built (before the decider and the
+    warm-up's compiles) and names ``--duration``, or the trace whose last time ends before it."""
+    trace = tmp_path / "short.csv"
+    trace.write_text("t,forward,left,turn\n0,0.5,0,0\n0.1,0.5,0,0\n")
+    extra = ("--duration", "1e-10") if case == "--duration" else ("--decide-at", "0.5")
+    rc, out, err = _cli("drive", "--headless", "--script", str(trace), "--shape", "40x40", *extra)
+    assert rc == 2 and out == "", (out, err)
+    named = "--duration 1e-10 s" if case == "--duration" else f"the trace's last time ({trace}) 0.1 s"
+    assert err.strip().splitlines()[-1].startswith(f"ijoy: error: {named} ends before the first decision"), err
+
+
+@pytest.mark.parametrize(
+    "start, message",
+    [
+        ("1,1,1e300", "--start heading 1e+300 rad is beyond geometry.MAX_HEADING = 2**39 rad"),
+        ("1e300,1,0", "--start x 1e+300 m is beyond ijoy_jax.footcost.MAX_COORDINATE = 8192 m, where no map reaches"),
+        ("1,-1e39,0", "--start y -1e+39 m is beyond ijoy_jax.footcost.MAX_COORDINATE = 8192 m, where no map reaches"),
+        ("nan,1,0", "--start must be finite numbers X,Y,THETA, got 'nan,1,0'"),
+    ],
+)
+def test_a_start_the_drive_cannot_place_is_refused_naming_start_and_its_bound(tmp_path, start, message):
+    """``--start 1,1,1e300`` said "start must be finite (2, 3) feet" (float32 made the heading inf) once the
+    terrain, its tables and the body were built; the CLI applies the library's pose rules to ``--start`` (a
+    heading within ``geometry.MAX_HEADING``, a position where a map may lie) before the terrain is read: the
+    missing image named after it is never looked at."""
+    rc, out, err = _cli("drive", "--headless", "--image", str(tmp_path / "none.png"), "--start", start)
+    assert rc == 2 and out == "", (out, err)
+    assert err.strip().splitlines()[-1].startswith(f"ijoy: error: {message}"), err
+
+
+def test_a_far_start_heading_is_reduced_by_whole_turns_as_a_pose_argument_is():
+    """float32 rounds ``2 pi 1e7 + 0.5`` rad by up to 0.5 rad: the start would face anywhere."""
+    from ijoy_jax.apps import drive_cli
+
+    x, y, theta = drive_cli._start(f"1.5,2,{2 * math.pi * 1e7 + 0.5!r}")
+    assert (x, y) == (1.5, 2.0) and abs(theta - 0.5) < 1e-6, theta
+    assert drive_cli._start("1,2,3") == (1.0, 2.0, 3.0)  # within MAX_ANGLE: as given
+
+
+SWEEP_TEXT = '[grid]\n"robot.w" = [0.5, 1.0]\n[sweep]\nscenarios_per_cell = 2\n'
+
+
+@pytest.mark.parametrize("name", ["a" * 101, "a" * 300, "é" * 51, "\U00020000" * 26])
+def test_a_sweep_name_no_folder_can_hold_is_refused_before_any_compute(name):
+    """A 300-character ``sweep.name`` passed and failed only at ``mkdir results/<name>`` (255 bytes per name),
+    after the sweep had started; so would 64 letters of 4 UTF-8 bytes each. At most 100 UTF-8 bytes."""
+    with pytest.raises(sweep_config.SweepConfigError, match=r"sweep\.name: must be at most 100 characters \(UTF-8"):
+        sweep_config.parse_config(SWEEP_TEXT + f'name = "{name}"\n')
+
+
+def test_a_sweep_files_long_stem_is_refused_as_its_name(tmp_path):
+    path = tmp_path / ("s" * 120 + ".toml")
+    path.write_text(SWEEP_TEXT)
+    stem_rule = r"sweep\.name \(the file's stem, when not given\): must be at most 100"
+    with pytest.raises(sweep_config.SweepConfigError, match=stem_rule):
+        sweep_config.load_config(path)
+    assert sweep_config.parse_config(SWEEP_TEXT + f'name = "{"a" * 100}"\n').name == "a" * 100  # the bound itself
+
+
+TINY_DENSITIES = st.one_of(
+    st.floats(min_value=5e-324, max_value=ij.robots.MIN_DENSITY, exclude_max=True), st.just(1e-300)
+)
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(TINY_DENSITIES)
+def test_a_density_below_the_smallest_action_set_is_refused_naming_the_range(density):
+    """``hrp2(density=1e-300)`` quietly gave the 10 actions of density 0.1 (every count clamped to its smallest
+    odd lattice): refused, naming density and its range, before a lattice is built; the sweep file says the same."""
+    match = r"density must be in \[ijoy_jax.robots.MIN_DENSITY, ijoy_jax.limits.MAX_DENSITY\] = \[0.1, 2.0\]"
+    for build in (ij.robots.hrp2, ij.robots.g1, ij.robots.hrp2_actions, ij.robots.g1_actions):
+        with pytest.raises(ValueError, match=match):
+            build(density=density)
+    with pytest.raises(sweep_config.SweepConfigError, match=r"robot\.density: must be in \[0\.1, 2\.0\]"):
+        sweep_config.parse_config(f"[robot]\ndensity = {density!r}\n")
+
+
+def test_every_documented_density_still_builds():
+    """The range's ends and the densities the tests, sweeps/*.toml and docs use."""
+    assert ij.robots.hrp2_actions(ij.robots.MIN_DENSITY).shape == (10, 3) == ij.robots.g1_actions(0.1).shape
+    sizes = {0.1: 10, 0.25: 19, 0.4: 52, 0.5: 117, 0.75: 202, 1.0: 496, 1.5: 1279, 2.0: 3307}
+    for density, size in sizes.items():
+        assert ij.robots.hrp2_actions(density).shape == (size, 3), density

@@ -7,6 +7,7 @@ to :func:`main`. The library is :mod:`ijoy_jax.live`; the format of traces and r
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -137,12 +138,30 @@ def _terrain_spec(args) -> dict:
 
 
 def _start(text):
+    """``--start X,Y,THETA`` as floats, the heading reduced by whole turns as the library's pose arguments are.
+
+    Raises:
+      ValueError: naming --start: not three numbers, not finite, a heading beyond ``geometry.MAX_HEADING`` or x
+        or y beyond ``ijoy_jax.footcost.MAX_COORDINATE``, where no map reaches (float32 rounded ``1e300`` to inf
+        and the refusal said only "start must be finite").
+    """
+    from ijoy_jax import geometry
+    from ijoy_jax.footcost import MAX_COORDINATE
+
     if text is None:
         return None
     try:
         x, y, theta = (float(v) for v in text.split(","))
     except ValueError:
         raise ValueError(f"--start must be X,Y,THETA, got {text!r}") from None
+    if not all(map(math.isfinite, (x, y, theta))):
+        raise ValueError(f"--start must be finite numbers X,Y,THETA, got {text!r}")
+    for name, v in (("x", x), ("y", y)):
+        if abs(v) > MAX_COORDINATE:
+            raise ValueError(f"--start {name} {v:g} m is beyond ijoy_jax.footcost.MAX_COORDINATE = "
+                             f"{MAX_COORDINATE:g} m, where no map reaches (float32 holds millimetres within it)")
+    geometry.check_headings("--start", [x, y, theta])
+    x, y, theta = (float(v) for v in geometry.reduce_turns([x, y, theta]))
     return (x, y, theta)
 
 
@@ -162,6 +181,8 @@ def main(args) -> int:
         live.session.server_address(args.server)  # a malformed --server: one line, before the terrain is built
     if args.duration is not None:
         live.loop.check_duration(args.duration, "--duration")  # before anything is built
+    if args.steps is not None:
+        live.loop.check_steps(args.steps, "--steps")
     source = None
     if args.script:
         source = live.ScriptInput(args.script)  # a missing or malformed trace fails here, before any compile
@@ -178,8 +199,6 @@ def main(args) -> int:
         raise ValueError(f"--deadzone must be in [0, 1), got {settings.deadzone}")
     if not 0.0 <= settings.decide_at < 1.0:
         raise ValueError(f"--decide-at must be in [0, 1), got {settings.decide_at}")
-    if args.steps is not None and args.steps < 0:
-        raise ValueError(f"--steps must be >= 0, got {args.steps}")
     terrain, robot, start = live.open_terrain(settings.terrain, settings.margin)  # bad terrain: one line, now
     if settings.start is not None:
         start = live.session.start_feet(settings, robot, start)
@@ -193,6 +212,15 @@ def main(args) -> int:
               file=sys.stderr, flush=True)
     if source is None:
         source = _live_source(kind, view)
+
+    def on_body(body):  # the drive's first-decision check, naming the flag, before the warm-up compiles
+        if args.duration is not None or args.script:
+            live.loop.check_first_decision(
+                source.duration if args.duration is None else args.duration, settings.decide_at, body,
+                "--duration" if args.duration is not None else f"the trace's last time ({args.script})")
+        if view is not None:
+            view.set_body(body)
+
     feedback = feedback_device(args.ff)
     realtime = not args.headless or args.realtime or not args.script
     if args.robot == "mjx":
@@ -200,7 +228,7 @@ def main(args) -> int:
     try:
         result = live.run(settings, source, realtime=realtime, num_steps=args.steps, duration=args.duration,
                           record_to=args.record, on_tick=None if view is None else view.publish,
-                          on_body=None if view is None else view.set_body, feedback=feedback,
+                          on_body=on_body, feedback=feedback,
                           stop=None if (args.steps is not None or args.duration is not None or args.script)
                           else _never(), terrain=terrain, robot=robot, start=start, progress=True)
     finally:

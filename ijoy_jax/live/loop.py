@@ -47,8 +47,8 @@ from ijoy_jax.robots import Robot
 from ijoy_jax.stick import DEFAULT_DEADZONE, axes_to_command
 from ijoy_jax.terrain import Terrain
 
-__all__ = ["DEFAULT_REACH_DIRECTIONS", "MAX_DURATION", "TERM_NAMES", "DriveResult", "check_duration", "drive",
-           "latency_stats"]
+__all__ = ["DEFAULT_REACH_DIRECTIONS", "MAX_DURATION", "TERM_NAMES", "DriveResult", "check_duration",
+           "check_first_decision", "check_steps", "drive", "latency_stats"]
 
 MAX_DURATION = 86400.0
 """s: the longest drive (a day). A drive keeps every tick's state for its result and its recording, so a longer
@@ -145,6 +145,27 @@ def check_duration(duration, what: str = "duration") -> float:
     return value
 
 
+def check_steps(num_steps, what: str = "num_steps") -> int:
+    """``num_steps`` (decisions to make) as an int, or ValueError naming ``what`` unless it is a whole number in
+    ``[1, ijoy_jax.limits.MAX_NUM_STEPS]`` (0 compiled everything, drove nothing and exited 0, as a NaN duration
+    did; every decision is kept for the result and the recording)."""
+    if (isinstance(num_steps, bool) or not isinstance(num_steps, (int, float, np.number))
+            or not 1 <= num_steps <= limits.MAX_NUM_STEPS or int(num_steps) != num_steps):
+        raise ValueError(f"{what} must be a whole number in [1, ijoy_jax.limits.MAX_NUM_STEPS = "
+                         f"{limits.MAX_NUM_STEPS}] (decisions to make), got {num_steps!r}")
+    return int(num_steps)
+
+
+def check_first_decision(duration: float, decide_at: float, body, what: str = "duration") -> None:
+    """ValueError naming ``what`` if a drive of ``duration`` s ends before its first decision, made ``decide_at``
+    of the way into the first step of ``body`` (its ``ticks_per_step`` of ``control_dt`` s): such a drive
+    compiled everything and drove nothing."""
+    first = math.floor(decide_at * int(body.ticks_per_step)) * float(body.control_dt)
+    if not first < duration - 1e-9:  # the loop's own test for making a decision
+        raise ValueError(f"{what} {duration!r} s ends before the first decision, {first:g} s into the drive "
+                         f"(decide_at {decide_at:g} of the step): nothing would be driven")
+
+
 def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: float = DEFAULT_DEADZONE,
           decide_at: float = 0.0, realtime: bool = True, num_steps: int | None = None,
           duration: float | None = None, recorder=None, on_tick: Callable[[dict], Any] | None = None,
@@ -184,22 +205,14 @@ def drive(terrain: Terrain, robot: Robot, body, source, decider, *, deadzone: fl
     """
     if not 0.0 <= decide_at < 1.0:
         raise ValueError(f"decide_at must be in [0, 1) (a fraction of the step), got {decide_at!r}")
-    # at least one decision (0 compiled everything, drove nothing and exited 0, as a NaN duration did), and at
-    # most the library's rollout bound: every decision is kept for the result and the recording
-    if num_steps is not None and (isinstance(num_steps, bool) or not isinstance(num_steps, (int, float, np.number))
-                                  or not 1 <= num_steps <= limits.MAX_NUM_STEPS or int(num_steps) != num_steps):
-        raise ValueError(f"num_steps must be a whole number in [1, ijoy_jax.limits.MAX_NUM_STEPS = "
-                         f"{limits.MAX_NUM_STEPS}] (decisions to make), got {num_steps!r}")
+    if num_steps is not None:
+        check_steps(num_steps)
     given = duration is not None
     duration = getattr(source, "duration", None) if duration is None else float(duration)
     if duration is not None:
         check_duration(duration, "duration" if given else "the source's duration (its last time)")
-        # the first decision is made decide_at into the first step: a drive that ends before it drives nothing
-        first = math.floor(decide_at * int(body.ticks_per_step)) * float(body.control_dt)
-        if not first < duration - 1e-9:  # the loop's own test for making a decision
-            raise ValueError(f"{'duration' if given else 'the source duration (its last time)'} {duration!r} s ends "
-                             f"before the first decision, {first:g} s into the drive (decide_at of the step): "
-                             f"nothing would be driven")
+        check_first_decision(duration, decide_at, body,
+                             "duration" if given else "the source duration (its last time)")
     if num_steps is None and duration is None and stop is None:
         raise ValueError("a drive without num_steps, duration or a stop event would never end")
     prepared = select.prepare(terrain, robot) if prepared is None else prepared

@@ -31,8 +31,10 @@ from ijoy_jax.robots.g1_model import g1 as g1
 from ijoy_jax.robots.g1_model import g1_actions as g1_actions
 from ijoy_jax.robots.hrp2_model import DX_SPACING as DX_SPACING
 from ijoy_jax.robots.hrp2_model import HRP2_P0 as HRP2_P0
+from ijoy_jax.robots.hrp2_model import MIN_DENSITY as MIN_DENSITY
 from ijoy_jax.robots.hrp2_model import PAPER_REACH as PAPER_REACH
 from ijoy_jax.robots.hrp2_model import STAIR_STEP_HEIGHT as STAIR_STEP_HEIGHT
+from ijoy_jax.robots.hrp2_model import check_density as check_density
 from ijoy_jax.robots.hrp2_model import density_counts as density_counts
 from ijoy_jax.robots.hrp2_model import hrp2 as hrp2
 from ijoy_jax.robots.hrp2_model import hrp2_actions as hrp2_actions
@@ -64,6 +66,7 @@ __all__ = [
     "LEFT",
     "LeafSpec",
     "MAX_SIZE",
+    "MIN_DENSITY",
     "OVERLAP_TOL",
     "PAPER_REACH",
     "RIGHT",
@@ -74,6 +77,7 @@ __all__ = [
     "TerrainMetrics",
     "WINDOW_SLACK",
     "action_steps",
+    "check_density",
     "check_robot",
     "command_range",
     "default_metrics",

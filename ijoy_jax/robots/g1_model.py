@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from ijoy_jax.robots.build import make_robot
-from ijoy_jax.robots.hrp2_model import PAPER_REACH, density_counts
+from ijoy_jax.robots.hrp2_model import PAPER_REACH, check_density, density_counts
 from ijoy_jax.robots.lattice import lattice_actions
 from ijoy_jax.robots.robot import Robot
 
@@ -53,7 +53,12 @@ def g1_actions(density: float = 1.0) -> np.ndarray:
     Example:
       >>> g1_actions().shape
       (496, 3)
+
+    Raises:
+      ValueError: a density outside ``[MIN_DENSITY, ijoy_jax.limits.MAX_DENSITY]``
+        (:func:`~ijoy_jax.robots.check_density`), before the lattice is built.
     """
+    check_density(density)
     return lattice_actions(density_counts(density, PAPER_REACH), dx_range=(-PAPER_REACH, PAPER_REACH),
                            dy_range=G1_DY)
 
@@ -64,7 +69,8 @@ def g1(margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
 
     Args:
       margin: safety margin (m).
-      density: action-set density (1.0 -> 496 actions; :func:`~ijoy_jax.robots.density_counts`).
+      density: action-set density (1.0 -> 496 actions; :func:`~ijoy_jax.robots.density_counts`), in
+        ``[MIN_DENSITY, ijoy_jax.limits.MAX_DENSITY]``.
       **overrides: any other :func:`~ijoy_jax.robots.make_robot` keyword (w, rotation_weight, step_time,
         clearance, max_step_height, metrics, ...).
 

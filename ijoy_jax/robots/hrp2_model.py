@@ -27,6 +27,11 @@ DX_SPACING = 0.05
 PAPER_REACH = 0.20
 """m: the paper's largest forward/backward step of HRP-2 (:func:`hrp2`'s default ``reach``)."""
 
+MIN_DENSITY = 0.1
+"""Smallest action-set density (:func:`hrp2`'s and :func:`~ijoy_jax.robots.g1`'s ``density``): 10 actions, the
+smallest lattice (3 x 2 x 3 less its 8 corners), which every smaller density gave too, silently (``1e-300``), at
+any reach below 0.75 m. The range is ``[MIN_DENSITY, ijoy_jax.limits.MAX_DENSITY]``."""
+
 STAIR_STEP_HEIGHT = 0.15
 """m: HRP-2's ``max_step_height`` with a reach beyond the paper's (:func:`hrp2`): stair risers up to 15 cm."""
 
@@ -48,6 +53,26 @@ def density_counts(density: float, reach: float = PAPER_REACH) -> tuple[int, int
     n_dy = 1 + max(1, round(7 * density))
     n_dt = 1 + 2 * max(1, round(3 * density))
     return n_dx, n_dy, n_dt
+
+
+def check_density(density) -> float:
+    """``density`` as a float, or ValueError naming it and its range ``[MIN_DENSITY, ijoy_jax.limits.MAX_DENSITY]``
+    (below it every density gives the same 10 actions; above it the targets table outgrows the memory budget).
+    Checked before a lattice is built."""
+    if not _positive_finite(density):
+        raise ValueError(f"density must be a positive finite number, got {density!r}")
+    if density < MIN_DENSITY:
+        raise ValueError(
+            f"density must be in [ijoy_jax.robots.MIN_DENSITY, ijoy_jax.limits.MAX_DENSITY] = [{MIN_DENSITY}, "
+            f"{MAX_DENSITY}] ({MIN_DENSITY} gives the smallest action set, 10 actions, as every smaller density "
+            f"would), got {density!r}"
+        )
+    if density > MAX_DENSITY:
+        raise ValueError(
+            f"density must be <= ijoy_jax.limits.MAX_DENSITY = {MAX_DENSITY} ({MAX_ACTIONS} actions; "
+            f"the targets table grows as its sixth power), got {density!r}"
+        )
+    return float(density)
 
 
 def _positive_finite(x) -> bool:
@@ -107,7 +132,7 @@ def hrp2(margin: float = 0.02, density: float = 1.0, *, reach: float = PAPER_REA
 
     Args:
       margin: safety margin (m).
-      density: action-set density (1.0 -> 496 actions).
+      density: action-set density (1.0 -> 496 actions), in ``[MIN_DENSITY, ijoy_jax.limits.MAX_DENSITY]``.
       reach: largest forward/backward step dx (m, > 0; default the paper's
         0.20). The farthest action must stay within ``max_sole_distance``.
       **overrides: any other :func:`make_robot` keyword (w, rotation_weight,
@@ -154,16 +179,12 @@ def hrp2_actions(density: float = 1.0, reach: float = PAPER_REACH) -> np.ndarray
       ((496, 3), (3307, 3))
 
     Raises:
-      ValueError: a density above :data:`ijoy_jax.limits.MAX_DENSITY`, before the lattice is built (a robot
-        of more than :data:`ijoy_jax.limits.MAX_ACTIONS` actions, at a longer reach, is refused by
-        :func:`make_robot`).
+      ValueError: a density outside ``[MIN_DENSITY, ijoy_jax.limits.MAX_DENSITY]`` (:func:`check_density`),
+        before the lattice is built (a robot of more than :data:`ijoy_jax.limits.MAX_ACTIONS` actions, at a
+        longer reach, is refused by :func:`make_robot`).
     """
+    check_density(density)
     counts = density_counts(density, reach)
-    if density > MAX_DENSITY:
-        raise ValueError(
-            f"density must be <= ijoy_jax.limits.MAX_DENSITY = {MAX_DENSITY} ({MAX_ACTIONS} actions; "
-            f"the targets table grows as its sixth power), got {density!r}"
-        )
     return lattice_actions(counts, dx_range=(-reach, reach), dy_range=_HRP2_DY)
 
 

@@ -85,6 +85,8 @@ __all__ = [
 _POSITIVE = {n for n, spec in robots.SCALAR_LEAVES.items() if spec.positive} | set(ACTION_SET_KEYS)
 # Largest margin the sweep accepts (m): the static footprint window grows with it.
 _MAX_MARGIN = 0.5
+# Longest sweep name (UTF-8 bytes): it names the output folder, and file systems hold 255 bytes per name.
+_MAX_NAME_BYTES = 100
 # MAX_NUM_STEPS, MAX_DENSITY, MAX_ACTIONS and MAX_MAP_CELLS are the library's (ijoy_jax.limits): a sweep file,
 # the CLI, the server and the functions they call share one memory budget.
 
@@ -118,6 +120,9 @@ def _robot_value(chk: Checker, key: str, name: str, value) -> float:
         chk.fail(key, f"must be <= {_MAX_MARGIN} m, got {v}")
     if name in ("foot_length", "foot_width") and v > robots.MAX_SIZE:
         chk.fail(key, f"must be <= {robots.MAX_SIZE} m (ijoy_jax.robots.MAX_SIZE), got {v}")
+    if name == "density" and v < robots.MIN_DENSITY:
+        chk.fail(key, f"must be in [{robots.MIN_DENSITY}, {MAX_DENSITY}] (ijoy_jax.robots.MIN_DENSITY: the smallest "
+                      f"action set, 10 actions, which every smaller density gives too), got {v}")
     if name == "density" and v > MAX_DENSITY:
         chk.fail(key, f"must be <= {MAX_DENSITY} (ijoy_jax.limits.MAX_DENSITY: the targets table grows as its sixth "
                       f"power), got {v}")
@@ -314,10 +319,14 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     for k in ("name", "description"):
         if k in sweep:
             kw[k] = chk.string(f"sweep.{k}", sweep[k])
-    # The name is the default output folder results/<name>: one path component, never "." or ".." (or hidden).
+    # The name is the default output folder results/<name>: one path component, never "." or ".." (or hidden),
+    # and short enough for every file system's folder names (255 bytes) to hold it.
+    where = "sweep.name" if "name" in sweep else "sweep.name (the file's stem, when not given)"
     if not kw["name"].replace("-", "_").replace(".", "_").isidentifier() or kw["name"].startswith("."):
-        where = "sweep.name" if "name" in sweep else "sweep.name (the file's stem, when not given)"
         chk.fail(where, f"must be letters, digits, '_', '-' or '.', not starting with '.', got {kw['name']!r}")
+    if len(kw["name"].encode()) > _MAX_NAME_BYTES:
+        chk.fail(where, f"must be at most {_MAX_NAME_BYTES} characters (UTF-8 bytes: it names the folder "
+                        f"results/<name>), got {len(kw['name'].encode())} starting {kw['name'][:24]!r}")
     if "seed" in sweep:
         kw["seed"] = chk.integer("sweep.seed", sweep["seed"], lo=0)  # < 2**63: jax.random.key's range
     if "scenarios_per_cell" in sweep:
