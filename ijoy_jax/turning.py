@@ -38,6 +38,7 @@ from ijoy_jax import control, geometry, select
 from ijoy_jax._struct import is_traced, pytree_dataclass, static_field
 from ijoy_jax.refine import lattice_spacing
 from ijoy_jax.robots import Robot, side_p0, side_sign, start_stance
+from ijoy_jax.select_options import SelectOptions
 from ijoy_jax.terrain import Terrain, flat
 
 __all__ = ["HeadingHold", "OvershootResult", "body_heading", "heading_hold", "overshoot_study"]
@@ -205,7 +206,7 @@ def _study(terrain: Terrain, robot: Robot, start, goals, rates, forward, mode: H
            latency: int, refine):
     def one(goal, rate):
         index, targets = select.prepare(terrain, robot)
-        selector = control.exact_selector(terrain, robot, select.SelectOptions(refine=refine), targets=targets,
+        selector = control.exact_selector(terrain, robot, SelectOptions(refine=refine), targets=targets,
                                           index=index)
         cf = _chain(_operator(goal, rate, forward, latency), None if mode is None else mode.build(robot))
         _, rec = control.loop(control.perfect_walker(), selector, start, jnp.float32(1.0),

@@ -413,10 +413,10 @@ def _corridors(cx, cy, sx, sy, half_width):
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**16))
 def test_corridor_box_holds_every_corridor_cell_and_box_top_is_its_highest_cell(seed):
-    """The swing corridor's broad phase: the box of footcost_kernel._corridor_box holds every cell of the
-    corridor (geometry.rect_column_spans, as the XLA path builds it) of every set lane, and _box_top is the
-    brute-force highest height in that box (+inf when the box leaves the map)."""
-    from ijoy_jax.footcost.pallas import _box_top, _corridor_box
+    """The swing corridor's broad phase: the box of footcost.pallas.corridor_box holds every cell of the
+    corridor (geometry.rect_column_spans, as the XLA path builds it) of every set lane, and box_top_height is
+    the brute-force highest height in that box (+inf when the box leaves the map)."""
+    from ijoy_jax.footcost.pallas import box_top_height, corridor_box
 
     rng = np.random.default_rng(seed)
     lanes, hw = 32, 0.065
@@ -424,8 +424,8 @@ def test_corridor_box_holds_every_corridor_cell_and_box_top_is_its_highest_cell(
     cx = np.float32(sx) + rng.uniform(-0.45, 0.45, lanes).astype(np.float32)
     cy = np.float32(sy) + rng.uniform(-0.45, 0.45, lanes).astype(np.float32)
     lane = rng.random(lanes) < 0.7
-    box = [int(v) for v in _corridor_box(jnp.asarray(lane), jnp.asarray(cx), jnp.asarray(cy), jnp.float32(sx),
-                                         jnp.float32(sy), jnp.float32(hw), RES)]
+    box = [int(v) for v in corridor_box(jnp.asarray(lane), jnp.asarray(cx), jnp.asarray(cy), jnp.float32(sx),
+                                        jnp.float32(sy), jnp.float32(hw), RES)]
     ix0, ix1, iy0, iy1 = box
     spans = _corridors(jnp.asarray(cx), jnp.asarray(cy), jnp.float32(sx), jnp.float32(sy), jnp.float32(hw))
     t = np.asarray(spans.touched) & lane[:, None]
@@ -436,7 +436,7 @@ def test_corridor_box_holds_every_corridor_cell_and_box_top_is_its_highest_cell(
         assert ix1 < ix0
     terrain = _terrain("25d", seed=seed)
     index = footcost.index_terrain(terrain, ij.robots.hrp2(margin=0.02))
-    top = float(_box_top(index.height_max, box, SHAPE, lanes))
+    top = float(box_top_height(index.height_max, box, SHAPE, lanes))
     inside = ix0 >= 0 and iy0 >= 0 and ix1 < SHAPE[0] and iy1 < SHAPE[1]
     h = np.asarray(terrain.height)
     want = (h[ix0:ix1 + 1, iy0:iy1 + 1].max(initial=-np.inf)) if inside else np.inf

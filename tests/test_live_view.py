@@ -321,15 +321,14 @@ def test_published_states_and_scene_are_strict_json_with_nan_as_null():
     view.publish({"t": np.float32(0.5), "latency_s": nan, "candidate_cost": np.array([1.5, inf, -inf, np.nan]),
                   "feet": np.array([[0.5, 0.6, 0.0], [np.nan, 0.4, 0.0]], np.float32), "nested": {"x": [inf, (nan, 2)]},
                   "flags": np.array([True, False]), "step": np.int64(3)})
-    with view._lock:
-        text = view._state
+    text = view.state_json()
     got = _strict(text)
     assert got["latency_s"] is None and got["candidate_cost"] == [1.5, None, None, None]
     assert got["feet"] == [[0.5, pytest.approx(0.6), 0.0], [None, pytest.approx(0.4), 0.0]]
     assert got["nested"] == {"x": [None, [None, 2]]} and got["flags"] == [True, False] and got["step"] == 3
     assert got["t"] == 0.5 and view.state() == got
     parser = _Initial()
-    parser.feed(page_html(view._scene, text))
+    parser.feed(view.page())
     page = _strict(parser.text)
     assert page["scene"]["start"] == [[0.5, 0.6, None], [0.5, 0.4, 0.0]] and page["state"] == got
 

@@ -299,15 +299,10 @@ def test_physics_values_do_not_recompile_the_sweep(reference, physics_file, tmp_
 
 
 @pytest.mark.slow
-def test_summary_plot_of_a_physics_sweep_draws_falls_and_collisions_beside_progress(reference, tmp_path, monkeypatch):
-    from ijoy_jax.sweep import plots
-
+def test_summary_plot_of_a_physics_sweep_draws_falls_and_collisions_beside_progress(reference, tmp_path):
     out, _, _ = reference
-    figs = []
-    finish = plots._finish
-    monkeypatch.setattr(plots, "_finish", lambda fig, *a: (figs.append(fig), finish(fig, *a))[1])
-    sweep.plot(sweep.load_aggregates(out), tmp_path / "p.png", x="robot.margin")
-    (fig,) = figs
+    fig = sweep.plot(sweep.load_aggregates(out), tmp_path / "p.png", x="robot.margin")
+    assert (tmp_path / "p.png").is_file()
     titles = [ax.get_title() for ax in fig.axes]
     # falls and collisions on either side of progress: the safety beside its price, as the table prints them
     assert titles[:3] == ["fall rate (rollouts that fell)", "distance along (m)",

@@ -188,7 +188,7 @@ def bench_select(rows, quick: bool, chunk: int):
         max_margin = 0.02 if rb is tight else 0.1
         for b in batches:
             stance, command, swing = workload_queries(b)
-            if b == 1:  # one decision as a user makes it: no vmap over a batch of one (about 1.7x slower)
+            if b == 1:  # one decision as a user makes it: no vmap over a batch of one (slower; benchmarks_history)
                 comp, run, flops, nbytes = _time(jax.jit(one), stance[0], command[0], swing[0])
             else:
                 comp, run, flops, nbytes = _time(f, stance, command, swing)

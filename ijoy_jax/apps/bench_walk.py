@@ -58,7 +58,7 @@ import numpy as np
 from ijoy_jax import control, robots, select
 from ijoy_jax.extras import require
 from ijoy_jax.jit_cache import compiled_count
-from ijoy_jax.select import SelectOptions
+from ijoy_jax.select_options import SelectOptions
 from ijoy_jax.sim import model
 from ijoy_jax.sim import walker as W
 from ijoy_jax.terrain import Terrain
@@ -373,8 +373,8 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
       seed: maps and random commands: a family's come from ``fold_in(seed, i)``, i its index in
         :data:`FAMILIES`, so it walks the same maps and commands whichever families run beside it.
       chunk: simulated rollouts per jitted call (equal chunks, one compile): default ``batch`` up to 1024 on an
-        accelerator (a rollout holds tens of MB of selector windows; on an H100 1024 ran 1.6x the physics
-        steps/s of 512), 32 on a CPU.
+        accelerator (a rollout holds tens of MB of selector windows; 1024 ran more physics steps/s than 512,
+        docs/benchmarks_history.md), 32 on a CPU.
       walkers: some of :data:`WALKERS`.
       forward: the held forward command (m/s) of families without their own (:attr:`WalkFamily.forward`).
       refine: both walkers refine each lattice choice to a continuous foothold (:mod:`ijoy_jax.refine`,

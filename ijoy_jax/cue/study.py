@@ -70,6 +70,7 @@ from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, side_p0, side_sign, start_stance
 from ijoy_jax.stats import mean_ci
+from ijoy_jax.targets import Targets, make_targets
 from ijoy_jax.terrain import Terrain, flat, scene
 
 FAMILIES = ("clutter", "wall", "slide")
@@ -378,7 +379,7 @@ _drives_jit = jax.jit(_drives, static_argnames=("cfg", "exact"))
 
 def drive(scenarios: Scenario, robot: Robot, params: field.CueParams | None = None,
           operator: Operator | None = None, *, cue_on: bool | jax.Array = True, cfg: StudyConfig | None = None,
-          targets: select.Targets | None = None) -> DriveLog:
+          targets: Targets | None = None) -> DriveLog:
     """The operator drives the perfect robot through a batch of scenarios (exact selector; one jit).
 
     Args:
@@ -397,7 +398,7 @@ def drive(scenarios: Scenario, robot: Robot, params: field.CueParams | None = No
     field.check_params(params)
     operator = default_operator() if operator is None else operator
     cfg = StudyConfig() if cfg is None else cfg
-    targets = select.make_targets(robot) if targets is None else targets
+    targets = make_targets(robot) if targets is None else targets
     return _drives_jit(scenarios, robot, params, operator, jnp.float32(cue_on), targets, cfg=cfg, exact=True)
 
 
@@ -427,7 +428,7 @@ def summarize(log: DriveLog, robot: Robot, cfg: StudyConfig | None = None) -> di
 
 
 def compare(scenarios: Scenario, robot: Robot, conditions: dict, operator: Operator | None = None, *,
-            cfg: StudyConfig | None = None, targets: select.Targets | None = None) -> dict:
+            cfg: StudyConfig | None = None, targets: Targets | None = None) -> dict:
     """Drive every condition on the same scenarios; per-scenario metrics and their intervals.
 
     Args:
@@ -445,7 +446,7 @@ def compare(scenarios: Scenario, robot: Robot, conditions: dict, operator: Opera
     if not conditions:
         raise ValueError("conditions must name at least one condition")
     cfg = StudyConfig() if cfg is None else cfg
-    targets = select.make_targets(robot) if targets is None else targets
+    targets = make_targets(robot) if targets is None else targets
     per = {}
     for name, params in conditions.items():
         log = drive(scenarios, robot, params, operator, cue_on=params is not None, cfg=cfg, targets=targets)
@@ -553,7 +554,7 @@ def tune_cue(scenarios: Scenario, robot: Robot, *, init: field.CueParams | None 
     cfg = StudyConfig() if cfg is None else cfg
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise ValueError(f"steps must be a positive int, got {steps!r}")
-    targets = select.make_targets(robot)
+    targets = make_targets(robot)
     _, metrics, trajectory = _tune_jit(from_params(init), scenarios, robot, operator, targets, cfg, weights,
                                        int(steps), float(learning_rate))
     best = int(np.argmin(np.asarray(metrics.loss)))

@@ -42,21 +42,17 @@ from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
 from ijoy_jax.footcost.index import TerrainIndex, centre_off_map, index_terrain, rows_max
-from ijoy_jax.footcost.sole import contact_offsets, sole_on_ground
-from ijoy_jax.footcost.xla import (
-    SLACK,
+from ijoy_jax.footcost.plane import plane_metrics, solve3
+from ijoy_jax.footcost.query import (
     check_action_index,
     checked_query,
-    exceeds,
-    metric_term,
-    plane_metrics,
     poses_supported,
     query_supported,
     safe_action_index,
     safe_poses,
-    sole_distance,
-    solve3,
 )
+from ijoy_jax.footcost.sole import contact_offsets, sole_on_ground
+from ijoy_jax.footcost.xla import SLACK, exceeds, metric_term, sole_distance
 from ijoy_jax.limits import check_window
 from ijoy_jax.robots import Robot, nearest_actions
 from ijoy_jax.terrain import Terrain
@@ -402,8 +398,8 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
             # the exact walk below is skipped for the block (the test is exact, a bound, not an estimate).
             if broad_phase:
                 open_lane = jnp.isfinite(total) & ~too_big & finite
-                box = _corridor_box(open_lane, cx, cy, p[_SWX], p[_SWY], p[_FHW], res)
-                box_top = _box_top(hmax_ref, box, shape, cx.shape[0])
+                box = corridor_box(open_lane, cx, cy, p[_SWX], p[_SWY], p[_FHW], res)
+                box_top = box_top_height(hmax_ref, box, shape, cx.shape[0])
                 clear = ~exceeds(box_top - floor_h, cand_ref[_CLEARANCE, :])
                 path_cols = jnp.where(_any(open_lane & ~clear), path_cols, 0)
 
@@ -427,10 +423,24 @@ def _any(flags):
     return jnp.max(flags.astype(jnp.int32)) > 0
 
 
-def _corridor_box(lane, cx, cy, sx, sy, half_width, res):
-    """Cells (ix0, ix1, iy0, iy1), inclusive, that hold every swing corridor of the lanes where ``lane``: the
-    bounding box of the swing start and those steps, grown by ``half_width`` and by one cell against rounding
-    (scalars; empty, ix1 < ix0, when no lane is set)."""
+def corridor_box(lane, cx, cy, sx, sy, half_width, res):
+    """The fused kernel's broad phase, part one: one box of cells that holds a block's swing corridors.
+
+    The cells (ix0, ix1, iy0, iy1), inclusive, that hold every swing corridor of the lanes where ``lane``
+    (:func:`ijoy_jax.footcost.index.swing_corridor`'s cells): the bounding box of the swing start and those
+    steps, grown by ``half_width`` and by one cell against rounding. With :func:`box_top_height` it lets a
+    block skip the exact corridor walk when no corridor can fail.
+
+    Args:
+      lane: (L,) bool, the lanes whose corridors the box must hold.
+      cx, cy: (L,) float32 m, each lane's step (the corridor's end).
+      sx, sy: () float32 m, the swing start (every corridor's start).
+      half_width: () float32 m, the corridor's half width (the foot's).
+      res: cell size (m).
+
+    Returns:
+      Four () int32 cell indices; empty (ix1 < ix0) when no lane is set.
+    """
     def cells(v, start):
         low = jnp.minimum(start, jnp.min(jnp.where(lane, v, jnp.inf))) - half_width
         high = jnp.maximum(start, jnp.max(jnp.where(lane, v, -jnp.inf))) + half_width
@@ -440,9 +450,23 @@ def _corridor_box(lane, cx, cy, sx, sy, half_width, res):
     return ix0, jnp.where(_any(lane), ix1, ix0 - 1), iy0, iy1
 
 
-def _box_top(hmax_ref, box, shape, lanes: int):
-    """The highest height in a box of cells (:func:`_corridor_box`), +inf if it leaves the map: the box's
-    columns spread over the lanes, each column's maximum from two reads of the sparse table, then the lanes'."""
+def box_top_height(hmax_ref, box, shape, lanes: int):
+    """The fused kernel's broad phase, part two: the highest height in a box of cells (:func:`corridor_box`).
+
+    The box's columns are spread over the lanes, each column's maximum taken from two reads of the sparse
+    table (:func:`ijoy_jax.footcost.index.rows_max`), then the lanes'. A box that leaves the map reads +inf,
+    so the exact walk, which knows what off the map costs, decides there.
+
+    Args:
+      hmax_ref: (levels, nx, ny) float32 m, :attr:`ijoy_jax.footcost.TerrainIndex.height_max` (an array or
+        the kernel's ref).
+      box: (ix0, ix1, iy0, iy1) inclusive cell indices, as :func:`corridor_box` returns them.
+      shape: (nx, ny), the map's cells (static).
+      lanes: how many lanes share the work (static).
+
+    Returns:
+      () float32 m: the highest height in the box, +inf if it leaves the map, -inf if it is empty.
+    """
     nx, ny = shape
     ix0, ix1, iy0, iy1 = box
     inside = (ix0 >= 0) & (ix1 < nx) & (iy0 >= 0) & (iy1 < ny)

@@ -299,8 +299,19 @@ class ViewServer:
 
     def state(self) -> dict:
         """The latest published state (as the page receives it)."""
+        return json.loads(self.state_json())
+
+    def state_json(self) -> str:
+        """The latest published state as the JSON text the WebSocket sends ("{}" before the first :meth:`publish`):
+        strict JSON, each non-finite number written null (:func:`finite_json`)."""
         with self._lock:
-            return json.loads(self._state)
+            return self._state
+
+    def page(self) -> str:
+        """The page as a browser loading it now gets it: :func:`page_html` of the scene and the latest state."""
+        with self._lock:
+            scene, state = self._scene, self._state
+        return page_html(scene, state)
 
     # -- server -------------------------------------------------------------------------------------------------
 
@@ -338,11 +349,7 @@ class ViewServer:
         static = resources.files("ijoy_jax.live") / "static"
 
         async def page(_):
-            with self._lock:
-                scene, state = self._scene, self._state
-            return web.Response(
-                text=page_html(scene, state), content_type="text/html", headers={"Cache-Control": "no-store"}
-            )
+            return web.Response(text=self.page(), content_type="text/html", headers={"Cache-Control": "no-store"})
 
         async def script(_):
             return web.Response(text=(static / "view.js").read_text(), content_type="application/javascript")

@@ -40,10 +40,11 @@ from ijoy_jax import geometry, robots, select
 from ijoy_jax._version import __version__
 from ijoy_jax.footcost import FootCostTerms, TerrainIndex, foot_cost_terms, index_terrain, window_cells
 from ijoy_jax.footcost.index import update_columns
-from ijoy_jax.footcost.xla import check_frame
+from ijoy_jax.footcost.query import check_frame
 from ijoy_jax.robots import Robot
 from ijoy_jax.server import schema
 from ijoy_jax.server.schema import DEFAULT_MAP, Limits, ProtocolError, json_float
+from ijoy_jax.targets import make_targets
 from ijoy_jax.terrain import Terrain, from_arrays
 
 log = logging.getLogger("ijoy_jax.server")
@@ -273,7 +274,7 @@ class Service:
         self.name = name
         self.options = dict(options or {})
         self.limits = limits or Limits()
-        self.targets = select.make_targets(robot)
+        self.targets = make_targets(robot)
         self.maps: dict[str, MapState] = {}
         self.stats = {"requests": 0, "errors": 0, "started": time.time()}
         p0 = np.asarray(robot.p0)
@@ -430,7 +431,7 @@ class Service:
         robot = robots.set_leaves(self.robot, values)
         robots.check_robot(robot)  # ValueError -> invalid_value, naming the leaf; the robot is unchanged
         if "rotation_weight" in values:  # L_i is sorted by dist, which weighs rotations: rebuild it (no recompile)
-            self.targets = select.make_targets(robot)
+            self.targets = make_targets(robot)
             for m in self.maps.values():
                 m.prepared = select.Prepared(m.prepared.index, self.targets)
         self.robot = robot

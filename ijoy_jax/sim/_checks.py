@@ -40,12 +40,7 @@ def check_rollout_inputs(
     """The inputs of one rollout (``batch`` None) or of ``batch`` rollouts: shapes and static options always,
     values only where they are concrete (so the checks pass through a caller's jit or vmap)."""
     lead = () if batch is None else (batch,)
-    grid = tuple(np.shape(terrain.free)[len(lead) :])
-    if grid != sim.shape or terrain.resolution != sim.resolution:
-        raise ValueError(
-            f"terrain grid {grid} at {terrain.resolution} m does not match "
-            f"the Sim's {sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid"
-        )
+    check_terrain_grid(sim, terrain, batch=len(lead))
     check_robot_for_sim(robot, sim.cfg)
     # concrete terrain values as ij.rollout's boundary checks them (check_terrain: finite heights and origin)
     for name in ("height", "origin"):
@@ -71,6 +66,17 @@ def check_rollout_inputs(
     shapes = (lead + (3,), lead + (num_steps, 3))
     if np.shape(commands) not in shapes:
         raise ValueError(f"commands must have shape {shapes[0]} or {shapes[1]}, got {np.shape(commands)}")
+
+
+def check_terrain_grid(sim: Sim, terrain: Terrain, *, batch: int = 0) -> None:
+    """The terrain's grid (its cells after ``batch`` leading batch axes) and cell size (m) are the Sim's: its
+    height field was built for them (:func:`ijoy_jax.sim.walker.make_sim`). ValueError naming both otherwise."""
+    grid = tuple(np.shape(terrain.free)[batch:])
+    if grid != sim.shape or float(terrain.resolution) != sim.resolution:
+        raise ValueError(
+            f"terrain grid {grid} at {float(terrain.resolution)} m does not match "
+            f"the Sim's {sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid"
+        )
 
 
 def rollout_keys(key, batch: int | None) -> jax.Array:

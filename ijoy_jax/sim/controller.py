@@ -124,9 +124,10 @@ class WalkConfig:
         the actuators (``physics.Dynamics.latency``), the compensation is
         scaled by ``1 / (1 + L / land_delay)``, so the loop's gain falls as its
         delay grows (a feedback of gain k through a delay L stays stable while
-        k L is bounded). Measured in MJX (1024 robots held forward on the
-        ``rough`` maps, 30 steps): at 20 ms the full gain fell 32.5 %, half of
-        it 4.7 %; without delay the full gain fell 0.1 %, half 2.0 %.
+        k L is bounded). 20 ms keeps the full gain without delay, where it
+        walks best, and half of it at 20 ms, where the full gain makes robots
+        fall on rough ground (docs/walk_families.md, "Control delay and
+        pushes", has the figures).
       stance_gain: the same feedback on the legs that carry the body (0 = the
         offsets only fade), low-passed with ``land_decay``: the soles are held
         partly level against the measured body tilt (foot compliance). Off by
@@ -136,10 +137,11 @@ class WalkConfig:
         ``(measured - wanted ground moment) / ankle_damping`` rad/s, so the
         sole yields to the ground (lands flat on a tilt it was not sent to, an
         early or uneven contact does not tip the robot) while its centre of
-        pressure is steered toward the ZMP reference. Measured in MJX (1024
-        robots, 20 steps, slopes of 2-10 degrees, BENCHMARKS.md): with 300
-        held forward commands up and down slopes fell 0 times (5 and 15
-        without), across slopes 48 (377 without).
+        pressure is steered toward the ZMP reference. 150 (the ankles yield
+        twice as fast as at 300, the value first measured on slopes) is part
+        of the combination that fell least on rough ground
+        (docs/benchmarks_history.md, "Walking on uneven ground in MJX", and
+        docs/walk_families.md have the figures).
       ankle_leak: time constant (s) with which those offsets return to zero.
       cop_edge: the wanted centre of pressure stays this far inside the sole's
         edges (m).
@@ -151,19 +153,18 @@ class WalkConfig:
         than ``pelvis_height`` above the lower sole, so the swing leg reaches
         a foothold two risers down; a standing step keeps the height it
         starts at (0 = off, which compiles the pattern without it;
-        :func:`pattern`). Measured in MJX (1024 refined descents of 5-15 cm
-        risers): held forward commands 4.0 % fell at 0, 0.1 % at 0.15;
-        random ones 0.1 and 0.3 %. On native MuJoCo 0.3 drove the
-        stance ankle past its -75 degree limit on a 15 cm flight; 0.15
-        walked every flight tried. docs/walk_families.md.
+        :func:`pattern`). Without it held forward descents fall far more
+        often; 0.15 rather than more, as a larger drop drives the stance
+        ankle past its pitch limit on the highest risers
+        (docs/walk_families.md has the figures).
       dcm_gain: the DCM feedback (0 = off; :func:`dcm_error`): the centre of
         pressure the ankles' damping control steers to is the ZMP reference
         plus ``dcm_gain`` times how far the measured capture point runs ahead
         of the LIPM's, so a body that falls ahead of its plan (a foot that
         rocks, a tilted or early contact) pushes harder on the side it falls
-        to. Measured on rough ground (native MuJoCo, 32 maps, held forward
-        commands, with the selector's ``support`` limit): 2-3 fell 2-3 of
-        32 where 0 fell 13 (BENCHMARKS.md).
+        to. On rough ground it cut the falls of held forward walks, alone
+        and beside the selector's ``support`` limit (docs/walk_families.md
+        and docs/benchmarks_history.md have the figures).
 
     Every field is checked when a config is made, ``dataclasses.replace``
     included: a value that is not a finite number in its field's range
@@ -361,9 +362,8 @@ def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPla
     # straight, its knee singular, once one foot stands 5 cm higher than the other), at lift-off at the step's
     # start and at touch-down at its end, in between a quintic in time: the pelvis starts and stops its vertical
     # motion at rest. (Following the swing sole's height linearly, with a kink where the two soles' heights
-    # cross, jerked the body at every riser: on stairs of 7.5-15 cm the stance foot unloaded and rocked, and 18.6 %
-    # of the robots fell going up, 51.1 % going down, against 12.1 % and 22.2 % with this profile; MJX, 1024 maps
-    # each, docs/walk_families.md.)
+    # cross, jerked the body at every riser: on stairs of 7.5-15 cm the stance foot unloaded and rocked, and more
+    # robots fell going up and down than with this profile; docs/walk_families.md has the figures.)
     u = swing.smoothstep(t / cfg.step_time)
     ground = ((1 - u) * jnp.minimum(plan.stance[2], plan.swing_from[2])
               + u * jnp.minimum(plan.stance[2], plan.swing_to[2]))
@@ -372,7 +372,7 @@ def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPla
         # Standing (no step: the swing side stays, the next step starts with the same two soles in the same
         # roles, in the walker and in next_plan) the pelvis holds its height; with the touch-down term there,
         # each standing step straddling a riser ended 0.15 x the riser lower than the next began, and robots
-        # standing at the foot of stairs rocked and fell (MJX: 22 of 4096 under random commands, 2 without).
+        # standing at the foot of stairs rocked and fell (docs/walk_families.md has the figures).
         end = jnp.where(plan.go, _step_down(plan.swing_to[2], plan.stance[2]), start)
         ground = ground - cfg.descent_drop * ((1 - u) * start + u * end)
     yaw_mid = feet[0, 5] + 0.5 * geometry.wrap_angle(feet[1, 5] - feet[0, 5])
@@ -498,10 +498,10 @@ def stabilize(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, qpos, base
     With stiff position-controlled joints the whole robot tips as one body
     about an edge of its stance foot; the swing foot, placed relative to a
     pelvis assumed upright, then lands tilted by the same angle, on its edge,
-    and the next step starts from there: in MJX, 1024 robots walking random
-    commands on flat ground fell 2 % of the time, each after a body roll that
-    grew step by step (5, 9, 15, 25 degrees, then over; BENCHMARKS.md); with
-    this feedback 0.2-0.3 % fell. Here the swing leg's joint targets are
+    and the next step starts from there: robots walking random commands on
+    flat ground fell after a body roll that grew step by step, and with this
+    feedback about a tenth as many fell (docs/benchmarks_history.md, "The
+    stabiliser", has the figures). Here the swing leg's joint targets are
     blended toward the inverse kinematics from the *measured* pelvis pose
     ``base`` = (position (3,), rotation (3, 3)) in the plan's frame, with
     weight ``land_gain`` faded in over the first ``land_ramp`` of the swing
@@ -605,20 +605,19 @@ def zmp_correction(m_free, params, cfg: WalkConfig, pgains: preview.PreviewGains
     carries the body past them), so the error measured there comes from a
     motion no robot makes. Corrected there too, that tail fed itself through
     :func:`carry_correction` from step to step: on stairs, where each step
-    lifts the body by a riser, it reached 1.9 m, 23 m and 135 m at the fourth
-    to sixth step of a 10.6 cm climb (native MuJoCo), the LIPM's preview read
-    it and the plan itself ran off at the end of a step (the pattern's CoM at
-    1.3 m/s, then -3 m/s): 10.6 % of the refined climbs fell in MJX, none of
-    1024 since (docs/walk_families.md).
+    lifts the body by a riser, it grew to metres within a few steps, the
+    LIPM's preview read it and the plan itself ran off at the end of a step,
+    and refined climbs fell (docs/walk_families.md has the diagnosis and the
+    figures).
 
     ``init`` warm-starts the passes, normally with the previous step's result
     moved on by one step (:func:`carry_correction`). It matters: the first two
     periods cannot be measured (central differences), and a cold start there
     leaves the LIPM a correction that jumps at every step boundary (spikes of
     tens of centimetres in the planned ZMP, measured), where the warm start
-    keeps it continuous. One warm pass leaves about 1.3 cm rms between the
-    pattern's multibody ZMP and its reference on 0.2 m forward steps
-    (6 cm without the filter).
+    keeps it continuous. One warm pass brings the pattern's multibody ZMP
+    close to its reference (docs/benchmarks_history.md, "Closed loop", has
+    the figure).
     """
     length = filtered_length(cfg)
     # the support's height: the stance sole's during this step, the landed swing sole's after it

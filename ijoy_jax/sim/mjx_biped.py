@@ -33,12 +33,12 @@ setting and terrain kind (2D or 2.5D) in this process and shared by every robot
 drive's clock starts.
 
 Where it runs: on ``device`` (default: JAX's default device, the GPU when JAX
-has one). A CPU runs it too, with less headroom than native MuJoCo: on this
-project's 2-core CPU a 10 ms tick took about 3 ms alone and 4 ms in a drive
-(beside the decision thread), so a loaded machine can make ticks late; the
-drive measures by how much (``tick_lag_max_s`` in its summary; docs/drive.md
-has the figures). :class:`ijoy_jax.sim.native.NativeBiped` (``ijoy drive
---robot native``) is the biped for real time on a CPU.
+has one). A CPU runs it too, with less headroom than native MuJoCo: a 10 ms
+tick takes a good part of its period, more in a drive (beside the decision
+thread), so a loaded machine can make ticks late; the drive measures by how
+much (``tick_lag_max_s`` in its summary; docs/drive.md has the figures).
+:class:`ijoy_jax.sim.native.NativeBiped` (``ijoy drive --robot native``) is
+the biped for real time on a CPU.
 
 Units: metres, radians, seconds. Soles are (x, y, z, roll, pitch, yaw),
 ``R = Rz(yaw) Ry(pitch) Rx(roll)``; feet are planar poses (x, y, yaw), row 0
@@ -58,8 +58,10 @@ from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import physics, walker
+from ijoy_jax.sim._checks import check_terrain_grid
+from ijoy_jax.sim._simulator import Sim
+from ijoy_jax.sim._step import PLANAR, StepLog
 from ijoy_jax.sim.stepped import SteppedBiped
-from ijoy_jax.sim.walker import PLANAR, Sim, StepLog
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["MjxBiped", "compiled_programs"]
@@ -148,9 +150,7 @@ class MjxBiped(SteppedBiped):
         if len(grid) != 2:
             raise ValueError(f"MjxBiped steps one robot on one terrain: terrain.free must be (nx, ny), got shape "
                              f"{grid} (a batch of terrains is walker.rollout_batch's)")
-        if grid != sim.shape or float(terrain.resolution) != sim.resolution:
-            raise ValueError(f"terrain grid {grid} at {float(terrain.resolution)} m does not match the Sim's "
-                             f"{sim.shape} at {sim.resolution} m; build a Sim with make_sim for this grid")
+        check_terrain_grid(sim, terrain)
         walker.check_robot_for_sim(robot, sim.cfg)
         start = np.asarray(start, np.float32)
         if start.shape != (2, 3) or not np.all(np.isfinite(start)):

@@ -5,7 +5,7 @@
 that advances in wall-clock time, tick by tick, so the decision for the next
 step can be made while this one executes, and the view can show it moving:
 :class:`NativeBiped` is that robot. Its physics is native MuJoCo
-(``mujoco.mj_step``, about 100x faster than MJX on a CPU for one robot), and
+(``mujoco.mj_step``, far faster than MJX on a CPU for one robot: docs/drive.md), and
 its controller the same functions as the MJX walker's
 (:func:`ijoy_jax.sim.controller.control_tick`, :func:`~ijoy_jax.sim.controller.plan_step`,
 the dynamics filter :func:`~ijoy_jax.sim.controller.zmp_correction`), compiled
@@ -46,8 +46,10 @@ import numpy as np
 from ijoy_jax import control, geometry, select
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import controller, kinematics, model, swing
+from ijoy_jax.sim._sensors import ankle_wrench, centre_of_mass
+from ijoy_jax.sim._simulator import Sim, check_robot_for_sim
+from ijoy_jax.sim._step import PLANAR, StepLog
 from ijoy_jax.sim.stepped import SteppedBiped
-from ijoy_jax.sim.walker import PLANAR, Sim, StepLog, ankle_wrench, centre_of_mass, check_robot_for_sim
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["NativeBiped", "Programs", "programs"]

@@ -46,7 +46,6 @@ from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.progress import compile_and_call
 from ijoy_jax.robots import LEFT, Robot
-from ijoy_jax.select import Targets
 from ijoy_jax.select_options import SelectOptions, checked
 from ijoy_jax.sim import physics
 from ijoy_jax.sim._checks import as_flag, check_rollout_inputs, rollout_keys
@@ -75,6 +74,7 @@ from ijoy_jax.sim._step import (
     stance_info,
     tick,
 )
+from ijoy_jax.targets import Targets
 from ijoy_jax.terrain import Terrain
 
 __all__ = [

@@ -38,9 +38,9 @@ class OnDevices:
     device alone computes on those rows. Handing the whole batch to jit
     with a sharding instead, the partitioner gathered whole batches where it has no per-row rule (the rough
     terrain's FFT, a Pallas kernel's custom call) and reduced vmapped while loops' predicates over all
-    devices at every iteration (the selector's search, MJX's solver): on two H200s a perfect-robot sweep ran
-    at a sixth of one GPU's rate. A ``shard_map`` over the rows fixed that, but a physics sweep's program
-    crashed XLA's GPU compiler (SIGSEGV).
+    devices at every iteration (the selector's search, MJX's solver): a perfect-robot sweep ran far slower
+    on two GPUs than on one (docs/benchmarks_history.md has the figures). A ``shard_map`` over the rows
+    fixed that, but a physics sweep's program crashed XLA's GPU compiler (SIGSEGV).
     """
 
     def __init__(self, devices: list):

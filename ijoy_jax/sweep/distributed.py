@@ -39,7 +39,7 @@ from collections.abc import Mapping
 
 import jax
 
-__all__ = ["ENV", "Layout", "agree", "barrier", "client", "initialize", "layout", "shutdown"]
+__all__ = ["ENV", "Layout", "agree", "barrier", "client", "initialize", "layout", "process_layout", "shutdown"]
 
 ENV = {"num_processes": "IJOY_NUM_PROCESSES", "process_id": "IJOY_PROCESS_ID", "coordinator": "IJOY_COORDINATOR",
        "distributed": "IJOY_DISTRIBUTED"}
@@ -144,6 +144,36 @@ def initialize(lay: Layout) -> tuple[int, int]:
         # that Ctrl-C stops it (see _beside)
         _beside(lambda: jax.distributed.initialize(lay.coordinator, lay.num_processes, lay.process_id))
     return jax.process_index(), jax.process_count()
+
+
+def process_layout(process_id: int | None = None, num_processes: int | None = None) -> tuple[int, int]:
+    """(I, N): which process of how many this one is in a run, checked against ``jax.distributed``.
+
+    A run's process ``I`` of ``N`` computes the chunks with ``chunk_id % N == I``. Both given: they are used,
+    once checked (ints, ``0 <= I < N``, and equal to ``jax.process_index()`` / ``jax.process_count()``
+    when ``jax.distributed`` runs several processes, so a slice is never computed twice or skipped). Both
+    None: ``jax.process_index()`` and ``jax.process_count()`` (0 of 1 without ``jax.distributed``).
+
+    Raises:
+      ValueError: one of them None or not an int, I out of range, or a layout that ``jax.distributed``
+        contradicts.
+
+    Example:
+      >>> process_layout(1, 4)
+      (1, 4)
+    """
+    if process_id is None and num_processes is None:
+        return jax.process_index(), jax.process_count()
+    for name, v in (("process_id", process_id), ("num_processes", num_processes)):
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ValueError(f"process_id and num_processes must both be ints (or both None), got {name}={v!r}")
+    if num_processes < 1 or not 0 <= process_id < num_processes:
+        raise ValueError(f"process id {process_id} out of range for {num_processes} processes "
+                         f"(0 to {num_processes - 1})")
+    if jax.process_count() > 1 and (process_id, num_processes) != (jax.process_index(), jax.process_count()):
+        raise ValueError(f"process_id={process_id}, num_processes={num_processes} disagree with jax.distributed "
+                         f"(process {jax.process_index()} of {jax.process_count()})")
+    return process_id, num_processes
 
 
 def shutdown(timeout_s: float = 120.0) -> None:

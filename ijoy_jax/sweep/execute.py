@@ -225,7 +225,7 @@ def run(
     if isinstance(barrier_timeout_s, bool) or not isinstance(barrier_timeout_s, (int, float)) or not (
             0 < barrier_timeout_s < math.inf):
         raise ValueError(f"barrier_timeout_s must be a positive number of seconds, got {barrier_timeout_s!r}")
-    pid, nproc = _process_layout(process_id, num_processes)
+    pid, nproc = distributed.process_layout(process_id, num_processes)
     devs = local_devices(devices)
     out = Path(out) if out is not None else Path("results") / cfg.name
     sel = selection(cfg.num_cells, cfg.scenarios_per_cell, scenarios_per_cell=scenarios_per_cell,
@@ -285,24 +285,6 @@ def _progress(done: int, total: int, rate: float, chunk: int, nchunks: int, who:
             f"{rate:.1f} scenarios/s{physics}  ETA {eta:.0f} s")
     end = "\r" if sys.stderr.isatty() and done < total else "\n"
     print(line.ljust(78), end=end, file=sys.stderr, flush=True)
-
-
-def _process_layout(process_id, num_processes) -> tuple[int, int]:
-    """(I, N) from the arguments, defaulting to ``jax.process_index()`` / ``jax.process_count()``."""
-    if process_id is None and num_processes is None:
-        return jax.process_index(), jax.process_count()
-    for name, v in (("process_id", process_id), ("num_processes", num_processes)):
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise ValueError(f"process_id and num_processes must both be ints (or both None), got {name}={v!r}")
-    if num_processes < 1 or not 0 <= process_id < num_processes:
-        raise ValueError(f"process id {process_id} out of range for {num_processes} processes "
-                         f"(0 to {num_processes - 1})")
-    if jax.process_count() > 1 and (process_id, num_processes) != (jax.process_index(), jax.process_count()):
-        raise ValueError(f"process_id={process_id}, num_processes={num_processes} disagree with jax.distributed "
-                         f"(process {jax.process_index()} of {jax.process_count()})")
-    return process_id, num_processes
-
-
 
 
 def _run_locked(cfg: SweepConfig, out: Path, table, cell_rows, bases: dict, sim, devs: list, pid: int, nproc: int,

@@ -17,8 +17,10 @@ import numpy as np
 from ijoy_jax import recordings, robots
 from ijoy_jax.limits import MAX_DENSITY
 from ijoy_jax.robots import Robot
-from ijoy_jax.sweep.config import ROBOT_DEFAULTS, SweepConfigError, load_config, parse_config, scenarios
+from ijoy_jax.sweep.config import load_config, parse_config
+from ijoy_jax.sweep.expansion import scenarios
 from ijoy_jax.sweep.programs import scenario
+from ijoy_jax.sweep.schema import ROBOT_DEFAULTS, SweepConfigError
 
 __all__ = ["EXPORT_TERRAINS", "export_drive"]
 

@@ -3,9 +3,9 @@
 ``ijoy sweep run FILE --local-processes N`` starts N children, process ``i`` of them with
 ``CUDA_VISIBLE_DEVICES`` set to the ``i``-th visible GPU and the layout flags of
 :mod:`ijoy_jax.sweep.distributed` (``--num-processes N --process-id i --coordinator
-localhost:PORT``, a free port), each running the same ``ijoy sweep run`` otherwise. On four H200s
-the perfect robot's sweep ran 4.08x one GPU's rate this way and 2.32x as one process over the four
-(BENCHMARKS.md): one process does not keep several GPUs busy with short chunks.
+localhost:PORT``, a free port), each running the same ``ijoy sweep run`` otherwise: one process does
+not keep several GPUs busy with short chunks, so N processes run a sweep faster than one process over
+the N GPUs (BENCHMARKS.md has the figures).
 
 This process starts no JAX backend (it would take GPU memory from its children): it only checks
 its arguments, starts the children, passes their progress lines (stderr) through, collects their

@@ -59,10 +59,10 @@ import numpy as np
 from ijoy_jax import robots
 from ijoy_jax.control import rollout
 from ijoy_jax.jit_cache import compiled_count
-from ijoy_jax.select import make_targets
 from ijoy_jax.select_options import SelectOptions
 from ijoy_jax.sweep.expansion import scenarios
 from ijoy_jax.sweep.schema import COMMAND_KEYS, ROBOT_DEFAULTS, SweepConfig, SweepConfigError, reach_of
+from ijoy_jax.targets import make_targets
 from ijoy_jax.terrain import generators
 
 __all__ = [

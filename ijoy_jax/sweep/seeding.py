@@ -28,7 +28,7 @@ CHECKED_REPLICATES = 64
 """Replicates (spread evenly, first and last included) whose vectorised draws are compared with NumPy's own
 generator on every :func:`uniform_draws` call (~20 microseconds each)."""
 
-_BLOCK = 1 << 13  # replicates per vectorised block: its temporaries stay in cache (2-3x faster than 1 << 20)
+_BLOCK = 1 << 13  # replicates per vectorised block: its temporaries stay in cache (docs/benchmarks_history.md)
 
 # SeedSequence (numpy/random/bit_generator.pyx): pool of 4 uint32 words, hash and mix constants.
 _POOL = 4

@@ -30,6 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.terrain import generators, grid, scene
 from ijoy_jax.terrain.grid import Terrain
@@ -165,6 +166,14 @@ class WalkFamily:
         """:attr:`make` as one jitted program per family, batch and grid (a new key reuses it): the same maps
         (to float32 rounding) as ``make`` op by op, which compiles each of its hundreds of small ops."""
         return _jitted(self.make)(key, batch, shape=tuple(int(n) for n in shape), resolution=float(resolution))
+
+    def compiled_programs(self) -> int:
+        """How many programs :meth:`maps` holds compiled for this family (in this process).
+
+        Read it before and after a loop of calls to learn how many compiles the loop caused: each new batch
+        size or grid compiles once; a new key, or the grid given as a list, reuses the program.
+        """
+        return compiled_count(_jitted(self.make))
 
 
 @functools.cache

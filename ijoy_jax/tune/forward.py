@@ -77,7 +77,9 @@ from ijoy_jax.footcost import foot_cost_terms, index_terrain
 from ijoy_jax.limits import check_map_shape
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, get_leaf, set_leaf, side_actions, side_p0, side_sign
-from ijoy_jax.select import SelectOptions, make_targets, prepare, select_step
+from ijoy_jax.select import prepare, select_step
+from ijoy_jax.select_options import SelectOptions
+from ijoy_jax.targets import make_targets
 from ijoy_jax.terrain import Terrain, generators
 from ijoy_jax.terrain.family import ParamError
 from ijoy_jax.tune import loop, relax

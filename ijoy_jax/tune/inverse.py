@@ -36,8 +36,9 @@ import optax
 
 from ijoy_jax import geometry, optim
 from ijoy_jax.robots import Robot, dist, get_leaf, set_leaf, side_actions, side_p0, side_sign
-from ijoy_jax.select import SelectOptions, make_targets, prepare, select_step
-from ijoy_jax.select_options import checked
+from ijoy_jax.select import prepare, select_step
+from ijoy_jax.select_options import SelectOptions, checked
+from ijoy_jax.targets import make_targets
 from ijoy_jax.terrain import Terrain
 from ijoy_jax.tune import relax
 

@@ -56,7 +56,7 @@ from ijoy_jax import geometry
 from ijoy_jax.footcost import foot_cost_terms, window_cells
 from ijoy_jax.footcost.sole import contact_offsets, soft_sole_on_ground
 from ijoy_jax.robots import Robot, dist, side_actions, side_p0, side_sign
-from ijoy_jax.select import Targets, make_targets
+from ijoy_jax.targets import Targets, make_targets
 from ijoy_jax.terrain import Terrain
 
 _EXTRA_CELLS = 2  # window border (cells each side) that holds the soft-coverage tails
@@ -513,7 +513,7 @@ def relaxed_select(
         the exact selector's default (then the choice is piecewise constant in
         step_time and the command); False (default) scores against p_next, so
         step_time and the command get gradients.
-      targets: prebuilt :func:`ijoy_jax.select.make_targets` (quantize only).
+      targets: prebuilt :func:`ijoy_jax.targets.make_targets` (quantize only).
       exact: static; also compute exact FootCost validity for ``invalid_mass``.
       swing_from: (3,) world pose of the swing foot, for the (relaxed and
         exact) swing-path check on 2.5D terrains, as :func:`ijoy_jax.select_step`;
