@@ -36,6 +36,13 @@ EXAMPLES = settings(max_examples=15, deadline=None)
 ERRORS = (ValueError, TypeError)
 
 
+def _beyond_max_heading(pose) -> bool:
+    """A finite heading beyond geometry.MAX_HEADING: the boundary refuses it (no reduction by whole turns places
+    it), as it refuses a pose that is not finite."""
+    yaw = float(np.asarray(pose, np.float64)[2])
+    return bool(np.isfinite(yaw) and abs(yaw) > ij.geometry.MAX_HEADING)
+
+
 def _names(err: Exception, *names: str) -> bool:
     return any(n in str(err) for n in names)
 
@@ -227,8 +234,9 @@ def test_select_step_refuses_or_flags_hostile_poses_and_commands(stance, command
     stance, command = np.array(stance, np.float64), np.array(command, np.float64)
     try:
         c = _one(ROBOT, TERRAIN_25D, stance, command)
-    except ValueError as e:
-        assert not np.all(np.isfinite(stance.astype(np.float32))) and _names(e, "stance", "swing_from"), e
+    except ValueError as e:  # not finite in float32, or a heading no whole-turn reduction places
+        assert (not np.all(np.isfinite(stance.astype(np.float32))) or _beyond_max_heading(stance)) and _names(
+            e, "stance", "swing_from"), e
         return
     assert np.all(np.isfinite(np.asarray(c.pose))) and float(c.cost) >= 0 and not np.isnan(float(c.cost))
     assert np.all(np.isfinite(np.asarray(c.foothold)))
@@ -268,8 +276,13 @@ _terms_jit = jax.jit(lambda r, steps: ij.foot_cost_terms(TERRAIN_25D, r, STANCE,
 @given(step=POSES)
 def test_foot_cost_terms_of_hostile_steps_are_flagged_finite_and_never_negative(step):
     steps = np.array([step, [0.4, 0.49, 0.0]], np.float32)
-    for terms in (ij.foot_cost_terms(TERRAIN_25D, ROBOT, STANCE, -1, steps, action_index=[0, 0]),
-                  _terms_jit(ROBOT, jnp.asarray(steps))):
+    calls = [lambda: _terms_jit(ROBOT, jnp.asarray(steps))]  # traced: flagged inside the program, never refused
+    if _beyond_max_heading(steps[0]):  # concrete: refused at the boundary, naming the argument
+        with pytest.raises(ValueError, match="steps heading"):
+            ij.foot_cost_terms(TERRAIN_25D, ROBOT, STANCE, -1, steps, action_index=[0, 0])
+    else:
+        calls.append(lambda: ij.foot_cost_terms(TERRAIN_25D, ROBOT, STANCE, -1, steps, action_index=[0, 0]))
+    for terms in (call() for call in calls):
         total = np.asarray(terms.total)
         assert not np.isnan(total).any() and np.all(total >= 0)
         if not np.all(np.isfinite(steps[0])):
