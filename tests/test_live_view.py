@@ -41,12 +41,11 @@ def _browser():
     return sync_playwright()
 
 
-@pytest.fixture(scope="module")
-def drive_with_view():
-    """A real-time drive of the perfect robot on a clutter map, its stick the view's, and the view's server (its
-    3D body the robot's soles)."""
+def _drive_in_view(body: str, wait_s: float):
+    """A real-time drive of ``body`` on the small clutter map, its stick the view's, and the view's server with
+    its 3D body: yields the server once the drive ticks (within ``wait_s``), then stops the drive."""
     settings = live.DriveSettings(terrain={"kind": "family", "family": "obstacles", "seed": 3, "shape": list(SHAPE),
-                                           "resolution": RES})
+                                           "resolution": RES}, body=body)
     terrain, robot, start = live.open_terrain(settings.terrain)
     view = ViewServer(port=0).start()
     view.set_scene(terrain, robot, start)
@@ -64,12 +63,19 @@ def drive_with_view():
 
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
-    assert ready.wait(120), "the drive never ticked"
+    assert ready.wait(wait_s), "the drive never ticked"
     yield view
     stop.set()
     thread.join(timeout=60)
     view.close()
     assert out["result"].decisions, "the drive made no decision"
+
+
+@pytest.fixture(scope="module")
+def drive_with_view():
+    """A real-time drive of the perfect robot on a clutter map, its stick the view's, and the view's server (its
+    3D body the robot's soles)."""
+    yield from _drive_in_view("perfect", 120)
 
 
 @slow
@@ -424,31 +430,7 @@ BLUE_OVER = 25  # a leg pixel: blue above red and green by this much (lit and sh
 def native_drive_with_view():
     """A real-time drive of the MuJoCo biped on native MuJoCo on the small clutter map, the view's stick, and
     the view's server with its 3D body."""
-    settings = live.DriveSettings(terrain={"kind": "family", "family": "obstacles", "seed": 3, "shape": list(SHAPE),
-                                           "resolution": RES}, body="native")
-    terrain, robot, start = live.open_terrain(settings.terrain)
-    view = ViewServer(port=0).start()
-    view.set_scene(terrain, robot, start)
-    stop = threading.Event()
-    out = {}
-    ready = threading.Event()
-
-    def on_tick(state):
-        view.publish(state)
-        ready.set()
-
-    def run():
-        out["result"] = live.run(settings, view.axes, realtime=True, on_tick=on_tick, on_body=view.set_body,
-                                 stop=stop, terrain=terrain, robot=robot, start=start)
-
-    thread = threading.Thread(target=run, daemon=True)
-    thread.start()
-    assert ready.wait(300), "the drive never ticked"
-    yield view
-    stop.set()
-    thread.join(timeout=60)
-    view.close()
-    assert out["result"].decisions, "the drive made no decision"
+    yield from _drive_in_view("native", 300)
 
 
 def _robot_x(view):
