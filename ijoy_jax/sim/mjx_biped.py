@@ -58,10 +58,8 @@ from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import physics, walker
-from ijoy_jax.sim._checks import check_terrain_grid
-from ijoy_jax.sim._simulator import Sim
-from ijoy_jax.sim._step import PLANAR, StepLog
 from ijoy_jax.sim.stepped import SteppedBiped
+from ijoy_jax.sim.walker import PLANAR, Sim, StepLog, check_terrain_grid
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["MjxBiped", "compiled_programs"]

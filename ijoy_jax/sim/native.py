@@ -46,10 +46,8 @@ import numpy as np
 from ijoy_jax import control, geometry, select
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import controller, kinematics, model, swing
-from ijoy_jax.sim._sensors import ankle_wrench, centre_of_mass
-from ijoy_jax.sim._simulator import Sim, check_robot_for_sim
-from ijoy_jax.sim._step import PLANAR, StepLog
 from ijoy_jax.sim.stepped import SteppedBiped
+from ijoy_jax.sim.walker import PLANAR, Sim, StepLog, ankle_wrench, centre_of_mass, check_robot_for_sim
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["NativeBiped", "Programs", "programs"]

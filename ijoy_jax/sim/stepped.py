@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ijoy_jax.sim._step import PLANAR, StepLog
+from ijoy_jax.sim.walker import PLANAR, StepLog
 
 __all__ = ["SteppedBiped"]
 

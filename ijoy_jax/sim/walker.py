@@ -48,7 +48,7 @@ from ijoy_jax.progress import compile_and_call
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select_options import SelectOptions, checked
 from ijoy_jax.sim import physics
-from ijoy_jax.sim._checks import as_flag, check_rollout_inputs, rollout_keys
+from ijoy_jax.sim._checks import as_flag, check_rollout_inputs, check_terrain_grid, rollout_keys
 from ijoy_jax.sim._metrics import summary
 from ijoy_jax.sim._sensors import (
     ankle_wrench,
@@ -82,6 +82,7 @@ __all__ = [
     "Sim",
     "make_sim",
     "check_robot_for_sim",
+    "check_terrain_grid",
     "StepLog",
     "SimState",
     "measured_soles",
