@@ -441,15 +441,17 @@ def write_ground_png(path, seed: int = 0, pixels=IMAGE_PIXELS) -> str:
     return os.fspath(path)
 
 
-def load_ground(path=None, *, resolution: float = RESOLUTION, height_scale: float = IMAGE_SCALE) -> Terrain:
+def load_ground(path=None, *, resolution: float = RESOLUTION, height_scale: float = IMAGE_SCALE,
+                seed: int = 0) -> Terrain:
     """The ground image as one Terrain (:func:`ijoy_jax.terrain.from_image`, a pixel per cell).
 
-    ``path`` None: the generated image (:func:`write_ground_png`, seed 0) through a temporary file.
+    ``path`` None: the generated image (:func:`write_ground_png` of ``seed``) through a temporary file.
     """
     if path is not None:
         return grid.from_image(path, resolution, height_scale=height_scale)
     with tempfile.TemporaryDirectory() as tmp:
-        return grid.from_image(write_ground_png(os.path.join(tmp, "ground.png")), resolution, height_scale=height_scale)
+        png = write_ground_png(os.path.join(tmp, "ground.png"), seed=seed)
+        return grid.from_image(png, resolution, height_scale=height_scale)
 
 
 def window_offsets(key, batch: int, image_shape, shape) -> jax.Array:
@@ -502,10 +504,7 @@ def natural(key, batch: int, *, shape, resolution: float) -> Terrain:
     :data:`NATURAL_SEED`, each scaled so its heights span :data:`NATURAL_RANGE` from lowest to highest cell
     (about 0.8 cm RMS).
     """
-    with tempfile.TemporaryDirectory() as tmp:
-        ground = grid.from_image(
-            write_ground_png(os.path.join(tmp, "ground.png"), seed=NATURAL_SEED), resolution, height_scale=IMAGE_SCALE
-        )
+    ground = load_ground(resolution=resolution, seed=NATURAL_SEED)
     maps = image(key, batch, shape=shape, resolution=resolution, ground=ground)
     h = maps.height
     span = jnp.max(h, axis=(1, 2), keepdims=True) - jnp.min(h, axis=(1, 2), keepdims=True)
