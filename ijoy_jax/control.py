@@ -48,6 +48,10 @@ class StanceInfo(NamedTuple):
     stance: jax.Array  # (3,) world pose of the (future) stance foot
     stance_side: jax.Array  # () +1 left, -1 right
     swing_from: jax.Array  # (3,) world pose the swing foot starts from
+    # (2,) m, world frame, or None (none): how far the robot's balance asks the next step to move (e.g. a pushed
+    # robot's capture-point lead; ijoy_jax.sim.controller.WalkConfig.capture_gain). The exact selector measures
+    # the candidates from the stance moved by it, so the step's foothold is still chosen on the terrain.
+    balance: jax.Array | None = None
 
 class Walker(NamedTuple):
     """A robot that executes footsteps (optax-style: a tuple of pure functions).
@@ -320,10 +324,13 @@ def exact_selector(terrain: Terrain, robot: Robot, options: SelectOptions | None
     """
     options = checked(options, robot)
     if index is None or targets is None:
-        index, targets = select.prepare(terrain, robot, index=index, targets=targets)
+        prepared = select.prepare(terrain, robot, targets=targets)
+        index = prepared.index if index is None else index
+        targets = prepared.targets
 
     def choose(info, command, key):
-        stance = jnp.where(supported, info.stance, jnp.nan)  # refused as any non-finite stance is
+        stance = info.stance if info.balance is None else info.stance.at[:2].add(info.balance)
+        stance = jnp.where(supported, stance, jnp.nan)  # refused as any non-finite stance is
         choice = select.select_step(terrain, robot, stance, info.stance_side, command, options,
                                     swing_from=info.swing_from, targets=targets, index=index)
         return choice.foothold, choice.valid | (options.method == "naive"), choice

@@ -289,7 +289,8 @@ def test_walk_config_checks_every_field(name):
     ("land_decay", 0.0), ("stance_gain", -0.1), ("ankle_damping", -150.0), ("ankle_leak", 0.0), ("cop_edge", -0.01),
     ("contact_force", 0.0), ("dcm_gain", -3.0), ("descent_drop", -0.1), ("descent_drop", 1.5),
     ("descent_drop", "0.3"), ("descent_drop", True), ("filter_passes", -1), ("filter_passes", 1.5),
-    ("filter_passes", True), ("com_offset", None), ("step_time", jnp.float32(0.8)),
+    ("filter_passes", True), ("com_offset", None), ("step_time", jnp.float32(0.8)), ("capture_gain", -1.0),
+    ("capture_gain", 4.5), ("capture_max", 0.0), ("capture_max", -0.05),
 ])
 def test_walk_config_refuses_values_outside_their_range(name, bad):
     with pytest.raises(ValueError, match=rf"WalkConfig\.{name} "):
@@ -301,8 +302,8 @@ def test_walk_config_accepts_the_ends_its_fields_document():
     cfg = controller.WalkConfig(ds_fraction=0.0, swing_lift=0.5, land_ramp=1.0, descent_drop=np.float64(1.0),
                                 ankle_damping=0, dcm_gain=0.0, stance_gain=0.0, land_gain=0.0, clearance=0.0,
                                 cop_edge=0.0, leg_share=0.0, preview_q=0.0, filter_passes=np.int64(0),
-                                com_offset=-0.02, preview_time=0.01)
-    assert cfg.horizon == 1 and cfg.descent_drop == 1.0 and cfg.filter_passes == 0
+                                com_offset=-0.02, preview_time=0.01, capture_gain=4.0)
+    assert cfg.horizon == 1 and cfg.descent_drop == 1.0 and cfg.filter_passes == 0 and cfg.capture_gain == 4.0
 
 
 @settings(max_examples=60, deadline=None)
@@ -618,3 +619,65 @@ def test_walks_on_a_slope(sim, deg, axis):
         tilts.append(walk.tilt_error)
     assert max(errs) < WALK_TOL, errs
     assert max(tilts) < np.radians(3.0), np.degrees(tilts)  # measured up to ~2.4 deg
+
+
+# ------------------------------------------------------------------ capture-point stepping
+
+
+def _sensed(sim, com, vel):
+    """Stand-in data holding only what :func:`W.centre_of_mass` reads: the com and com_vel sensors."""
+    from types import SimpleNamespace
+
+    data = np.zeros(sim.mj_model.nsensordata, np.float32)
+    adr = np.asarray(sim.index.com_sensor)
+    data[adr[0]:adr[0] + 3], data[adr[1]:adr[1] + 3] = com, vel
+    return SimpleNamespace(sensordata=jnp.asarray(data))
+
+
+@pytest.mark.parametrize("gain, limit", [(1.0, 0.5), (2.5, 0.5), (2.5, 0.03)])
+def test_balance_shift_is_the_capture_points_lead_in_the_world_frame(sim, gain, limit):
+    """The next step moves by gain x (measured - planned capture point), rotated from the plan's frame (its yaw
+    differs from the measured soles' by the stance's drift) back to the world, at most ``capture_max`` long
+    (then along the same direction). Reference: the capture point's closed form in NumPy."""
+    s = dataclasses.replace(sim, cfg=dataclasses.replace(sim.cfg, capture_gain=gain, capture_max=limit))
+    stance = np.array([1.0, 2.0, 0.02, 0.0, 0.0, 0.4], np.float32)  # measured: x, y, z, roll, pitch, yaw
+    planned = np.array([0.3, -0.1, 0.0, 0.0, 0.0, 0.25], np.float32)  # as commanded, the controller's frame
+    com, vel = np.array([1.05, 1.97, 0.8]), np.array([0.31, -0.12, 0.01])
+    lipm = np.array([[0.33, -0.14], [0.2, 0.05], [0.0, 0.0]], np.float32)
+    cs = SimpleCtrl(lipm)
+    got = np.asarray(W.balance_shift(s, _sensed(sim, com, vel), cs, jnp.asarray(stance), jnp.asarray(planned)))
+    yaw = planned[5] - stance[5]
+    rot = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+    omega = np.sqrt(9.81 / sim.cfg.com_height)
+    measured = rot @ (com[:2] - stance[:2]) + planned[:2], rot @ vel[:2]
+    lead = (measured[0] - lipm[0]) + (measured[1] - lipm[1]) / omega  # the plan's frame
+    want = gain * (rot.T @ lead)
+    if np.linalg.norm(want) > limit:
+        want = want * limit / np.linalg.norm(want)
+    np.testing.assert_allclose(got, want, atol=2e-5)  # float32 of centimetres
+    assert np.linalg.norm(got) <= limit + 1e-6
+
+
+class SimpleCtrl:
+    """The controller's state as :func:`W.balance_shift` reads it (the LIPM's rows)."""
+
+    def __init__(self, lipm):
+        self.lipm = jnp.asarray(lipm)
+
+
+def test_the_exact_selector_measures_its_candidates_from_the_stance_moved_by_balance():
+    """A stance info with ``balance`` (dx, dy) chooses the same action on flat ground, its foothold moved by
+    exactly (dx, dy); None is the stance as reported."""
+    from ijoy_jax import control
+
+    field = T.flat((120, 120), 0.02, has_height=True)
+    robot = robots.hrp2(margin=0.02)
+    choose = control.exact_selector(field, robot).choose
+    stance = jnp.array([1.2, 1.1, 0.0], jnp.float32)
+    swing = geometry.compose(stance, jnp.array([0.0, 0.19, 0.0], jnp.float32))
+    cmd = jnp.array([0.25, 0.0, 0.0], jnp.float32)
+    base, ok, c0 = choose(control.StanceInfo(stance, jnp.float32(-1), swing), cmd, None)
+    moved, ok2, c1 = choose(control.StanceInfo(stance, jnp.float32(-1), swing, jnp.array([0.03, -0.02])), cmd, None)
+    assert bool(ok) and bool(ok2) and int(c0.index) == int(c1.index)
+    np.testing.assert_allclose(np.asarray(moved[:2]) - np.asarray(base[:2]), [0.03, -0.02], atol=1e-5)
+    np.testing.assert_allclose(np.asarray(moved[2:]), np.asarray(base[2:]), atol=1e-6)

@@ -67,6 +67,7 @@ class SimState(NamedTuple):
     key: jax.Array  # () PRNG key of the stance noise and the pushes still to come
     belief: jax.Array  # (2,) m, the measured stance's error for the next decision (physics.Dynamics.stance_noise)
     sent: jax.Array  # (latency ticks + 1, nu) the last joint targets, newest first (physics.Dynamics.latency)
+    balance: jax.Array | None = None  # (2,) m, the next step's capture-point shift (WalkConfig.capture_gain)
 
 
 def _normal(sole) -> jax.Array:
@@ -256,14 +257,37 @@ def init_state(
         key,
         _believed_error(world, k_belief),
         sent,
+        None if sim.cfg.capture_gain == 0 else jnp.zeros(2, jnp.float32),
     )
+
+
+def balance_shift(sim: Sim, d: mjx.Data, cs: controller.CtrlState, stance, planned_stance) -> jax.Array:
+    """(2,) m, world frame: how far the next step moves for balance, ``WalkConfig.capture_gain`` times the
+    divergent component of motion's error (:func:`ijoy_jax.sim.controller.dcm_error`: the measured capture point
+    minus the LIPM's) at the step's end, at most ``WalkConfig.capture_max`` long.
+
+    A robot pushed ahead of its plan steps further that way, the capture point's classic use (Pratt 2006,
+    Englsberger 2015): the next decision's candidates are measured from the stance moved by it
+    (:attr:`ijoy_jax.control.StanceInfo.balance`), so the selector chooses that step's foothold on the terrain.
+    ``stance`` and ``planned_stance`` are the new stance sole (6,) measured and as the controller commanded it
+    (its own frame); ``cs`` the controller's state at the step's end, ``d`` the data after its last tick.
+    """
+    cfg = sim.cfg
+    to_plan = kinematics.rot_z(planned_stance[5] - stance[5])
+    c, v = centre_of_mass(sim, d)
+    com = ((to_plan @ (c - stance[:3]) + planned_stance[:3])[:2], (to_plan @ v)[:2])
+    err = controller.dcm_error(cfg, (cs.lipm[0], cs.lipm[1]), com)
+    shift = cfg.capture_gain * (to_plan[:2, :2].T @ err)
+    norm = jnp.sqrt(jnp.sum(shift**2))
+    return jnp.where(norm > cfg.capture_max, shift * (cfg.capture_max / jnp.maximum(norm, 1e-9)), shift)
 
 
 def stance_info(state: SimState) -> control.StanceInfo:
     """The next decision's stance (the Walker's ``stance``): the measured stance foot and the swing foot (x, y,
     yaw), as the robot believes them (shifted by :attr:`SimState.belief`), and the stance side."""
     st, sw = _split(state.soles, state.swing)
-    return control.StanceInfo(_believed(st[PLANAR], state), -state.swing, _believed(sw[PLANAR], state))
+    return control.StanceInfo(_believed(st[PLANAR], state), -state.swing, _believed(sw[PLANAR], state),
+                              state.balance)
 
 
 class Step(NamedTuple):
@@ -429,12 +453,18 @@ def end_step(
     tilt = jnp.where(diverged | jnp.isnan(ticks.tilt), jnp.pi, ticks.tilt)  # and the torso over
     log = StepLog(landed, err, yaw_err, tilt_err, fallen, ticks.touched, low, tilt, frames, world.dynamics_invalid)
     anchor = jnp.where(go, pst[:2], 0.5 * (planned[0, :2] + planned[1, :2]))
+    swing_next = jnp.where(go, -s.swing, s.swing)
+    balance = None
+    if sim.cfg.capture_gain != 0:
+        new_st, _ = _split(soles, swing_next)
+        new_pst, _ = _split(planned, swing_next)
+        balance = jnp.where(go & ~fallen, balance_shift(sim, d, ctrl, new_st, new_pst), 0.0)
     return SimState(
         d,
         ctrl,
         soles,
         planned,
-        jnp.where(go, -s.swing, s.swing),
+        swing_next,
         anchor,
         step.corr,
         log,
@@ -442,4 +472,5 @@ def end_step(
         step.key,
         _believed_error(world, step.belief_key),
         sent,
+        balance,
     )

@@ -61,7 +61,7 @@ _POSITIVE = (0.0, _INF, False, False)
 _NON_NEGATIVE = (0.0, _INF, True, False)
 _RANGES: dict[str, tuple[float, float, bool, bool]] = {
     **dict.fromkeys(("step_time", "control_dt", "preview_time", "com_height", "pelvis_height", "preview_r",
-                     "land_decay", "land_delay", "ankle_leak", "contact_force"), _POSITIVE),
+                     "land_decay", "land_delay", "ankle_leak", "contact_force", "capture_max"), _POSITIVE),
     **dict.fromkeys(("clearance", "preview_q", "land_gain", "stance_gain", "ankle_damping", "cop_edge",
                      "dcm_gain"), _NON_NEGATIVE),
     "ds_fraction": (0.0, 1.0, True, False),
@@ -69,6 +69,7 @@ _RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "swing_lift": (0.0, 0.5, False, True),
     "land_ramp": (0.0, 1.0, False, True),
     "descent_drop": (0.0, 1.0, True, True),
+    "capture_gain": (0.0, 4.0, True, True),
     "com_offset": (-_INF, _INF, False, False),
 }
 
@@ -128,6 +129,13 @@ class WalkConfig:
         walks best, and half of it at 20 ms, where the full gain makes robots
         fall on rough ground (docs/walk_families.md, "Control delay and
         pushes", has the figures).
+      capture_gain, capture_max: capture-point stepping (0 = off, which
+        compiles the walker without it): at each step's end the next step is
+        moved by ``capture_gain`` times how far the measured capture point
+        runs ahead of the LIPM's (:func:`dcm_error`), at most ``capture_max``
+        metres, before the selector chooses its foothold on the terrain (the
+        walker's ``StanceInfo.balance``): a robot pushed ahead of its plan
+        steps further that way.
       stance_gain: the same feedback on the legs that carry the body (0 = the
         offsets only fade), low-passed with ``land_decay``: the soles are held
         partly level against the measured body tilt (foot compliance). Off by
@@ -198,6 +206,8 @@ class WalkConfig:
     contact_force: float = 50.0
     dcm_gain: float = 3.0
     descent_drop: float = 0.15
+    capture_gain: float = 0.0
+    capture_max: float = 0.05
 
     def __post_init__(self):
         # Every field is checked here, so dataclasses.replace is checked too: the config is static (hashed into

@@ -71,6 +71,7 @@ from ijoy_jax.sim._step import (
     frame_ticks,
     init_state,
     make_world,
+    balance_shift,
     stance_info,
     tick,
 )
@@ -95,6 +96,7 @@ __all__ = [
     "World",
     "make_world",
     "init_state",
+    "balance_shift",
     "stance_info",
     "Step",
     "TickState",
