@@ -50,7 +50,8 @@ class StanceInfo(NamedTuple):
     swing_from: jax.Array  # (3,) world pose the swing foot starts from
     # (2,) m, world frame, or None (none): how far the robot's balance asks the next step to move (e.g. a pushed
     # robot's capture-point lead; ijoy_jax.sim.controller.WalkConfig.capture_gain). The exact selector measures
-    # the candidates from the stance moved by it, so the step's foothold is still chosen on the terrain.
+    # the candidates from the stance moved by it, so the step's foothold is still chosen on the terrain (rollouts
+    # and sweeps; the live drive's decider and the other selectors measure from the stance itself).
     balance: jax.Array | None = None
 
 class Walker(NamedTuple):
