@@ -249,14 +249,22 @@ distributed.initialize(distributed.layout(num_processes=2, process_id=1, coordin
 """
 
 
+def _terminal_ctrl_c():
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 @pytest.mark.parametrize("script", [_WAITS_FOR_THE_COORDINATOR, _WAITS_FOR_AGREE], ids=["coordinator", "agree"])
 def test_ctrl_c_stops_a_process_waiting_for_process_0(script):
     """Processes other than 0 wait for process 0 twice before their chunks: for the coordinator to come up (up to
     5 minutes), and for the chunk size it agrees. Ctrl-C stops either wait at once (they run beside the main
     thread, as the final barrier's does); before, the first did not stop, the second only at its end."""
+    # A suite started as a background job (nohup, `cmd &`) inherits SIGINT ignored, and an ignored or blocked
+    # signal stays so across exec: the child gets Ctrl-C's default, as a process started from a terminal has it.
+    # (One fast-tier run here, started with nohup, timed out in both cases; alone they pass.)
     p = subprocess.Popen([sys.executable, "-c", script, f"localhost:{_free_port()}"],
                          env=dict(os.environ, JAX_PLATFORMS="cpu"), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True)
+                         text=True, preexec_fn=_terminal_ctrl_c)
     try:
         assert p.stdout.readline() == "waiting\n", p.stderr.read()
         time.sleep(2.0)  # inside the native wait (after the imports)
