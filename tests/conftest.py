@@ -34,6 +34,7 @@ import jax  # noqa: E402
 import pytest  # noqa: E402
 
 import ijoy_jax.sim  # noqa: F401, E402  headless: selects MUJOCO_GL=egl before any test module imports mujoco
+from ijoy_jax.jit_cache import COMPILE_EVENTS  # noqa: E402
 
 hypothesis.settings.register_profile("ci", derandomize=True, deadline=None, max_examples=40,
                                      print_blob=True)
@@ -63,6 +64,7 @@ def pytest_configure(config):
     min_s = os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", _CACHE_MIN_COMPILE_S)
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_s))
+    jax.monitoring.register_event_duration_secs_listener(_count_compiling)
 
 
 def pytest_sessionfinish(session):
@@ -214,6 +216,9 @@ def pytest_collection_modifyitems(config, items):
     return result
 
 
+COMPILE_REPORT_FILES = 10  # the terminal summary names the files that compiled longest, this many
+
+
 class _WorkerTime:
     """The sum of every test's setup, call and teardown durations (seconds), over all xdist workers: the
     worker-minutes a run costs, whatever the wall time (the controller receives every worker's reports), in
@@ -223,11 +228,35 @@ class _WorkerTime:
     by_file: dict[str, dict[str, float]] = {tier: {} for tier in TIERS}
 
 
+class _Compiling:
+    """Seconds JAX spent compiling (:data:`ijoy_jax.jit_cache.COMPILE_EVENTS`) in this process since the last
+    test phase's report, which carries them to the controller (``user_properties``, as xdist sends them)."""
+
+    seconds = 0.0
+    total = 0.0  # the controller's sums over every worker: all, and by file
+    by_file: dict[str, float] = {}
+
+
+def _count_compiling(event, duration, **_):
+    if event in COMPILE_EVENTS:
+        _Compiling.seconds += float(duration)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    outcome.get_result().user_properties.append(("compile_s", _Compiling.seconds))
+    _Compiling.seconds = 0.0
+
+
 def pytest_runtest_logreport(report):
     _WorkerTime.total += report.duration
     files = _WorkerTime.by_file["slow" if "slow" in report.keywords else "fast"]
     file = report.nodeid.split("::", 1)[0]
     files[file] = files.get(file, 0.0) + report.duration
+    compiling = sum(v for k, v in report.user_properties if k == "compile_s")
+    _Compiling.total += compiling
+    _Compiling.by_file[file] = _Compiling.by_file.get(file, 0.0) + compiling
 
 
 def pytest_addoption(parser):
@@ -262,6 +291,10 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         return
     terminalreporter.write_line(f"worker time: {_WorkerTime.total / 60:.1f} worker-minutes "
                                 "(the sum of every test's setup, call and teardown)")
+    top = sorted(_Compiling.by_file.items(), key=lambda kv: -kv[1])[:COMPILE_REPORT_FILES]
+    terminalreporter.write_line(f"of which compiling: {_Compiling.total / 60:.1f} worker-minutes (JAX's tracing, "
+                                "lowering and XLA compiles); most in " + ", ".join(
+                                    f"{Path(f).name} {v:.0f} s" for f, v in top if v >= 1.0))
     durations = load_durations()
     missing = sorted(f for tier in TIERS for f in _WorkerTime.by_file[tier] if f not in durations[tier])
     if missing:

@@ -142,3 +142,27 @@ def test_the_table_holds_only_files_that_exist():
     for tier, files in table.items():
         for file, seconds in files.items():
             assert (TESTS.parent / file).is_file() and seconds >= 0, (tier, file)
+
+
+def test_compile_time_is_counted_per_test_phase_and_summed_per_file(conftest, monkeypatch):
+    """JAX's compile events (and no other event) add up until a phase's report takes them along; the controller
+    sums them by file (the terminal summary's "of which compiling" line)."""
+    import jax
+
+    monkeypatch.setattr(conftest._Compiling, "seconds", 0.0)
+    monkeypatch.setattr(conftest._Compiling, "total", 0.0)
+    monkeypatch.setattr(conftest._Compiling, "by_file", {})
+    conftest._count_compiling("/jax/core/compile/backend_compile_duration", 1.5)
+    conftest._count_compiling("/jax/core/compile/jaxpr_trace_duration", 0.25)
+    conftest._count_compiling("/jax/some/other/event", 100.0)
+    assert conftest._Compiling.seconds == 1.75
+    monkeypatch.setattr(conftest._Compiling, "seconds", 0.0)
+    jax.jit(lambda x: x * 3 + 1)(jax.numpy.zeros(7919))  # a shape nothing else compiles: a real compile
+    assert conftest._Compiling.seconds > 0.0
+    report = SimpleNamespace(duration=2.0, keywords={}, nodeid="tests/test_x.py::t",
+                             user_properties=[("compile_s", 1.25)])
+    monkeypatch.setattr(conftest._WorkerTime, "total", 0.0)
+    monkeypatch.setattr(conftest._WorkerTime, "by_file", {"fast": {}, "slow": {}})
+    conftest.pytest_runtest_logreport(report)
+    conftest.pytest_runtest_logreport(report)
+    assert conftest._Compiling.by_file == {"tests/test_x.py": 2.5} and conftest._Compiling.total == 2.5

@@ -41,7 +41,6 @@ bar plot of falls, stops and progress per family, perfect and simulated side by 
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import math
 import time
@@ -57,7 +56,7 @@ import numpy as np
 
 from ijoy_jax import control, robots, select
 from ijoy_jax.extras import require
-from ijoy_jax.jit_cache import compiled_count
+from ijoy_jax.jit_cache import compile_seconds, compiled_count
 from ijoy_jax.select_options import SelectOptions
 from ijoy_jax.sim import model
 from ijoy_jax.sim import walker as W
@@ -134,28 +133,6 @@ def family_robot(family: WalkFamily) -> robots.Robot:
 
 WALKERS = ("perfect", "mjx")
 """The perfect robot (:func:`ijoy_jax.control.perfect_walker`) and the MJX biped (:mod:`ijoy_jax.sim.walker`)."""
-COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration",
-                  "/jax/core/compile/backend_compile_duration")
-"""JAX's own events (:mod:`jax.monitoring`) whose durations add up to a program's compile time: tracing of a
-top-level program, lowering to MLIR, and the backend's compile."""
-
-
-@contextlib.contextmanager
-def compile_seconds():
-    """Context manager yielding a one-element list that accumulates the seconds JAX spends compiling inside it."""
-    total = [0.0]
-
-    def listener(event, duration, **_):
-        if event in COMPILE_EVENTS:
-            total[0] += float(duration)
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
-        yield total
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
-
-
 def forward_commands(batch: int, steps: int, speed: float = FORWARD) -> jax.Array:
     """(batch, steps, 3) the held forward command ``(speed, 0, 0)`` (m/s, m/s, rad/s) for every robot and step."""
     return jnp.broadcast_to(jnp.asarray([speed, 0.0, 0.0], jnp.float32), (batch, steps, 3))
