@@ -57,14 +57,14 @@ def pytest_configure(config):
     same programs are compiled in several test files, on both xdist workers, in the notebooks' kernels and in
     subprocess tests, which inherit it through the environment. Compiled code is keyed by its program, JAX
     version and flags, so a hit runs the same code; the no-recompile tests count traces and jit cache entries,
-    which this cache does not change."""
+    which this cache does not change. Every run counts the seconds spent compiling (:class:`_Compiling`)."""
+    jax.monitoring.register_event_duration_secs_listener(_count_compiling)
     if getattr(config, "cache", None) is None:  # -p no:cacheprovider
         return
     path = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(config.cache.mkdir("jax_compilation_cache")))
     min_s = os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", _CACHE_MIN_COMPILE_S)
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_s))
-    jax.monitoring.register_event_duration_secs_listener(_count_compiling)
 
 
 def pytest_sessionfinish(session):
@@ -291,10 +291,10 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         return
     terminalreporter.write_line(f"worker time: {_WorkerTime.total / 60:.1f} worker-minutes "
                                 "(the sum of every test's setup, call and teardown)")
-    top = sorted(_Compiling.by_file.items(), key=lambda kv: -kv[1])[:COMPILE_REPORT_FILES]
+    top = [f"{Path(f).name} {v:.0f} s" for f, v in sorted(_Compiling.by_file.items(), key=lambda kv: -kv[1])
+           if v >= 1.0][:COMPILE_REPORT_FILES]
     terminalreporter.write_line(f"of which compiling: {_Compiling.total / 60:.1f} worker-minutes (JAX's tracing, "
-                                "lowering and XLA compiles); most in " + ", ".join(
-                                    f"{Path(f).name} {v:.0f} s" for f, v in top if v >= 1.0))
+                                "lowering and XLA compiles)" + (f"; most in {', '.join(top)}" if top else ""))
     durations = load_durations()
     missing = sorted(f for tier in TIERS for f in _WorkerTime.by_file[tier] if f not in durations[tier])
     if missing:
