@@ -32,7 +32,7 @@ ROOT = Path(__file__).parents[1]
 
 CASES = [
     (["demo", "--margin", "-1"], "margin must be >= 0"),
-    (["demo", "--steps", "0"], "num_steps must be at least 1"),
+    (["demo", "--steps", "0"], "argument --steps: takes an integer >= 1, got '0'"),
     (["bench", "footcost", "--ref", "ref.npz"], "--ref is read or written by 'ijoy bench check' only"),
     (["bench", "check", "--ref", "no/such/folder/ref.npz"], "no folder for"),
     (["bench", "walk", "--families", "flat,lava"], "unknown terrain families ['lava']"),
@@ -54,7 +54,7 @@ CASES = [
     (["sim", "render", "--strip", "no/such/folder/strip.png"], "argument --strip: no folder for"),
     (["demo", "--out", "no/such/folder/demo.png"], "argument --out: no folder for 'no/such/folder/demo.png'"),
     (["demo", "--out", "."], "argument --out: '.' is a folder"),
-    (["demo", "--steps", "abc"], "argument --steps: invalid int value: 'abc'"),
+    (["demo", "--steps", "abc"], "argument --steps: takes an integer >= 1, got 'abc'"),
     (["bench", "walk", "--batch", "0"], "argument --batch: takes an integer >= 1, got '0'"),
     (["bench", "lava"], "argument BENCHMARK: invalid choice: 'lava'"),
     (["tune", "forward", "--out", "/dev/null/o"], "argument --out: no folder for '/dev/null/o'"),
@@ -68,6 +68,9 @@ CASES = [
     (["tune", "forward", "--out", "o", "--set", "distance"], "--set takes NAME=VALUE, e.g. distance=0.04"),
     (["tune", "inverse", "--out", "o", "--config", "no_such.toml"], "No such file or directory"),
     (["cue", "study", "--out", "o", "--train", "0"], "--train must be at least 1"),
+    (["cue", "study", "--out", "o", "--steps", "0"], "argument --steps: takes an integer >= 1, got '0'"),
+    (["tune", "forward", "--out", "o", "--set", "density=0.05"], "--set 'density=0.05': ForwardConfig: density must"),
+    (["tune", "forward", "--out", "o", "--steps", "0"], "--steps: ForwardConfig: steps must be >= 1"),
     (["cue", "field", "--out", "no/such/folder/field.png"], "no folder for"),
     (["drive", "--server", "nohost"], "server must be HOST:PORT, got 'nohost'"),
     (["drive", "--margin", "-1"], "margin must be >= 0"),
@@ -142,7 +145,8 @@ def test_the_ijoy_command_runs_as_a_program(tmp_path):
     """The real command in a process of its own: the module's entry point, its exit status and its one line."""
     p = run_cli(["demo", "--steps", "0"], tmp_path)
     assert p.returncode == 2 and p.stdout == "" and list(tmp_path.iterdir()) == []
-    assert p.stderr.strip().splitlines() == ["ijoy: error: num_steps must be at least 1, got 0"], p.stderr
+    assert p.stderr.strip().splitlines() == [
+        "ijoy: error: argument --steps: takes an integer >= 1, got '0' (see 'ijoy demo --help')"], p.stderr
 
 
 def test_every_subcommand_has_a_bad_input_case(tmp_path):

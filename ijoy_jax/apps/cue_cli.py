@@ -10,7 +10,7 @@ import json
 import time
 from pathlib import Path
 
-from ijoy_jax.apps.options import output_file, output_folder
+from ijoy_jax.apps.options import output_file, output_folder, positive_int
 
 
 def add_parser(sub) -> None:
@@ -33,7 +33,7 @@ def add_parser(sub) -> None:
     st.add_argument("--train", type=int, default=8, help="training scenarios per family (default: %(default)s)")
     st.add_argument("--held-out", type=int, default=40,
                     help="held-out scenarios per family (default: %(default)s)")
-    st.add_argument("--steps", type=int, default=30, help="decisions per drive (default: %(default)s)")
+    st.add_argument("--steps", type=positive_int, default=30, help="decisions per drive (default: %(default)s)")
     st.add_argument("--tune-steps", type=int, default=40, help="Adam steps (default: %(default)s; 0: no tuning)")
     st.add_argument("--learning-rate", type=float, default=0.05, help="Adam's (default: %(default)s)")
     st.add_argument("--seed", type=int, default=0, help="training scenarios; held-out use seed + 1 (default: 0)")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 
-from ijoy_jax.apps.options import output_file
+from ijoy_jax.apps.options import output_file, positive_int
 
 
 def add_parser(sub) -> None:
@@ -22,7 +22,7 @@ def add_parser(sub) -> None:
         "JSON and draws their footholds in one PNG.",
     )
     demo.add_argument("--out", default="ijoy_demo.png", type=output_file, help="PNG to write (default: %(default)s)")
-    demo.add_argument("--steps", type=int, default=24, help="number of steps (default: %(default)s)")
+    demo.add_argument("--steps", type=positive_int, default=24, help="number of steps (default: %(default)s)")
     demo.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
 
 

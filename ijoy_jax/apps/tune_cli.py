@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import time
 import types
 import typing
@@ -214,7 +215,14 @@ def _build_config(cls, args, extra: dict):
     unknown = sorted(set(given) - fields)
     if unknown:
         raise ValueError(f"unknown config field(s) {unknown}; known: {sorted(fields)}")
-    return cls(**{k: _field_value(cls, k, v, where) for k, (v, where) in given.items()})
+    values = {k: _field_value(cls, k, v, where) for k, (v, where) in given.items()}
+    try:
+        return cls(**values)
+    except ValueError as e:  # the config's own checks name the field: say where its value came from
+        msg = str(e)
+        found = [(m.start(), where) for k, (_, where) in given.items()
+                 if (m := re.search(rf"\b{re.escape(k)}\b", msg))]
+        raise ValueError(f"{min(found)[1]}: {msg}" if found else msg) from None
 
 
 def main(args) -> int:

@@ -204,6 +204,10 @@ def _check_config(cfg: ForwardConfig) -> None:
         need(getattr(cfg, name) > 0 and math.isfinite(getattr(cfg, name)), f"{name} must be finite and > 0")
     for name in ("num_noise_samples", "batch_size", "steps"):
         need(int(getattr(cfg, name)) >= 1, f"{name} must be >= 1")
+    try:
+        robots.check_density(cfg.density)  # the action set's range, before any robot is built
+    except ValueError as e:
+        need(False, str(e))
     need(0 < cfg.margin < cfg.max_margin, f"margin must be in (0, max_margin={cfg.max_margin}), got {cfg.margin}")
     if cfg.names is not None:
         bad = [n for n in cfg.names if n not in TUNABLE]
