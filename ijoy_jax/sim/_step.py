@@ -284,7 +284,8 @@ def balance_shift(sim: Sim, d: mjx.Data, cs: controller.CtrlState, stance, plann
 
 def stance_info(state: SimState) -> control.StanceInfo:
     """The next decision's stance (the Walker's ``stance``): the measured stance foot and the swing foot (x, y,
-    yaw), as the robot believes them (shifted by :attr:`SimState.belief`), and the stance side."""
+    yaw), as the robot believes them (shifted by :attr:`SimState.belief`), the stance side, and the next
+    step's capture-point shift (:func:`balance_shift`; None while ``WalkConfig.capture_gain`` is 0)."""
     st, sw = _split(state.soles, state.swing)
     return control.StanceInfo(_believed(st[PLANAR], state), -state.swing, _believed(sw[PLANAR], state),
                               state.balance)
