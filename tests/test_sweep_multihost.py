@@ -93,7 +93,16 @@ def _launch(tiny: Path, out: Path, pid: int, port: int, extra_env=None, exit_del
             "--process-id", str(pid), "--coordinator", f"localhost:{port}", *extra_args]
     cmd = ([sys.executable, "-c", _CLI_THEN_WAIT, str(exit_delay_s)] if exit_delay_s
            else [sys.executable, "-m", "ijoy_jax.apps.cli"]) + args
-    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_terminal_ctrl_c)
+
+
+def _terminal_ctrl_c():
+    """A child's Ctrl-C as a terminal gives it: SIGINT at its default disposition, unblocked. A suite started as
+    a background job (nohup, `cmd &`) inherits SIGINT ignored, and an ignored or blocked signal stays so across
+    exec, so the tests that send SIGINT timed out there (a full run with nohup, 2026-11-30) and passed in CI."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def _kill_process_1_after_its_first_part(tiny: Path, out: Path, port: int) -> None:
@@ -249,19 +258,11 @@ distributed.initialize(distributed.layout(num_processes=2, process_id=1, coordin
 """
 
 
-def _terminal_ctrl_c():
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-
-
 @pytest.mark.parametrize("script", [_WAITS_FOR_THE_COORDINATOR, _WAITS_FOR_AGREE], ids=["coordinator", "agree"])
 def test_ctrl_c_stops_a_process_waiting_for_process_0(script):
     """Processes other than 0 wait for process 0 twice before their chunks: for the coordinator to come up (up to
     5 minutes), and for the chunk size it agrees. Ctrl-C stops either wait at once (they run beside the main
     thread, as the final barrier's does); before, the first did not stop, the second only at its end."""
-    # A suite started as a background job (nohup, `cmd &`) inherits SIGINT ignored, and an ignored or blocked
-    # signal stays so across exec: the child gets Ctrl-C's default, as a process started from a terminal has it.
-    # (One fast-tier run here, started with nohup, timed out in both cases; alone they pass.)
     p = subprocess.Popen([sys.executable, "-c", script, f"localhost:{_free_port()}"],
                          env=dict(os.environ, JAX_PLATFORMS="cpu"), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                          text=True, preexec_fn=_terminal_ctrl_c)
