@@ -634,6 +634,13 @@ def _sensed(sim, com, vel):
     return SimpleNamespace(sensordata=jnp.asarray(data))
 
 
+class SimpleCtrl:
+    """The controller's state as :func:`W.balance_shift` reads it (the LIPM's rows)."""
+
+    def __init__(self, lipm):
+        self.lipm = jnp.asarray(lipm)
+
+
 @pytest.mark.parametrize("gain, limit", [(1.0, 0.5), (2.5, 0.5), (2.5, 0.03)])
 def test_balance_shift_is_the_capture_points_lead_in_the_world_frame(sim, gain, limit):
     """The next step moves by gain x (measured - planned capture point), rotated from the plan's frame (its yaw
@@ -656,13 +663,6 @@ def test_balance_shift_is_the_capture_points_lead_in_the_world_frame(sim, gain, 
         want = want * limit / np.linalg.norm(want)
     np.testing.assert_allclose(got, want, atol=2e-5)  # float32 of centimetres
     assert np.linalg.norm(got) <= limit + 1e-6
-
-
-class SimpleCtrl:
-    """The controller's state as :func:`W.balance_shift` reads it (the LIPM's rows)."""
-
-    def __init__(self, lipm):
-        self.lipm = jnp.asarray(lipm)
 
 
 def test_the_exact_selector_measures_its_candidates_from_the_stance_moved_by_balance():
