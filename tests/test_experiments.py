@@ -358,14 +358,15 @@ def _stances(scenario, traj):
     return np.array(out)
 
 
-def _cells(shape, pose, grow):
-    """(nx, ny) cells touched by the footprint at ``pose`` grown by ``grow`` on every side."""
-    return rect_touches_cells(pose[0], pose[1], pose[2], HL + grow, HW + grow, RES, shape)
+def _cells(shape, pose, grow, half=(HL, HW)):
+    """(nx, ny) cells touched by the footprint at ``pose`` grown by ``grow`` on every side (``half``: the sole's
+    half length and width; HRP-2's by default)."""
+    return rect_touches_cells(pose[0], pose[1], pose[2], half[0] + grow, half[1] + grow, RES, shape)
 
 
-def _inside_map(shape, pose, grow):
+def _inside_map(shape, pose, grow, half=(HL, HW)):
     c, s = math.cos(pose[2]), math.sin(pose[2])
-    hl, hw = HL + grow, HW + grow
+    hl, hw = half[0] + grow, half[1] + grow
     ex, ey = abs(c) * hl + abs(s) * hw, abs(s) * hl + abs(c) * hw
     return (pose[0] - ex >= -EPS and pose[0] + ex <= shape[0] * RES + EPS
             and pose[1] - ey >= -EPS and pose[1] + ey <= shape[1] * RES + EPS)
@@ -387,15 +388,15 @@ def _taken(traj):
     return np.flatnonzero(traj.taken)
 
 
-def _assert_walks_safely(name, sc, traj):
+def _assert_walks_safely(name, sc, traj, half=(HL, HW)):
     """Every step taken, none stopped, and every foothold's grown footprint free and inside the map
     (checked here in NumPy, independently of the library's ``on_obstacle``)."""
     assert traj.taken.all() and not traj.stopped.any(), name
     assert traj.on_obstacle.sum() == 0, name
     for t in _taken(traj):
         pose = traj.footsteps[t]
-        assert _inside_map(sc.free.shape, pose, sc.margin), (name, t, pose)
-        assert sc.free[_cells(sc.free.shape, pose, sc.margin - EPS)].all(), (name, t, pose)
+        assert _inside_map(sc.free.shape, pose, sc.margin, half), (name, t, pose)
+        assert sc.free[_cells(sc.free.shape, pose, sc.margin - EPS, half)].all(), (name, t, pose)
 
 
 def _repeats(traj, last=4):

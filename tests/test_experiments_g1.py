@@ -32,6 +32,7 @@ from test_experiments import (  # tests/ is on sys.path (pytest rootdir import)
     TOL,
     WALL_XS,
     X0,
+    _assert_walks_safely,
     _free,
     _relative,
     _repeats,
@@ -41,7 +42,6 @@ from test_experiments import (  # tests/ is on sys.path (pytest rootdir import)
 
 import ijoy_jax as ij
 from ijoy_jax.control import rollout
-from ijoy_jax.testing import rect_touches_cells
 
 pytestmark = pytest.mark.slow  # the G1's own compiled rollout; its robot is tested fast in test_robots_g1.py
 
@@ -104,15 +104,6 @@ def runs():
     return {n: jax.tree_util.tree_map(lambda x, i=i: x[i], traj) for i, n in enumerate(names)}
 
 
-def _assert_walks_safely(name, sc, traj):
-    """Every step taken, and every foothold's footprint grown by the margin free and inside the map (NumPy)."""
-    assert traj.taken.all() and not traj.stopped.any() and traj.on_obstacle.sum() == 0, name
-    for pose in traj.footsteps:
-        cells = rect_touches_cells(pose[0], pose[1], pose[2], HL + sc.margin - EPS, HW + sc.margin - EPS, RES,
-                                   sc.free.shape)
-        assert sc.free[cells].all(), (name, pose)
-
-
 def test_the_g1s_numbers_are_its_own():
     """What every expectation below derives from: the G1's lattice and sole, not HRP-2's."""
     assert (HL, HW) == pytest.approx((0.09, 0.03)) and P0_Y == pytest.approx(0.24) and L_MAX == pytest.approx(0.2)
@@ -124,7 +115,7 @@ def test_the_g1s_numbers_are_its_own():
 def test_walks_up_to_a_wall_as_close_as_the_margin_allows_then_steps_in_place(name):
     sc, traj = scenarios()[name], runs()[name]
     m, wall = sc.margin, sc.info["wall_x"]
-    _assert_walks_safely(name, sc, traj)
+    _assert_walks_safely(name, sc, traj, half=(HL, HW))
     assert np.all(wall - (traj.footsteps[:, 0] + HL) >= m - EPS)  # never closer than the margin
     final = traj.feet[:, 0] + HL
     assert np.all(wall - final >= m - EPS) and np.all(wall - final < m + TOL), (final, wall, m)
@@ -137,7 +128,7 @@ def test_sidesteps_along_an_l_shaped_blockage():
     leg; the left foot gains ground to the left at every step."""
     sc, traj = scenarios()["side-ell"], runs()["side-ell"]
     m, corner, wall = sc.margin, sc.info["corner_y"], sc.info["wall_x"]
-    _assert_walks_safely("side-ell", sc, traj)
+    _assert_walks_safely("side-ell", sc, traj, half=(HL, HW))
     np.testing.assert_allclose(traj.footsteps[:, 2], 0.0, atol=EPS)  # no rotation was commanded
     left = traj.footsteps[traj.sides > 0]
     assert np.all(np.diff(left[:, 1]) >= 0.07), left
@@ -154,7 +145,7 @@ def test_steps_over_an_obstacle_in_one_lane_only_below_the_length_limit():
     crossed_lengths = []
     for name in [n for n in scenarios() if n.startswith("over-")]:
         sc, traj = scenarios()[name], runs()[name]
-        _assert_walks_safely(name, sc, traj)
+        _assert_walks_safely(name, sc, traj, half=(HL, HW))
         c0, c1 = sc.info["obstacle"]
         right = traj.footsteps[traj.sides < 0]
         past = right[:, 0] - HL >= c1 - EPS
