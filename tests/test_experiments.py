@@ -503,12 +503,13 @@ def _crossed(sc, traj):
     return bool(past.any())
 
 
-def _lattice_predicts_crossing(c0, c1, m):
+def _lattice_predicts_crossing(c0, c1, m, hl=HL, l_max=L_MAX):
     """Exact outcome on this map: the blocked foot reaches the last lattice x whose grown front stays
-    before the obstacle, the other foot steps 0.2 m ahead of it, and the blocked foot then swings
-    0.4 m (2 L): it gets past iff its grown rear then clears the obstacle's far edge."""
-    x_last = X0 + DX_STEP * math.floor((c0 - HL - m - X0) / DX_STEP)
-    return x_last + 2 * L_MAX - HL - m >= c1
+    before the obstacle, the other foot steps L ahead of it, and the blocked foot then swings 2 L: it
+    gets past iff its grown rear then clears the obstacle's far edge (``hl``: the sole's half length,
+    ``l_max``: the longest step L; HRP-2's by default)."""
+    x_last = X0 + DX_STEP * math.floor((c0 - hl - m - X0) / DX_STEP)
+    return x_last + 2 * l_max - hl - m >= c1
 
 
 @pytest.mark.parametrize("margin", MARGINS)

@@ -19,7 +19,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from test_experiments import (  # tests/ is on sys.path (pytest rootdir import)
-    DX_STEP,
     EPS,
     FORWARD,
     OVER_X,
@@ -34,6 +33,7 @@ from test_experiments import (  # tests/ is on sys.path (pytest rootdir import)
     X0,
     _assert_walks_safely,
     _free,
+    _lattice_predicts_crossing,
     _relative,
     _repeats,
     _stances,
@@ -151,10 +151,7 @@ def test_steps_over_an_obstacle_in_one_lane_only_below_the_length_limit():
         past = right[:, 0] - HL >= c1 - EPS
         assert np.all(past | (right[:, 0] + HL <= c0 + EPS)), (name, right)  # before it or past it, never on it
         crossed = bool(past.any())
-        # the exact outcome on the lattice: the right foot stops at the last x whose grown front stays before
-        # the obstacle, the left one steps L ahead of it, and the right one then swings 2 L
-        x_last = X0 + DX_STEP * math.floor((c0 - HL - 0.02 - X0) / DX_STEP + 1e-6)
-        assert crossed == (x_last + 2 * L_MAX - HL - 0.02 >= c1 - EPS), (name, crossed)
+        assert crossed == _lattice_predicts_crossing(c0, c1, sc.margin, hl=HL, l_max=L_MAX), (name, crossed)
         if sc.info["b"] <= bound - TOL:
             assert crossed and traj.feet[:, 0].min() - HL > c1, (name, traj.feet)
         if sc.info["b"] > bound:
