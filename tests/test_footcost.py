@@ -28,6 +28,25 @@ def _flat2d(shape=(40, 40)):
     return ij.terrain.flat(shape, RES)
 
 
+SHAPE = (60, 60)  # every 2.5D map of the eager queries below: with PAD poses, one compiled program per query kind
+PAD = 496  # the action set's size: a query of N <= PAD poses is padded to it (:func:`_terms`)
+
+
+def _terms(t, robot, stance, side, steps, *, swing_from=None, action_index=0):
+    """``ij.foot_cost_terms`` of ``steps`` (N, 3) with their ``action_index`` (one or N), as NumPy arrays.
+
+    The query is padded to :data:`PAD` poses with copies of the first (their terms are dropped), so the queries of
+    this module on :data:`SHAPE` maps share one compiled program per kind (with or without ``swing_from``) instead
+    of one per number of poses. A pose's terms do not depend on the others in its batch."""
+    steps = np.asarray(steps, np.float32).reshape(-1, 3)
+    n = len(steps)
+    index = np.broadcast_to(np.asarray(action_index, np.int32), (n,))
+    pad = PAD - n
+    terms = ij.foot_cost_terms(t, robot, stance, side, np.concatenate([steps, np.repeat(steps[:1], pad, 0)]),
+                               swing_from=swing_from, action_index=np.concatenate([index, np.repeat(index[:1], pad)]))
+    return type(terms)(*(np.asarray(x)[:n] for x in terms))
+
+
 def test_single_cell_obstacle_exact_at_many_poses():
     """2D validity equals a brute-force geometric check of the grown footprint, cell by cell."""
     rng = np.random.default_rng(0)
@@ -154,7 +173,7 @@ def _mirror_pose(p):
     return np.stack([p[..., 0], -p[..., 1], -p[..., 2]], -1)
 
 
-def _rough_terrain(seed, has_height=True, shape=(50, 60)):
+def _rough_terrain(seed, has_height=True, shape=SHAPE):
     rng = np.random.default_rng(seed)
     h = 0.002 * rng.standard_normal(shape)
     h[20:35, 25:40] += 0.04  # a low platform
@@ -202,7 +221,7 @@ def _assert_same_costs(a, b):
 
 def test_height_metrics_match_numpy_reference():
     rng = np.random.default_rng(5)
-    shape = (50, 50)
+    shape = SHAPE
     xs = np.arange(shape[0])[:, None] * RES
     h = 0.1 * xs * 0.3 + 0.003 * rng.standard_normal(shape) + np.zeros(shape)
     h[30:, 28:] += 0.015
@@ -210,7 +229,7 @@ def test_height_metrics_match_numpy_reference():
     n = 150
     poses = np.column_stack([rng.uniform(0.35, 0.65, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
     stance = np.array([0.5, 0.3, 0.0])
-    terms = ij.foot_cost_terms(t, ROBOT, stance, -1, poses, action_index=np.zeros(n, int))
+    terms = _terms(t, ROBOT, stance, -1, poses)
     ref_stance = foot_metrics(h, RES, (0, 0), stance, L, W, 0.02)["rest"]
     checked = supports = 0
     shortfalls = []
@@ -260,28 +279,28 @@ def test_slope_of_a_ramp_and_its_limit():
     h = np.tan(alpha) * xs[:, None] * np.ones((1, 60))
     t = ij.terrain.from_arrays(h, None, RES)
     pose = np.array([[0.6, 0.6, 0.4]])
-    terms = ij.foot_cost_terms(t, ROBOT, pose[0], -1, pose, action_index=[0])
+    terms = _terms(t, ROBOT, pose[0], -1, pose)
     assert float(terms.slope_angle[0]) == pytest.approx(alpha, abs=1e-4)
     assert float(terms.roughness_m[0]) < 1e-5
     assert float(terms.slope[0]) == pytest.approx(float(ROBOT.metrics.slope_weight) * alpha, rel=1e-3)  # weight / rad
     steep = ROBOT.replace(metrics=ROBOT.metrics.replace(slope_limit=jnp.float32(math.radians(10))))
-    assert np.isinf(ij.foot_cost_terms(t, steep, pose[0], -1, pose, action_index=[0]).slope[0])
+    assert np.isinf(_terms(t, steep, pose[0], -1, pose).slope[0])
 
 
 def test_step_height_term_and_per_action_limit():
-    h = np.zeros((60, 60))
+    h = np.zeros(SHAPE)
     h[30:, :] = 0.05
     t = ij.terrain.from_arrays(h, None, RES)
     stance = np.array([0.45, 0.6, 0.0])  # on the low side, within the legs' reach of the step onto the high one
     onto = np.array([[0.9, 0.6, 0.0]])
-    terms = ij.foot_cost_terms(t, ROBOT, stance, -1, onto, action_index=[0])
+    terms = _terms(t, ROBOT, stance, -1, onto)
     assert float(terms.step_height_m[0]) == pytest.approx(0.05, abs=1e-6)
     assert float(terms.total[0]) == pytest.approx(0.05, abs=1e-5)  # step weight 1 / m, all else zero
     low = ROBOT.replace(max_step_height=jnp.full(496, 0.04, jnp.float32))
-    assert np.isinf(ij.foot_cost_terms(t, low, stance, -1, onto, action_index=[0]).step[0])
+    assert np.isinf(_terms(t, low, stance, -1, onto).step[0])
     # Near the edge the safety band sees the 5 cm drop: invalid by the band, not by the obstacle flag.
     edge = np.array([[0.6 + 0.121 + 0.01, 0.6, 0.0]])
-    e = ij.foot_cost_terms(t, ROBOT, stance, -1, edge, action_index=[0])
+    e = _terms(t, ROBOT, stance, -1, edge)
     assert np.isinf(e.band[0]) and e.obstacle[0] == 0 and float(e.band_m[0]) == pytest.approx(0.05, abs=1e-6)
 
 
@@ -308,7 +327,7 @@ def test_sole_tilt_puts_the_sole_on_the_plane_through_rpy_to_rot(gx, gy, yaw):
     assert float(roll) == pytest.approx(want_roll, abs=ROT_TOL)
 
 
-def _ramp(alpha, shape=(60, 60)):
+def _ramp(alpha, shape=SHAPE):
     """A plane rising at ``alpha`` rad along +x (heights at cell centres)."""
     xs = (np.arange(shape[0]) + 0.5) * RES
     return ij.terrain.from_arrays(np.tan(alpha) * xs[:, None] * np.ones((1, shape[1])), None, RES)
@@ -329,7 +348,7 @@ def test_a_sole_tilted_beyond_the_ankles_is_refused_by_the_ankle_term(across):
     yaw = math.pi / 2 if across else 0.0  # the foot faces across the ramp (+y) or up it (+x)
     pose = np.array([[0.6, 0.6, yaw]])
     for alpha, refused in ((limit + math.radians(2.0), True), (limit - math.radians(2.0), False)):
-        terms = ij.foot_cost_terms(_ramp(alpha), robot, [0.6, 0.41, 0.0], -1, pose, action_index=[0])
+        terms = _terms(_ramp(alpha), robot, [0.6, 0.41, 0.0], -1, pose)
         want_pitch, want_roll = (0.0, -alpha) if across else (-alpha, 0.0)  # up the ramp: toe up; across: right side up
         assert float(terms.sole_pitch_rad[0]) == pytest.approx(want_pitch, abs=1e-4)
         assert float(terms.sole_roll_rad[0]) == pytest.approx(want_roll, abs=1e-4)
@@ -345,8 +364,7 @@ def test_the_default_ankle_limits_roll_tighter_than_they_pitch():
     pitch, roll = float(robot.max_sole_pitch), float(robot.max_sole_roll)
     assert roll < pitch <= float(ROBOT.metrics.slope_limit) + 1e-7  # pitch never refuses what the slope limit accepts
     t = _ramp(0.5 * (pitch + roll))
-    terms = ij.foot_cost_terms(t, robot, [0.6, 0.41, 0.0], -1, [[0.6, 0.6, 0.0], [0.6, 0.6, math.pi / 2]],
-                               action_index=[0, 0])
+    terms = _terms(t, robot, [0.6, 0.41, 0.0], -1, [[0.6, 0.6, 0.0], [0.6, 0.6, math.pi / 2]])
     assert np.isfinite(terms.total[0]) and np.isinf(terms.ankle[1])
 
 
@@ -355,14 +373,14 @@ def test_soles_farther_apart_than_the_legs_reach_are_refused_by_the_reach_term(h
     """The reach term: the 3D distance of the sole centres against max_sole_distance (0.50 m for HRP-2). On a
     2.5D map the height change counts: 0.45 m ahead and 0.25 m up is 0.515 m away."""
     limit = float(ROBOT.max_sole_distance)
-    h = np.zeros((60, 60))
+    h = np.zeros(SHAPE)
     if has_height:
         h[35:, :] = 0.25  # a platform from x = 0.7 m
     t = ij.terrain.from_arrays(h, None, RES) if has_height else ij.terrain.flat(h.shape, RES)
     robot = _lenient(ROBOT)
     stance = np.array([0.4, 0.6, 0.0])
     steps = np.array([[0.4 + limit - 0.01, 0.6, 0.0], [0.4 + limit + 0.01, 0.6, 0.0], [0.85, 0.6, 0.0]])
-    terms = ij.foot_cost_terms(t, robot, stance, -1, steps, action_index=[0, 0, 0])
+    terms = _terms(t, robot, stance, -1, steps)
     dz = np.asarray(terms.step_height_m)
     np.testing.assert_allclose(np.asarray(terms.sole_distance_m), np.hypot(steps[:, 0] - 0.4, dz), atol=1e-5)
     assert np.isinf(np.asarray(terms.reach)).tolist() == [has_height, True, has_height]
@@ -373,16 +391,16 @@ def test_soles_farther_apart_than_the_legs_reach_are_refused_by_the_reach_term(h
 
 @pytest.mark.parametrize("bar, valid", [(0.08, True), (0.12, False)])
 def test_swing_path_clearance(bar, valid):
-    h = np.zeros((60, 60))
+    h = np.zeros(SHAPE)
     h[29:31, :] = bar  # a 4 cm wide bar across the map at x = 0.58..0.62
     t = ij.terrain.from_arrays(h, None, RES)
     stance = np.array([0.6, 0.5, 0.0])
     start, end = np.array([0.42, 0.69, 0.0]), np.array([[0.78, 0.69, 0.0]])
-    terms = ij.foot_cost_terms(t, ROBOT, stance, -1, end, swing_from=start, action_index=[0])
+    terms = _terms(t, ROBOT, stance, -1, end, swing_from=start)
     assert float(terms.path_height_m[0]) == pytest.approx(bar, abs=1e-6)
     assert np.isinf(terms.swing_path[0]) != valid
     # Without the start pose there is no path check.
-    assert ij.foot_cost_terms(t, ROBOT, stance, -1, end, action_index=[0]).swing_path[0] == 0
+    assert _terms(t, ROBOT, stance, -1, end).swing_path[0] == 0
 
 
 def test_action_cost_is_added_and_nearest_action_is_used():
@@ -580,12 +598,12 @@ def test_total_is_the_sum_of_the_cost_terms_and_the_named_terms_are_all_of_them(
     valid and refused by each kind of term, a finite total equals the sum of the others, and an infinite one has
     an infinite term among them."""
     rng = np.random.default_rng(9)
-    h = 0.004 * rng.standard_normal((50, 50)) + np.arange(50)[:, None] * RES * 0.2
+    h = 0.004 * rng.standard_normal(SHAPE) + np.arange(SHAPE[0])[:, None] * RES * 0.2
     h[30:, :] += 0.06
     t = ij.terrain.from_arrays(h.astype(np.float32), None, RES)
     stance = np.array([0.5, 0.5, 0.3])
     terms = ij.foot_cost_terms(t, ROBOT, stance, -1, ij.action_steps(ROBOT, stance, -1),
-                               swing_from=np.array([0.45, 0.7, 0.3]))
+                               swing_from=np.array([0.45, 0.7, 0.3]), action_index=np.arange(PAD))
     names = footcost.COST_TERMS
     assert names[0] == "total" and names[-1] == "unsupported" and {"support", "ankle"} <= set(names)
     assert not any(n.endswith(("_m", "_rad", "_angle")) or n == "action_index" for n in names)
