@@ -362,10 +362,10 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
 
             return (1.0 - tx) * ((1.0 - ty) * at(0, 0) + ty * at(0, 1)) + tx * ((1.0 - ty) * at(1, 0) + ty * at(1, 1))
 
-        # The rested sole (footcost.sole, the same code as plane_metrics'): its height, tilt and support.
+        # The rested sole (footcost.sole, plane_metrics' code in the kernel's layout): its height, tilt and support.
         du, dv = contact_offsets(p[_FHL], p[_FHW], p[_CONTACT_INSET], c, s)
         rest = sole_on_ground(tuple(ground_at(du[i], dv[i]) for i in range(6)), p[_FHL], p[_FHW],
-                              p[_CONTACT_INSET], p[_CONTACT_TOL])
+                              p[_CONTACT_INSET], p[_CONTACT_TOL], unrolled=True)
         rested = jnp.isfinite(rest.height)
         too_big = too_big | ~rested
         height = jnp.where(rested, rest.height + h_ref, h_ref)  # the rested sole's, as the step's height

@@ -14,8 +14,15 @@ coefficients depend on the sole's size only, so per candidate a triple costs a f
 is the lowest plane under the centre among those above every point. Where several are lowest (the sole rests on
 an edge through its centre, such as the line of its middle points, and can turn about it), it takes the middle
 of their range: the plane halfway between the two that touch a point on either side. It is exact, has no
-iteration to converge, and uses only arithmetic and selects, so both FootCost paths
-(:mod:`ijoy_jax.footcost.xla` and the fused kernel of :mod:`ijoy_jax.footcost.pallas`) run this same code.
+iteration to converge, and uses only arithmetic and selects.
+
+Two layouts of the same arithmetic. The XLA path (:mod:`ijoy_jax.footcost.xla`) stacks the points, triples and
+point pairs on leading axes (:func:`rest_on_points`): a few dozen array operations, which XLA compiles in about a
+third of the time the unrolled layout takes (the rested sole was 37 % of a 2.5D ``select_step``'s compile). The
+fused kernel (:mod:`ijoy_jax.footcost.pallas`) unrolls them into operations on its blocks
+(``unrolled=True``): a Triton block holds power-of-two shapes only, and the kernel has no gathers. Both compute
+every plane, check and edge with the same formulas in the same order; XLA may contract a multiply-add
+differently in the two layouts, so they agree to float32 rounding (tests/test_sole.py compares them).
 
 The contact polygon is the convex hull of the points within ``tol`` of the rested sole; its ``margin`` is the
 distance from the centre (the ankle, where the centre of pressure sits at rest) to its nearest edge: how far the
@@ -26,11 +33,13 @@ on the front half only with the heel hanging, has margin 0.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 # m: a point counts as under (or on) a candidate plane, and as in contact, within this of it: float32 rounding of
 # the plane through three heights of a few decimetres' relief, measured below 1e-7 m (tests/test_sole.py).
@@ -85,9 +94,45 @@ def _plane_through(p, q, r):
     return cz, cx, cy, det
 
 
-def _margin(xs, ys, contact):
-    """Distance from the origin to the nearest edge of the convex hull of the points flagged in ``contact``
-    (a tuple of bool arrays), negative when the origin lies outside, -inf with fewer than two points."""
+@functools.cache
+def _combinations(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The k-subsets of n points in ``itertools.combinations`` order, (C, k) int, and (C, n) bool: point j lies
+    outside subset c (static, NumPy)."""
+    sets = np.array(list(itertools.combinations(range(n), k)), np.int32).reshape(-1, k)
+    return sets, ~np.any(sets[:, :, None] == np.arange(n), axis=1)
+
+
+def _lead(a, ndim: int):
+    """(K,) or (K, M) coefficients reshaped to broadcast against (K, ...) or (K, M, ...) arrays of ``ndim``
+    trailing axes."""
+    return jnp.reshape(a, jnp.shape(a) + (1,) * ndim)
+
+
+def _margin(xs, ys, flags):
+    """Distance from the origin to the nearest edge of the convex hull of the points flagged in ``flags`` (an
+    (n, ...) bool array), negative when the origin lies outside, -inf with fewer than two points. The stacked
+    layout of :func:`_margin_unrolled`: pairs (i, j) and the other points k on leading axes."""
+    n = len(xs)
+    x, y = jnp.stack(xs), jnp.stack(ys)  # (n,)
+    extra = flags.ndim - 1
+    pairs, others = _combinations(n, 2)
+    xi, yi, xj, yj = x[pairs[:, 0]], y[pairs[:, 0]], x[pairs[:, 1]], y[pairs[:, 1]]
+    ex, ey = xj - xi, yj - yi
+    length = jnp.sqrt(ex * ex + ey * ey)
+    inner = ex * (-yi) - ey * (-xi)  # cross(e, origin - p_i): > 0 when the origin lies left of i -> j
+    side = _lead(ex[:, None] * (y[None, :] - yi[:, None]) - ey[:, None] * (x[None, :] - xi[:, None]), extra)
+    ignore = _lead(jnp.asarray(others), extra) & ~flags[None]  # (pairs, n, ...): not a touching other point
+    plus = flags[pairs[:, 0]] & flags[pairs[:, 1]]
+    minus = plus & jnp.all(ignore | (side <= SIDE_EPS), axis=1)
+    plus = plus & jnp.all(ignore | (side >= -SIDE_EPS), axis=1)
+    d = _lead(inner / length, extra)
+    margin = jnp.min(jnp.minimum(jnp.where(plus, d, jnp.inf), jnp.where(minus, -d, jnp.inf)), axis=0)
+    return jnp.where(jnp.isfinite(margin), margin, -jnp.inf)
+
+
+def _margin_unrolled(xs, ys, contact):
+    """:func:`_margin` unrolled over the pairs and points (the fused kernel's layout); ``contact``: a tuple of n
+    bool arrays."""
     n = len(xs)
     margin = None
     for i, j in itertools.combinations(range(n), 2):
@@ -108,7 +153,7 @@ def _margin(xs, ys, contact):
     return jnp.where(jnp.isfinite(margin), margin, -jnp.inf)
 
 
-def rest_on_points(xs, ys, z, tol) -> Rest:
+def rest_on_points(xs, ys, z, tol, *, unrolled: bool = False) -> Rest:
     """The rest pose of a rigid sole on the ground heights ``z`` under its points (see the module's docstring).
 
     Args:
@@ -116,10 +161,48 @@ def rest_on_points(xs, ys, z, tol) -> Rest:
         convex hull holds the centre).
       z: a tuple of P arrays of one shape: the ground's height under each point (m, any common reference).
       tol: the contact tolerance (m): points within it of the rested sole form the contact polygon.
+      unrolled: the fused kernel's layout (every triple, point and edge its own operations) instead of the
+        stacked one; the same results to float32 rounding.
 
     Returns:
       :class:`Rest` of arrays of ``z``'s shape; finite wherever the heights are.
     """
+    if unrolled:
+        return _rest_unrolled(xs, ys, z, tol)
+    n = len(xs)
+    x, y = jnp.stack(xs), jnp.stack(ys)  # (n,)
+    heights = jnp.stack(z)  # (n, ...)
+    extra = heights.ndim - 1
+    triples, outside = _combinations(n, 3)
+    corners = [(x[triples[:, j]], y[triples[:, j]]) for j in range(3)]
+    cz, cx, cy, det = _plane_through(*corners)  # each a (T,) array per point of the triples
+    ok_det = jnp.abs(det) > 1e-9  # collinear points define no plane (m^2; a real triple spans ~1e-2)
+    inv = _lead(1.0 / jnp.where(ok_det, det, 1.0), extra)
+    zt = [heights[triples[:, j]] for j in range(3)]  # (T, ...) the heights under each triple's points
+    h = (_lead(cz[0], extra) * zt[0] + _lead(cz[1], extra) * zt[1] + _lead(cz[2], extra) * zt[2]) * inv
+    gx = (_lead(cx[0], extra) * zt[0] + _lead(cx[1], extra) * zt[1] + _lead(cx[2], extra) * zt[2]) * inv
+    gy = (_lead(cy[0], extra) * zt[0] + _lead(cy[1], extra) * zt[1] + _lead(cy[2], extra) * zt[2]) * inv
+    over = h[:, None] + gx[:, None] * _lead(x[None, :], extra) + gy[:, None] * _lead(y[None, :], extra)
+    above = ~_lead(jnp.asarray(outside), extra) | (over >= heights[None] - HEIGHT_EPS)  # (T, n, ...)
+    valid = _lead(ok_det, extra) & jnp.all(above, axis=1)
+    h = jnp.where(valid, h, jnp.inf)  # +inf where the triple's plane passes under a point
+    best = jnp.min(h, axis=0)
+    # Ties: as in the unrolled layout, the middle of the lowest planes' gradients.
+    tie = h <= best + HEIGHT_EPS
+    lo_x, hi_x = jnp.min(jnp.where(tie, gx, jnp.inf), axis=0), jnp.max(jnp.where(tie, gx, -jnp.inf), axis=0)
+    lo_y, hi_y = jnp.min(jnp.where(tie, gy, jnp.inf), axis=0), jnp.max(jnp.where(tie, gy, -jnp.inf), axis=0)
+    found = jnp.isfinite(best) & jnp.isfinite(lo_x + hi_x + lo_y + hi_y)
+    height = jnp.where(found, best, jnp.max(heights, axis=0))
+    gx = jnp.where(found, 0.5 * (lo_x + hi_x), 0.0)
+    gy = jnp.where(found, 0.5 * (lo_y + hi_y), 0.0)
+    gaps = height[None] + gx[None] * _lead(x, extra) + gy[None] * _lead(y, extra) - heights  # (n, ...)
+    contact = gaps <= tol + HEIGHT_EPS
+    return Rest(height=height, grad_along=gx, grad_across=gy, margin=_margin(xs, ys, contact),
+                contacts=jnp.sum(contact.astype(jnp.int32), axis=0), gap=jnp.maximum(jnp.max(gaps, axis=0), 0.0))
+
+
+def _rest_unrolled(xs, ys, z, tol) -> Rest:
+    """:func:`rest_on_points` unrolled over the triples and points (the fused kernel's layout)."""
     n = len(xs)
     planes = []  # (h, gx, gy) of each triple, h = +inf where its plane passes under a point
     for t in itertools.combinations(range(n), 3):
@@ -160,7 +243,8 @@ def rest_on_points(xs, ys, z, tol) -> Rest:
     for i in range(1, n):
         gap = jnp.maximum(gap, gaps[i])
         count = count + contact[i].astype(jnp.int32)
-    return Rest(height=height, grad_along=gx, grad_across=gy, margin=_margin(xs, ys, contact), contacts=count,
+    return Rest(height=height, grad_along=gx, grad_across=gy, margin=_margin_unrolled(xs, ys, contact),
+                contacts=count,
                 gap=jnp.maximum(gap, 0.0))
 
 
@@ -185,12 +269,13 @@ class SoleOnGround(NamedTuple):
     support: object  # the whole sole's margin less the contact polygon's (m, >= 0; +inf with no polygon)
 
 
-def sole_on_ground(ground, half_length, half_width, inset, tol) -> SoleOnGround:
+def sole_on_ground(ground, half_length, half_width, inset, tol, *, unrolled: bool = False) -> SoleOnGround:
     """The rested sole of FootCost's ``support`` term and of the footholds, from the ground ``ground`` (a tuple
     of six arrays, m) under its :func:`contact_points` (half sizes and inset in m, tol: the contact tolerance,
-    m). The one code both FootCost paths run."""
+    m). The one code both FootCost paths run, in the fused kernel's layout where ``unrolled``
+    (:func:`rest_on_points`)."""
     xs, ys = contact_points(half_length, half_width, inset)
-    r = rest_on_points(xs, ys, ground, tol)
+    r = rest_on_points(xs, ys, ground, tol, unrolled=unrolled)
     pitch, roll = tilt(r.grad_along, r.grad_across)
     support = full_margin(half_length, half_width, inset) - r.margin
     # a sole on all of its points: the margins differ by rounding (~1e-8 m); 0, so that level ground costs nothing
@@ -215,7 +300,7 @@ def soft_sole_on_ground(ground, half_length, half_width, inset, tol, temp) -> So
     full = full_margin(half_length, half_width, inset)
     sets = jnp.asarray(list(itertools.product((False, True), repeat=n)))  # (2^n, n), every contact set
     # each set's margin depends on the sole's size alone: one traced copy, vmapped over the sets
-    margins = jnp.clip(jax.vmap(lambda flags: _margin(xs, ys, tuple(flags[i] for i in range(n))))(sets), -full, full)
+    margins = jnp.clip(jax.vmap(lambda flags: _margin(xs, ys, flags))(sets), -full, full)
     weights = jnp.prod(jnp.where(sets, p[..., None, :], 1.0 - p[..., None, :]), axis=-1)  # (..., 2^n)
     expected = jnp.sum(weights * margins, axis=-1)
     pitch, roll = tilt(r.grad_along, r.grad_across)
