@@ -162,10 +162,18 @@ class WalkFamily:
     reach: float | None = None
     forward: float | None = None
 
+    def one(self, key, *, shape, resolution: float) -> Terrain:
+        """One map of ``shape`` (nx, ny) cells of ``resolution`` m drawn from ``key``: :attr:`make`'s batch of one
+        (its parameters drawn from the family's range), without the batch axis. Traceable: a sweep draws
+        replicate r's map as ``one(fold_in(key(seed), r))`` (``[terrain] walk``, :mod:`ijoy_jax.sweep`)."""
+        shape = tuple(int(n) for n in shape)
+        return jax.tree_util.tree_map(lambda a: a[0], self.make(key, 1, shape=shape, resolution=float(resolution)))
+
     def maps(self, key, batch: int, *, shape, resolution: float) -> Terrain:
-        """:attr:`make` as one jitted program per family, batch and grid (a new key reuses it): the same maps
-        (to float32 rounding) as ``make`` op by op, which compiles each of its hundreds of small ops."""
-        return _jitted(self.make)(key, batch, shape=tuple(int(n) for n in shape), resolution=float(resolution))
+        """``batch`` maps, map i :meth:`one` of ``jax.random.split(key, batch)[i]`` (which is ``fold_in(key, i)``:
+        the sweep's replicate i of seed ``key``), as one jitted program per family, batch and grid (a new key
+        reuses it); a leading batch axis on every leaf."""
+        return _jitted(self)(as_key(key), batch, shape=tuple(int(n) for n in shape), resolution=float(resolution))
 
     def compiled_programs(self) -> int:
         """How many programs :meth:`maps` holds compiled for this family (in this process).
@@ -173,12 +181,16 @@ class WalkFamily:
         Read it before and after a loop of calls to learn how many compiles the loop caused: each new batch
         size or grid compiles once; a new key, or the grid given as a list, reuses the program.
         """
-        return compiled_count(_jitted(self.make))
+        return compiled_count(_jitted(self))
 
 
 @functools.cache
-def _jitted(make: Callable[..., Terrain]) -> Callable[..., Terrain]:
-    return jax.jit(make, static_argnums=1, static_argnames=("shape", "resolution"))
+def _jitted(family: WalkFamily) -> Callable[..., Terrain]:
+    def maps(key, batch, *, shape, resolution):
+        one = functools.partial(family.one, shape=shape, resolution=resolution)
+        return jax.vmap(one)(jax.random.split(key, batch))
+
+    return jax.jit(maps, static_argnums=1, static_argnames=("shape", "resolution"))
 
 
 def grid_shape(resolution: float = RESOLUTION) -> tuple[int, int]:
