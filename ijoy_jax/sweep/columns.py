@@ -45,11 +45,12 @@ PHYSICS_METRICS = (
 touched an obstacle (``collided``) and in how many steps, its touch-down errors (m, rad), and whether a
 physics value was out of bounds (``dynamics_invalid``; refused before compute, so False)."""
 
-WALK_METRICS = ("steps_made", "progress")
+WALK_METRICS = ("steps_made", "progress", "footholds_on_obstacles_made")
 """Per-scenario metrics of a walk sweep (``[terrain] walk``), what ``ijoy bench walk`` tabulates: ``steps_made``,
-steps taken that ended with the robot standing (all steps taken, for the perfect robot), and ``progress`` (m),
+steps taken that ended with the robot standing (all steps taken, for the perfect robot); ``progress`` (m),
 how far the midpoint of the feet moved along +x from the start feet to their touch-downs after the last step
-made (:func:`ijoy_jax.sweep.programs.walk_summary`)."""
+made; ``footholds_on_obstacles_made``, steps made onto an obstacle cell (bare footprint)
+(:func:`ijoy_jax.sweep.programs.walk_summary`)."""
 
 WALK_PHYSICS_METRICS = (
     "standing_contacts",
@@ -120,6 +121,7 @@ UNITS = {
     "dynamics_invalid": "fraction",
     "steps_made": "steps",
     "progress": "m",
+    "footholds_on_obstacles_made": "footholds",
     "standing_contacts": "steps",
     "made_placement_error_mean": "m",
     "made_placement_error_p95": "m",

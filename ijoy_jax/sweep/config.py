@@ -608,7 +608,9 @@ def _toml_value(key: str, value) -> str:
     if isinstance(value, (int, float)):
         return repr(value) if isinstance(value, int) or math.isfinite(value) else str(value)
     if isinstance(value, str):
-        return json.dumps(value)  # a TOML basic string
+        # a TOML basic string: JSON's escapes, non-ASCII as itself (JSON's \\u escapes of surrogates are not TOML's),
+        # DEL escaped (a control character TOML refuses literally)
+        return json.dumps(value, ensure_ascii=False).replace("\x7f", "\\u007f")
     raise ValueError(f"{key}: a sweep file value must be a bool, int, float or string, got {value!r}")
 
 

@@ -161,7 +161,8 @@ def walk_summary(traj, start, *, physics: bool = False) -> dict:
     :data:`ijoy_jax.sweep.WALK_PHYSICS_METRICS`); jit- and vmap-friendly, 0-d arrays.
 
     A step *made* is one taken that ended with the robot standing (``taken`` and not ``log.fallen``; every step
-    taken when the trajectory has no log, the perfect robot). ``progress`` (m): the midpoint of the feet along
+    taken when the trajectory has no log, the perfect robot). ``footholds_on_obstacles_made``: steps made onto an
+    obstacle cell. ``progress`` (m): the midpoint of the feet along
     +x after the last step made (each step made puts its swing foot, ``traj.sides`` +1 left, at its
     ``traj.footsteps`` pose) minus that of ``start`` ((2, 3) start feet, left then right).
     """
@@ -176,7 +177,11 @@ def walk_summary(traj, start, *, physics: bool = False) -> dict:
         return jnp.where(i >= 0, traj.footsteps[jnp.maximum(i, 0), 0], start[row, 0])
 
     left, right = last_x(made & (traj.sides > 0), 0), last_x(made & (traj.sides <= 0), 1)
-    out = {"steps_made": jnp.sum(made, dtype=jnp.int32), "progress": 0.5 * (left + right - start[0, 0] - start[1, 0])}
+    out = {
+        "steps_made": jnp.sum(made, dtype=jnp.int32),
+        "progress": 0.5 * (left + right - start[0, 0] - start[1, 0]),
+        "footholds_on_obstacles_made": jnp.sum(made & traj.on_obstacle, dtype=jnp.int32),
+    }
     if not physics:
         return out
     upright = jnp.concatenate([jnp.ones((1,), bool), ~fallen[:-1]])  # standing as the step began
