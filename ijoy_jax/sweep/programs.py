@@ -77,6 +77,7 @@ __all__ = [
     "compiled_programs",
     "make_sim",
     "physics_steps_per_scenario",
+    "random_commands",
     "scenario",
     "scenario_bytes",
     "shared_inputs",
