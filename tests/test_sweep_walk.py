@@ -219,10 +219,11 @@ def sweep_traj(x, taken, fallen):
 @pytest.mark.slow
 def test_a_walk_sweep_walks_the_familys_maps_and_both_command_kinds_share_its_program(tmp_path):
     """Replicate r walks maps(key(seed), B)[r] (sweep.scenario rebuilds it), with the random commands above; the
-    held-command file of the same family runs in the program the random one compiled."""
+    held-command file of the same family runs in the programs the random one compiled, and another family's
+    rollouts in the same rollout program."""
     cfg = parse(sweep.set_values(BASE, {"sweep.seed": 2}))
     stats = sweep.run(cfg, tmp_path / "random", progress=False)
-    assert stats.complete and stats.compiles == 1
+    assert stats.complete and stats.compiles == 2  # the maps (and robots, starts), the rollouts
     df = sweep.load(tmp_path / "random")
     assert set(sweep.WALK_METRICS) <= set(df.columns) and not set(sweep.WALK_PHYSICS_METRICS) & set(df.columns)
     maps = WF.FAMILIES["rough"].maps(jax.random.key(2), 3, shape=cfg.shape, resolution=cfg.resolution)
@@ -235,5 +236,7 @@ def test_a_walk_sweep_walks_the_familys_maps_and_both_command_kinds_share_its_pr
     held = parse(sweep.set_values(BASE.replace("random = true", "vx = 0.25"), {"sweep.seed": 2}))
     again = sweep.run(held, tmp_path / "forward", progress=False)
     assert again.compiles == 0
+    stones = sweep.run(parse(BASE.replace('"rough"', '"stones"')), tmp_path / "stones", progress=False)
+    assert stones.compiles == 1  # its maps; the rollouts' program is the one above
     progress = sweep.load(tmp_path / "forward")["progress"].to_numpy()
     assert np.all(progress > 0) and np.all(progress <= 0.1 + 3 * 0.2 + 1e-6)  # forward, at most as on flat ground

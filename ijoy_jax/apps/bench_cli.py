@@ -118,8 +118,9 @@ def _walk_options(parser) -> None:
         "--out",
         default=None,
         type=output_folder,
-        help="folder of the sweeps' results, one subfolder per file and walker; a rerun into it resumes "
-        "(default: a new temporary folder, named in the last JSON line)",
+        help="folder of the sweeps' results, one subfolder per file and walker; a rerun with the same options "
+        "resumes there, other options need another folder (default: a new temporary folder, named in the last "
+        "JSON line)",
     )
     walk.add_argument("--plot", default=None, type=output_file, help="write the bar plot (PNG) here")
 

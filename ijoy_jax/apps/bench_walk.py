@@ -32,10 +32,10 @@ footholds on obstacles, and for the MJX biped obstacle contacts while standing a
 steps made (:data:`ijoy_jax.sweep.WALK_PHYSICS_METRICS`). Timings: each run's compile seconds from JAX's own
 compile events, the rest of its wall time as run time, and physics steps (or decisions) per second of that.
 
-Compiles. The MJX rollout (:func:`ijoy_jax.sim.walker.rollout_batch`) is one program for every family and
-command kind of one chunk shape and action set (the stairs' longer reach compiles once more), as before; the
-sweep's small per-family programs (the maps, the summaries) and the perfect robot's chunk program, which
-draws the family's maps inside, compile once per family.
+Compiles. Each walker's rollout (the MJX biped's :func:`ijoy_jax.sim.walker.rollout_batch`, the perfect
+robot's vmapped :func:`ijoy_jax.control.rollout`) is one program for every family and command kind of one chunk
+shape and action set (the stairs' longer reach compiles once more), as before; the sweep's small programs that
+draw a family's maps and summarise its rollouts compile once per family (:mod:`ijoy_jax.sweep.programs`).
 """
 
 from __future__ import annotations
@@ -301,7 +301,8 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
         row = dict(name="walk", family=family, commands=kind, walker=w,
                    robot="hrp2()" if "reach" not in cfg.robot else f"hrp2(reach={cfg.robot['reach']:g})",
                    ranges=fam.ranges, **summarize(sweep.load(folder)), compile_s=round(compiled[0], 3),
-                   run_s=round(run_s, 4), compiles=stats.compiles, chunk=stats.chunk_size, batch=cfg.scenarios_per_cell,
+                   run_s=round(run_s, 4), compiles=stats.compiles, chunk=min(stats.chunk_size, cfg.num_scenarios),
+                   batch=cfg.scenarios_per_cell,
                    steps=cfg.num_steps, seed=cfg.seed, resolution=cfg.resolution, shape=list(cfg.shape),
                    refine=cfg.refine, kernel=cfg.kernel, forward_m_s=cfg.command.get("vx", (None,))[0],
                    robot_leaves={k: float(v) for k, v in (robot_leaves or {}).items()}, sweep=str(path),

@@ -29,6 +29,11 @@ is the one any caller of those shapes uses), and a vmap of
 (plan, chunk sizes, devices, parts, resume, processes, aggregates) is the
 same as for the perfect robot.
 
+Walk sweeps (``[terrain] walk``). The perfect robot's chunk is three programs too, as the physics chunk's: the
+family's maps, robots and starts, the rollouts (one vmap of :func:`ijoy_jax.control.rollout`, the same program
+for every family of the same shapes, so the benchmark's twelve families compile the selector's rollout once),
+then the summaries.
+
 Compiles (counted by :func:`trace_count`): parameter values never
 recompile (physics values and the lookahead's discount neither: they are traced leaves); each density
 value compiles once (its action-set size is a shape; no padding of action sets), and so does each value of
@@ -250,20 +255,49 @@ def _prepare(static: _Static, base, key, scene, seeds, robot_vals, terrain_vals)
 
 
 def _finish(static: _Static, base, key, scene, seeds, robot_vals, terrain_vals, traj) -> dict:
-    """A physics chunk's per-scenario summary (:func:`ijoy_jax.sim.walker.summary`) and family metrics."""
-    from ijoy_jax.sim import walker
+    """A chunk's per-scenario summary (a physics chunk's :func:`ijoy_jax.sim.walker.summary`), family metrics and
+    walk metrics, after its rollouts."""
+    physics = static.walker == "mjx"
+    if physics:
+        from ijoy_jax.sim import walker
 
     def one(seed, r, t, tr):
         tkey, params, _, robot, start = _setup(static, base, key, scene, seed, r, t)  # the terrain is not used
-        walk = {} if static.walk is None else walk_summary(tr, start, physics=True)
-        return {**walker.summary(tr), **_family_metrics(static, tkey, params, tr.feet, robot), **walk}
+        walk = {} if static.walk is None else walk_summary(tr, start, physics=physics)
+        summary = walker.summary(tr) if physics else tr.summary()
+        return {**summary, **_family_metrics(static, tkey, params, tr.feet, robot), **walk}
 
     return jax.vmap(one)(seeds, robot_vals, terrain_vals, traj)
+
+
+def _rollouts(targets, scene, terrains, robots_, starts, commands, discounts, *, selector: SelectOptions,
+              num_steps: int):
+    """The perfect robot's rollouts of a chunk whose maps come in (a walk sweep's): one program for every walk
+    family of the same shapes (each scenario's discount traced, as in :func:`_scenario`)."""
+
+    def one(t, r, s, c, d):
+        options = selector.replace(discount=d) if selector.method == "lookahead" else selector
+        return rollout(t, r, s, c, num_steps, options, targets=targets, first_swing=scene.first_swing)
+
+    return jax.vmap(one)(terrains, robots_, starts, commands, discounts)
 
 
 _counted_prepare, _prepare_traces = _counting_traces(_prepare)
 _run_prepare = jax.jit(_counted_prepare, static_argnames=("static",))
 _run_finish = jax.jit(_finish, static_argnames=("static",))
+_counted_rollouts, _rollouts_traces = _counting_traces(_rollouts)
+_run_rollouts = jax.jit(_counted_rollouts, static_argnames=("selector", "num_steps"))
+
+
+def _walk_chunk(static: _Static, base, targets, key, sim, scene, seeds, robot_vals, terrain_vals, commands, sim_vals):
+    """A chunk of the perfect robot on a walk family's maps (``[terrain] walk``), as a physics chunk is: the maps,
+    robots and starts (a small program per family), the rollouts (:func:`_rollouts`, one program for every
+    family), the summaries. (:func:`_chunk`, one program with the maps generated inside, would compile the
+    selector's rollout once per family: twelve times for the benchmark.)"""
+    terrains, robots_, starts, _ = _run_prepare(static, base, key, scene, seeds, robot_vals, terrain_vals)
+    traj = _run_rollouts(targets, scene, terrains, robots_, starts, commands, robot_vals["discount"],
+                         selector=static.selector, num_steps=static.num_steps)
+    return _run_finish(static, base, key, scene, seeds, robot_vals, terrain_vals, traj)
 
 
 def _physics_chunk(
@@ -293,15 +327,19 @@ def _physics_chunk(
 
 
 def chunk_runner(static: _Static):
-    """The function that runs a chunk: the perfect robot's jitted chunk or the physics chunk's three programs."""
-    return _run_chunk if static.walker == "perfect" else _physics_chunk
+    """The function that runs a chunk: the perfect robot's jitted chunk, or three programs (the maps, the
+    rollouts, the summaries) for the MJX biped and for the perfect robot on a walk family's maps."""
+    if static.walker == "mjx":
+        return _physics_chunk
+    return _run_chunk if static.walk is None else _walk_chunk
 
 
 def trace_count() -> int:
     """How many chunk programs have been traced (compiled) in this process: the perfect robot's chunk function,
-    plus each physics chunk shape's preparation (its rollouts are :func:`ijoy_jax.sim.walker.rollout_batch`'s
-    program, counted by :func:`ijoy_jax.sim.walker.compiled_programs`)."""
-    return _chunk_traces() + _prepare_traces()
+    plus each physics or walk chunk shape's preparation and the perfect robot's rollouts of a walk chunk (a
+    physics chunk's rollouts are :func:`ijoy_jax.sim.walker.rollout_batch`'s program, counted by
+    :func:`ijoy_jax.sim.walker.compiled_programs`)."""
+    return _chunk_traces() + _prepare_traces() + _rollouts_traces()
 
 
 def compiled_programs() -> int:
@@ -312,7 +350,8 @@ def compiled_programs() -> int:
     the run caused: each new static setting (:func:`chunk_static`) or chunk shape compiles once; new parameter
     values, seeds and commands reuse the program (:func:`trace_count` counts the traces behind them).
     """
-    return compiled_count(_run_chunk) + compiled_count(_run_prepare) + compiled_count(_run_finish)
+    return (compiled_count(_run_chunk) + compiled_count(_run_prepare) + compiled_count(_run_finish)
+            + compiled_count(_run_rollouts))
 
 
 def base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
@@ -541,10 +580,11 @@ def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot, sim=None) -> tup
     key = jax.random.key(cfg.seed)
     sim = make_sim(cfg, table) if sim is None else sim
     batch = chunk_batch(table.iloc[:1], 1, robot_cols, terrain_cols, sim_cols, cfg=cfg, base=base)
-    runner = _run_chunk if cfg.walker == "perfect" else jax.jit(_physics_chunk, static_argnames=("static",))
     heaviest = chunk_static(
         cfg, int(table["selector.horizon"].max()), bool(table["selector.refine"].max())
     )  # the most memory per scenario
+    runner = chunk_runner(heaviest)
+    runner = runner if runner is _run_chunk else jax.jit(runner, static_argnames=("static",))
     compiled = runner.lower(heaviest, base, targets, key, sim, chunk_scene(cfg), *batch).compile()
     mem = compiled.memory_analysis()
     if mem is None:
