@@ -85,7 +85,7 @@ def _walk_options(parser) -> None:
         "--chunk",
         type=positive_int,
         default=None,
-        help="rollouts per jitted call (default: the sweep engine's, sized to an accelerator's memory, 32 on a CPU)",
+        help="rollouts per jitted call (default: the batch, up to 1024 on an accelerator, 32 on a CPU)",
     )
     walk.add_argument("--seed", type=int, default=None, help="maps and random commands (default: the files' 0)")
     walk.add_argument(

@@ -117,6 +117,11 @@ COMMANDS = ("random", "forward")
 """The command kinds, one sweep file each per family: a new random command every step, the held forward one."""
 WALKERS = ("perfect", "mjx")
 """The perfect robot (``walker = "perfect"``) and the MJX biped (``walker = "mjx"``) of :mod:`ijoy_jax.sweep`."""
+CHUNK = 1024
+"""Rollouts per jitted call on an accelerator when ``chunk`` is not given (at most the batch; 32 on a CPU, the sweep
+engine's :data:`ijoy_jax.sweep.DEFAULT_CHUNK`): a rollout holds tens of MB of selector windows, and 1024 ran
+more physics steps/s than 512 (docs/benchmarks_history.md). Given, the sweep engine does not size the chunk to
+the device's memory, which costs an ahead-of-time compile of each file's program."""
 SWEEPS = Path(__file__).resolve().parents[2] / "sweeps" / "walk"
 """The shipped sweep files (a source checkout's ``sweeps/walk``; ``run(sweeps=...)``, ``--sweeps`` elsewhere)."""
 
@@ -252,8 +257,8 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
         ``[terrain] resolution`` (m), ``[sweep] refine`` (each lattice choice refined to a continuous
         foothold, :mod:`ijoy_jax.refine`) and ``[sweep] kernel`` ("xla", or "pallas": the fused FootCost
         kernel, for a GPU); None keeps the files' (0, 0.02, false, "xla").
-      chunk: scenarios per jitted call (:func:`ijoy_jax.sweep.run`'s ``chunk_size``; None: its default, sized to
-        the device's memory on an accelerator, 32 on a CPU).
+      chunk: scenarios per jitted call (:func:`ijoy_jax.sweep.run`'s ``chunk_size``; None: the batch, up to
+        :data:`CHUNK` on an accelerator and :data:`ijoy_jax.sweep.DEFAULT_CHUNK` on a CPU).
       robot_leaves: robot values set on every file (``[robot]``, dotted names as ``metrics.support_limit``;
         traced leaves of the choice, so they reuse the compiled programs). Recorded in each row.
       sweeps: the folder of the sweep files (None: :data:`SWEEPS`).
@@ -283,6 +288,8 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
         for w in WALKERS:
             if w in walkers:
                 planned.append((path, w, sweep.parse_config(sweep_text(text, walker=w, **options), str(path))))
+    if chunk is None:
+        chunk = min(batch, sweep.DEFAULT_CHUNK if jax.default_backend() == "cpu" else CHUNK)
     out = Path(tempfile.mkdtemp(prefix="ijoy-bench-walk-") if out is None else out)
     emit = (lambda row: None) if emit is None else emit
     rows: list[dict[str, Any]] = []
