@@ -1,26 +1,32 @@
 """``ijoy bench walk`` (ijoy_jax/apps/bench_walk.py): the terrain families have the properties they claim
-(measured from the maps with NumPy), the aggregation equals a NumPy count over the trajectories, the table and
-plot writers, and one tiny run of both walkers that compiles the MJX rollout once for two families and both
-command kinds (about a minute on a 2-core CPU, most of it that compile).
+(measured from the maps with NumPy), the summary of the sweep results equals a NumPy count over the trajectories,
+the table's numbers equal an independent computation on the sweep's own maps, bad options are refused before any
+compute, the table and plot writers, and one tiny run of both walkers that compiles the MJX rollout once for two
+families and both command kinds (about two minutes on a 2-core CPU, most of it that compile).
 
 The perfect robot's rollouts are compiled programs too, one per robot, batch and step count: the tests walk HRP-2
 on BATCH maps for STEPS steps wherever the property does not need a length of its own, so that they share one
-program; the 2D maps, the stairs' longer robot and walk, the fused kernel and the MJX run's batch of 2 have their
-own.
+program (:func:`perfect_rollouts`, the sweep's perfect walker: the ordered selector vmapped over the maps); the 2D
+maps, the stairs' longer robot and walk, the fused kernel and the MJX run's batch of 2 have their own, and each
+bench run compiles the sweep's chunk program once per family.
 """
 
+import functools
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pandas as pd
 import pytest
 from PIL import Image
 
 import ijoy_jax as ij
-from ijoy_jax import robots
+from ijoy_jax import control, robots, sweep
 from ijoy_jax.apps import bench_walk as B
+from ijoy_jax.select_options import SelectOptions
 from ijoy_jax.sim import walker as W
+from ijoy_jax.sweep import programs
 
 SHAPE = B.grid_shape()
 RES = B.RESOLUTION
@@ -38,6 +44,46 @@ RMS_TOL = 0.25
 patches) is within a few tens of percent of its expected RMS; the mean over the maps is checked to 10 %."""
 PLACEMENT_GOAL = 0.01
 """m: issue #20's placement error p95 goal."""
+OPTIONS = SelectOptions(method="ordered")
+"""The walk sweeps' search (``method = "ordered"``)."""
+
+
+def start_stances(robot, batch):
+    """(batch, 2, 3) the start feet of every walk map: side by side at START, facing +x."""
+    return jnp.broadcast_to(robots.start_stance(robot, *B.START), (batch, 2, 3))
+
+
+def forward_commands(batch, steps, speed=B.FORWARD):
+    """(batch, steps, 3) the held forward command (m/s)."""
+    return jnp.broadcast_to(jnp.asarray([speed, 0.0, 0.0], jnp.float32), (batch, steps, 3))
+
+
+def random_commands(key, robot, batch, steps):
+    """(batch, steps, 3) a new random command every step inside the action set's range."""
+    return robots.random_commands(key, robot, batch, steps)
+
+
+def sweep_random_commands(seed, robot, batch, steps):
+    """(batch, steps, 3) the walk sweeps' random commands: replicate r's ``default_rng([seed, 2, r])`` doubles
+    on the action set's range (tests/test_sweep_walk.py checks the sweep draws these)."""
+    lo, hi = robots.command_range(robot)
+    u = np.stack([np.random.default_rng([seed, 2, r]).random(3 * steps).reshape(steps, 3) for r in range(batch)])
+    return jnp.asarray((lo + u * (hi - lo)).astype(np.float32))
+
+
+@functools.partial(jax.jit, static_argnames=("num_steps",))
+def perfect_rollouts(terrains, robot, starts, commands, options=OPTIONS, *, num_steps):
+    """The perfect robot on B maps: a jitted vmap of :func:`ijoy_jax.control.rollout` (robot shared)."""
+    return jax.vmap(lambda t, s, c: control.rollout(t, robot, s, c, num_steps, options))(terrains, starts, commands)
+
+
+def results_table(traj, starts, physics=False) -> pd.DataFrame:
+    """A walk sweep's per-scenario columns for a batch of rollouts: the trajectory's summary (the simulated one
+    with ``physics``) and :func:`ijoy_jax.sweep.programs.walk_summary`, one row per rollout."""
+    traj = jax.tree_util.tree_map(jnp.asarray, traj)
+    base = W.summary(traj) if physics else traj.summary()
+    walk = jax.vmap(lambda t, s: programs.walk_summary(t, s, physics=physics))(traj, jnp.asarray(starts))
+    return pd.DataFrame({k: np.asarray(v) for k, v in {**base, **walk}.items()})
 
 
 @pytest.fixture(scope="module")
@@ -88,24 +134,29 @@ def test_same_key_same_maps(maps, name):
 
 
 @pytest.mark.slow
-def test_the_jitted_maps_are_the_op_by_op_maps_and_a_new_key_reuses_the_program(maps):
-    """WalkFamily.maps (what ``ijoy bench walk`` draws its maps with): every family traces under jit and gives
-    make's maps to float32 rounding (heights within 1e-6 m of values under 0.6 m, the same free cells); a new
-    key, and the grid given as a list, reuse the compiled program."""
+def test_the_jitted_maps_are_the_op_by_op_maps_and_a_new_key_reuses_the_program():
+    """WalkFamily.maps (the maps the walk sweeps' replicates walk): every family traces under jit and gives, as
+    map i, make's batch of one from ``split(key, B)[i]`` to float32 rounding (heights within 1e-6 m of values under
+    0.6 m, the same free cells); a new key, and the grid given as a list, reuse the compiled program."""
+    key = jax.random.key(7)
     for name, fam in B.FAMILIES.items():
-        jitted = fam.maps(jax.random.key(7), BATCH, shape=SHAPE, resolution=RES)
-        np.testing.assert_allclose(np.asarray(jitted.height), np.asarray(maps[name].height), atol=1e-6, err_msg=name)
-        np.testing.assert_array_equal(np.asarray(jitted.free), np.asarray(maps[name].free), err_msg=name)
+        jitted = fam.maps(key, BATCH, shape=SHAPE, resolution=RES)
+        for i, k in enumerate(jax.random.split(key, BATCH)):
+            one = fam.make(k, 1, shape=SHAPE, resolution=RES)
+            np.testing.assert_allclose(np.asarray(jitted.height[i]), np.asarray(one.height[0]), atol=1e-6,
+                                       err_msg=name)
+            np.testing.assert_array_equal(np.asarray(jitted.free[i]), np.asarray(one.free[0]), err_msg=name)
     before = B.FAMILIES["rough"].compiled_programs()
     again = B.FAMILIES["rough"].maps(jax.random.key(8), BATCH, shape=list(SHAPE), resolution=RES)
     assert B.FAMILIES["rough"].compiled_programs() == before == 1
-    assert not np.array_equal(np.asarray(again.height), np.asarray(maps["rough"].height))
+    first = B.FAMILIES["rough"].maps(key, BATCH, shape=SHAPE, resolution=RES)
+    assert not np.array_equal(np.asarray(again.height), np.asarray(first.height))
 
 
 @pytest.mark.slow
 def test_the_start_feet_are_valid_footholds_on_every_map(maps):
     robot = robots.hrp2()
-    feet = np.asarray(B.start_stances(robot, 1)[0])
+    feet = np.asarray(start_stances(robot, 1)[0])
     for name, batch in maps.items():
         for b in range(BATCH):
             t = jax.tree_util.tree_map(lambda a, b=b: a[b], batch)
@@ -133,10 +184,10 @@ def test_clutter2d_choices_are_those_on_the_2d_maps():
     maps25 = B.clutter2d(4, BATCH, shape=SHAPE, resolution=RES)
     maps2 = ij.Terrain(height=jnp.zeros_like(maps25.height), free=maps25.free, origin=maps25.origin,
                        resolution=RES, has_height=False)
-    starts = B.start_stances(robot, BATCH)
-    cmd = jnp.concatenate([B.commands_for("random", 9, robot, BATCH, 12)[:, :6], B.forward_commands(BATCH, 6)], 1)
-    a = B.perfect_rollouts(maps25, robot, starts, cmd, num_steps=12)
-    b = B.perfect_rollouts(maps2, robot, starts, cmd, num_steps=12)
+    starts = start_stances(robot, BATCH)
+    cmd = jnp.concatenate([random_commands(9, robot, BATCH, 12)[:, :6], forward_commands(BATCH, 6)], 1)
+    a = perfect_rollouts(maps25, robot, starts, cmd, num_steps=12)
+    b = perfect_rollouts(maps2, robot, starts, cmd, num_steps=12)
     np.testing.assert_array_equal(np.asarray(a.taken), np.asarray(b.taken))
     np.testing.assert_allclose(np.asarray(a.footsteps), np.asarray(b.footsteps), atol=FLOAT_TOL)
 
@@ -232,7 +283,7 @@ def test_stones_reachable_by_the_lattice_from_the_start(maps):
     """Brute force over HRP-2's 496 actions: from the start, a valid left step then a valid right step puts the
     right foot's grown footprint wholly on a stone ahead of the start pad, on every map."""
     robot = robots.hrp2()
-    feet = np.asarray(B.start_stances(robot, 1)[0])
+    feet = np.asarray(start_stances(robot, 1)[0])
     grown_half = 0.5 * float(robot.foot_length) + float(robot.margin)
     for b in range(BATCH):
         t = jax.tree_util.tree_map(lambda a, b=b: a[b], maps["stones"])
@@ -293,7 +344,7 @@ def test_image_windows_are_the_png(tmp_path):
 def test_the_perfect_robot_climbs_and_descends_the_stairs():
     """The stairs' robot is ``robots.hrp2(reach=0.30)`` with the held :data:`STAIR_FORWARD` (the longest step): on
     every map of both stair families (treads of 30 and 40 cm) the perfect robot walks past the last riser onto the
-    far landing, without a stop. The family's own forward command overrides the run's ``forward``."""
+    far landing, without a stop. Each file holds its family's forward command (the flat one the benchmark's)."""
     last = B.STAIR_FIRST + (B.STAIR_COUNT - 1) * max(B.STAIR_RUNS)  # the far landing's start, at most (m)
     rows = B.run(["stairs_up", "stairs_down"], batch=BATCH, steps=20, commands=("forward",), walkers=("perfect",))
     assert [r["family"] for r in rows if r["name"] == "walk"] == ["stairs_up", "stairs_down"]
@@ -302,11 +353,8 @@ def test_the_perfect_robot_climbs_and_descends_the_stairs():
         assert r["stops"] == 0 and r["footholds_on_obstacles"] == 0, r
         assert r["progress_min_m"] > last + 0.5 * float(robots.hrp2().foot_length), r
     assert B.STAIR_FORWARD * float(robots.hrp2(reach=B.STAIR_REACH).step_time) == pytest.approx(B.STAIR_REACH)
-    slow = B.run(["stairs_up"], batch=BATCH, steps=20, commands=("forward",), walkers=("perfect",),
-                 forward=B.FORWARD)
-    assert slow[0]["forward_m_s"] == B.STAIR_FORWARD  # the family's own command wins over the run's
-    flat = B.run(["flat"], batch=BATCH, steps=STEPS, commands=("forward",), walkers=("perfect",), forward=0.1)
-    assert flat[0]["forward_m_s"] == 0.1
+    flat = B.run(["flat"], batch=BATCH, steps=STEPS, commands=("forward",), walkers=("perfect",))
+    assert flat[0]["forward_m_s"] == B.FORWARD and flat[0]["robot"] == "hrp2()"
 
 
 # --------------------------------------------------------------------------------------------- aggregation
@@ -328,14 +376,14 @@ def numpy_reference(traj, start) -> dict[str, Any]:
 
 
 @pytest.mark.slow
-def test_aggregate_perfect_robot_equals_numpy():
+def test_summary_of_the_perfect_robot_equals_numpy():
     robot = robots.hrp2()
     key = jax.random.key(1)
     terrains = B.clutter2d(key, BATCH, shape=SHAPE, resolution=RES)
-    starts = B.start_stances(robot, BATCH)
-    cmd = B.commands_for("random", key, robot, BATCH, STEPS)
-    traj = jax.tree_util.tree_map(np.asarray, B.perfect_rollouts(terrains, robot, starts, cmd, num_steps=STEPS))
-    got = B.aggregate(traj, starts)
+    starts = start_stances(robot, BATCH)
+    cmd = random_commands(key, robot, BATCH, STEPS)
+    traj = jax.tree_util.tree_map(np.asarray, perfect_rollouts(terrains, robot, starts, cmd, num_steps=STEPS))
+    got = B.summarize(results_table(traj, starts))
     ref = numpy_reference(traj, starts)
     for k, v in ref.items():
         assert got[k] == pytest.approx(v, abs=1e-6), k
@@ -343,23 +391,19 @@ def test_aggregate_perfect_robot_equals_numpy():
 
 
 @pytest.mark.slow
-def test_aggregate_forward_on_flat_is_the_closed_form_and_does_not_recompile():
+def test_summary_forward_on_flat_is_the_closed_form():
     """Held forward at the fastest command on flat ground: the first step (from feet side by side) moves the
-    midpoint 0.1 m, each later one 0.2 m; and a second batch of maps and commands reuses the program."""
+    midpoint 0.1 m, each later one 0.2 m."""
     robot = robots.hrp2()
-    starts = B.start_stances(robot, BATCH)
+    starts = start_stances(robot, BATCH)
     terrains = B.flat_maps(0, BATCH, shape=SHAPE, resolution=RES)
-    traj = B.perfect_rollouts(terrains, robot, starts, B.forward_commands(BATCH, STEPS), num_steps=STEPS)
-    got = B.aggregate(jax.tree_util.tree_map(np.asarray, traj), starts)
+    traj = perfect_rollouts(terrains, robot, starts, forward_commands(BATCH, STEPS), num_steps=STEPS)
+    got = B.summarize(results_table(traj, starts))
     assert STEPS == 5  # 0.9 m = 0.1 + 4 * 0.2
     assert got["progress_mean_m"] == pytest.approx(0.1 + 4 * 0.2, abs=1e-5)
     assert got["progress_min_m"] == pytest.approx(0.9, abs=1e-5) and got["stops"] == 0
     assert got["steps_made_mean"] == 5
     np.testing.assert_allclose(np.asarray(traj.summary()["distance_along"]), 0.9, atol=1e-5)
-    before = B.compiled_perfect_programs()
-    B.perfect_rollouts(B.uphill(1, BATCH, shape=SHAPE, resolution=RES), robot, starts,
-                       B.commands_for("random", 2, robot, BATCH, STEPS), num_steps=STEPS)
-    assert B.compiled_perfect_programs() == before
 
 
 def synthetic(log_cls, **log_values):
@@ -370,7 +414,8 @@ def synthetic(log_cls, **log_values):
     nonsense), and the loop goes on choosing steps for it; robot 2 never steps (no valid foothold).
     """
     b, t = 3, 4
-    flags = ("valid", "taken", "stopped", "in_place", "stationary", "on_obstacle", "unsupported")
+    flags = ("valid", "taken", "stopped", "in_place", "stationary", "on_obstacle", "near_obstacle", "unsupported",
+             "command_ok")
     fields = {f: np.zeros((b, t), bool if f in flags else np.float32) for f in ij.Trajectory._fields}
     x = np.array([[0.7, 0.9, 1.1, 1.3], [0.7, 2.0, 2.0, 2.0], [0.5, 0.5, 0.5, 0.5]])
     sides = np.array([[1, -1, 1, -1]] * 3)
@@ -393,12 +438,15 @@ def synthetic(log_cls, **log_values):
     return ij.Trajectory(**fields)
 
 
-def test_aggregate_simulated_by_hand():
-    """Counts and pooled errors of the hand-made batch, worked out by hand: only the steps made count (taken and
-    ending upright: robot 0's four, robot 1's first); robot 1's stop is its fall, not a stop."""
+def test_summary_simulated_by_hand():
+    """Counts and errors of the hand-made batch, worked out by hand: only the steps made count (taken and ending
+    upright: robot 0's four, robot 1's first); robot 1's stop is its fall, not a stop. The mean touch-down error is
+    pooled over every step made; the 95th percentiles are each robot's over its steps made, averaged over the
+    robots that made one (the sweep keeps one row per robot)."""
     start = np.asarray(robots.start_stance(robots.hrp2(), *B.START))
     tilt = np.array([[1, 2, 3, 4], [5, 90, 90, 0], [90, 90, 90, 90]], np.float32) * 1e-3
-    got = B.aggregate(synthetic(W.StepLog, tilt_error=tilt), start)
+    table = results_table(synthetic(W.StepLog, tilt_error=tilt), np.broadcast_to(start, (3, 2, 3)), physics=True)
+    got = B.summarize(table)
     assert got["robots"] == 3 and got["fell"] == 1 and got["fell_pct"] == pytest.approx(100 / 3)
     assert got["stops"] == 1 and got["stops_pct"] == pytest.approx(100 / 3)
     assert got["steps_made_mean"] == pytest.approx(5 / 3)
@@ -406,20 +454,47 @@ def test_aggregate_simulated_by_hand():
     assert got["footholds_on_obstacles"] == 1 and got["unsupported_decisions"] == 1
     # feet midpoints: robot 0 (1.1 + 1.3) / 2, robot 1 (0.7 + 0.5) / 2 (its first step), robot 2 at the start
     assert got["progress_mean_m"] == pytest.approx((0.7 + 0.1 + 0.0) / 3) and got["progress_min_m"] == 0.0
-    # made: 1, 2, 3, 4, 5 mm -> mean 3 mm; p95 at rank 0.95 * 4 = 3.8: 4 + 0.8 * (5 - 4) mm
+    # made: 1, 2, 3, 4, 5 mm -> mean 3 mm
     assert got["placement_error_mean_m"] == pytest.approx(3e-3)
-    assert got["placement_error_p95_m"] == pytest.approx(4.8e-3)
-    assert got["yaw_error_p95_rad"] == pytest.approx(4.8e-2)
-    assert got["tilt_error_p95_rad"] == pytest.approx(4.8e-3)  # pooled over the steps made, like the placement
+    # p95 per robot: robot 0's 1-4 mm at rank 0.95 * 3 = 2.85: 3.85 mm; robot 1's 5 mm; robot 2 made none
+    assert got["placement_error_p95_m"] == pytest.approx((3.85e-3 + 5e-3) / 2)
+    assert got["tilt_error_p95_rad"] == pytest.approx((3.85e-3 + 5e-3) / 2)  # like the placement
 
 
 @pytest.mark.slow
-def test_touchdown_feet_of_the_perfect_robot_are_its_final_feet():
+def test_progress_of_the_perfect_robot_is_its_final_feet():
+    """The perfect robot makes every step it takes: its touch-downs after the last step are its final feet."""
     robot = robots.hrp2()
-    starts = B.start_stances(robot, BATCH)
-    cmd = B.commands_for("random", 5, robot, BATCH, STEPS)
-    traj = B.perfect_rollouts(B.stones(2, BATCH, shape=SHAPE, resolution=RES), robot, starts, cmd, num_steps=STEPS)
-    np.testing.assert_allclose(B.touchdown_feet(traj, starts, traj.taken), np.asarray(traj.feet), atol=1e-6)
+    starts = start_stances(robot, BATCH)
+    cmd = random_commands(5, robot, BATCH, STEPS)
+    traj = perfect_rollouts(B.stones(2, BATCH, shape=SHAPE, resolution=RES), robot, starts, cmd, num_steps=STEPS)
+    table = results_table(traj, starts)
+    want = np.asarray(traj.feet)[:, :, 0].mean(axis=1) - np.asarray(starts)[:, :, 0].mean(axis=1)
+    np.testing.assert_allclose(table["progress"], want, atol=1e-6)
+    np.testing.assert_array_equal(table["steps_made"], np.asarray(traj.taken).sum(axis=1))
+
+
+@pytest.mark.slow
+def test_the_table_equals_an_independent_computation_on_the_sweeps_maps():
+    """The benchmark's rows (the sweep files run by the sweep engine) equal the NumPy count over the perfect
+    robot's rollouts on the same maps with the same commands, computed apart from the engine: the family's
+    maps(key(seed), B) and each replicate's NumPy command draws. The selector's rollout compiles once for every
+    family and command kind; each family's maps once for both kinds."""
+    rows = B.run(["flat", "rough", "stones"], batch=BATCH, steps=6, walkers=("perfect",))
+    walk = [r for r in rows if r["name"] == "walk"]
+    assert [(r["family"], r["commands"]) for r in walk] == [(f, c) for f in ("flat", "rough", "stones")
+                                                            for c in B.COMMANDS]
+    assert [r["compiles"] for r in walk] == [2, 0, 1, 0, 1, 0]  # maps and rollouts, then the next family's maps
+    robot = robots.hrp2()
+    starts = start_stances(robot, BATCH)
+    for r in walk:
+        maps = B.FAMILIES[r["family"]].maps(jax.random.key(0), BATCH, shape=SHAPE, resolution=RES)
+        cmd = (sweep_random_commands(0, robot, BATCH, 6) if r["commands"] == "random"
+               else forward_commands(BATCH, 6))
+        traj = jax.device_get(perfect_rollouts(maps, robot, starts, cmd, num_steps=6))
+        for k, v in numpy_reference(traj, starts).items():
+            assert r[k] == pytest.approx(v, abs=1e-6), (r["family"], r["commands"], k)
+        assert r["batch"] == BATCH and r["steps"] == 6 and r["seed"] == 0 and r["robot"] == "hrp2()"
 
 
 # --------------------------------------------------------------------------------------------- options, table, plot
@@ -433,76 +508,89 @@ def test_touchdown_feet_of_the_perfect_robot_are_its_final_feet():
     (dict(chunk=-1), "chunk must be a positive int"),
     (dict(commands=("sideways",)), "commands must be some of"),
     (dict(walkers=("real",)), "walkers must be some of"),
-    (dict(resolution=0.03), "whole cells"),
-    (dict(forward=float("nan")), "forward speed"),
-    (dict(refine="yes"), "refine must be True or False"),
-    (dict(kernel="triton"), "kernel must be one of"),
-    (dict(robot_leaves={"foot_length": 0.3}), "unknown robot leaves"),
-    (dict(robot_leaves={"metrics.support_limit": -1.0}), r"robot\.metrics\.support_limit must be finite"),
-    (dict(robot_leaves={"w": "2"}), r"robot\.w must be a number"),
-    (dict(robot_leaves={"margin": float("inf")}), r"robot\.margin"),
+    (dict(sweeps="/nonexistent"), "no sweep file /nonexistent/flat_random.toml"),
+    (dict(resolution=0.03), r"flat_random\.toml: terrain\.resolution: .*whole cells"),
+    (dict(seed=-1), r"flat_random\.toml: sweep\.seed: must be >= 0"),
+    (dict(refine="yes"), r"sweep\.refine: must be true or false"),
+    (dict(kernel="triton"), r"sweep\.kernel: must be one of"),
+    (dict(robot_leaves={"lava": 0.3}), r"robot\.lava: unknown key"),
+    (dict(robot_leaves={"metrics.support_limit": -1.0}), r"robot\.metrics\.support_limit: must be >= 0"),
+    (dict(robot_leaves={"w": "2"}), r"robot\.w: must be a number"),
+    (dict(robot_leaves={"margin": float("inf")}), r"robot\.margin: must be finite"),
 ])
-def test_run_refuses_bad_options_before_any_compute(kwargs, message):
+def test_run_refuses_bad_options_before_any_compute(kwargs, message, tmp_path):
     with pytest.raises(ValueError, match=message):
-        B.run(**kwargs)
+        B.run(**kwargs, out=tmp_path / "out")
+    assert not (tmp_path / "out").exists()  # nothing ran
+
+
+def test_every_walk_sweep_file_is_there_and_the_text_holds_the_options():
+    """A file per family and command kind; sweep_text sets the options in the text that the run saves."""
+    assert len(B.check_options(None, batch=1, steps=1, commands=B.COMMANDS, walkers=B.WALKERS, chunk=None)) == 24
+    text = B.sweep_file("rough", "random").read_text()
+    cfg = sweep.parse_config(B.sweep_text(text, walker="perfect", batch=3, steps=2, seed=4, resolution=0.04,
+                                          kernel="pallas", refine=True, robot_leaves={"w": 2.0}))
+    assert (cfg.name, cfg.walker, cfg.scenarios_per_cell, cfg.num_steps, cfg.seed) == (
+        "walk_rough_random_perfect", "perfect", 3, 2, 4)
+    assert (cfg.shape, cfg.kernel, cfg.refine, cfg.robot, cfg.walk, cfg.random_commands) == (
+        (125, 50), "pallas", True, {"w": 2.0}, "rough", True)
+    assert sweep.parse_config(B.sweep_text(text, walker="mjx")).num_steps == 30  # None keeps the file's
 
 
 @pytest.mark.slow
 def test_the_fused_kernel_reaches_the_selector_chooses_as_xla_and_is_recorded():
     """``kernel="pallas"`` (``ijoy bench walk --kernel pallas``) puts the fused FootCost kernel (interpreted on
-    the CPU) in the perfect robot's selector, and every row names it. Its choices are XLA's on rough maps up to
-    float32 rounding: the decisions cost the same until a near-tie (two actions whose costs differ by rounding)
-    goes the other way, after which the robots walk on from different feet."""
+    the CPU) in the perfect robot's selector, and every row and the saved sweep file name it. Its choices are XLA's
+    on rough maps up to float32 rounding: the decisions cost the same until a near-tie (two actions whose costs
+    differ by rounding) goes the other way, after which the robots walk on from different feet."""
     robot = robots.hrp2()
-    starts = B.start_stances(robot, BATCH)
-    cmd = B.commands_for("random", 3, robot, BATCH, 3)
+    starts = start_stances(robot, BATCH)
+    cmd = random_commands(3, robot, BATCH, 3)
     terrains = B.FAMILIES["rough"].maps(jax.random.key(3), BATCH, shape=SHAPE, resolution=RES)
+    pallas = SelectOptions(method="ordered", kernel="pallas")
 
-    def program(kernel):
-        return str(jax.make_jaxpr(lambda t: B.perfect_rollouts(t, robot, starts, cmd, B.walk_options(kernel=kernel),
-                                                               num_steps=3))(terrains))
+    def program(options):
+        return str(jax.make_jaxpr(lambda t: perfect_rollouts(t, robot, starts, cmd, options, num_steps=3))(terrains))
 
-    assert "pallas_call" in program("pallas") and "pallas_call" not in program("xla")
-    xla = B.perfect_rollouts(terrains, robot, starts, cmd, num_steps=3)
-    fused = B.perfect_rollouts(terrains, robot, starts, cmd, B.walk_options(kernel="pallas"), num_steps=3)
+    assert "pallas_call" in program(pallas) and "pallas_call" not in program(OPTIONS)
+    xla = perfect_rollouts(terrains, robot, starts, cmd, num_steps=3)
+    fused = perfect_rollouts(terrains, robot, starts, cmd, pallas, num_steps=3)
     same_feet = np.all(np.abs(np.asarray(fused.footsteps) - np.asarray(xla.footsteps)) < 1e-5, axis=-1)
     before = np.cumprod(np.concatenate([np.ones((BATCH, 1), bool), same_feet[:, :-1]], axis=1), axis=1) > 0
     assert before.sum() >= 0.75 * before.size  # (the decisions up to and including each robot's first difference)
     np.testing.assert_allclose(np.asarray(fused.cost)[before], np.asarray(xla.cost)[before], rtol=1e-6, atol=1e-6)
     assert np.all(np.isfinite(np.asarray(xla.cost)[before]))
     rows = B.run(["flat"], batch=BATCH, steps=3, commands=("forward",), walkers=("perfect",), kernel="pallas")
-    assert [r["kernel"] for r in rows] == ["pallas", "pallas"]
+    assert [r.get("kernel") for r in rows[:-1]] == ["pallas"]
+    assert sweep.load_config(f"{rows[0]['results']}/sweep.toml").kernel == "pallas"
 
 
 @pytest.mark.slow
-def test_robot_leaves_reach_the_choice_and_are_recorded(maps):
+def test_robot_leaves_reach_the_choice_and_are_recorded():
     """``robot_leaves`` (``ijoy bench walk --set``) walk the robot the selector would get from set_leaves: the
-    same trajectory as a direct rollout with that robot, a different one from the preset's on rough ground (a zero
-    support limit refuses every foothold whose contact polygon is smaller than the sole, so other footholds are
-    chosen: farther or shorter, as the greedy choice goes on), and in every row."""
+    same walks as direct rollouts with that robot on the sweep's maps, a different one from the preset's on rough
+    ground (a zero support limit refuses every foothold whose contact polygon is smaller than the sole, so other
+    footholds are chosen: farther or shorter, as the greedy choice goes on), and in every row."""
     leaves = {"metrics.support_limit": 0.0, "w": 2}
     rows = B.run(["rough"], batch=BATCH, steps=STEPS, commands=("forward",), walkers=("perfect",), seed=5,
                  robot_leaves=leaves)
     base = B.run(["rough"], batch=BATCH, steps=STEPS, commands=("forward",), walkers=("perfect",), seed=5)
     row, row0 = rows[0], base[0]
     assert row["robot_leaves"] == {"metrics.support_limit": 0.0, "w": 2.0} and row0["robot_leaves"] == {}
-    assert rows[-1]["robot_leaves"] == row["robot_leaves"]
     assert row["progress_mean_m"] != row0["progress_mean_m"]
     robot = robots.set_leaves(robots.hrp2(), leaves)
-    k_map, k_cmd = jax.random.split(jax.random.fold_in(jax.random.key(5), list(B.FAMILIES).index("rough")))
-    terr = B.FAMILIES["rough"].maps(k_map, BATCH, shape=SHAPE, resolution=RES)  # as run draws them
-    starts = B.start_stances(robot, BATCH)
-    cmd = B.commands_for("forward", jax.random.fold_in(k_cmd, B.COMMANDS.index("forward")), robot, BATCH, STEPS,
-                         B.FORWARD)
-    direct = B.aggregate(jax.device_get(B.perfect_rollouts(terr, robot, starts, cmd, num_steps=STEPS)), starts)
+    terr = B.FAMILIES["rough"].maps(jax.random.key(5), BATCH, shape=SHAPE, resolution=RES)  # as the sweep draws
+    starts = start_stances(robot, BATCH)
+    traj = jax.device_get(perfect_rollouts(terr, robot, starts, forward_commands(BATCH, STEPS), num_steps=STEPS))
+    direct = numpy_reference(traj, starts)
     assert direct["progress_mean_m"] == pytest.approx(row["progress_mean_m"], abs=1e-6)
     assert direct["steps_made_mean"] == row["steps_made_mean"] and direct["stops"] == row["stops"]
 
 
 @pytest.mark.slow
 def test_a_family_walks_the_same_maps_and_commands_whichever_families_run_beside_it():
-    """Seeds follow the registry, not the selection: rough ground alone and after flat ground gives the same
-    row (random commands, so a different command stream would move the robots elsewhere)."""
+    """Each family is its own sweep file: rough ground alone and after flat ground gives the same row (random
+    commands, so a different command stream would move the robots elsewhere)."""
     kw = dict(batch=BATCH, steps=3, commands=("random",), walkers=("perfect",), seed=2)
     alone = B.run(["rough"], **kw)[0]
     beside = [r for r in B.run(["flat", "rough"], **kw) if r.get("family") == "rough"][0]
@@ -551,15 +639,16 @@ def test_plot_png(tmp_path):
 
 
 @pytest.mark.slow
-def test_run_both_walkers_compiles_the_mjx_rollout_once():
-    """Two families x two command kinds: the first simulated call compiles, the other three reuse it."""
-    rows = B.run(["flat", "clutter2d"], batch=2, steps=2, seed=3)
+def test_run_both_walkers_compiles_the_mjx_rollout_once(tmp_path):
+    """Two families x two command kinds: the first simulated run compiles the MJX rollout, the other three reuse
+    it; a rerun into the same folder resumes (nothing left to compute) with the same rows."""
+    rows = B.run(["flat", "clutter2d"], batch=2, steps=2, seed=3, out=tmp_path)
     walk = [r for r in rows if r["name"] == "walk"]
     assert [(r["family"], r["commands"], r["walker"]) for r in walk] == [
         (f, c, w) for f in ("flat", "clutter2d") for c in B.COMMANDS for w in B.WALKERS]
     assert [r["new_compiles"] for r in walk if r["walker"] == "mjx"] == [1, 0, 0, 0]
     total = rows[-1]
-    assert total["name"] == "walk_compiles" and total["mjx_programs"] == 1 and total["mjx_calls"] == 4
+    assert total["name"] == "walk_compiles" and total["mjx_programs"] == 1 and total["results"] == str(tmp_path)
     for r in walk:
         assert r["robots"] == 2 and r["stops"] == 0 and r["compile_s"] >= 0 and r["run_s"] > 0
     flat_forward = {r["walker"]: r for r in walk if r["family"] == "flat" and r["commands"] == "forward"}
@@ -568,3 +657,7 @@ def test_run_both_walkers_compiles_the_mjx_rollout_once():
     assert sim["fell"] == 0 and sim["placement_error_p95_m"] < PLACEMENT_GOAL
     assert abs(sim["progress_mean_m"] - 0.3) < 2 * PLACEMENT_GOAL  # each foot within the goal of its target
     assert sim["physics_steps_per_s"] > 0 and sim["tilt_error_p95_rad"] is not None
+    again = B.run(["flat"], batch=2, steps=2, seed=3, commands=("forward",), out=tmp_path)
+    for r, r0 in zip(again[:2], walk[2:4], strict=True):
+        assert {k: r[k] for k in ("progress_mean_m", "fell", "stops")} == {k: r0[k] for k in
+                                                                            ("progress_mean_m", "fell", "stops")}

@@ -43,7 +43,10 @@ CASES = [
     (["bench", "walk", "--set", "metrics.support_limit"], "--set takes NAME=VALUE, e.g. metrics.support_limit="),
     (["bench", "walk", "--set", "w=abc"], "--set 'w=abc': 'abc' is not a number"),
     (["bench", "walk", "--set", "foot_length=0.3"], "--set 'foot_length=0.3': 'foot_length' is not one of ['w',"),
-    (["bench", "walk", "--set", "metrics.support_limit=-1"], "robot.metrics.support_limit must be finite and >= 0"),
+    (["bench", "walk", "--set", "metrics.support_limit=-1"], "robot.metrics.support_limit: must be >= 0, got -1.0"),
+    (["bench", "walk", "--sweeps", "no_such_folder"], "no sweep file no_such_folder/flat_random.toml"),
+    (["bench", "walk", "--resolution", "0.03"], "terrain.resolution: resolution 0.03 m must divide"),
+    (["bench", "walk", "--seed", "-1"], "sweep.seed: must be >= 0, got -1"),
     (["bench", "sim", "--set", "w=2"], "--set: options of 'ijoy bench walk' only"),
     (["bench", "sim", "--calls", "5"], "--calls: options of 'ijoy bench haptics' and 'ijoy bench cue' only"),
     (["bench", "haptics", "--tick-only"], "--tick-only: options of 'ijoy bench cue' only, not of 'haptics'"),
@@ -244,7 +247,8 @@ def test_every_subcommand_is_a_module_of_its_own():
 # A value each option type refuses; an option of a type not listed here fails the test below until it is added.
 BAD_VALUE = {"int": "abc", "float": "abc", "positive_int": "0", "positive_ints": "1,x", "image_size": "big",
              "output_file": "no/such/folder/x.out", "output_folder": "/dev/null/x",
-             "output_file_in_new_folder": "/dev/null/x/y.toml", "_walk_families": "lava"}
+             "output_file_in_new_folder": "/dev/null/x/y.toml", "_walk_families": "lava",
+             "_walkers": "real"}
 
 
 def test_every_typed_option_refuses_a_bad_value_in_one_line_naming_it(tmp_path, monkeypatch):

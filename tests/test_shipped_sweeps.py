@@ -210,3 +210,55 @@ def test_a_tiny_slice_of_the_shipped_sweep_runs(name, tmp_path):
         assert m in df.columns and df[m].notna().all(), m
     assert (df["steps_taken"] > 0).all() and (df["distance_along"] > 0).all()  # they walked
     assert (df["steps_taken"] <= cfg.num_steps).all()
+
+
+# --------------------------------------------------------------------------------------------- the walk sweeps
+
+WALK_SWEEPS = sorted((DIR / "walk").glob("*.toml"))
+
+
+def test_the_walk_sweeps_are_one_per_family_and_command_kind_and_in_the_readme():
+    """``ijoy bench walk`` runs sweeps/walk/<family>_<commands>.toml: one per walk family and command kind."""
+    from ijoy_jax.terrain import walk_families
+
+    want = {f"{f}_{c}.toml" for f in walk_families.FAMILIES for c in ("random", "forward")}
+    assert {p.name for p in WALK_SWEEPS} == want
+    assert "`walk/<family>_<commands>.toml`" in (DIR / "README.md").read_text()
+
+
+@pytest.mark.parametrize("path", WALK_SWEEPS, ids=lambda p: p.stem)
+def test_walk_sweep_says_what_ijoy_bench_walk_runs(path):
+    """The family's maps at 2 cm, 1024 robots x 30 steps of the ordered selector with the MJX biped, the random or
+    held forward command (the family's own speed and reach where it has them), nothing swept."""
+    from ijoy_jax.apps import bench_walk
+    from ijoy_jax.terrain import walk_families
+
+    family, _, kind = path.stem.rpartition("_")
+    fam = walk_families.FAMILIES[family]
+    cfg = sweep.load_config(path)
+    assert cfg.name == f"walk_{path.stem}" and cfg.description and cfg.walk == family and cfg.walker == "mjx"
+    assert (cfg.scenarios_per_cell, cfg.num_steps, cfg.method, cfg.seed, cfg.kernel, cfg.refine) == (
+        1024, 30, "ordered", 0, "xla", False)
+    assert cfg.shape == walk_families.grid_shape() and cfg.resolution == walk_families.RESOLUTION
+    assert cfg.robot == ({} if fam.reach is None else {"reach": fam.reach})
+    assert cfg.grid == {} and cfg.random == {} and cfg.sim == {} and cfg.num_scenarios == 1024
+    if kind == "random":
+        assert cfg.random_commands and cfg.command == {}
+    else:
+        speed = bench_walk.FORWARD if fam.forward is None else fam.forward
+        assert not cfg.random_commands and cfg.command == {"vx": (speed, speed), "vy": (0.0, 0.0), "wz": (0.0, 0.0)}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", [p for p in WALK_SWEEPS if p.stem.endswith("_random")], ids=lambda p: p.stem)
+def test_a_tiny_slice_of_each_walk_sweep_runs(path, tmp_path):
+    """One robot, two steps, the perfect robot (each family's chunk program compiles once: the slow tier; the MJX
+    biped on two of them runs in tests/test_bench_walk.py)."""
+    text = sweep.set_values(path.read_text(), {"sweep.walker": "perfect", "sweep.num_steps": 2,
+                                               "sweep.scenarios_per_cell": 1})
+    stats = sweep.run(sweep.parse_config(text, str(path)), tmp_path / "o", progress=False)
+    assert stats.complete and stats.computed == 1
+    df = sweep.load(tmp_path / "o")
+    for m in sweep.METRICS + sweep.WALK_METRICS:
+        assert m in df.columns and df[m].notna().all(), m
+    assert (df["steps_made"] <= 2).all() and (df["steps_made"] == df["steps_taken"]).all()

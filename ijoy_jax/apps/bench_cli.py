@@ -20,7 +20,7 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from ijoy_jax.apps import bench, bench_cue, bench_haptics, bench_serve, tune_cli
-from ijoy_jax.apps.options import output_file, positive_int
+from ijoy_jax.apps.options import output_file, output_folder, positive_int
 
 
 class Benchmark(NamedTuple):
@@ -44,6 +44,16 @@ def _walk_families(text: str) -> list[str]:
     return names
 
 
+def _walkers(text: str) -> list[str]:
+    """``--walkers`` as a list of :data:`ijoy_jax.apps.bench_walk.WALKERS` (ArgumentTypeError otherwise)."""
+    walkers = ("perfect", "mjx")  # bench_walk.WALKERS, without importing MuJoCo to parse the line
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    bad = [n for n in names if n not in walkers]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(f"walkers must be some of {', '.join(walkers)}, got {text!r}")
+    return names
+
+
 def _walk_options(parser) -> None:
     """``ijoy bench walk``'s own options; each None unless given (its defaults depend on --quick)."""
     walk = parser.add_argument_group("walk", "options of 'ijoy bench walk' (ijoy_jax/apps/bench_walk.py)")
@@ -51,8 +61,8 @@ def _walk_options(parser) -> None:
         "--families",
         default=None,
         type=_walk_families,
-        help="comma-separated terrain families (default: all of flat, clutter2d, uphill, "
-        "downhill, cross, rough, stones, platforms, stairs_up, stairs_down, image)",
+        help="comma-separated terrain families (default: all of flat, clutter2d, uphill, downhill, cross, "
+        "rough, stones, platforms, stairs_up, stairs_down, image, natural)",
     )
     walk.add_argument(
         "--batch", type=positive_int, default=None, help="robots (maps) per family (default: 1024; --quick: 4)"
@@ -64,21 +74,20 @@ def _walk_options(parser) -> None:
         default=None,
         help="a new random command every step, a held forward command, or both (default: both)",
     )
-    walk.add_argument("--resolution", type=float, default=None, help="cell size in metres (default: 0.02)")
     walk.add_argument(
-        "--forward",
-        type=float,
+        "--walkers",
+        type=_walkers,
         default=None,
-        help="held forward command in m/s (default: 0.25; the stairs keep their own 0.375, "
-        "the 30 cm step that crosses a riser)",
+        help="comma-separated walkers: perfect (the paper's robot), mjx (the MJX biped) (default: both)",
     )
+    walk.add_argument("--resolution", type=float, default=None, help="cell size in metres (default: the files' 0.02)")
     walk.add_argument(
         "--chunk",
         type=positive_int,
         default=None,
-        help="simulated rollouts per jitted call (default: up to 1024 on an accelerator, 32 on a CPU)",
+        help="rollouts per jitted call (default: the batch, up to 1024 on an accelerator, 32 on a CPU)",
     )
-    walk.add_argument("--seed", type=int, default=None, help="maps and random commands (default: 0)")
+    walk.add_argument("--seed", type=int, default=None, help="maps and random commands (default: the files' 0)")
     walk.add_argument(
         "--refine",
         action="store_const",
@@ -100,32 +109,44 @@ def _walk_options(parser) -> None:
         help="a robot leaf of the choice for every family, e.g. metrics.support_limit=0.003 "
         "(repeatable; names: ijoy_jax.robots.SELECTOR_LEAVES)",
     )
+    walk.add_argument(
+        "--sweeps",
+        default=None,
+        help="folder of the walk sweep files <family>_<commands>.toml (default: the checkout's sweeps/walk)",
+    )
+    walk.add_argument(
+        "--out",
+        default=None,
+        type=output_folder,
+        help="folder of the sweeps' results, one subfolder per file and walker; a rerun with the same options "
+        "resumes there, other options need another folder (default: a new temporary folder, named in the last "
+        "JSON line)",
+    )
     walk.add_argument("--plot", default=None, type=output_file, help="write the bar plot (PNG) here")
 
 
 def _walk(args) -> list[dict]:
-    """``ijoy bench walk``: JSON lines as the rows come, then the Markdown table; the plot with --plot."""
+    """``ijoy bench walk``: the walk sweep files through the sweep engine, a JSON line per row as the rows come,
+    then the Markdown table; the plot with --plot."""
     from ijoy_jax import robots
     from ijoy_jax.apps import bench_walk
     from ijoy_jax.apps.options import number_assignments
 
-    def given(value, default):
-        return default if value is None else value
-
-    families = args.families  # a list of names, checked as parsed
     kinds = bench_walk.COMMANDS if args.commands in (None, "both") else (args.commands,)
     rows = bench_walk.run(
-        families,
-        batch=given(args.batch, 4 if args.quick else 1024),
-        steps=given(args.steps, 6 if args.quick else 30),
+        args.families,  # a list of names, checked as parsed
+        batch=(4 if args.quick else 1024) if args.batch is None else args.batch,
+        steps=(6 if args.quick else 30) if args.steps is None else args.steps,
         commands=kinds,
-        resolution=given(args.resolution, bench_walk.RESOLUTION),
-        seed=given(args.seed, 0),
+        walkers=bench_walk.WALKERS if args.walkers is None else args.walkers,
+        resolution=args.resolution,
+        seed=args.seed,
         chunk=args.chunk,
-        forward=given(args.forward, bench_walk.FORWARD),
-        refine=given(args.refine, False),
-        kernel=given(args.kernel, "xla"),
+        refine=args.refine,
+        kernel=args.kernel,
         robot_leaves=number_assignments(args.set, robots.SELECTOR_LEAVES, "metrics.support_limit=0.003"),
+        sweeps=args.sweeps,
+        out=args.out,
         emit=lambda row: print(json.dumps(row), flush=True),
     )
     print(bench_walk.markdown_table(rows))
@@ -188,8 +209,9 @@ BENCHMARKS = {
     ),
     "walk": Benchmark(
         "the perfect robot and the MJX biped per terrain family",
-        "The perfect robot and the MJX biped per terrain family: falls, stops, progress, contacts, placement "
-        "and tilt errors; JSON lines as they come, then a Markdown table, and a bar plot with --plot.",
+        "The perfect robot and the MJX biped per terrain family, the walk sweep files (sweeps/walk) run through "
+        "the sweep engine: falls, stops, progress, contacts, placement and tilt errors; JSON lines as they come, "
+        "then a Markdown table, and a bar plot with --plot.",
         run=_walk,
         add_options=_walk_options,
     ),

@@ -1,66 +1,63 @@
 """Walking benchmark per terrain family: ``ijoy bench walk``, the perfect robot next to the MJX biped.
 
-On one GPU (H100 or H200), the whole default run (11 families x 2 command kinds x 1024 robots x 30 steps,
-one MJX compile; 0.28 G physics steps, several minutes)::
+The benchmark is a set of sweep files, ``sweeps/walk/<family>_<commands>.toml``, one per terrain family of
+:data:`ijoy_jax.terrain.walk_families.FAMILIES` and command kind (:data:`COMMANDS`), run by the sweep engine
+(:func:`ijoy_jax.sweep.run`); this module runs the files asked for with each walker and summarises the sweep
+results into the table of BENCHMARKS.md (:func:`markdown_table`) and a bar plot (:func:`plot`).
 
-    ijoy bench walk --batch 1024 --steps 30 --json out/walk.json --plot out/walk.png
+On one GPU (H100 or H200), the whole default run (12 families x 2 command kinds x 1024 robots x 30 steps, both
+walkers)::
+
+    ijoy bench walk --batch 1024 --steps 30 --out results/bench_walk --json out/walk.json --plot out/walk.png
 
 (``python -m ijoy_jax.apps.cli bench walk ...`` where the ``ijoy`` script is not installed; ``--families``
-takes a comma-separated subset, e.g. to split the run in two). A smoke test on a CPU (4 robots, 6 steps,
-two to three minutes on two cores, a minute of it the one MJX compile)::
+takes a comma-separated subset, e.g. to split the run in two). A smoke test on a CPU (4 robots, 6 steps)::
 
     ijoy bench walk --quick --json /tmp/walk.json --plot /tmp/walk.png
 
-Every robot walks HRP-2's joystick loop (margin 2 cm, 496 actions, ``method="ordered"``) on its own
-5 m x 2 m map of 2 cm cells (250 x 100), drawn from its family's parameter range (:data:`FAMILIES`),
-standing at ``x = 0.5 m`` on the centre line (``y = 1 m``) facing +x, for ``steps`` steps, once with
-a new random command every step inside the action set's range (:func:`ijoy_jax.robots.random_commands`)
-and once with a held forward command (:data:`FORWARD` m/s). Each (family, commands) pair runs the
-paper's perfect robot (:func:`ijoy_jax.control.rollout`, vmapped) and the simulated biped
-(:func:`ijoy_jax.sim.walker.rollout_batch`) on the same maps with the same commands, and gives one row
-per walker (:func:`aggregate`): falls, stops, progress along +x, obstacle contacts, placement and
-sole-tilt errors, and the timings (compile time from JAX's own compile events, run time, physics steps/s).
+What a file declares (sweeps/README.md has the table): HRP-2's joystick loop (margin 2 cm,
+496 actions, ``method = "ordered"``) on the family's maps (``[terrain] walk``: replicate r walks its own
+5 m x 2 m map of 2 cm cells drawn from the family's ranges with the key ``fold_in(key(seed), r)``, standing at
+``x = 0.5 m`` on the centre line facing +x), for 30 steps, with a new random command every step inside the
+action set's range (``[command] random = true``) or the held forward command (``vx`` = :data:`FORWARD` m/s; the
+stairs' 0.375 m/s, their robot ``[robot] reach = 0.30``). Replicate r is the same map in both files of a
+family and the same random commands in every ``random`` file. The files say ``walker = "mjx"``; the perfect
+robot's run is the same file with ``walker = "perfect"`` (:func:`sweep_text`). The options of :func:`run`
+(robots, steps, seed, search) are set in each file's text before it is parsed, so the text saved with each
+run's results (its folder's ``sweep.toml``) is what ran.
 
-One compile for everything. Every family is a 2.5D map (``has_height=True``; 2D clutter is stored as the
-2.5D map the physics makes of it) of one grid shape and resolution, every command schedule is
-(B, steps, 3), the robots share one action set, and one :class:`ijoy_jax.sim.walker.Sim` serves every
-family, so :func:`ijoy_jax.sim.walker.rollout_batch` compiles once and every later family only changes
-traced heights and free masks; each row says how many new programs its call compiled
-(:func:`ijoy_jax.sim.walker.compiled_programs`) and the last record gives the total. A family whose robot
-has another action set (the stairs, with ``robots.hrp2(reach=0.30)``) compiles once more.
-The Sim's height field spans :data:`HEIGHT_RANGE` (the stairs and 10 deg slopes rise or fall up to
-0.9 m over the map).
+The table's numbers per (family, commands, walker) come from the sweep's per-scenario results
+(:func:`summarize`): falls, stops, progress along +x and the steps made (:data:`ijoy_jax.sweep.WALK_METRICS`),
+footholds on obstacles, and for the MJX biped obstacle contacts while standing and the touch-down errors of the
+steps made (:data:`ijoy_jax.sweep.WALK_PHYSICS_METRICS`). Timings: each run's compile seconds from JAX's own
+compile events, the rest of its wall time as run time, and physics steps (or decisions) per second of that.
 
-The families and their map geometry (:data:`FAMILIES`, :data:`START`, :func:`grid_shape`, ...) live in
-:mod:`ijoy_jax.terrain.walk_families` and are named here too; this module is the benchmark: the runner, the
-aggregation, the table and the plot.
-
-Outputs: JSON records (:func:`run`), the Markdown table of BENCHMARKS.md (:func:`markdown_table`) and a
-bar plot of falls, stops and progress per family, perfect and simulated side by side (:func:`plot`).
+Compiles. Each walker's rollout (the MJX biped's :func:`ijoy_jax.sim.walker.rollout_batch`, the perfect
+robot's vmapped :func:`ijoy_jax.control.rollout`) is one program for every family and command kind of one chunk
+shape and action set (the stairs' longer reach compiles once more), as before; the sweep's small programs that
+draw a family's maps and summarise its rollouts compile once per family (:mod:`ijoy_jax.sweep.programs`).
 """
 
 from __future__ import annotations
 
-import functools
 import math
+import tempfile
 import time
+import tomllib
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import ijoy_jax.sim  # noqa: F401  before mujoco: headless EGL, and mjx imported without the warp lines
 
 # isort: split
 import jax
-import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax import control, robots, select
+from ijoy_jax import robots, sweep
 from ijoy_jax.extras import require
-from ijoy_jax.jit_cache import compile_seconds, compiled_count
-from ijoy_jax.select_options import SelectOptions
+from ijoy_jax.jit_cache import compile_seconds
 from ijoy_jax.sim import model
-from ijoy_jax.sim import walker as W
-from ijoy_jax.terrain import Terrain
 
 # The terrain families live in ijoy_jax.terrain.walk_families; the benchmark names them where it always did.
 from ijoy_jax.terrain.walk_families import (  # noqa: F401
@@ -114,14 +111,19 @@ from ijoy_jax.terrain.walk_families import (  # noqa: F401
 HEIGHT_RANGE = (model.BipedParams.z_lo, model.BipedParams.z_hi)
 """z_lo, z_hi (m) of the Sim's height field (the biped's defaults): every family's heights lie inside (tested)."""
 FORWARD = 0.25
-"""Held forward command (m/s): the paper's action set's fastest, 0.2 m steps of 0.8 s; on open ground the robot
-reaches the far edge of the 5 m map after about 21 steps and marks time there."""
+"""Held forward command (m/s) of the ``forward`` files: the paper's action set's fastest, 0.2 m steps of 0.8 s;
+on open ground the robot reaches the far edge of the 5 m map after about 21 steps and marks time there."""
 COMMANDS = ("random", "forward")
-
-
-def start_stances(robot: robots.Robot, batch: int) -> jax.Array:
-    """(batch, 2, 3) start feet (left, right): side by side at :data:`START`, facing +x, ``p0`` apart."""
-    return jnp.broadcast_to(robots.start_stance(robot, *START), (batch, 2, 3))
+"""The command kinds, one sweep file each per family: a new random command every step, the held forward one."""
+WALKERS = ("perfect", "mjx")
+"""The perfect robot (``walker = "perfect"``) and the MJX biped (``walker = "mjx"``) of :mod:`ijoy_jax.sweep`."""
+CHUNK = 1024
+"""Rollouts per jitted call on an accelerator when ``chunk`` is not given (at most the batch; 32 on a CPU, the sweep
+engine's :data:`ijoy_jax.sweep.DEFAULT_CHUNK`): a rollout holds tens of MB of selector windows, and 1024 ran
+more physics steps/s than 512 (docs/benchmarks_history.md). Given, the sweep engine does not size the chunk to
+the device's memory, which costs an ahead-of-time compile of each file's program."""
+SWEEPS = Path(__file__).resolve().parents[2] / "sweeps" / "walk"
+"""The shipped sweep files (a source checkout's ``sweeps/walk``; ``run(sweeps=...)``, ``--sweeps`` elsewhere)."""
 
 
 def family_robot(family: WalkFamily) -> robots.Robot:
@@ -129,178 +131,92 @@ def family_robot(family: WalkFamily) -> robots.Robot:
     return robots.hrp2() if family.reach is None else robots.hrp2(reach=family.reach)
 
 
-# --------------------------------------------------------------------------------------------- the benchmark
-
-WALKERS = ("perfect", "mjx")
-"""The perfect robot (:func:`ijoy_jax.control.perfect_walker`) and the MJX biped (:mod:`ijoy_jax.sim.walker`)."""
-def forward_commands(batch: int, steps: int, speed: float = FORWARD) -> jax.Array:
-    """(batch, steps, 3) the held forward command ``(speed, 0, 0)`` (m/s, m/s, rad/s) for every robot and step."""
-    return jnp.broadcast_to(jnp.asarray([speed, 0.0, 0.0], jnp.float32), (batch, steps, 3))
+def sweep_file(family: str, commands: str, folder=None) -> Path:
+    """The sweep file of a family and command kind: ``<folder>/<family>_<commands>.toml`` (default :data:`SWEEPS`)."""
+    return Path(SWEEPS if folder is None else folder) / f"{family}_{commands}.toml"
 
 
-def commands_for(kind: str, key, robot: robots.Robot, batch: int, steps: int, speed: float = FORWARD) -> jax.Array:
-    """(batch, steps, 3) commands of a kind: "random" (:func:`ijoy_jax.robots.random_commands`, a new one every
-    step inside the action set's range) or "forward" (:func:`forward_commands`)."""
-    if kind == "random":
-        return robots.random_commands(key, robot, batch, steps)
-    if kind == "forward":
-        return forward_commands(batch, steps, speed)
-    raise ValueError(f"commands must be one of {COMMANDS}, got {kind!r}")
+def sweep_text(text: str, *, walker: str, batch: int | None = None, steps: int | None = None,
+               seed: int | None = None, resolution: float | None = None, kernel: str | None = None,
+               refine: bool | None = None, robot_leaves: Mapping[str, float] | None = None) -> str:
+    """A walk sweep file's text with the benchmark's options set (:func:`ijoy_jax.sweep.set_values`): the
+    ``walker``, ``batch`` (``scenarios_per_cell``), ``steps`` (``num_steps``), ``seed``, ``kernel`` and
+    ``refine`` of ``[sweep]``, the map's ``resolution`` and the robot's leaves (``[robot]``, dotted names as
+    ``metrics.support_limit``); None leaves the file's value. The sweep name gets ``_<walker>``."""
+    name = tomllib.loads(text).get("sweep", {}).get("name", "walk")
+    values = {"sweep.name": f"{name}_{walker}", "sweep.walker": walker}
+    for key, value in (("scenarios_per_cell", batch), ("num_steps", steps), ("seed", seed), ("kernel", kernel),
+                       ("refine", refine)):
+        if value is not None:
+            values[f"sweep.{key}"] = value
+    if resolution is not None:
+        values["terrain.resolution"] = resolution
+    values.update({f"robot.{k}": v for k, v in (robot_leaves or {}).items()})
+    return sweep.set_values(text, values)
 
 
-def _percentile(values, q) -> float | None:
-    values = np.asarray(values, np.float64).ravel()
-    return float(np.percentile(values, q)) if values.size else None
+def _pooled_mean(values, weights) -> float | None:
+    """Σ values x weights / Σ weights over the rows with a weight (None without any): the mean over every step
+    made of a per-robot mean over its steps made."""
+    w = np.asarray(weights, np.float64)
+    keep = w > 0
+    return float(np.sum(np.asarray(values, np.float64)[keep] * w[keep]) / w[keep].sum()) if keep.any() else None
 
 
-def touchdown_feet(traj: control.Trajectory, start, mask) -> np.ndarray:
-    """(B, 2, 3) the feet after the last step of ``mask`` (B, T): the start feet with each masked step's
-    foothold (``traj.footsteps``, the measured touch-down of a simulated robot) put down by its swing foot
-    (``traj.sides``: +1 left, row 0). With ``mask = traj.taken`` and the perfect robot it is ``traj.feet``."""
-    steps, sides, mask = np.asarray(traj.footsteps), np.asarray(traj.sides), np.asarray(mask, bool)
-    feet = np.array(np.broadcast_to(np.asarray(start, np.float64), (mask.shape[0], 2, 3)))
-    rows = np.arange(mask.shape[0])
-    for k in range(mask.shape[1]):
-        row = np.where(sides[:, k] > 0, 0, 1)
-        feet[rows, row] = np.where(mask[:, k, None], steps[:, k], feet[rows, row])
-    return feet
+def _mean(values) -> float | None:
+    v = np.asarray(values, np.float64)
+    v = v[np.isfinite(v)]
+    return float(v.mean()) if v.size else None
 
 
-def aggregate(traj: control.Trajectory, start) -> dict[str, Any]:
-    """The benchmark's numbers for a batch of rollouts (leading axis B on every leaf of ``traj``).
-
-    A simulated robot's steps count while it stands: a step "made" is one taken that ended with the
-    robot standing (``taken`` and not ``log.fallen``); after a fall the loop may go on choosing steps
-    that the robot no longer makes. The perfect robot never falls: its steps made are those taken.
+def summarize(df) -> dict[str, Any]:
+    """The benchmark's numbers for one walk sweep's per-scenario results (:func:`ijoy_jax.sweep.load`).
 
     Keys: ``robots``; ``fell`` / ``fell_pct`` (robots that fell; 0 for the perfect robot); ``stops`` /
-    ``stops_pct``, robots that stopped walking before the last step without falling (no valid foothold:
-    the loop stops, Algorithm 1's StopWalking); ``progress_mean_m`` / ``progress_min_m``, how far the
-    midpoint of the feet moved along +x from ``start`` ((B, 2, 3) or (2, 3) start feet) to their
-    touch-downs after the last step made (:func:`touchdown_feet`); ``steps_made_mean``;
-    ``footholds_on_obstacles`` (steps made onto an obstacle cell, bare footprint); ``unsupported_decisions``.
-    With a simulated robot's log (:class:`ijoy_jax.sim.walker.StepLog`), also ``obstacle_contacts``
-    (steps begun standing during which a sole or shin touched an obstacle cell) and
-    ``robots_with_contact``; over every step made by every robot, ``placement_error_mean_m`` /
-    ``_p95_m``, ``yaw_error_p95_rad`` and ``tilt_error_p95_rad`` (the angle between a landed sole's normal
-    and its foothold's, ``StepLog.tilt_error``). These are None for the perfect robot (not measured).
+    ``stops_pct``, robots that stopped walking before the last step without falling (no valid foothold: the
+    loop stops, Algorithm 1's StopWalking); ``progress_mean_m`` / ``progress_min_m`` (``progress``: the feet's
+    midpoint along +x after the last step made); ``steps_made_mean``; ``footholds_on_obstacles`` (steps made onto
+    an obstacle cell, bare footprint); ``unsupported_decisions``. With the MJX biped's columns
+    (:data:`ijoy_jax.sweep.WALK_PHYSICS_METRICS`) also ``obstacle_contacts`` (steps begun standing during which
+    a sole or shin touched an obstacle cell) and ``robots_with_contact``; ``placement_error_mean_m``, the mean
+    touch-down error over every step made by every robot; ``placement_error_p95_m`` and ``tilt_error_p95_rad``,
+    the mean over robots of each robot's 95th percentile over its steps made (robots that made none left out).
+    These are None for the perfect robot (not measured).
     """
-    taken = np.asarray(traj.taken, bool)
-    b = taken.shape[0]
-    log = traj.log
-    fallen = np.zeros_like(taken) if log is None else np.asarray(log.fallen, bool)
-    made = taken & ~fallen
-    upright = np.concatenate([np.ones((b, 1), bool), ~fallen[:, :-1]], axis=1)  # standing as the step began
-    fell = fallen.any(axis=1)
-    stops = np.asarray(traj.stopped, bool).any(axis=1) & ~fell
-    start = np.broadcast_to(np.asarray(start, np.float64), (b, 2, 3))
-    progress = touchdown_feet(traj, start, made)[:, :, 0].mean(axis=1) - start[:, :, 0].mean(axis=1)
+    fell = df["fell"].to_numpy(bool) if "fell" in df else np.zeros(len(df), bool)
+    stops = df["stopped"].to_numpy(bool) & ~fell
+    progress = df["progress"].to_numpy(np.float64)
     out: dict[str, Any] = dict(
-        robots=int(b),
+        robots=int(len(df)),
         fell=int(fell.sum()),
         fell_pct=100.0 * float(fell.mean()),
         stops=int(stops.sum()),
         stops_pct=100.0 * float(stops.mean()),
         progress_mean_m=float(progress.mean()),
         progress_min_m=float(progress.min()),
-        steps_made_mean=float(made.sum(axis=1).mean()),
-        footholds_on_obstacles=int((np.asarray(traj.on_obstacle, bool) & made).sum()),
-        unsupported_decisions=int(np.asarray(traj.unsupported, bool).sum()),
+        steps_made_mean=float(df["steps_made"].mean()),
+        footholds_on_obstacles=int(df["footholds_on_obstacles_made"].sum()),
+        unsupported_decisions=int(df["unsupported_decisions"].sum()),
     )
-    if log is None:
+    if "standing_contacts" not in df:
         out.update(obstacle_contacts=None, robots_with_contact=None, placement_error_mean_m=None,
-                   placement_error_p95_m=None, yaw_error_p95_rad=None, tilt_error_p95_rad=None)
+                   placement_error_p95_m=None, tilt_error_p95_rad=None)
         return out
-    contact = np.asarray(log.obstacle_contact, bool) & upright
-    err = np.asarray(log.placement_error, np.float64)[made]
+    contacts = df["standing_contacts"].to_numpy(np.int64)
     out.update(
-        obstacle_contacts=int(contact.sum()),
-        robots_with_contact=int(contact.any(axis=1).sum()),
-        placement_error_mean_m=float(err.mean()) if err.size else None,
-        placement_error_p95_m=_percentile(err, 95),
-        yaw_error_p95_rad=_percentile(np.asarray(log.yaw_error, np.float64)[made], 95),
-        tilt_error_p95_rad=_percentile(np.asarray(log.tilt_error, np.float64)[made], 95),
+        obstacle_contacts=int(contacts.sum()),
+        robots_with_contact=int((contacts > 0).sum()),
+        placement_error_mean_m=_pooled_mean(df["made_placement_error_mean"], df["steps_made"]),
+        placement_error_p95_m=_mean(df["made_placement_error_p95"]),
+        tilt_error_p95_rad=_mean(df["made_tilt_error_p95"]),
     )
     return out
 
 
-def _to_host(tree):
-    return jax.tree_util.tree_map(np.asarray, tree)
-
-
-def _stack_robot(robot: robots.Robot, batch: int) -> robots.Robot:
-    return jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (batch, *np.shape(x))), robot)
-
-
-def walk_options(*, refine: bool = False, kernel: str = "xla") -> SelectOptions:
-    """Both walkers' search: the paper's ordered selector with FootCost's ``kernel`` ("xla" or "pallas"), each
-    lattice choice refined to a continuous foothold when ``refine`` (:mod:`ijoy_jax.refine`)."""
-    return SelectOptions(method="ordered", kernel=kernel, refine=refine)
-
-
-def perfect_rollouts(terrains: Terrain, robot: robots.Robot, starts, commands, options: SelectOptions | None = None,
-                     *, num_steps: int, targets=None) -> control.Trajectory:
-    """The perfect robot on B maps: one jitted ``vmap`` of :func:`ijoy_jax.control.rollout`.
-
-    ``terrains``, ``starts`` (B, 2, 3) and ``commands`` (B, num_steps, 3) are batched; the robot and its
-    targets (:func:`ijoy_jax.make_targets`, built when None) are shared, and traced: new maps, commands or
-    robot values reuse the compiled program. ``options``: the search (None: :func:`walk_options`' default,
-    the ordered selector; refinement is one more program).
-    """
-    targets = select.make_targets(robot) if targets is None else targets
-    options = walk_options() if options is None else options
-    return _perfect_jit(terrains, robot, starts, commands, targets, options, num_steps=int(num_steps))
-
-
-@functools.partial(jax.jit, static_argnames=("num_steps",))
-def _perfect_jit(terrains, robot, starts, commands, targets, options, *, num_steps: int):
-    def one(t, s, c):
-        return control.rollout(t, robot, s, c, num_steps, options, targets=targets)
-
-    return jax.vmap(one)(terrains, starts, commands)
-
-
-def _timed(fn, *args, **kwargs):
-    """Run ``fn(*args, **kwargs)`` to completion; return (result on the host, compile seconds, run seconds)."""
-    with compile_seconds() as compiled:
-        t0 = time.perf_counter()
-        out = jax.block_until_ready(fn(*args, **kwargs))
-        wall = time.perf_counter() - t0
-    return _to_host(out), compiled[0], max(wall - compiled[0], 0.0)
-
-
-def simulated_rollouts(sim: W.Sim, terrains: Terrain, robot: robots.Robot, starts, commands,
-                       options: SelectOptions | None = None, *, num_steps: int, chunk: int, targets=None):
-    """The MJX biped on B maps, ``chunk`` rollouts per :func:`ijoy_jax.sim.walker.rollout_batch` call
-    (``options``: its selector's search, as :func:`perfect_rollouts`).
-
-    Every call has ``chunk`` rollouts (the last chunk wraps round to the first maps, its extra rollouts
-    dropped), so all calls share one compiled program. Returns (trajectory on the host with leading axis B,
-    compile seconds, run seconds).
-    """
-    total = int(np.shape(starts)[0])
-    targets = select.make_targets(robot) if targets is None else targets
-    options = walk_options() if options is None else options
-    stacked = _stack_robot(robot, chunk)
-    parts, comp, run_s = [], 0.0, 0.0
-    for lo in range(0, total, chunk):
-        idx = np.arange(lo, lo + chunk) % total
-        part, c, r = _timed(W.rollout_batch, sim, jax.tree_util.tree_map(lambda x, idx=idx: x[idx], terrains),
-                            stacked, starts[idx], commands[idx], options, num_steps=num_steps, targets=targets)
-        parts.append(jax.tree_util.tree_map(lambda a, n=min(chunk, total - lo): a[:n], part))
-        comp, run_s = comp + c, run_s + r
-    return jax.tree_util.tree_map(lambda *a: np.concatenate(a), *parts), comp, run_s
-
-
-def _device_info() -> dict[str, str]:
-    import mujoco
-
-    return dict(device=str(jax.devices()[0].device_kind), jax=jax.__version__, mujoco=mujoco.__version__)
-
-
 def check_options(families: Sequence[str] | None, *, batch: int, steps: int, commands: Sequence[str],
-                  resolution: float, chunk: int | None, walkers: Sequence[str], forward: float) -> list[str]:
-    """Validate :func:`run`'s options before any compute; returns the family names in table order."""
+                  walkers: Sequence[str], chunk: int | None, folder=None) -> list[Path]:
+    """Validate :func:`run`'s own options before any compute; returns the sweep files in table order (family
+    by family in the registry's order, then :data:`COMMANDS`' order). The rest is checked with each file."""
     names = list(FAMILIES) if families is None else list(families)
     unknown = [n for n in names if n not in FAMILIES]
     if unknown or not names:
@@ -314,142 +230,110 @@ def check_options(families: Sequence[str] | None, *, batch: int, steps: int, com
     bad = [w for w in walkers if w not in WALKERS]
     if bad or not walkers:
         raise ValueError(f"walkers must be some of {WALKERS}, got {list(walkers)}")
-    if not (math.isfinite(forward) and 0 <= forward):
-        raise ValueError(f"forward speed must be a finite number of m/s >= 0, got {forward!r}")
-    grid_shape(resolution)
-    return [n for n in FAMILIES if n in names]
-
-
-def check_robot_leaves(values: Mapping[str, float] | None) -> dict[str, float]:
-    """Validate :func:`run`'s ``robot_leaves`` (names in :data:`ijoy_jax.robots.SELECTOR_LEAVES`, values that
-    :func:`ijoy_jax.robots.check_robot` accepts on the preset); returns them as a dict of floats."""
-    values = {} if values is None else dict(values)
-    unknown = [n for n in values if n not in robots.SELECTOR_LEAVES]
-    if unknown:
-        raise ValueError(f"unknown robot leaves {unknown}; the choice's leaves: {', '.join(robots.SELECTOR_LEAVES)}")
-    for name, value in values.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-            raise ValueError(f"robot.{name} must be a number, got {value!r}")
-    out = {n: float(v) for n, v in values.items()}
-    robots.check_robot(robots.set_leaves(robots.hrp2(), out))  # names the first bad value
-    return out
+    files = [sweep_file(n, c, folder) for n in FAMILIES if n in names for c in COMMANDS if c in commands]
+    missing = [str(f) for f in files if not f.is_file()]
+    if missing:
+        raise ValueError(f"no sweep file {missing[0]} (the walk sweeps ship in sweeps/walk of a source checkout; "
+                         "give their folder with --sweeps)")
+    return files
 
 
 def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int = 30,
-        commands: Sequence[str] = COMMANDS, resolution: float = RESOLUTION, seed: int = 0, chunk: int | None = None,
-        walkers: Sequence[str] = WALKERS, forward: float = FORWARD, refine: bool = False, kernel: str = "xla",
-        robot_leaves: Mapping[str, float] | None = None,
+        commands: Sequence[str] = COMMANDS, walkers: Sequence[str] = WALKERS, seed: int | None = None,
+        resolution: float | None = None, chunk: int | None = None, refine: bool | None = None,
+        kernel: str | None = None, robot_leaves: Mapping[str, float] | None = None, sweeps=None, out=None,
         emit: Callable[[dict], None] | None = None) -> list[dict[str, Any]]:
-    """Walk ``batch`` robots per family and command kind with each walker; one record per row (and skips).
+    """Run the walk sweep files of ``families`` x ``commands`` with each walker; one record per row.
+
+    Every file and walker is checked (:func:`ijoy_jax.sweep.parse_config` of :func:`sweep_text`) before the
+    first runs.
 
     Args:
-      families: names in :data:`FAMILIES` (None: all), run in the registry's order.
-      batch: robots (maps) per family; steps: steps per rollout.
-      commands: some of :data:`COMMANDS`; the same maps serve both kinds.
-      resolution: cell size (m) of the 5 m x 2 m maps.
-      seed: maps and random commands: a family's come from ``fold_in(seed, i)``, i its index in
-        :data:`FAMILIES`, so it walks the same maps and commands whichever families run beside it.
-      chunk: simulated rollouts per jitted call (equal chunks, one compile): default ``batch`` up to 1024 on an
-        accelerator (a rollout holds tens of MB of selector windows; 1024 ran more physics steps/s than 512,
-        docs/benchmarks_history.md), 32 on a CPU.
-      walkers: some of :data:`WALKERS`.
-      forward: the held forward command (m/s) of families without their own (:attr:`WalkFamily.forward`).
-      refine: both walkers refine each lattice choice to a continuous foothold (:mod:`ijoy_jax.refine`,
-        ``SelectOptions(refine=True)`` of :func:`ijoy_jax.control.rollout` and
-        :func:`ijoy_jax.sim.walker.rollout_batch`).
-      kernel: FootCost's implementation in both walkers' selector (:data:`ijoy_jax.select.KERNELS`): "xla", or
-        "pallas", the fused kernel (on a GPU it compiles the MJX program several seconds faster, BENCHMARKS.md;
-        on a CPU it is interpreted, slowly). Recorded in each row.
-      robot_leaves: values of the selector's robot leaves (:data:`ijoy_jax.robots.SELECTOR_LEAVES` by dotted
-        name, e.g. ``{"metrics.support_limit": 0.003}``) set on every family's robot: both walkers choose with
-        them; traced, so they reuse the compiled programs. Recorded in each row as ``robot_leaves``.
+      families: names in :data:`FAMILIES` (None: all), in the registry's order.
+      batch: robots (maps) per family and command kind (the files' ``scenarios_per_cell``); steps: steps per
+        rollout (``num_steps``).
+      commands: some of :data:`COMMANDS`; walkers: some of :data:`WALKERS`.
+      seed, resolution, refine, kernel: the files' ``[sweep] seed`` (maps and random commands),
+        ``[terrain] resolution`` (m), ``[sweep] refine`` (each lattice choice refined to a continuous
+        foothold, :mod:`ijoy_jax.refine`) and ``[sweep] kernel`` ("xla", or "pallas": the fused FootCost
+        kernel, for a GPU); None keeps the files' (0, 0.02, false, "xla").
+      chunk: scenarios per jitted call (:func:`ijoy_jax.sweep.run`'s ``chunk_size``; None: the batch, up to
+        :data:`CHUNK` on an accelerator and :data:`ijoy_jax.sweep.DEFAULT_CHUNK` on a CPU).
+      robot_leaves: robot values set on every file (``[robot]``, dotted names as ``metrics.support_limit``;
+        traced leaves of the choice, so they reuse the compiled programs). Recorded in each row.
+      sweeps: the folder of the sweep files (None: :data:`SWEEPS`).
+      out: the folder of the sweeps' results, one subfolder ``<file stem>_<walker>`` each (a folder of the same
+        run is resumed, one of another refused by the sweep engine); None: a new temporary folder.
       emit: called with each record as soon as it exists (e.g. to print JSON lines).
 
     Returns:
       Records (dicts) with ``name`` "walk": ``family``, ``commands``, ``walker``, the numbers of
-      :func:`aggregate`, ``compile_s`` and ``run_s`` (compile time from JAX's compile events, run time the
-      rest of the wall time), ``physics_steps_per_s`` (simulated: robots x (steps + the standing step) x
-      physics steps per step / run time) or ``decisions_per_s`` (perfect), ``new_compiles`` (programs the
-      simulated rows' calls added to :func:`ijoy_jax.sim.walker.compiled_programs`), and the setup;
-      ``skipped`` (the reason) for a family whose robot cannot be built; and a last record ``name``
-      "walk_compiles" with the totals.
+      :func:`summarize`, ``compile_s`` and ``run_s`` (compile time from JAX's compile events, run time the rest
+      of the run's wall time), ``physics_steps_per_s`` (MJX: robots x (steps + the standing step) x physics
+      steps per step / run time) and ``new_compiles`` (MJX rollout programs the run compiled,
+      :func:`ijoy_jax.sim.walker.compiled_programs`), or ``decisions_per_s`` (perfect), ``compiles`` (the
+      sweep's chunk programs traced by the run), the ``sweep`` file, its results folder ``results`` and the
+      setup; and a last record ``name`` "walk_compiles" with the totals (``mjx_programs``: MJX rollout programs
+      compiled).
     """
-    names = check_options(families, batch=batch, steps=steps, commands=commands, resolution=resolution,
-                          chunk=chunk, walkers=walkers, forward=forward)
-    leaves = check_robot_leaves(robot_leaves)
-    if not isinstance(refine, (bool, np.bool_)):
-        raise ValueError(f"refine must be True or False, got {refine!r}")
-    refine = bool(refine)
-    options = walk_options(refine=refine, kernel=kernel)  # the strings of the command line, as one object
-    shape = grid_shape(resolution)
+    from ijoy_jax.sim import walker as W
+
+    files = check_options(families, batch=batch, steps=steps, commands=commands, walkers=walkers, chunk=chunk,
+                          folder=sweeps)
+    options = dict(batch=batch, steps=steps, seed=seed, resolution=resolution, kernel=kernel, refine=refine,
+                   robot_leaves=robot_leaves)
+    planned = []  # every (file, walker) parsed before the first runs: a bad option fails before any compute
+    for path in files:
+        text = path.read_text(encoding="utf-8")
+        for w in WALKERS:
+            if w in walkers:
+                planned.append((path, w, sweep.parse_config(sweep_text(text, walker=w, **options), str(path))))
     if chunk is None:
-        chunk = min(batch, 32 if jax.default_backend() == "cpu" else 1024)
-    chunk = min(int(chunk), batch)
+        chunk = min(batch, sweep.DEFAULT_CHUNK if jax.default_backend() == "cpu" else CHUNK)
+    out = Path(tempfile.mkdtemp(prefix="ijoy-bench-walk-") if out is None else out)
     emit = (lambda row: None) if emit is None else emit
     rows: list[dict[str, Any]] = []
-
-    def record(row):
+    programs0, t_all = W.compiled_programs(), time.perf_counter()
+    info = _device_info()
+    for path, w, cfg in planned:
+        family, kind = cfg.walk, path.stem.rpartition("_")[2]
+        folder = out / f"{path.stem}_{w}"
+        before = W.compiled_programs()
+        with compile_seconds() as compiled:
+            t0 = time.perf_counter()
+            stats = sweep.run(cfg, folder, chunk_size=chunk, progress=False)
+            wall = time.perf_counter() - t0
+        run_s = max(wall - compiled[0], 1e-9)
+        fam = FAMILIES[family]
+        row = dict(name="walk", family=family, commands=kind, walker=w,
+                   robot="hrp2()" if "reach" not in cfg.robot else f"hrp2(reach={cfg.robot['reach']:g})",
+                   ranges=fam.ranges, **summarize(sweep.load(folder)), compile_s=round(compiled[0], 3),
+                   run_s=round(run_s, 4), compiles=stats.compiles, chunk=min(stats.chunk_size, cfg.num_scenarios),
+                   batch=cfg.scenarios_per_cell,
+                   steps=cfg.num_steps, seed=cfg.seed, resolution=cfg.resolution, shape=list(cfg.shape),
+                   refine=cfg.refine, kernel=cfg.kernel, forward_m_s=cfg.command.get("vx", (None,))[0],
+                   robot_leaves={k: float(v) for k, v in (robot_leaves or {}).items()}, sweep=str(path),
+                   results=str(folder), **info)
+        if w == "mjx":
+            row["physics_steps_per_s"] = stats.computed * stats.physics_steps / run_s
+            row["new_compiles"] = W.compiled_programs() - before
+        else:
+            row["decisions_per_s"] = stats.computed * cfg.num_steps / run_s
         rows.append(row)
         emit(row)
-
-    base = robots.hrp2()
-    sim = None
-    if "mjx" in walkers:
-        sim = W.make_sim(shape, resolution, robot=base)
-    info = _device_info()
-    programs0, t_all = W.compiled_programs(), time.perf_counter()
-    perfect_compile = 0.0
-    setup = dict(batch=batch, steps=steps, resolution=resolution, shape=list(shape), chunk=chunk, seed=seed,
-                 forward_m_s=forward, refine=refine, kernel=kernel, robot_leaves=leaves, **info)
-    key = jax.random.key(seed)
-    for name in names:
-        fam = FAMILIES[name]
-        try:
-            robot = robots.set_leaves(family_robot(fam), leaves)
-        except TypeError as e:
-            record(dict(name="walk", family=name, skipped=f"robots.hrp2(reach={fam.reach}) failed: {e}", **setup))
-            continue
-        robot_name = "hrp2()" if fam.reach is None else f"hrp2(reach={fam.reach})"
-        k_map, k_cmd = jax.random.split(jax.random.fold_in(key, list(FAMILIES).index(name)))
-        t0 = time.perf_counter()
-        maps = jax.block_until_ready(fam.maps(k_map, batch, shape=shape, resolution=resolution))
-        maps_s = time.perf_counter() - t0
-        lo, hi = float(jnp.min(maps.height)), float(jnp.max(maps.height))
-        if sim is not None and (lo < HEIGHT_RANGE[0] or hi > HEIGHT_RANGE[1]):
-            raise ValueError(f"family {name}: heights {lo:.3f}..{hi:.3f} m leave the Sim's range {HEIGHT_RANGE}")
-        starts = start_stances(robot, batch)
-        targets = select.make_targets(robot)
-        speed = forward if fam.forward is None else fam.forward
-        for kind in commands:
-            cmd = jax.block_until_ready(
-                commands_for(kind, jax.random.fold_in(k_cmd, COMMANDS.index(kind)), robot, batch, steps, speed))
-            common = dict(name="walk", family=name, commands=kind, robot=robot_name, ranges=fam.ranges,
-                          maps_s=round(maps_s, 3), **dict(setup, forward_m_s=speed))
-            if "perfect" in walkers:
-                traj, comp, run_s = _timed(perfect_rollouts, maps, robot, starts, cmd, options, num_steps=steps,
-                                           targets=targets)
-                perfect_compile += comp
-                record(dict(common, walker="perfect", **aggregate(traj, starts), compile_s=round(comp, 3),
-                            run_s=round(run_s, 4), decisions_per_s=batch * steps / max(run_s, 1e-9)))
-            if sim is not None:
-                before = W.compiled_programs()
-                traj, comp, run_s = simulated_rollouts(sim, maps, robot, starts, cmd, options, num_steps=steps,
-                                                       chunk=chunk, targets=targets)
-                physics = batch * (steps + 1) * sim.substeps * sim.cfg.ticks_per_step
-                record(dict(common, walker="mjx", **aggregate(traj, starts), compile_s=round(comp, 3),
-                            run_s=round(run_s, 4), physics_steps_per_s=physics / max(run_s, 1e-9),
-                            new_compiles=W.compiled_programs() - before))
-    record(dict(name="walk_compiles", mjx_programs=W.compiled_programs() - programs0,
-                mjx_calls=sum(1 for r in rows if r.get("walker") == "mjx") * -(-batch // chunk),
-                mjx_compile_s=round(sum(r["compile_s"] for r in rows if r.get("walker") == "mjx"), 3),
-                perfect_compile_s=round(perfect_compile, 3), wall_s=round(time.perf_counter() - t_all, 2), **setup))
+    total = dict(name="walk_compiles", mjx_programs=W.compiled_programs() - programs0,
+                 mjx_compile_s=round(sum(r["compile_s"] for r in rows if r["walker"] == "mjx"), 3),
+                 perfect_compile_s=round(sum(r["compile_s"] for r in rows if r["walker"] == "perfect"), 3),
+                 wall_s=round(time.perf_counter() - t_all, 2), results=str(out), **info)
+    rows.append(total)
+    emit(total)
     return rows
 
 
-def compiled_perfect_programs() -> int:
-    """How many programs :func:`perfect_rollouts` holds compiled in this process (one per robot action-set size,
-    batch and ``num_steps``; new maps, commands and robot values reuse them)."""
-    return compiled_count(_perfect_jit)
+def _device_info() -> dict[str, str]:
+    import mujoco
+
+    return dict(device=str(jax.devices()[0].device_kind), jax=jax.__version__, mujoco=mujoco.__version__)
 
 
 # --------------------------------------------------------------------------------------------- table and plot

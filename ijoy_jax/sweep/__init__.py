@@ -3,6 +3,7 @@
 Public names::
 
   load_config / parse_config / SweepConfig / SweepConfigError   the TOML schema, validated before compute
+  set_values                                                     a sweep file's text with some values set
   cells / scenarios                                              the expansion into cells and scenarios
   MAX_SCENARIOS / HOST_MEMORY_FRACTION / table_bytes             sizes checked before any allocation
   MAX_NUM_STEPS / MAX_DENSITY / MIN_RESOLUTION / MAX_MAP_CELLS /  bounds of the sizes that set memory and
@@ -30,6 +31,8 @@ Public names::
   IncompleteSweepError / action_counts / PAPER_ACTIONS           missing chunks, parts of another plan;
                                                                  density as action counts
   plan_hash / part_plan                                          the plan every part records (its hash)
+  WALK_METRICS / WALK_PHYSICS_METRICS                            [terrain] walk: steps made, progress along +x
+                                                                 (ijoy bench walk's table)
   EXTRA_METRICS / plot_crossing / b_max                          family metrics (bars: crossing rate vs the
                                                                  paper's bound; see terrain.family.Family.metrics)
 
@@ -49,8 +52,8 @@ _require("sweep", "pandas", "pyarrow", "matplotlib")
 
 from ijoy_jax.limits import MAX_ACTIONS, MAX_DENSITY, MAX_MAP_CELLS, MAX_NUM_STEPS
 from ijoy_jax.sweep import distributed, export, local, recorded
-from ijoy_jax.sweep.columns import EXTRA_METRICS, METRICS, PHYSICS_METRICS, UNITS
-from ijoy_jax.sweep.config import load_config, parse_config
+from ijoy_jax.sweep.columns import EXTRA_METRICS, METRICS, PHYSICS_METRICS, UNITS, WALK_METRICS, WALK_PHYSICS_METRICS
+from ijoy_jax.sweep.config import load_config, parse_config, set_values
 from ijoy_jax.sweep.execute import RunStats, run
 from ijoy_jax.sweep.expansion import HOST_MEMORY_FRACTION, MAX_SCENARIOS, cells, scenarios, table_bytes
 from ijoy_jax.sweep.export import EXPORT_TERRAINS, export_drive
@@ -115,6 +118,8 @@ __all__ = [
     "SIM_MIN_RESOLUTION",
     "UNITS",
     "WALKERS",
+    "WALK_METRICS",
+    "WALK_PHYSICS_METRICS",
     "IncompleteSweepError",
     "RunStats",
     "Scenario",
@@ -146,6 +151,7 @@ __all__ = [
     "scenario",
     "scenario_bytes",
     "scenarios",
+    "set_values",
     "table_bytes",
     "trace_count",
 ]

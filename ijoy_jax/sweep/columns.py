@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from ijoy_jax.terrain import generators
 
-__all__ = ["EXTRA_METRICS", "METRICS", "PARAMETER_PREFIXES", "PHYSICS_METRICS", "UNITS"]
+__all__ = ["EXTRA_METRICS", "METRICS", "PARAMETER_PREFIXES", "PHYSICS_METRICS", "UNITS", "WALK_METRICS",
+           "WALK_PHYSICS_METRICS", "walk_metrics"]
 
 METRICS = (
     "steps_taken",
@@ -43,6 +44,34 @@ PHYSICS_METRICS = (
 """Per-scenario metrics of a ``walker = "mjx"`` sweep (:func:`ijoy_jax.sim.walker.summary`): the robot fell,
 touched an obstacle (``collided``) and in how many steps, its touch-down errors (m, rad), and whether a
 physics value was out of bounds (``dynamics_invalid``; refused before compute, so False)."""
+
+WALK_METRICS = ("steps_made", "progress", "footholds_on_obstacles_made")
+"""Per-scenario metrics of a walk sweep (``[terrain] walk``), what ``ijoy bench walk`` tabulates: ``steps_made``,
+steps taken that ended with the robot standing (all steps taken, for the perfect robot); ``progress`` (m),
+how far the midpoint of the feet moved along +x from the start feet to their touch-downs after the last step
+made; ``footholds_on_obstacles_made``, steps made onto an obstacle cell (bare footprint)
+(:func:`ijoy_jax.sweep.programs.walk_summary`)."""
+
+WALK_PHYSICS_METRICS = (
+    "standing_contacts",
+    "made_placement_error_mean",
+    "made_placement_error_p95",
+    "made_tilt_error_p95",
+)
+"""With ``walker = "mjx"``, a walk sweep's figures over the steps made (after a fall the loop may go on choosing
+steps the robot no longer makes; :data:`PHYSICS_METRICS` count those too): ``standing_contacts``, steps begun
+standing during which a sole or shin touched an obstacle cell; the mean and 95th percentile of the touch-down
+error (m) and the 95th percentile of the sole tilt error (rad) over the steps made (NaN for a robot that made
+none)."""
+
+
+def walk_metrics(walk: bool, walker: str) -> tuple[str, ...]:
+    """The walk metrics a sweep's results hold: () without ``[terrain] walk``, else :data:`WALK_METRICS` and with
+    ``walker = "mjx"`` :data:`WALK_PHYSICS_METRICS`."""
+    if not walk:
+        return ()
+    return WALK_METRICS + (WALK_PHYSICS_METRICS if walker == "mjx" else ())
+
 
 EXTRA_METRICS = generators.METRIC_NAMES
 """Family-specific metrics (every family's ``metric_names``, :data:`ijoy_jax.terrain.generators.METRIC_NAMES`),
@@ -90,6 +119,13 @@ UNITS = {
     "yaw_error_mean": "rad",
     "tilt_error_p95": "rad",
     "dynamics_invalid": "fraction",
+    "steps_made": "steps",
+    "progress": "m",
+    "footholds_on_obstacles_made": "footholds",
+    "standing_contacts": "steps",
+    "made_placement_error_mean": "m",
+    "made_placement_error_p95": "m",
+    "made_tilt_error_p95": "rad",
     "sim.friction": "coefficient",
     "sim.mass_scale": "x nominal",
     "sim.kp_scale": "x nominal",

@@ -11,7 +11,9 @@ exports the names sweep files are described with (the schema's constants, the me
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -51,7 +53,7 @@ from ijoy_jax.sweep.schema import (
     reach_of,
     sim_field_names,
 )
-from ijoy_jax.terrain import generators
+from ijoy_jax.terrain import generators, walk_families
 from ijoy_jax.terrain.family import Family, ParamError
 
 __all__ = [
@@ -77,6 +79,7 @@ __all__ = [
     "parse_config",
     "reach_of",
     "scenarios",
+    "set_values",
     "table_bytes",
 ]
 
@@ -96,6 +99,8 @@ _SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps",
 
 _TERRAIN_KEYS = ("family", "shape", "resolution", "has_height", "max_count", "params")
 _RECORDING_KEY = "recording"  # [terrain] recording: a drive recording's terrain, instead of the _TERRAIN_KEYS
+_WALK_KEY = "walk"  # [terrain] walk: a walking-benchmark family's maps, with [terrain] resolution alone
+_RANDOM_KEY = "random"  # [command] random: a new random command every step, instead of vx, vy, wz or file
 
 
 def _flatten(table: dict, prefix: str = "") -> dict:
@@ -195,6 +200,26 @@ def _generated_terrain(chk: Checker, terrain: dict, kw: dict):
     kw["terrain_params"] = {k: _terrain_value(chk, f"terrain.params.{k}", fam, k, v, max_count)
                             for k, v in tparams.items()}
     return fam, fields, max_count
+
+
+def _walk_terrain(chk: Checker, terrain: dict, kw: dict) -> None:
+    """``[terrain] walk``: a walking-benchmark family (:data:`ijoy_jax.terrain.walk_families.FAMILIES`), its
+    5 m x 2 m 2.5D map at ``[terrain] resolution``, into ``kw`` (``family`` None)."""
+    name = chk.string(f"terrain.{_WALK_KEY}", terrain[_WALK_KEY], tuple(walk_families.FAMILIES))
+    for k in (*_TERRAIN_KEYS, _RECORDING_KEY):
+        if k in terrain and k != "resolution":
+            chk.fail(f"terrain.{k}", f"the terrain comes from terrain.{_WALK_KEY} (the family's own 5 m x 2 m 2.5D "
+                                     "maps, one per replicate): only terrain.resolution goes with it")
+    res = walk_families.RESOLUTION
+    if "resolution" in terrain:
+        res = chk.number("terrain.resolution", terrain["resolution"])
+        if res < MIN_RESOLUTION:
+            chk.fail("terrain.resolution", f"must be >= {MIN_RESOLUTION} m (sweep.config.MIN_RESOLUTION), got {res}")
+    try:
+        shape = walk_families.grid_shape(res)
+    except ValueError as e:
+        chk.fail("terrain.resolution", str(e))
+    kw.update(family=None, walk=name, shape=shape, resolution=res, has_height=True, terrain_params={})
 
 
 def _file_path(chk: Checker, key: str, value, folder: Path) -> Path:
@@ -353,9 +378,12 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     sim_fields = sim_field_names() if mjx else ()
 
     terrain = chk.table("terrain", raw.get("terrain", {}))
-    chk.unknown("terrain.", terrain, (*_TERRAIN_KEYS, _RECORDING_KEY))
+    chk.unknown("terrain.", terrain, (*_TERRAIN_KEYS, _RECORDING_KEY, _WALK_KEY))
     folder = Path(source).parent if source != "<string>" else Path(".")
-    if _RECORDING_KEY in terrain:
+    if _WALK_KEY in terrain:
+        fam, fields, max_count = None, (), None
+        _walk_terrain(chk, terrain, kw)
+    elif _RECORDING_KEY in terrain:
         fam, fields, max_count = None, (), None
         _recorded_terrain(chk, terrain, kw, folder)
     else:
@@ -366,8 +394,14 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     kw["robot"] = {k: _robot_value(chk, f"robot.{k}", k, v) for k, v in robot.items()}
 
     command = chk.table("command", raw.get("command", {}))
-    chk.unknown("command.", command, (*COMMAND_KEYS, *recorded.COMMAND_FILE_KEYS))
-    if "file" in command:  # read once the grid is known (a trace's robot must not be swept)
+    chk.unknown("command.", command, (*COMMAND_KEYS, *recorded.COMMAND_FILE_KEYS, _RANDOM_KEY))
+    if _RANDOM_KEY in command and _bool(chk, f"command.{_RANDOM_KEY}", command[_RANDOM_KEY]):
+        for k in command:
+            if k != _RANDOM_KEY:
+                chk.fail(f"command.{k}", f"the commands are drawn every step (command.{_RANDOM_KEY} = true): give "
+                                         "random, a distribution (vx, vy, wz) or a file, one of them")
+        kw.update(random_commands=True, command={})
+    elif "file" in command:  # read once the grid is known (a trace's robot must not be swept)
         for k in COMMAND_KEYS:
             if k in command:
                 chk.fail(f"command.{k}", "the commands come from command.file: give a file or a distribution, "
@@ -377,7 +411,7 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
             if k in command:
                 chk.fail(f"command.{k}", "only with command.file (commands from a recorded drive or a trace file)")
         cmd = {"vx": (0.25, 0.25), "vy": (0.0, 0.0), "wz": (0.0, 0.0)}
-        for k, v in command.items():
+        for k, v in ((k, v) for k, v in command.items() if k != _RANDOM_KEY):  # random = false: held commands
             cmd[k] = chk.range(f"command.{k}", v) if isinstance(v, list) else (chk.number(f"command.{k}", v),) * 2
         kw["command"] = cmd
 
@@ -406,7 +440,7 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
             chk.fail(f"{section}.{key}", 'physics needs [sweep] walker = "mjx" (the perfect robot has none)')
         if head == "terrain" and fam is None:
             chk.fail(f"{section}.{key}", "terrain parameters need a generated terrain ([terrain] family), not "
-                                         "[terrain] recording")
+                                         f"[terrain] {_WALK_KEY if kw.get('walk') else _RECORDING_KEY}")
         known = (tuple(f"robot.{k}" for k in ROBOT_DEFAULTS) + tuple(f"terrain.{k}" for k in fields)
                  + tuple(f"sim.{k}" for k in sim_fields) + tuple(f"selector.{k}" for k in SELECTOR_DEFAULTS))
         if key not in known:
@@ -471,6 +505,11 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     # The start zone must leave room for the terrain on the sweep's map (family.Family.validate).
     # Only the terrain values matter: each distinct combination is checked once, in cell order (the first
     # failing cell's combination fails first), not every cell (2e5 cells took 35 s).
+    if cfg.walk is not None:  # a walk family: its own maps; the simulated robot stands at its start
+        if mjx:
+            ext = [n * cfg.resolution for n in cfg.shape]
+            check_start_fits(chk, cfg, walk_families.START[0] / ext[0], walk_families.START[1] / ext[1])
+        return cfg
     if fam is None:  # a recorded terrain: no family rules; the recorded start must fit the simulated robot
         if mjx:
             check_recorded_start_fits(chk, cfg)
@@ -558,3 +597,67 @@ def _terrain_of(cfg: SweepConfig, row, name: str):
         return cfg.terrain_params[name]
     return getattr(cfg.params_class(), name)
 
+
+
+_TABLE_LINE = re.compile(r"^\s*\[\s*([A-Za-z0-9_.-]+)\s*\]\s*(#.*)?$")
+
+
+def _toml_value(key: str, value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value) if isinstance(value, int) or math.isfinite(value) else str(value)
+    if isinstance(value, str):
+        # a TOML basic string: JSON's escapes, non-ASCII as itself (JSON's \\u escapes of surrogates are not TOML's),
+        # DEL escaped (a control character TOML refuses literally)
+        return json.dumps(value, ensure_ascii=False).replace("\x7f", "\\u007f")
+    raise ValueError(f"{key}: a sweep file value must be a bool, int, float or string, got {value!r}")
+
+
+def set_values(text: str, values) -> str:
+    """A sweep file's text with the given values set: ``{"table.key": value}``, e.g. ``{"sweep.num_steps": 6,
+    "robot.metrics.support_limit": 0.003}`` (``key`` may be dotted within ``[table]``).
+
+    Each key's line in its table (``key = ...`` on one line) is replaced, or the key is added under the table's
+    header, the table added at the end when the text has none; the rest of the text (comments included) stays
+    as it is, so the text saved with a run's results says what ran. The values are checked when the text is
+    parsed (:func:`parse_config`), not here.
+
+    Raises:
+      ValueError: a key without a table, a value that is not a bool, int, float or string, or a key whose
+        line this cannot edit (a value spanning lines, or written as a nested table).
+
+    Example:
+      >>> text = set_values("[sweep]\\nnum_steps = 30  # steps\\n", {"sweep.num_steps": 6, "robot.margin": 0.03})
+      >>> cfg = parse_config(text)
+      >>> cfg.num_steps, cfg.robot["margin"]
+      (6, 0.03)
+    """
+    lines = text.splitlines()
+    for dotted, value in values.items():
+        table, _, key = str(dotted).partition(".")
+        if not table or not key:
+            raise ValueError(f"{dotted!r}: name a table and a key, as 'sweep.num_steps'")
+        line = f"{key} = {_toml_value(dotted, value)}"
+        key_re = re.compile(rf"^\s*({re.escape(key)}|\"{re.escape(key)}\")\s*=")
+        current, header, found = None, None, None
+        for i, text_line in enumerate(lines):
+            m = _TABLE_LINE.match(text_line)
+            if m:
+                current = m.group(1)
+                header = i if current == table else header
+            elif current == table and key_re.match(text_line):
+                found = i
+        if found is not None:
+            lines[found] = line
+        elif header is not None:
+            lines.insert(header + 1, line)
+        else:
+            lines += ["", f"[{table}]", line]
+        try:
+            got = _flatten(tomllib.loads("\n".join(lines)).get(table, {})).get(key)
+        except tomllib.TOMLDecodeError as e:
+            raise ValueError(f"{dotted}: cannot set it in this text ({e})") from None
+        if got != value:
+            raise ValueError(f"{dotted}: cannot set it in this text (a value spanning lines, or a nested table)")
+    return "\n".join(lines) + "\n"

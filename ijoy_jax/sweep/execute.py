@@ -479,7 +479,7 @@ def _compute(cfg: SweepConfig, calls: list, table, cell_rows, bases: dict, sim, 
                 shared_of[density] = on_devices.put_shared((*shared_inputs(cell_rows, bases[density]), key, sim,
                                                             chunk_scene(cfg)))
             rows = by_id.loc[ids]
-            batch = chunk_batch(rows, size, robot_cols, terrain_cols, sim_cols, cfg=cfg)
+            batch = chunk_batch(rows, size, robot_cols, terrain_cols, sim_cols, cfg=cfg, base=bases[density])
             outs = on_devices.dispatch(run_chunk, static_g, shared_of[density], batch)
             finish_pending((index, label, rows, chunk_of, outs, t0))
         finish_pending()

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from ijoy_jax.sweep import seeding
-from ijoy_jax.sweep.columns import METRICS, PHYSICS_METRICS
+from ijoy_jax.sweep.columns import METRICS, PHYSICS_METRICS, walk_metrics
 from ijoy_jax.sweep.schema import (
     COMMAND_KEYS,
     ROBOT_DEFAULTS,
@@ -58,8 +58,9 @@ def table_bytes(cfg: SweepConfig, num_scenarios: int | None = None) -> int:
     """
     fam = None if cfg.family is None else generators.FAMILIES[cfg.family]
     terrain_columns = 0 if fam is None else len(fam.rules) + len(fam.metric_names)
-    command_columns = 0 if cfg.command_file is not None else len(COMMAND_KEYS)
+    command_columns = len(cfg.command_columns)
     columns = 4 + len(ROBOT_DEFAULTS) + terrain_columns + command_columns + len(SELECTOR_DEFAULTS) + len(METRICS)
+    columns += len(walk_metrics(cfg.walk is not None, cfg.walker))
     if cfg.walker == "mjx":
         columns += len(sim_field_names()) + len(PHYSICS_METRICS)
     n = cfg.num_scenarios if num_scenarios is None else num_scenarios
@@ -148,7 +149,8 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     :data:`ROBOT_DEFAULTS`), ``terrain.<field>`` (all of the family's
     parameters; none for a recorded terrain), ``command.vx`` (m/s), ``command.vy`` (m/s),
     ``command.wz`` (rad/s) (none when the commands come from ``[command] file``: every scenario
-    takes :attr:`SweepConfig.command_steps`), ``selector.horizon``, ``selector.refine`` (int64, 0 or 1),
+    takes :attr:`SweepConfig.command_steps`; nor with ``[command] random``: each scenario draws its own per step,
+    :func:`ijoy_jax.sweep.programs.chunk_batch`), ``selector.horizon``, ``selector.refine`` (int64, 0 or 1),
     ``selector.discount``, and for ``walker = "mjx"`` ``sim.<field>`` (every
     :class:`ijoy_jax.sim.physics.Dynamics` field: the grid's, random cell's, ``[sim]``'s or the nominal value).
 
@@ -167,8 +169,8 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     n_rep = cfg.scenarios_per_cell
     total = len(c) * n_rep if max_scenarios is None else min(len(c) * n_rep, int(max_scenarios))
     reps = min(n_rep, total)  # only the replicates of the rows asked for
-    if cfg.command_file is not None:
-        cmd = np.zeros((reps, 0))  # no command columns: the file's sequence, the same for every scenario
+    if not cfg.command_columns:
+        cmd = np.zeros((reps, 0))  # no command columns: the file's sequence, or drawn per step (chunk_batch)
     elif all(lo == hi for lo, hi in cfg.command.values()):
         # Fixed commands: what every replicate's draw gives (lo + (hi - lo) * u), without drawing.
         cmd = np.zeros((reps, 3))
@@ -182,7 +184,7 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     rules = {} if cfg.family is None else generators.FAMILIES[cfg.family].rules
     fields = list(cfg.terrain_fields)
     sim_fields = sim_field_names() if cfg.walker == "mjx" else ()
-    command_keys = () if cfg.command_file is not None else COMMAND_KEYS
+    command_keys = cfg.command_columns
     names = [
         "scenario",
         "cell",

@@ -29,6 +29,11 @@ is the one any caller of those shapes uses), and a vmap of
 (plan, chunk sizes, devices, parts, resume, processes, aggregates) is the
 same as for the perfect robot.
 
+Walk sweeps (``[terrain] walk``). The perfect robot's chunk is three programs too, as the physics chunk's: the
+family's maps, robots and starts, the rollouts (one vmap of :func:`ijoy_jax.control.rollout`, the same program
+for every family of the same shapes, so the benchmark's twelve families compile the selector's rollout once),
+then the summaries.
+
 Compiles (counted by :func:`trace_count`): parameter values never
 recompile (physics values and the lookahead's discount neither: they are traced leaves); each density
 value compiles once (its action-set size is a shape; no padding of action sets), and so does each value of
@@ -60,10 +65,11 @@ from ijoy_jax import robots
 from ijoy_jax.control import rollout
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.select_options import SelectOptions
+from ijoy_jax.sweep import seeding
 from ijoy_jax.sweep.expansion import scenarios
 from ijoy_jax.sweep.schema import COMMAND_KEYS, ROBOT_DEFAULTS, SweepConfig, SweepConfigError, reach_of
 from ijoy_jax.targets import make_targets
-from ijoy_jax.terrain import generators
+from ijoy_jax.terrain import generators, walk_families
 
 __all__ = [
     "Scenario",
@@ -76,18 +82,20 @@ __all__ = [
     "compiled_programs",
     "make_sim",
     "physics_steps_per_scenario",
+    "random_commands",
     "scenario",
     "scenario_bytes",
     "shared_inputs",
     "trace_count",
     "value_columns",
+    "walk_summary",
 ]
 
 
 class _Static(NamedTuple):
     """Everything about a chunk that is static under jit (hashable)."""
 
-    family: str | None  # None: the recorded terrain of the shared _Scene
+    family: str | None  # None: the recorded terrain of the shared _Scene, or the walk family's
     shape: tuple[int, int]
     resolution: float
     has_height: bool
@@ -95,6 +103,7 @@ class _Static(NamedTuple):
     num_steps: int
     walker: str
     selector: SelectOptions  # the chunk group's search (chunk_selector); its discount is each scenario's
+    walk: str | None = None  # a walking-benchmark family (walk_families.FAMILIES): replicate r's map from its key
 
 
 class _Scene(NamedTuple):
@@ -119,6 +128,9 @@ def _setup(static: _Static, base: robots.Robot, key, scene: _Scene, seed, robot_
     stance."""
     tkey = jax.random.fold_in(key, seed)
     robot = robots.set_leaves(base, {k: robot_vals[k] for k in robots.SCALAR_LEAVES})
+    if static.walk is not None:  # the family's map drawn from the replicate's key, the robot at its start
+        terrain = walk_families.FAMILIES[static.walk].one(tkey, shape=static.shape, resolution=static.resolution)
+        return tkey, None, terrain, robot, robots.start_stance(base, *walk_families.START)
     if static.family is None:  # the recorded terrain and start feet: the same for every scenario
         return tkey, None, scene.terrain, robot, scene.start
     fam = generators.FAMILIES[static.family]
@@ -150,6 +162,50 @@ def _family_metrics(static: _Static, tkey, params, feet, robot) -> dict:
     )
 
 
+def walk_summary(traj, start, *, physics: bool = False) -> dict:
+    """The walk metrics of one rollout (:data:`ijoy_jax.sweep.WALK_METRICS`, and with ``physics``
+    :data:`ijoy_jax.sweep.WALK_PHYSICS_METRICS`); jit- and vmap-friendly, 0-d arrays.
+
+    A step *made* is one taken that ended with the robot standing (``taken`` and not ``log.fallen``; every step
+    taken when the trajectory has no log, the perfect robot). ``footholds_on_obstacles_made``: steps made onto an
+    obstacle cell. ``progress`` (m): the midpoint of the feet along
+    +x after the last step made (each step made puts its swing foot, ``traj.sides`` +1 left, at its
+    ``traj.footsteps`` pose) minus that of ``start`` ((2, 3) start feet, left then right).
+    """
+    taken = traj.taken
+    log = traj.log
+    fallen = jnp.zeros_like(taken) if log is None else log.fallen
+    made = taken & ~fallen
+    k = jnp.arange(taken.shape[-1])
+
+    def last_x(mask, row):
+        i = jnp.max(jnp.where(mask, k, -1))
+        return jnp.where(i >= 0, traj.footsteps[jnp.maximum(i, 0), 0], start[row, 0])
+
+    left, right = last_x(made & (traj.sides > 0), 0), last_x(made & (traj.sides <= 0), 1)
+    out = {
+        "steps_made": jnp.sum(made, dtype=jnp.int32),
+        "progress": 0.5 * (left + right - start[0, 0] - start[1, 0]),
+        "footholds_on_obstacles_made": jnp.sum(made & traj.on_obstacle, dtype=jnp.int32),
+    }
+    if not physics:
+        return out
+    upright = jnp.concatenate([jnp.ones((1,), bool), ~fallen[:-1]])  # standing as the step began
+    any_made = jnp.any(made)
+
+    def p95(values):
+        return jnp.where(any_made, jnp.nanpercentile(jnp.where(made, values, jnp.nan), 95), jnp.nan)
+
+    out.update(
+        standing_contacts=jnp.sum(log.obstacle_contact & upright, dtype=jnp.int32),
+        made_placement_error_mean=jnp.where(
+            any_made, jnp.sum(jnp.where(made, log.placement_error, 0.0)) / jnp.maximum(jnp.sum(made), 1), jnp.nan),
+        made_placement_error_p95=p95(log.placement_error),
+        made_tilt_error_p95=p95(log.tilt_error),
+    )
+    return out
+
+
 def _scenario(static: _Static, base: robots.Robot, targets, key, scene, seed, robot_vals, terrain_vals, commands):
     """One scenario of the perfect robot: terrain, robot, start and rollout of its (num_steps, 3) commands; the
     trajectory's summary (scalars)."""
@@ -159,7 +215,8 @@ def _scenario(static: _Static, base: robots.Robot, targets, key, scene, seed, ro
         options = options.replace(discount=robot_vals["discount"])
     traj = rollout(terrain, robot, start, commands, static.num_steps, options, targets=targets,
                    first_swing=scene.first_swing)
-    return {**traj.summary(), **_family_metrics(static, tkey, params, traj.feet, robot)}
+    walk = {} if static.walk is None else walk_summary(traj, start)
+    return {**traj.summary(), **_family_metrics(static, tkey, params, traj.feet, robot), **walk}
 
 
 def _counting_traces(fn):
@@ -198,19 +255,49 @@ def _prepare(static: _Static, base, key, scene, seeds, robot_vals, terrain_vals)
 
 
 def _finish(static: _Static, base, key, scene, seeds, robot_vals, terrain_vals, traj) -> dict:
-    """A physics chunk's per-scenario summary (:func:`ijoy_jax.sim.walker.summary`) and family metrics."""
-    from ijoy_jax.sim import walker
+    """A chunk's per-scenario summary (a physics chunk's :func:`ijoy_jax.sim.walker.summary`), family metrics and
+    walk metrics, after its rollouts."""
+    physics = static.walker == "mjx"
+    if physics:
+        from ijoy_jax.sim import walker
 
     def one(seed, r, t, tr):
-        tkey, params, _, robot, _ = _setup(static, base, key, scene, seed, r, t)  # the terrain itself is not used
-        return {**walker.summary(tr), **_family_metrics(static, tkey, params, tr.feet, robot)}
+        tkey, params, _, robot, start = _setup(static, base, key, scene, seed, r, t)  # the terrain is not used
+        walk = {} if static.walk is None else walk_summary(tr, start, physics=physics)
+        summary = walker.summary(tr) if physics else tr.summary()
+        return {**summary, **_family_metrics(static, tkey, params, tr.feet, robot), **walk}
 
     return jax.vmap(one)(seeds, robot_vals, terrain_vals, traj)
+
+
+def _rollouts(targets, scene, terrains, robots_, starts, commands, discounts, *, selector: SelectOptions,
+              num_steps: int):
+    """The perfect robot's rollouts of a chunk whose maps come in (a walk sweep's): one program for every walk
+    family of the same shapes (each scenario's discount traced, as in :func:`_scenario`)."""
+
+    def one(t, r, s, c, d):
+        options = selector.replace(discount=d) if selector.method == "lookahead" else selector
+        return rollout(t, r, s, c, num_steps, options, targets=targets, first_swing=scene.first_swing)
+
+    return jax.vmap(one)(terrains, robots_, starts, commands, discounts)
 
 
 _counted_prepare, _prepare_traces = _counting_traces(_prepare)
 _run_prepare = jax.jit(_counted_prepare, static_argnames=("static",))
 _run_finish = jax.jit(_finish, static_argnames=("static",))
+_counted_rollouts, _rollouts_traces = _counting_traces(_rollouts)
+_run_rollouts = jax.jit(_counted_rollouts, static_argnames=("selector", "num_steps"))
+
+
+def _walk_chunk(static: _Static, base, targets, key, sim, scene, seeds, robot_vals, terrain_vals, commands, sim_vals):
+    """A chunk of the perfect robot on a walk family's maps (``[terrain] walk``), as a physics chunk is: the maps,
+    robots and starts (a small program per family), the rollouts (:func:`_rollouts`, one program for every
+    family), the summaries. (:func:`_chunk`, one program with the maps generated inside, would compile the
+    selector's rollout once per family: twelve times for the benchmark.)"""
+    terrains, robots_, starts, _ = _run_prepare(static, base, key, scene, seeds, robot_vals, terrain_vals)
+    traj = _run_rollouts(targets, scene, terrains, robots_, starts, commands, robot_vals["discount"],
+                         selector=static.selector, num_steps=static.num_steps)
+    return _run_finish(static, base, key, scene, seeds, robot_vals, terrain_vals, traj)
 
 
 def _physics_chunk(
@@ -240,15 +327,19 @@ def _physics_chunk(
 
 
 def chunk_runner(static: _Static):
-    """The function that runs a chunk: the perfect robot's jitted chunk or the physics chunk's three programs."""
-    return _run_chunk if static.walker == "perfect" else _physics_chunk
+    """The function that runs a chunk: the perfect robot's jitted chunk, or three programs (the maps, the
+    rollouts, the summaries) for the MJX biped and for the perfect robot on a walk family's maps."""
+    if static.walker == "mjx":
+        return _physics_chunk
+    return _run_chunk if static.walk is None else _walk_chunk
 
 
 def trace_count() -> int:
     """How many chunk programs have been traced (compiled) in this process: the perfect robot's chunk function,
-    plus each physics chunk shape's preparation (its rollouts are :func:`ijoy_jax.sim.walker.rollout_batch`'s
-    program, counted by :func:`ijoy_jax.sim.walker.compiled_programs`)."""
-    return _chunk_traces() + _prepare_traces()
+    plus each physics or walk chunk shape's preparation and the perfect robot's rollouts of a walk chunk (a
+    physics chunk's rollouts are :func:`ijoy_jax.sim.walker.rollout_batch`'s program, counted by
+    :func:`ijoy_jax.sim.walker.compiled_programs`)."""
+    return _chunk_traces() + _prepare_traces() + _rollouts_traces()
 
 
 def compiled_programs() -> int:
@@ -259,7 +350,8 @@ def compiled_programs() -> int:
     the run caused: each new static setting (:func:`chunk_static`) or chunk shape compiles once; new parameter
     values, seeds and commands reuse the program (:func:`trace_count` counts the traces behind them).
     """
-    return compiled_count(_run_chunk) + compiled_count(_run_prepare) + compiled_count(_run_finish)
+    return (compiled_count(_run_chunk) + compiled_count(_run_prepare) + compiled_count(_run_finish)
+            + compiled_count(_run_rollouts))
 
 
 def base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
@@ -298,8 +390,8 @@ class Scenario(NamedTuple):
     terrain: its generated :class:`~ijoy_jax.Terrain` (or the recorded one); robot: its :class:`~ijoy_jax.Robot`
     (the density's action set, the scenario's leaves); start: (2, 3) float32 feet (left, right; m, rad);
     command: (3,) float32 its held command (m/s, m/s, rad/s), or (num_steps, 3) one per step when the commands
-    come from ``[command] file``; cell, replicate: its cell and replicate (its terrain key is
-    ``fold_in(key(seed), replicate)``); first_swing: +1 if the left foot swings first. So
+    come from ``[command] file`` or are drawn every step (``[command] random``); cell, replicate: its cell and
+    replicate (its terrain key is ``fold_in(key(seed), replicate)``); first_swing: +1 if the left foot swings first. So
     ``ijoy_jax.rollout(s.terrain, s.robot, s.start, s.command, num_steps, first_swing=s.first_swing)`` walks it
     as the sweep does (the perfect robot).
     """
@@ -336,7 +428,8 @@ def scenario(cfg: SweepConfig, scenario_id: int) -> Scenario:
     density = float(row["robot.density"].iloc[0])
     base = base_robot(cfg, table, density)
     robot_cols, terrain_cols, _ = value_columns(table)
-    replicate, robot_vals, terrain_vals, commands, _ = chunk_batch(row, 1, robot_cols, terrain_cols, cfg=cfg)
+    replicate, robot_vals, terrain_vals, commands, _ = chunk_batch(row, 1, robot_cols, terrain_cols, cfg=cfg,
+                                                                   base=base)
     one = lambda d: {k: v[0] for k, v in d.items()}  # noqa: E731
     _, _, terrain, robot, start = _setup(
         chunk_static(cfg),
@@ -347,7 +440,7 @@ def scenario(cfg: SweepConfig, scenario_id: int) -> Scenario:
         one(robot_vals),
         one(terrain_vals),
     )
-    command = commands[0] if cfg.command_file is not None else commands[0, 0]  # (num_steps, 3) or held (3,)
+    command = commands[0] if not cfg.command_columns else commands[0, 0]  # (num_steps, 3) or held (3,)
     return Scenario(
         terrain,
         robot,
@@ -359,11 +452,27 @@ def scenario(cfg: SweepConfig, scenario_id: int) -> Scenario:
     )
 
 
-def chunk_batch(rows, size: int, robot_cols, terrain_cols, sim_cols=(), *, cfg: SweepConfig):
+def random_commands(cfg: SweepConfig, base: robots.Robot, replicates, step_time) -> np.ndarray:
+    """(n, num_steps, 3) float32 ``[command] random``'s commands: replicate r's ``default_rng([seed, 2, r])
+    .random(3 * num_steps)`` (:func:`ijoy_jax.sweep.seeding.first_doubles`, step by step, vx, vy, wz) mapped
+    onto :func:`ijoy_jax.robots.command_range` of ``base`` (the density's action set) at each scenario's
+    ``step_time`` (s, (n,)): the same commands for replicate r in every cell of a step time."""
+    reps = np.asarray(replicates, np.int64)
+    dt = np.asarray(step_time, np.float32)
+    u = seeding.first_doubles([cfg.seed, 2], reps, 3 * cfg.num_steps).reshape(len(reps), cfg.num_steps, 3)
+    out = np.empty(u.shape, np.float32)
+    for t in np.unique(dt):
+        lo, hi = robots.command_range(base.replace(step_time=jnp.float32(t)))
+        rows = dt == t
+        out[rows] = lo + u[rows] * (hi - lo)
+    return out
+
+
+def chunk_batch(rows, size: int, robot_cols, terrain_cols, sim_cols=(), *, cfg: SweepConfig, base=None):
     """Per-scenario inputs of a chunk: ``rows`` padded to ``size`` by repeating the last one (NumPy): the
     replicates, robot values, terrain values, commands (size, num_steps, 3) (each scenario's held command at
-    every step, or the ``[command] file``'s sequence, the same program either way) and physics values ({} for
-    the perfect robot)."""
+    every step, the ``[command] file``'s sequence, or with ``[command] random`` its :func:`random_commands` at
+    the density's ``base`` robot; the same program each way) and physics values ({} for the perfect robot)."""
     n = len(rows)
     pad = np.concatenate([np.arange(n), np.full(size - n, n - 1)])
 
@@ -375,7 +484,9 @@ def chunk_batch(rows, size: int, robot_cols, terrain_cols, sim_cols=(), *, cfg: 
         c.partition(".")[2]: col(c, np.int32 if rows[c].dtype.kind == "i" else np.float32) for c in terrain_cols
     }
     steps = cfg.command_steps
-    if steps is None:
+    if cfg.random_commands:
+        commands = random_commands(cfg, base, col("replicate", np.int64), col("robot.step_time", np.float32))
+    elif steps is None:
         held = np.stack([col(f"command.{k}", np.float32) for k in COMMAND_KEYS], axis=-1)
         commands = np.repeat(held[:, None, :], cfg.num_steps, axis=1)
     else:
@@ -428,6 +539,7 @@ def chunk_static(cfg: SweepConfig, horizon: int | None = None, refine: bool | No
         cfg.num_steps,
         cfg.walker,
         chunk_selector(cfg, cfg.horizon if horizon is None else horizon, cfg.refine if refine is None else refine),
+        cfg.walk,
     )
 
 
@@ -467,11 +579,12 @@ def scenario_bytes(cfg: SweepConfig, table, base: robots.Robot, sim=None) -> tup
     base, targets = shared_inputs(table, base)
     key = jax.random.key(cfg.seed)
     sim = make_sim(cfg, table) if sim is None else sim
-    batch = chunk_batch(table.iloc[:1], 1, robot_cols, terrain_cols, sim_cols, cfg=cfg)
-    runner = _run_chunk if cfg.walker == "perfect" else jax.jit(_physics_chunk, static_argnames=("static",))
+    batch = chunk_batch(table.iloc[:1], 1, robot_cols, terrain_cols, sim_cols, cfg=cfg, base=base)
     heaviest = chunk_static(
         cfg, int(table["selector.horizon"].max()), bool(table["selector.refine"].max())
     )  # the most memory per scenario
+    runner = chunk_runner(heaviest)
+    runner = runner if runner is _run_chunk else jax.jit(runner, static_argnames=("static",))
     compiled = runner.lower(heaviest, base, targets, key, sim, chunk_scene(cfg), *batch).compile()
     mem = compiled.memory_analysis()
     if mem is None:

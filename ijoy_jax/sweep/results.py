@@ -32,7 +32,15 @@ from pathlib import Path
 import numpy as np
 
 from ijoy_jax.stats import t_quantile
-from ijoy_jax.sweep.columns import EXTRA_METRICS, METRICS, PARAMETER_PREFIXES, PHYSICS_METRICS, UNITS
+from ijoy_jax.sweep.columns import (
+    EXTRA_METRICS,
+    METRICS,
+    PARAMETER_PREFIXES,
+    PHYSICS_METRICS,
+    UNITS,
+    WALK_METRICS,
+    WALK_PHYSICS_METRICS,
+)
 from ijoy_jax.sweep.config import parse_config
 from ijoy_jax.sweep.folder import IncompleteSweepError, check_plans, corrupt_part, part_plan, read_part, read_record
 from ijoy_jax.sweep.plan import (
@@ -239,7 +247,8 @@ def aggregate(df, by=None):
     for cell, g in df.groupby("cell", sort=True):
         row = {"cell": cell, **{c: g[c].iloc[0] for c in by}, "n": len(g)}
         t = t_quantile(len(g) - 1)
-        for m in tuple(e for e in METRICS + EXTRA_METRICS + PHYSICS_METRICS if e in df.columns):
+        for m in tuple(e for e in METRICS + EXTRA_METRICS + PHYSICS_METRICS + WALK_METRICS + WALK_PHYSICS_METRICS
+                       if e in df.columns):
             x = g[m].to_numpy(np.float64)
             std = float(np.std(x, ddof=1)) if len(x) > 1 else math.nan
             sem = std / math.sqrt(len(x))

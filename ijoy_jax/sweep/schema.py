@@ -35,6 +35,8 @@ A sweep file has these tables (every key optional unless noted; units in bracket
 
     # or, instead of family, shape, resolution, has_height, max_count and params:
     # recording = "drive.mcap"    # a drive recording's map and start feet (ijoy_jax.sweep.recorded)
+    # or a walking-benchmark family (ijoy_jax.terrain.walk_families.FAMILIES), a map per replicate:
+    # walk = "stones"             # with resolution (default 0.02); the 5 m x 2 m map, start (0.5, 1.0) m
 
     [command]                     # joystick command per scenario: a number or [lo, hi] uniform
     vx = 0.25                     # [m/s] forward, in the stance foot's frame
@@ -45,6 +47,8 @@ A sweep file has these tables (every key optional unless noted; units in bracket
     # first_swing = 1             # +1 the left foot first (default: the recording's; +1 for a trace)
     # deadzone = 0.1              # trace files only: the stick's dead zone
     # decide_at = 0.0             # trace files only: the fraction of a step at which the stick is read
+    # or, instead of vx, vy and wz, a new random command every step:
+    # random = true               # uniform over the action set's range (ijoy_jax.robots.command_range)
 
     [grid]                        # cartesian product of value lists
     "robot.w" = [0.0, 0.5, 1, 2, 4]
@@ -94,6 +98,17 @@ file): ``[command] file`` replays a recorded drive's commands (or a trace file's
 recording's map from its start feet (no ``terrain.*`` parameters then; with the perfect robot every
 replicate is the same walk, so ``scenarios_per_cell = 1``). ``ijoy drive --replay REC --export-sweep
 OUT.toml`` writes such a file for a recorded drive.
+
+The walking benchmark's terrains and commands (``ijoy bench walk`` runs its families as the sweep files of
+``sweeps/walk/``): ``[terrain] walk = "<name>"`` gives replicate ``r`` the map
+``walk_families.FAMILIES[name].one(fold_in(key(seed), r))`` (its parameters drawn from the family's
+ranges, on the family's 5 m x 2 m map at ``[terrain] resolution``, 2.5D, the robot standing at
+:data:`ijoy_jax.terrain.walk_families.START`; no ``terrain.*`` parameters); ``[command] random = true``
+gives replicate ``r`` a new command every step, uniform over the action set's range
+(:func:`ijoy_jax.robots.command_range` of the scenario's robot), from
+``np.random.default_rng([seed, 2, r]).random(3 * num_steps)`` (step by step, vx, vy, wz), the same in
+every cell. A walk sweep's results add :data:`ijoy_jax.sweep.WALK_METRICS` (steps made, progress along +x,
+and with ``walker = "mjx"`` the touch-down figures of the steps made).
 
 A *cell* is one combination of grid values (times one random sample); each cell
 runs ``scenarios_per_cell`` scenarios, replicate ``r`` of every cell on the same
@@ -208,7 +223,7 @@ class SweepConfig:
       walker: who executes the steps, one of :data:`WALKERS` (static).
       horizon, refine, discount: the selector's options (:data:`SELECTOR_DEFAULTS`), unless swept as
         ``selector.<name>``; beam: the lookahead's beam for horizons >= 3 (None: exact).
-      family: terrain family name (None: the terrain of ``terrain_recording``); shape (nx, ny) cells;
+      family: terrain family name (None: the terrain of ``terrain_recording`` or of ``walk``); shape (nx, ny) cells;
         resolution (m); has_height; max_count (static object slots, None: the family's default).
       robot: fixed robot values, ``{name: float}`` (names as in :data:`ROBOT_DEFAULTS`).
       terrain_params: fixed terrain parameters, ``{field: number}``.
@@ -221,6 +236,10 @@ class SweepConfig:
       grid: ``{"robot.x" | "terrain.x" | "sim.x" | "selector.x": (values...)}``.
       random: ``{"robot.x" | "terrain.x" | "sim.x" | "selector.discount": (lo, hi)}``.
       sim: ``{key: (lo, hi)}`` of the ``[sim]`` table, lo == hi for a fixed value (``walker = "mjx"``).
+      walk: the walking-benchmark family of ``[terrain] walk``
+        (:data:`ijoy_jax.terrain.walk_families.FAMILIES`), or None.
+      random_commands: ``[command] random``: a new command every step, uniform over the action set's range
+        (``command`` is {} then).
       source: the file it came from; text: the file's text (saved with the results).
     """
 
@@ -252,6 +271,8 @@ class SweepConfig:
     sim: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
     command_file: recorded.CommandSequence | None = dataclasses.field(default=None, compare=False)
     terrain_recording: recorded.RecordedTerrain | None = dataclasses.field(default=None, compare=False)
+    walk: str | None = None
+    random_commands: bool = False
     source: str = "<string>"
     text: str = ""
 
@@ -284,10 +305,17 @@ class SweepConfig:
     @property
     def command_steps(self) -> np.ndarray | None:
         """(num_steps, 3) float32 the command of every step, the same for every scenario (``[command] file``), or
-        None: each scenario holds its own command (``command.vx``, ``command.vy``, ``command.wz`` columns)."""
+        None: each scenario holds its own command (``command.vx``, ``command.vy``, ``command.wz`` columns, or
+        with ``[command] random`` its own draw per step, no columns)."""
         if self.command_file is None:
             return None
         return self.command_file.commands[: self.num_steps]
+
+    @property
+    def command_columns(self) -> tuple[str, ...]:
+        """The components the scenario table holds per scenario (``command.<k>`` columns): :data:`COMMAND_KEYS`,
+        or () when the commands come from ``[command] file`` or are drawn every step (``[command] random``)."""
+        return () if self.command_file is not None or self.random_commands else COMMAND_KEYS
 
     @property
     def inputs(self) -> dict:

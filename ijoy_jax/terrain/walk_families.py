@@ -1,14 +1,15 @@
 """The walking benchmark's terrain families: eleven kinds of ground, each a batch of 5 m x 2 m maps from one key.
 
 ``ijoy bench walk`` (:mod:`ijoy_jax.apps.bench_walk`) walks a batch of robots over each family, every robot on
-its own map. A family (:class:`WalkFamily`) draws ``batch`` maps of one grid from its parameter range
-(:data:`FAMILIES`, in the benchmark's table order): level ground, 2D clutter, slopes up, down and across, rough
-ground, staggered stepping stones, single-lane platforms, stairs up and down, and windows of a fractal ground
-image. Every map is 2.5D (``has_height=True``) and of the same grid, with the robot's start at :data:`START` on
-flat ground, so one compiled walker serves every family. Most families are the registry's generators
-(:data:`ijoy_jax.terrain.generators.FAMILIES`) batched with per-map parameters drawn here; the stones, the
-platforms and the image windows are built from them (or from :mod:`ijoy_jax.terrain.scene`) in the shapes the
-benchmark needs.
+its own map: a sweep file's ``[terrain] walk = "<name>"`` (:mod:`ijoy_jax.sweep`) gives replicate r the map
+:meth:`WalkFamily.one` draws from its key, map r of :meth:`WalkFamily.maps`. A family (:class:`WalkFamily`)
+draws ``batch`` maps of one grid from its parameter range (:data:`FAMILIES`, in the benchmark's table order):
+level ground, 2D clutter, slopes up, down and across, rough ground, staggered stepping stones, single-lane
+platforms, stairs up and down, and windows of a fractal ground image. Every map is 2.5D (``has_height=True``)
+and of the same grid, with the robot's start at :data:`START` on flat ground, so one compiled walker serves
+every family. Most families are the registry's generators (:data:`ijoy_jax.terrain.generators.FAMILIES`)
+batched with per-map parameters drawn here; the stones, the platforms and the image windows are built from
+them (or from :mod:`ijoy_jax.terrain.scene`) in the shapes the benchmark needs.
 
 The numbers a family needs from the robot or the simulator are plain constants here, equal to theirs (tested):
 the platforms' highest top is HRP-2's ``max_step_height`` (:data:`PLATFORM_HEIGHT_MAX`), the clutter's height the
@@ -162,10 +163,18 @@ class WalkFamily:
     reach: float | None = None
     forward: float | None = None
 
+    def one(self, key, *, shape, resolution: float) -> Terrain:
+        """One map of ``shape`` (nx, ny) cells of ``resolution`` m drawn from ``key``: :attr:`make`'s batch of one
+        (its parameters drawn from the family's range), without the batch axis. Traceable: a sweep draws
+        replicate r's map as ``one(fold_in(key(seed), r))`` (``[terrain] walk``, :mod:`ijoy_jax.sweep`)."""
+        shape = tuple(int(n) for n in shape)
+        return jax.tree_util.tree_map(lambda a: a[0], self.make(key, 1, shape=shape, resolution=float(resolution)))
+
     def maps(self, key, batch: int, *, shape, resolution: float) -> Terrain:
-        """:attr:`make` as one jitted program per family, batch and grid (a new key reuses it): the same maps
-        (to float32 rounding) as ``make`` op by op, which compiles each of its hundreds of small ops."""
-        return _jitted(self.make)(key, batch, shape=tuple(int(n) for n in shape), resolution=float(resolution))
+        """``batch`` maps, map i :meth:`one` of ``jax.random.split(key, batch)[i]`` (which is ``fold_in(key, i)``:
+        the sweep's replicate i of seed ``key``), as one jitted program per family, batch and grid (a new key
+        reuses it); a leading batch axis on every leaf."""
+        return _jitted(self)(as_key(key), batch, shape=tuple(int(n) for n in shape), resolution=float(resolution))
 
     def compiled_programs(self) -> int:
         """How many programs :meth:`maps` holds compiled for this family (in this process).
@@ -173,12 +182,16 @@ class WalkFamily:
         Read it before and after a loop of calls to learn how many compiles the loop caused: each new batch
         size or grid compiles once; a new key, or the grid given as a list, reuses the program.
         """
-        return compiled_count(_jitted(self.make))
+        return compiled_count(_jitted(self))
 
 
 @functools.cache
-def _jitted(make: Callable[..., Terrain]) -> Callable[..., Terrain]:
-    return jax.jit(make, static_argnums=1, static_argnames=("shape", "resolution"))
+def _jitted(family: WalkFamily) -> Callable[..., Terrain]:
+    def maps(key, batch, *, shape, resolution):
+        one = functools.partial(family.one, shape=shape, resolution=resolution)
+        return jax.vmap(one)(jax.random.split(key, batch))
+
+    return jax.jit(maps, static_argnums=1, static_argnames=("shape", "resolution"))
 
 
 def grid_shape(resolution: float = RESOLUTION) -> tuple[int, int]:
