@@ -364,14 +364,16 @@ def markdown_table(rows: Sequence[dict]) -> str:
     the perfect robot and the simulated one side by side ("perfect / simulated"; "-" where a walker did not
     run or a number does not apply).
 
-    Columns (:func:`aggregate`): robots; fell % (simulated); stops % and mean progress along +x (m); mean
+    Columns (:func:`summarize`): robots; fell % (simulated); stops % and mean progress along +x (m); mean
     steps made; obstacle contacts (perfect: footholds on obstacle cells; simulated: steps with a sole or shin
-    on one); the simulated placement error, mean and p95 (cm); its sole tilt error p95 (deg). A skipped
-    family gets one line with the reason.
+    on one); the simulated placement error, its mean over every step made and the mean over robots of each
+    robot's p95 (cm); the sole tilt error's mean robot p95 (deg). Per-robot percentiles, since the sweep keeps
+    a row per robot: they run a few per cent below the p95 over every step pooled, which the tables before the
+    sweep files gave. A skipped family gets one line with the reason.
     """
     head = ("| family | commands | robots | fell % (sim) | stops % (perfect / sim) | progress m (perfect / sim) "
-            "| steps made (perfect / sim) | contacts (perfect / sim) | placement mean / p95 cm (sim) "
-            "| tilt p95 deg (sim) |")
+            "| steps made (perfect / sim) | contacts (perfect / sim) | placement mean / robot p95 cm (sim) "
+            "| tilt robot p95 deg (sim) |")
     lines = [head, "|" + " --- |" * head.count(" | ") + " --- |"]
     for family, kind, p, s, why in _pairs(rows):
         if why is not None:
