@@ -1,11 +1,12 @@
-"""The walking benchmark's terrain families: eleven kinds of ground, each a batch of 5 m x 2 m maps from one key.
+"""The walking benchmark's terrain families: twelve kinds of ground, each a batch of 5 m x 2 m maps from one key.
 
 ``ijoy bench walk`` (:mod:`ijoy_jax.apps.bench_walk`) walks a batch of robots over each family, every robot on
 its own map: a sweep file's ``[terrain] walk = "<name>"`` (:mod:`ijoy_jax.sweep`) gives replicate r the map
 :meth:`WalkFamily.one` draws from its key, map r of :meth:`WalkFamily.maps`. A family (:class:`WalkFamily`)
 draws ``batch`` maps of one grid from its parameter range (:data:`FAMILIES`, in the benchmark's table order):
 level ground, 2D clutter, slopes up, down and across, rough ground, staggered stepping stones, single-lane
-platforms, stairs up and down, and windows of a fractal ground image. Every map is 2.5D (``has_height=True``)
+platforms, stairs up and down, windows of a fractal ground image, and natural ground (windows of a second
+image, 0-6 cm per map). Every map is 2.5D (``has_height=True``)
 and of the same grid, with the robot's start at :data:`START` on flat ground, so one compiled walker serves
 every family. Most families are the registry's generators (:data:`ijoy_jax.terrain.generators.FAMILIES`)
 batched with per-map parameters drawn here; the stones, the platforms and the image windows are built from
