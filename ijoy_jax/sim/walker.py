@@ -66,12 +66,12 @@ from ijoy_jax.sim._step import (
     StepLog,
     TickState,
     World,
+    balance_shift,
     begin_step,
     end_step,
     frame_ticks,
     init_state,
     make_world,
-    balance_shift,
     stance_info,
     tick,
 )
