@@ -131,7 +131,7 @@ def test_traced_leaves_vary_without_recompiling_select_step():
         assert bool(ij.select_step(TERRAIN, ROBOT, STANCE, SIDE, COMMAND, again, targets=targets).valid)
     assert select.compiled_programs() == before
     # Equal options built anew reuse the program too; other static fields compile one more (the naive search:
-    # the cheapest program to show it, where another lookahead with refinement would compile for 8 s).
+    # the cheapest program to show it; another lookahead with refinement is among the slowest to compile).
     ij.select_step(
         TERRAIN, ROBOT, STANCE, SIDE, COMMAND, ij.SelectOptions(method="lookahead", refine=True), targets=targets
     )

@@ -100,8 +100,8 @@ def _overlap(xp, a, foot_length, foot_width, tol):
     zero = xp.zeros_like(a[:1, 0])
     stance = xp.broadcast_to(corners(zero, zero, zero), swing.shape)
     # The candidate axes: the normals of both rectangles' edges (corner i to i + 1), all eight at once (arrays,
-    # not a loop over the edges: robot_supported runs in every selector program, and the loop lowered to six
-    # times the operations).
+    # not a loop over the edges: robot_supported runs in every selector program, and a loop lowers to many
+    # times the operations, which XLA compiles anew in each).
     polys = xp.stack([stance, swing], 1)  # (N, 2, 4, 2)
     e = (xp.roll(polys, -1, axis=2) - polys).reshape(-1, 8, 2)
     n = xp.stack([-e[..., 1], e[..., 0]], -1)[:, :, None, :]  # (N, 8, 1, 2)
