@@ -81,6 +81,7 @@ __all__ = [
     "scenarios",
     "set_values",
     "table_bytes",
+    "toml_value",
 ]
 
 
@@ -602,7 +603,9 @@ def _terrain_of(cfg: SweepConfig, row, name: str):
 _TABLE_LINE = re.compile(r"^\s*\[\s*([A-Za-z0-9_.-]+)\s*\]\s*(#.*)?$")
 
 
-def _toml_value(key: str, value) -> str:
+def toml_value(value, key: str = "value") -> str:
+    """One bool, int, float or string as a TOML value (a string as a basic string that reads back as itself,
+    whatever its characters); ``key`` names the value in the ValueError any other type raises."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, (int, float)):
@@ -638,7 +641,7 @@ def set_values(text: str, values) -> str:
         table, _, key = str(dotted).partition(".")
         if not table or not key:
             raise ValueError(f"{dotted!r}: name a table and a key, as 'sweep.num_steps'")
-        line = f"{key} = {_toml_value(dotted, value)}"
+        line = f"{key} = {toml_value(value, dotted)}"
         key_re = re.compile(rf"^\s*({re.escape(key)}|\"{re.escape(key)}\")\s*=")
         current, header, found = None, None, None
         for i, text_line in enumerate(lines):

@@ -7,7 +7,6 @@ for bit, before it is written. How a sweep reads the recording it names: :mod:`i
 from __future__ import annotations
 
 import datetime
-import json
 import os
 from pathlib import Path
 
@@ -17,7 +16,7 @@ import numpy as np
 from ijoy_jax import recordings, robots
 from ijoy_jax.limits import MAX_DENSITY
 from ijoy_jax.robots import Robot
-from ijoy_jax.sweep.config import load_config, parse_config
+from ijoy_jax.sweep.config import load_config, parse_config, toml_value
 from ijoy_jax.sweep.expansion import scenarios
 from ijoy_jax.sweep.programs import scenario
 from ijoy_jax.sweep.schema import ROBOT_DEFAULTS, SweepConfigError
@@ -32,19 +31,6 @@ generator family it was drawn from (replicate 0 is the recorded map)."""
 def _shortest(x) -> str:
     """The shortest decimal that reads back as the same float32 (0.02, not 0.019999999552965164)."""
     return np.format_float_positional(np.float32(x), unique=True, trim="0")
-
-
-def _toml(value) -> str:
-    """A TOML value: a string (JSON's escapes are TOML's), a bool, a number or a list of them."""
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
-    if isinstance(value, int):
-        return str(value)
-    return repr(float(value))
 
 
 def _first_difference(a, b, what: str) -> str | None:
@@ -156,17 +142,17 @@ def export_drive(recording: recordings.Recording, path, recording_path, *, terra
     if invalid:
         lines += [f"# The drive had decisions without a valid step (steps {invalid[:10]}): it stood and decided again,",
                   "# the sweep's robot stops there for good, so the footsteps agree up to the first of them."]
-    lines += ["", "[sweep]", f"name = {_toml(name)}",
-              f"description = {_toml(f'the drive recorded in {recording_path.name}, its commands step by step')}",
+    lines += ["", "[sweep]", f"name = {toml_value(name)}",
+              f"description = {toml_value(f'the drive recorded in {recording_path.name}, its commands step by step')}",
               f"seed = {int(spec.get('seed', 0)) if terrain == 'family' else 0}",
               "scenarios_per_cell = 1", f"num_steps = {len(decisions)}",
               'method = "exhaustive"               # the live deciders\' search (ordered: the same footholds)',
-              f"walker = {_toml(walker)}", "",
+              f"walker = {toml_value(walker)}", "",
               "[robot]                             # the drive's robot: HRP-2's (sweep.ROBOT_DEFAULTS) but these"]
-    lines += [f"{n} = {_shortest(v) if n != 'density' else _toml(v)}" for n, v in changed.items()]
+    lines += [f"{n} = {_shortest(v) if n != 'density' else toml_value(v)}" for n, v in changed.items()]
     lines += ["", "[terrain]"]
     if terrain == "recording":
-        lines += [f"recording = {_toml(rel)}   # the drive's own map and start feet"]
+        lines += [f"recording = {toml_value(rel)}   # the drive's own map and start feet"]
     else:
         if spec.get("kind") != "family":
             raise ValueError(f"the drive's terrain was not drawn from a generator family (its spec: "
@@ -174,16 +160,17 @@ def export_drive(recording: recordings.Recording, path, recording_path, *, terra
         if settings.get("start") is not None:
             raise ValueError("the drive started away from the family's start zone (--start): a generated sweep "
                              "starts there; export it with its recorded map (terrain 'recording')")
-        lines += [f"family = {_toml(spec['family'])}                 # replicate 0 is the drive's map",
-                  f"shape = {_toml([int(v) for v in spec.get('shape', (200, 120))])}",
-                  f"resolution = {_toml(float(spec.get('resolution', 0.02)))}",
-                  f"has_height = {_toml(bool(spec.get('has_height', False)))}"]
+        lines += [f"family = {toml_value(spec['family'])}                 # replicate 0 is the drive's map",
+                  f"shape = [{', '.join(str(int(v)) for v in spec.get('shape', (200, 120)))}]",
+                  f"resolution = {toml_value(float(spec.get('resolution', 0.02)))}",
+                  f"has_height = {toml_value(bool(spec.get('has_height', False)))}"]
         if spec.get("max_count") is not None:
             lines.append(f"max_count = {int(spec['max_count'])}")
         if spec.get("params"):
-            lines += ["", "[terrain.params]"] + [f"{k} = {_toml(v)}" for k, v in spec["params"].items()]
+            lines += ["", "[terrain.params]"] + [f"{k} = {toml_value(v, f'terrain.params.{k}')}"
+                                                   for k, v in spec["params"].items()]
     first_swing = int(settings.get("first_swing", 1))
-    lines += ["", "[command]", f"file = {_toml(rel)}   # the recorded decisions' commands, one per step",
+    lines += ["", "[command]", f"file = {toml_value(rel)}   # the recorded decisions' commands, one per step",
               f"first_swing = {first_swing}                     # the drive's first swing foot (+1 left)", ""]
     text = "\n".join(lines)
     path.parent.mkdir(parents=True, exist_ok=True)  # the recording is named relative to it
