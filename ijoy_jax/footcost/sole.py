@@ -108,12 +108,11 @@ def _lead(a, ndim: int):
     return jnp.reshape(a, jnp.shape(a) + (1,) * ndim)
 
 
-def _margin(xs, ys, flags):
-    """Distance from the origin to the nearest edge of the convex hull of the points flagged in ``flags`` (an
-    (n, ...) bool array), negative when the origin lies outside, -inf with fewer than two points. The stacked
-    layout of :func:`_margin_unrolled`: pairs (i, j) and the other points k on leading axes."""
-    n = len(xs)
-    x, y = jnp.stack(xs), jnp.stack(ys)  # (n,)
+def _margin(x, y, flags):
+    """Distance from the origin to the nearest edge of the convex hull of the points (``x``, ``y``: (n,) arrays)
+    flagged in ``flags`` (an (n, ...) bool array), negative when the origin lies outside, -inf with fewer than two
+    points. The stacked layout of :func:`_margin_unrolled`: pairs (i, j) and the other points k on leading axes."""
+    n = x.shape[0]
     extra = flags.ndim - 1
     pairs, others = _combinations(n, 2)
     xi, yi, xj, yj = x[pairs[:, 0]], y[pairs[:, 0]], x[pairs[:, 1]], y[pairs[:, 1]]
@@ -197,7 +196,7 @@ def rest_on_points(xs, ys, z, tol, *, unrolled: bool = False) -> Rest:
     gy = jnp.where(found, 0.5 * (lo_y + hi_y), 0.0)
     gaps = height[None] + gx[None] * _lead(x, extra) + gy[None] * _lead(y, extra) - heights  # (n, ...)
     contact = gaps <= tol + HEIGHT_EPS
-    return Rest(height=height, grad_along=gx, grad_across=gy, margin=_margin(xs, ys, contact),
+    return Rest(height=height, grad_along=gx, grad_across=gy, margin=_margin(x, y, contact),
                 contacts=jnp.sum(contact.astype(jnp.int32), axis=0), gap=jnp.maximum(jnp.max(gaps, axis=0), 0.0))
 
 
@@ -300,7 +299,8 @@ def soft_sole_on_ground(ground, half_length, half_width, inset, tol, temp) -> So
     full = full_margin(half_length, half_width, inset)
     sets = jnp.asarray(list(itertools.product((False, True), repeat=n)))  # (2^n, n), every contact set
     # each set's margin depends on the sole's size alone: one traced copy, vmapped over the sets
-    margins = jnp.clip(jax.vmap(lambda flags: _margin(xs, ys, flags))(sets), -full, full)
+    x, y = jnp.stack(xs), jnp.stack(ys)
+    margins = jnp.clip(jax.vmap(lambda flags: _margin(x, y, flags))(sets), -full, full)
     weights = jnp.prod(jnp.where(sets, p[..., None, :], 1.0 - p[..., None, :]), axis=-1)  # (..., 2^n)
     expected = jnp.sum(weights * margins, axis=-1)
     pitch, roll = tilt(r.grad_along, r.grad_across)
