@@ -24,7 +24,8 @@ from mujoco import mjx
 
 from ijoy_jax import terrain as terrain_mod
 from ijoy_jax.robots import Robot
-from ijoy_jax.sim import dynamics, model, physics
+from ijoy_jax.sim import bodies, dynamics, physics
+from ijoy_jax.sim import model as model_mod
 from ijoy_jax.sim.controller import WalkConfig
 
 
@@ -43,12 +44,12 @@ class Sim:
     ``static_argnums``.
     """
 
-    params: model.BipedParams
+    params: model_mod.BipedParams
     cfg: WalkConfig
     mj_model: mujoco.MjModel
     mjx_model: mjx.Model
     mjx_free: mjx.Model  # the same robot without constraints, for the dynamics filter's inverse dynamics
-    index: model.ModelIndex
+    index: model_mod.ModelIndex
     shape: tuple[int, int]
     resolution: float
     fall_height: float  # pelvis height above its ground below which the robot has fallen (m)
@@ -95,13 +96,18 @@ jax.tree_util.register_pytree_node(
 def make_sim(
     shape,
     resolution: float,
-    params: model.BipedParams | None = None,
+    params: model_mod.BipedParams | None = None,
     cfg: WalkConfig | None = None,
     *,
     robot: Robot | None = None,
+    model: str | None = None,
 ) -> Sim:
     """Build the biped and its controller for terrains of ``shape`` (nx, ny) cells of ``resolution`` m.
 
+    ``model`` picks the robot (:data:`ijoy_jax.sim.bodies.MODELS`): ``"biped"`` (the project's HRP-2-like
+    biped, the default) or ``"g1"`` (the Unitree G1 of MuJoCo Menagerie; the ``robots`` extra); it sets
+    ``params.model`` (when both are given they must agree). ``cfg`` defaults to :class:`WalkConfig` with the
+    robot's walking height (:func:`ijoy_jax.sim.bodies.pelvis_height`).
     ``cfg.com_height`` is replaced by the model's own CoM height at the
     standing posture with the pelvis ``cfg.pelvis_height`` above the ground,
     so the LIPM matches the robot. With ``robot`` given, its footprint sizes
@@ -110,8 +116,13 @@ def make_sim(
     shape = (int(shape[0]), int(shape[1]))
     if min(shape) < 2:
         raise ValueError(f"terrain shape must be at least (2, 2) cells, got {shape}")
-    params = model.biped_params(robot) if params is None else params
-    cfg = WalkConfig() if cfg is None else cfg
+    if model is not None and model not in bodies.MODELS:
+        raise ValueError(f"model must be one of {bodies.MODELS}, got {model!r}")
+    if params is None:
+        params = model_mod.biped_params(robot, model=model or "biped")
+    elif model is not None and params.model != model:
+        raise ValueError(f"model {model!r} differs from params.model {params.model!r}")
+    cfg = WalkConfig(pelvis_height=bodies.pelvis_height(params)) if cfg is None else cfg
     if robot is not None:
         check_robot_for_sim(robot, cfg)
     timestep = params.timestep
@@ -121,14 +132,14 @@ def make_sim(
     ratio = cfg.step_time / cfg.control_dt
     if abs(ratio - round(ratio)) > 1e-6:
         raise ValueError(f"step_time {cfg.step_time} must be a whole multiple of control_dt {cfg.control_dt}")
-    mj_model = model.build_model(params, terrain_mod.flat(shape, resolution, has_height=True))
+    mj_model = bodies.build_model(params, terrain_mod.flat(shape, resolution, has_height=True))
     # The LIPM's z_c and the horizontal CoM model (controller.WalkConfig): fitted on the standing robot.
     data = mujoco.MjData(mj_model)
-    idx = model.model_index(mj_model)
+    idx = model_mod.model_index(mj_model)
 
     def com_of(shift):
         feet = jnp.asarray([[0.0, half, 0.0], [0.0, -half, 0.0]], jnp.float32)
-        qpos = model.stand_pose(
+        qpos = bodies.stand_pose(
             params, feet, jnp.zeros(2), jnp.float32(cfg.pelvis_height), jnp.asarray(shift, jnp.float32)
         )[0]
         data.qpos[:] = np.asarray(qpos)
@@ -144,7 +155,7 @@ def make_sim(
         params,
         cfg,
         mj_model,
-        model.put_model(mj_model),
+        model_mod.put_model(mj_model),
         dynamics.no_contact_model(mj_model),
         idx,
         shape,

@@ -26,7 +26,7 @@ from mujoco import mjx
 from ijoy_jax import control, geometry, select
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot
-from ijoy_jax.sim import controller, kinematics, model, physics, preview, swing
+from ijoy_jax.sim import bodies, controller, kinematics, model, physics, preview, swing
 from ijoy_jax.sim._sensors import (
     ankle_wrench,
     centre_of_mass,
@@ -214,9 +214,10 @@ def init_state(
     keep = frame_ticks(sim, frames_per_step)
     start = jnp.asarray(start, jnp.float32)
     planned = jax.vmap(lambda p: _rest(sim, world, select.foothold(world.terrain, robot, p)))(start)
-    # the pelvis cfg.pelvis_height above the lower sole, as the controller holds it
-    qpos = model.stand_pose(
-        params, start, planned[:, 2], jnp.min(planned[:, 2]) + cfg.pelvis_height, tilt=planned[:, 3:5]
+    # the pelvis cfg.pelvis_height above the lower sole and the CoM above the soles, as the controller holds them
+    qpos = bodies.stand_pose(
+        params, start, planned[:, 2], jnp.min(planned[:, 2]) + cfg.pelvis_height,
+        controller.standing_shift(cfg, start), tilt=planned[:, 3:5]
     )[0]
     m = world.m
     d = mjx.make_data(m)
@@ -361,6 +362,11 @@ def begin_step(sim: Sim, world: World, state: SimState, foothold, go) -> tuple[S
     ground = jnp.minimum(plan.stance[2], plan.swing_to[2])  # as the controller holds the pelvis above it
     cs = s.ctrl._replace(t=jnp.zeros((), jnp.float32))
     corr = s.corr
+    # The warm-up step stands unfiltered: its pattern is the LIPM's own, which starts moving the CoM toward the
+    # first stance foot ahead of time (controller.prepare_plan). Filtered, the correction measured on that
+    # standing pattern cancelled the anticipation, and the first step began with the LIPM's velocity jumping
+    # by 0.15-0.2 m/s in one period: the HRP-2-like biped lagged 1.5 cm and recovered on its 13 cm wide feet,
+    # the G1 on its 6 cm wide feet rolled onto an edge and fell.
     if cfg.filter_passes > 0:
         corr = controller.zmp_correction(
             world.free,
@@ -372,6 +378,7 @@ def begin_step(sim: Sim, world: World, state: SimState, foothold, go) -> tuple[S
             cfg.filter_passes,
             init=controller.carry_correction(cfg, corr),
         )
+        corr = jnp.where(s.fresh, jnp.zeros_like(corr), corr)
     # World -> the plan's frame: the planar transform that takes the measured stance sole onto the planned one.
     to_plan = kinematics.rot_z(pst[5] - st[5])
     step = Step(plan, target, go, st, pst, to_plan, ground, corr, kick_tick, dv, key, k_belief)

@@ -51,7 +51,7 @@ import numpy as np
 
 from ijoy_jax import geometry
 from ijoy_jax._struct import check_real, check_whole
-from ijoy_jax.sim import dynamics, kinematics, preview, swing
+from ijoy_jax.sim import bodies, dynamics, kinematics, preview, swing
 
 _INF = math.inf
 # WalkConfig's numeric fields: (low, high, low allowed, high allowed). The open ends are divisors (times, the
@@ -356,8 +356,9 @@ def foot_targets(cfg: WalkConfig, plan: StepPlan, t) -> jax.Array:
 
 def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPlan, cs: CtrlState,
             correction=None) -> tuple[jax.Array, CtrlState, jax.Array]:
-    """One controller period of the pattern: the whole planned qpos (19,) at the period's end, the new state,
-    and the ZMP reference (2,) at its start.
+    """One controller period of the pattern: the whole planned qpos (nq,) at the period's end (the free joint,
+    the legs, the robot's other joints at rest: :func:`ijoy_jax.sim.bodies.rest_joints`), the new state, and
+    the ZMP reference (2,) at its start.
 
     ``correction`` (N, 2), when given, is subtracted from the ZMP reference the
     LIPM tracks over the horizon: the dynamics filter's estimate of how far the
@@ -393,7 +394,19 @@ def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPla
     pelvis_pos = jnp.concatenate([pelvis_xy, (ground + cfg.pelvis_height)[None]])
     q = legs_ik(params, pelvis_pos, kinematics.rot_z(yaw_mid), feet)
     quat = jnp.stack([jnp.cos(yaw_mid / 2), jnp.zeros_like(yaw_mid), jnp.zeros_like(yaw_mid), jnp.sin(yaw_mid / 2)])
-    return jnp.concatenate([pelvis_pos, quat, q]), cs._replace(lipm=lipm, err_sum=err_sum, t=t), zref[0]
+    rest = jnp.asarray(bodies.rest_joints(params), q.dtype)
+    return jnp.concatenate([pelvis_pos, quat, q, rest]), cs._replace(lipm=lipm, err_sum=err_sum, t=t), zref[0]
+
+
+def standing_shift(cfg: WalkConfig, feet) -> jax.Array:
+    """(2,) m: where the pelvis stands from the soles' midpoint so that the fitted CoM model (``com_offset``,
+    ``leg_share``; :func:`pattern`) puts the centre of mass right above that midpoint, for feet (2, 3) (x, y,
+    yaw). A robot started there starts where the pattern's first period holds it: started with the pelvis above
+    the midpoint instead, a robot whose CoM lies far ahead of its pelvis (the G1's, 3.6 cm) is thrown back by
+    the first targets and bounces on its toes."""
+    feet = jnp.asarray(feet, jnp.float32)
+    yaw = jnp.arctan2(jnp.sum(jnp.sin(feet[:, 2])), jnp.sum(jnp.cos(feet[:, 2])))
+    return -kinematics.rot_z(yaw)[:2, 0] * cfg.com_offset / (1.0 - cfg.leg_share)
 
 
 def _step_down(front, rear) -> jax.Array:
@@ -406,16 +419,17 @@ def _step_down(front, rear) -> jax.Array:
 
 def legs_ik(params, pelvis_pos, pelvis_rot, feet) -> jax.Array:
     """(12,) joint angles (left leg then right) that put the soles on ``feet`` (2, 6) (x, y, z, roll, pitch, yaw)
-    from the pelvis at ``pelvis_pos`` (3,) with orientation ``pelvis_rot`` (3, 3)."""
-    return jnp.concatenate([kinematics.leg_ik(params, side, pelvis_pos, pelvis_rot, feet[row, :3],
-                                              kinematics.rpy_to_rot(feet[row, 3:]))[0]
-                            for row, side in enumerate((1, -1))])
+    from the pelvis at ``pelvis_pos`` (3,) with orientation ``pelvis_rot`` (3, 3) (the robot's own inverse
+    kinematics, :func:`ijoy_jax.sim.bodies.legs_ik`)."""
+    return bodies.legs_ik(params, pelvis_pos, pelvis_rot, feet)[0]
 
 
 def control_tick(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPlan, cs: CtrlState,
                  correction=None, base=None, wrench=None, com=None, latency=0.0
                  ) -> tuple[jax.Array, CtrlState, jax.Array]:
-    """One controller period: the 12 joint targets (left leg then right), the new state, the ZMP reference (2,).
+    """One controller period: the joint targets (nq - 7,) in ``qpos[7:]`` order (the 12 leg joints, left leg
+    then right, then the robot's other joints at rest; one actuator each, in that order), the new state, the ZMP
+    reference (2,).
 
     ``base`` = (position (3,), rotation (3, 3)) of the measured pelvis in the
     plan's frame turns the stabiliser on (:func:`stabilize`); ``wrench`` (2, 6),
@@ -433,7 +447,8 @@ def control_tick(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: St
     qpos, cs, zref = pattern(params, cfg, pgains, plan, cs, correction)
     q = qpos[7:]
     if base is not None and cfg.land_gain != 0:
-        q, cs = stabilize(params, cfg, plan, cs, qpos, base, latency)
+        legs, cs = stabilize(params, cfg, plan, cs, qpos, base, latency)
+        q = q.at[:12].set(legs)
     if wrench is not None and cfg.ankle_damping > 0:
         want = zref if com is None else zref + cfg.dcm_gain * dcm_error(cfg, planned_com, com)
         cs = comply(params, cfg, plan, cs, want, wrench)
@@ -457,14 +472,22 @@ def ground_cop(params, wrench) -> tuple[jax.Array, jax.Array]:
     """Each foot's ground force (N, foot frame) and centre of pressure (m, foot frame xy from the sole centre)
     from the ankles' measured wrench (2, 6) (what the shank exerts on the foot). The ground's force is its
     opposite plus the foot's weight (the sole taken as level for that term: 1 - cos 10 deg = 1.5 % of 17 N),
-    its moment about the ankle the opposite (the foot's centre of mass lies under the ankle); the foot's
-    inertia is neglected. The CoP is 0 on an unloaded foot."""
-    f = -wrench[:, :3] + jnp.array([0.0, 0.0, params.foot_mass * _GRAVITY], jnp.float32)
+    its moment about the ankle the opposite (the foot's centre of mass taken under the ankle); the foot's
+    inertia is neglected. The ankle sensor's point relative to the sole centre is the robot's
+    (:func:`ijoy_jax.sim.bodies.foot`). The CoP is 0 on an unloaded foot."""
+    mass, (sx, sy, sz) = bodies.foot(params)
+    f = -wrench[:, :3] + jnp.array([0.0, 0.0, mass * _GRAVITY], jnp.float32)
     m = -wrench[:, 3:]
-    h = params.ankle_height
     fz = f[:, 2]
     safe = jnp.where(fz > 1.0, fz, 1.0)
-    cop = jnp.stack([(-m[:, 1] - h * f[:, 0]) / safe, (m[:, 0] - h * f[:, 1]) / safe], axis=1)
+    # the moment about the sole centre is the one about the sensor plus (sensor - centre) x force; the sensor's
+    # offset is static, and its zero terms (the biped's ankle lies right above the sole centre) are left out
+    mx, my = m[:, 0] - sz * f[:, 1], -m[:, 1] - sz * f[:, 0]
+    if sy:
+        mx = mx + sy * fz
+    if sx:
+        my = my + sx * fz
+    cop = jnp.stack([my / safe, mx / safe], axis=1)
     return f, jnp.where((fz > 1.0)[:, None], cop, 0.0)
 
 
@@ -523,17 +546,17 @@ def stabilize(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, qpos, base
     the ankles and hips.
 
     Args:
-      qpos: (19,) the pattern's planned configuration at the period's end (:func:`pattern`).
+      qpos: (nq,) the pattern's planned configuration at the period's end (:func:`pattern`).
       base: (pos (3,), rot (3, 3)) the measured pelvis, expressed in the plan's frame.
       latency: () s, the known delay before the actuators receive the targets (0: none).
 
     Returns:
-      The 12 joint targets (pattern + offsets), and the state with the new offsets.
+      The 12 leg joint targets (pattern + offsets), and the state with the new offsets.
     """
     pos, rot = base
     feet = foot_targets(cfg, plan, cs.t)
     q_meas = legs_ik(params, pos, rot, feet)
-    q_plan = qpos[7:]
+    q_plan = qpos[7:19]
     s = swing_phase(cfg, cs.t)
     delta = (q_meas - q_plan) / (1.0 + jnp.asarray(latency, jnp.float32) / cfg.land_delay)
     w = cfg.stance_gain + (cfg.land_gain - cfg.stance_gain) * jnp.clip(s / cfg.land_ramp, 0.0, 1.0)

@@ -45,6 +45,7 @@ from ijoy_jax.sim import kinematics
 
 __all__ = [
     "JOINTS",
+    "MODELS",
     "SIDES",
     "BipedParams",
     "ModelIndex",
@@ -52,6 +53,7 @@ __all__ = [
     "biped_params",
     "build_model",
     "build_spec",
+    "compile_with_terrain",
     "contacts",
     "hfield_data",
     "model_index",
@@ -64,6 +66,10 @@ __all__ = [
 ]
 
 SIDES = ("left", "right")
+MODELS = ("biped", "g1")
+"""The robots the walker drives (``BipedParams.model``; :mod:`ijoy_jax.sim.bodies`)."""
+_MODEL_DEFAULTS = {"biped": {}, "g1": {"foot_length": 0.18, "foot_width": 0.06, "stand_width": 0.24}}
+"""The fields :func:`biped_params` sets for each model before the robot's footprint and the overrides."""
 JOINTS = ("hip_yaw", "hip_roll", "hip_pitch", "knee", "ankle_pitch", "ankle_roll")
 _AXES = ((0, 0, 1), (1, 0, 0), (0, 1, 0), (0, 1, 0), (0, 1, 0), (1, 0, 0))
 _FOOT_THICKNESS = 0.03  # visual/inertial foot box height above the sole, metres
@@ -86,6 +92,14 @@ _JOINT_FIELDS = ("range_lo", "range_hi", "armature", "damping", "kp", "kv", "for
 @dataclasses.dataclass(frozen=True)
 class BipedParams:
     """Static parameters of the HRP-2-like biped and its terrain model (hashable; metres, kg, seconds, radians).
+
+    Robot::
+
+      model: which robot the walker simulates (:data:`MODELS`): "biped", the HRP-2-like biped these fields
+        describe, or "g1", the Unitree G1 read from its MJCF (:mod:`ijoy_jax.sim.g1`; the ``robots`` extra),
+        for which the geometry, mass and joint fields below are not read (the contact, simulation and terrain
+        fields are, and ``foot_length``, ``foot_width`` and ``stand_width`` are the G1's,
+        :func:`biped_params`).
 
     Geometry::
 
@@ -174,8 +188,11 @@ class BipedParams:
     z_lo: float = -1.0
     z_hi: float = 1.0
     base_depth: float = 0.1
+    model: str = "biped"
 
     def __post_init__(self):
+        if self.model not in MODELS:
+            raise ValueError(f"BipedParams.model must be one of {MODELS}, got {self.model!r}")
         # Static (hashed into the compiled model): a field is a finite Python/NumPy number in its range, so a
         # string, a bool or a NaN is refused here by name, not by MuJoCo's compiler or a NaN in the physics.
         for name, (lo, lo_in) in _LOWER_BOUNDS.items():
@@ -224,8 +241,8 @@ def biped_params(robot=None, **overrides) -> BipedParams:
 
     Args:
       robot: an :class:`ijoy_jax.robots.Robot` (concrete; its ``foot_length``
-        and ``foot_width`` become the box feet) or None for HRP-2's.
-      **overrides: any :class:`BipedParams` field.
+        and ``foot_width`` become the box feet) or None for the model's own (HRP-2's, the G1's).
+      **overrides: any :class:`BipedParams` field; ``model="g1"`` also sets the G1's feet and stance width.
 
     Example:
       >>> import ijoy_jax as ij
@@ -233,7 +250,10 @@ def biped_params(robot=None, **overrides) -> BipedParams:
       >>> model.biped_params(ij.robots.hrp2(), timestep=0.001).foot_width
       0.13
     """
-    kwargs: dict[str, Any] = {}
+    kind = overrides.get("model", "biped")
+    if kind not in MODELS:
+        raise ValueError(f"model must be one of {MODELS}, got {kind!r}")
+    kwargs: dict[str, Any] = dict(_MODEL_DEFAULTS[kind])
     if robot is not None:
         # the Robot stores float32: round to micrometres so 0.13 stays 0.13 (and the params hash alike)
         kwargs["foot_length"] = round(float(robot.foot_length), 6)
@@ -440,6 +460,13 @@ def build_model(params: BipedParams, terrain, *, edit=None) -> mujoco.MjModel:
     compiled (e.g. textures for :mod:`ijoy_jax.sim.render`).
     """
     spec = build_spec(params, terrain.shape, terrain.resolution, np.asarray(terrain.origin))
+    return compile_with_terrain(spec, params, terrain, edit=edit)
+
+
+def compile_with_terrain(spec: mujoco.MjSpec, params: BipedParams, terrain, *, edit=None) -> mujoco.MjModel:
+    """Compile a robot's spec with its height field (added by :func:`add_terrain` for ``terrain``'s grid) and write
+    ``terrain``'s heights into the compiled model (:func:`build_model`'s contract; ``edit`` changes the spec in
+    place before it is compiled)."""
     if edit is not None:
         edit(spec)
     m = spec.compile()
@@ -508,7 +535,8 @@ def put_terrains(mjx_model, params: BipedParams, terrains):
 
 
 class ModelIndex(NamedTuple):
-    """Addresses in a compiled biped model (NumPy ints; rows: 0 left, 1 right; columns: :data:`JOINTS`).
+    """Addresses in a compiled walker model (NumPy ints; rows: 0 left, 1 right; columns: the leg joints from the
+    hip down, :data:`JOINTS` for the biped).
 
     Fields:
       qpos_adr: (2, 6) qpos addresses of the leg joints.
@@ -521,7 +549,6 @@ class ModelIndex(NamedTuple):
       shin_geom: (2,) shin capsule geom ids.
       hfield_geom: () the terrain geom id.
       imu_site: () site at the pelvis origin.
-      torso_site: () site in the torso.
       ankle_sensor: (2, 2) sensordata addresses of each ankle's force and torque (3 values each, foot frame,
       at the ankle point: what the shank exerts on the foot).
       com_sensor: (2,) sensordata addresses of the whole robot's centre of mass and of its velocity (3 values
@@ -538,22 +565,26 @@ class ModelIndex(NamedTuple):
     shin_geom: np.ndarray
     hfield_geom: np.ndarray
     imu_site: np.ndarray
-    torso_site: np.ndarray
     ankle_sensor: np.ndarray
     com_sensor: np.ndarray
 
 
 def model_index(mj_model: mujoco.MjModel) -> ModelIndex:
-    """The :class:`ModelIndex` of a model made by :func:`build_model` (or ``build_spec().compile()``)."""
+    """The :class:`ModelIndex` of a walker's model (:func:`build_model`, or
+    :func:`ijoy_jax.sim.bodies.build_model` for any of :data:`MODELS`): each leg's joints are the hinges on the
+    chain from the root body ``pelvis`` down to its ``{side}_sole`` site, hip first."""
     def oid(kind, name):
         i = mujoco.mj_name2id(mj_model, kind, name)
         if i < 0:
             raise ValueError(f"model has no {kind.name} named {name!r}; was it built by ijoy_jax.sim.model?")
         return i
 
-    jnt, body, site, geom, act = (mujoco.mjtObj.mjOBJ_JOINT, mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_SITE,
-                                  mujoco.mjtObj.mjOBJ_GEOM, mujoco.mjtObj.mjOBJ_ACTUATOR)
-    jids = np.array([[oid(jnt, f"{s}_{j}") for j in JOINTS] for s in SIDES])
+    body, site, geom = mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_SITE, mujoco.mjtObj.mjOBJ_GEOM
+    pelvis = oid(body, "pelvis")
+    sole_sites = np.array([oid(site, f"{s}_sole") for s in SIDES])
+    jids = np.array([_leg_joints(mj_model, int(mj_model.site_bodyid[i]), pelvis) for i in sole_sites])
+    by_joint = {int(mj_model.actuator_trnid[a, 0]): a for a in range(mj_model.nu)
+                if mj_model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT}
     sole_geoms = []
     for s in SIDES:
         ids, k = [], 0
@@ -564,19 +595,29 @@ def model_index(mj_model: mujoco.MjModel) -> ModelIndex:
     return ModelIndex(
         qpos_adr=np.asarray(mj_model.jnt_qposadr[jids]),
         qvel_adr=np.asarray(mj_model.jnt_dofadr[jids]),
-        actuator=np.array([[oid(act, f"{s}_{j}") for j in JOINTS] for s in SIDES]),
-        pelvis=np.asarray(oid(body, "pelvis")),
-        foot=np.array([oid(body, f"{s}_foot") for s in SIDES]),
-        sole_site=np.array([oid(site, f"{s}_sole") for s in SIDES]),
+        actuator=np.array([[by_joint.get(int(j), -1) for j in row] for row in jids]),
+        pelvis=np.asarray(pelvis),
+        foot=np.asarray(mj_model.site_bodyid[sole_sites]),
+        sole_site=sole_sites,
         sole_geoms=np.array(sole_geoms),
         shin_geom=np.array([oid(geom, f"{s}_shin") for s in SIDES]),
         hfield_geom=np.asarray(oid(geom, "terrain")),
         imu_site=np.asarray(oid(site, "imu")),
-        torso_site=np.asarray(oid(site, "torso")),
         ankle_sensor=np.array([[mj_model.sensor_adr[oid(mujoco.mjtObj.mjOBJ_SENSOR, f"{s}_ankle_{k}")]
                                 for k in ("force", "torque")] for s in SIDES]),
         com_sensor=np.array([mj_model.sensor_adr[oid(mujoco.mjtObj.mjOBJ_SENSOR, n)] for n in ("com", "com_vel")]),
     )
+
+
+def _leg_joints(mj_model: mujoco.MjModel, foot: int, root: int) -> list[int]:
+    """The joint ids on the chain from body ``root`` down to body ``foot``, hip first."""
+    ids, b = [], foot
+    while b != root:
+        if b == 0:
+            raise ValueError("a sole site does not hang from the pelvis; was the model built by ijoy_jax.sim?")
+        ids = list(range(mj_model.body_jntadr[b], mj_model.body_jntadr[b] + mj_model.body_jntnum[b])) + ids
+        b = int(mj_model.body_parentid[b])
+    return ids
 
 
 def _x64():

@@ -45,7 +45,7 @@ import numpy as np
 
 from ijoy_jax import control, geometry, select
 from ijoy_jax.robots import LEFT, Robot
-from ijoy_jax.sim import controller, kinematics, model, swing
+from ijoy_jax.sim import bodies, controller, kinematics, model, swing
 from ijoy_jax.sim.stepped import SteppedBiped
 from ijoy_jax.sim.walker import PLANAR, Sim, StepLog, ankle_wrench, centre_of_mass, check_robot_for_sim
 from ijoy_jax.terrain import Terrain
@@ -166,12 +166,12 @@ class NativeBiped(SteppedBiped):
         self.programs = programs(sim)
         self.terrain = terrain
         self.phys = _physical(sim, terrain)
-        self.m = model.build_model(self.params, terrain)
+        self.m = bodies.build_model(self.params, terrain)
         self.d = mujoco.MjData(self.m)
         planned = np.array(self.programs.start(self.phys, robot, start), np.float32)  # a writable copy
         pelvis_z = planned[:, 2].min() + self.cfg.pelvis_height
-        qpos = model.stand_pose(self.params, jnp.asarray(start), jnp.asarray(planned[:, 2]), jnp.float32(pelvis_z),
-                                tilt=jnp.asarray(planned[:, 3:5]))[0]
+        qpos = bodies.stand_pose(self.params, jnp.asarray(start), jnp.asarray(planned[:, 2]), jnp.float32(pelvis_z),
+                                 controller.standing_shift(self.cfg, start), tilt=jnp.asarray(planned[:, 3:5]))[0]
         self.d.qpos[:] = np.asarray(qpos)
         self.d.ctrl[:] = self.d.qpos[7:]
         mujoco.mj_forward(self.m, self.d)
@@ -243,8 +243,9 @@ class NativeBiped(SteppedBiped):
         plan, target = p.plan(self.phys, self.planned, soles, np.float32(self.swing), self.anchor,
                               foothold, go, self.fresh)
         self.cs = self.cs._replace(t=jnp.zeros((), jnp.float32))
-        if self.cfg.filter_passes:
-            self.corr = np.asarray(p.filter(plan, self.cs, self.corr))
+        if self.cfg.filter_passes:  # the warm-up step stands unfiltered (ijoy_jax.sim.walker.begin_step)
+            corr = np.asarray(p.filter(plan, self.cs, self.corr))
+            self.corr = np.zeros_like(corr) if self.fresh else corr
         st = soles[1] if self.swing > 0 else soles[0]
         pst = np.asarray(plan.stance)
         self._step = dict(plan=plan, target=np.asarray(target), go=go, k=0, st=st, pst=pst,

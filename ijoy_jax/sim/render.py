@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from ijoy_jax.sim import model
+from ijoy_jax.sim import bodies, model
 
 LEFT_RGBA = (0.95, 0.75, 0.1, 0.6)  # commanded footholds of the left foot
 RIGHT_RGBA = (0.1, 0.7, 0.95, 0.6)  # and of the right
@@ -69,7 +69,7 @@ def _add_looks(spec: mujoco.MjSpec) -> None:
 def _host_model(sim, terrain, width: int, height: int) -> mujoco.MjModel:
     """The biped on ``terrain`` as :func:`ijoy_jax.sim.model.build_model` makes it, with :func:`_add_looks` and an
     offscreen buffer of at least ``width`` x ``height`` pixels."""
-    m = model.build_model(sim.params, terrain, edit=_add_looks)
+    m = bodies.build_model(sim.params, terrain, edit=_add_looks)
     m.vis.global_.offwidth = max(int(width), m.vis.global_.offwidth)
     m.vis.global_.offheight = max(int(height), m.vis.global_.offheight)
     return m

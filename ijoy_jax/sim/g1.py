@@ -1,0 +1,119 @@
+"""The Unitree G1 (MuJoCo Menagerie) as the walker's robot: its model on the terrain and what the controller reads.
+
+The robot is Menagerie's G1 as MuJoCo Playground ships it for MJX (:func:`ijoy_jax.sim.menagerie.g1_spec`,
+the ``robots`` extra), its links, masses, inertias, joint axes, limits, armatures and torque limits unchanged,
+made the walker's by :func:`walker_spec`:
+
+* its world is the project's (:func:`ijoy_jax.sim.scene.terrain_scene`): the terrain's height field in place of
+  its floor, the soles as a grid of spheres on the bottom of each foot box, the ankle force/torque sensors and
+  the centre-of-mass sensors the controller reads; its own sensors (for learned policies) and the feet's
+  contact pair with each other (the selector keeps the footprints apart) are dropped, the hand-thigh pairs kept;
+* its servos are stiff position servos (:data:`LEG_KP`, ``kv = kp / 100``). Menagerie's gains (kp 75 on the
+  hips and knees, 20 and 2 on the ankles) are those its learned policies command through; a ZMP walking
+  controller tracks joint positions and needs servos that hold them under load, as the project's own biped
+  does (15000-30000 N m/rad on its 58 kg). The G1's own torque limits (88, 139, 88, 139, 50, 50 N m on
+  the hip pitch, roll, yaw, knee and ankles) still bound every joint;
+* its options are the walker's (``BipedParams``: timestep, implicitfast, Newton with the walker's
+  iteration caps, pyramidal cones).
+
+:func:`description` reads that model back (:func:`ijoy_jax.sim.description.describe`): the leg chains the
+inverse kinematics solves, the standing posture of the ``knees_bent`` keyframe (waist and arms held there while
+walking), the foot's mass and where its ankle sensor sits.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import mujoco
+import numpy as np
+
+from ijoy_jax.sim import menagerie, scene
+from ijoy_jax.sim.description import BipedDescription, describe
+
+__all__ = ["LEG_KP", "OTHER_KP", "PELVIS_HEIGHT", "STAND_WIDTH", "description", "foot", "walker_spec"]
+
+LEG_KP = {"hip_pitch": 8000.0, "hip_roll": 8000.0, "hip_yaw": 4000.0, "knee": 8000.0, "ankle_pitch": 4000.0,
+          "ankle_roll": 3000.0}
+"""N m/rad: the walker's servo stiffness on each leg joint (kv = kp / 100 N m s/rad). Standing on its
+``knees_bent`` keyframe they hold every leg joint within 1.7 mrad of its target (0.35 mrad at x2, 7 mrad at
+x0.25; all stable at the 2 ms timestep with the G1's own armatures)."""
+
+OTHER_KP = {"waist": 2000.0, "other": 500.0}
+"""N m/rad: the servos holding the waist and the arms at their standing angles (kv = kp / 100)."""
+
+PELVIS_HEIGHT = 0.72
+"""m: the G1's pelvis origin above the lower sole while walking (the keyframe stands it at 0.758 m, its
+knees bent 0.67 rad; lower bends them further, so a long and wide step stays within the legs' reach)."""
+
+STAND_WIDTH = 0.24
+"""m: the G1's feet apart when standing (its keyframe's 0.237 m on the action lattice's 2 cm grid,
+``robots.g1``'s step in place)."""
+
+_SIDES = ("left", "right")
+_SOLES = menagerie.G1_SOLES
+
+
+def _gain(joint: str) -> float:
+    name = joint.removesuffix("_joint")
+    for side in _SIDES:
+        if name.startswith(side + "_") and name[len(side) + 1:] in LEG_KP:
+            return LEG_KP[name[len(side) + 1:]]
+    return OTHER_KP["waist"] if name.startswith("waist") else OTHER_KP["other"]
+
+
+def walker_spec(params, shape=(200, 200), resolution: float = 0.02, origin=(0.0, 0.0)) -> mujoco.MjSpec:
+    """The G1 on a terrain height field, as the walker simulates it (see the module docstring).
+
+    Args:
+      params: :class:`ijoy_jax.sim.model.BipedParams` (its contact, simulation and terrain fields; the
+        geometry and mass fields describe the project's own biped and are not read).
+      shape, resolution, origin: the terrain grid, as :func:`ijoy_jax.sim.model.build_spec`.
+
+    Raises:
+      MissingExtraError: the ``robots`` extra is not installed.
+    """
+    spec = menagerie.g1_spec(meshes=False)
+    spec.modelname = "ijoy_g1"
+    for sensor in list(spec.sensors):
+        spec.delete(sensor)
+    for pair in [p for p in spec.pairs if {p.geomname1, p.geomname2} == set(_SOLES)]:
+        spec.delete(pair)
+    scene.terrain_scene(spec, soles=_SOLES, params=params, shape=shape, resolution=resolution, origin=origin)
+    opt = spec.option
+    opt.timestep = params.timestep
+    opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
+    opt.iterations = params.iterations
+    opt.ls_iterations = params.ls_iterations
+    opt.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+    for act in spec.actuators:
+        kp = _gain(act.target)
+        act.set_to_position(kp=kp, kv=kp / 100.0)
+    return spec
+
+
+@functools.lru_cache(maxsize=4)
+def _small_model(params) -> mujoco.MjModel:
+    """:func:`walker_spec` on a 2 x 2 flat grid, compiled (what the host reads of the robot; cached per params)."""
+    return walker_spec(params, (2, 2), 1.0).compile()
+
+
+@functools.lru_cache(maxsize=4)
+def description(params) -> BipedDescription:
+    """The walker's G1 read by :func:`~ijoy_jax.sim.description.describe`, standing on its ``knees_bent``
+    keyframe (cached per params)."""
+    return describe(_small_model(params), soles=_SOLES, keyframe=menagerie.G1_KEYFRAME)
+
+
+def foot(params) -> tuple[float, np.ndarray]:
+    """The foot below the ankle sensor: its mass (kg) and the sensor's point from the sole centre in the sole's
+    frame (3,) m (the G1's ankle lies 4 cm behind the sole centre, 3.7 cm above it)."""
+    m = _small_model(params)
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    ankle = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, "left_ankle")
+    sole = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, "left_sole")
+    rot = d.site_xmat[sole].reshape(3, 3)
+    offset = rot.T @ (d.site_xpos[ankle] - d.site_xpos[sole])
+    return float(m.body_mass[m.site_bodyid[ankle]]), offset
