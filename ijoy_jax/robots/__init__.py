@@ -29,6 +29,7 @@ from ijoy_jax.robots.commands import start_stance as start_stance
 from ijoy_jax.robots.g1_model import G1_P0 as G1_P0
 from ijoy_jax.robots.g1_model import g1 as g1
 from ijoy_jax.robots.g1_model import g1_actions as g1_actions
+from ijoy_jax.robots.g1_model import g1_defaults as g1_defaults
 from ijoy_jax.robots.hrp2_model import DX_SPACING as DX_SPACING
 from ijoy_jax.robots.hrp2_model import HRP2_P0 as HRP2_P0
 from ijoy_jax.robots.hrp2_model import MIN_DENSITY as MIN_DENSITY
@@ -86,6 +87,7 @@ __all__ = [
     "footprints_overlap",
     "g1",
     "g1_actions",
+    "g1_defaults",
     "get_leaf",
     "hrp2",
     "hrp2_actions",

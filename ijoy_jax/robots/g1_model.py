@@ -23,12 +23,13 @@ G1 walks in MJX.
 
 from __future__ import annotations
 
+import inspect
 import math
 
 import numpy as np
 
 from ijoy_jax.robots.build import make_robot
-from ijoy_jax.robots.hrp2_model import PAPER_REACH, check_density, density_counts
+from ijoy_jax.robots.hrp2_model import PAPER_REACH, check_density, density_counts, hrp2_defaults
 from ijoy_jax.robots.lattice import lattice_actions
 from ijoy_jax.robots.robot import Robot
 
@@ -81,3 +82,24 @@ def g1(margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
       ((496, 3), 0.18)
     """
     return make_robot(g1_actions(density), **{**_G1_BODY, "margin": margin, **overrides})
+
+
+def g1_defaults() -> dict[str, float]:
+    """name -> value of every :data:`~ijoy_jax.robots.SCALAR_LEAVES` leaf of ``g1()``, and its ``density``, without
+    building it (host floats: checks of sweep files run before any backend starts).
+
+    HRP-2's :func:`~ijoy_jax.robots.hrp2_defaults` (the same selector weights and metrics, from
+    :func:`~ijoy_jax.robots.make_robot`'s and :func:`~ijoy_jax.robots.default_metrics`' keyword defaults) with the
+    G1's body: its footprint, step time and sole limits (the module docstring). No ``reach``: the G1's lattice
+    spans the paper's dx range, :data:`~ijoy_jax.robots.PAPER_REACH`, always.
+
+    Example:
+      >>> from ijoy_jax import robots
+      >>> d = robots.g1_defaults()
+      >>> d["foot_length"], d["max_sole_distance"], "reach" in d
+      (0.18, 0.48, False)
+    """
+    params = inspect.signature(g1).parameters
+    own = {**{k: v for k, v in _G1_BODY.items() if k != "p0"}, "margin": params["margin"].default,
+           "density": params["density"].default}
+    return {k: float(own.get(k, v)) for k, v in hrp2_defaults().items() if k != "reach"}
