@@ -28,6 +28,9 @@ Public names::
                                                                  (lookahead horizon, refinement, discount)
   WALKERS / PHYSICS_METRICS / SIM_MIN_RESOLUTION                 walker = "mjx": the MJX biped, its metrics
                                                                  (falls, collisions, placement errors)
+  MODELS / models                                                [sweep] model: the robot, HRP-2 ("biped")
+                                                                 or the Unitree G1 ("g1"), for the selector
+                                                                 and in MJX; its defaults, actions, builder
   IncompleteSweepError / action_counts / PAPER_ACTIONS           missing chunks, parts of another plan;
                                                                  density as action counts
   plan_hash / part_plan                                          the plan every part records (its hash)
@@ -51,7 +54,7 @@ from ijoy_jax.extras import require as _require
 _require("sweep", "pandas", "pyarrow", "matplotlib")
 
 from ijoy_jax.limits import MAX_ACTIONS, MAX_DENSITY, MAX_MAP_CELLS, MAX_NUM_STEPS
-from ijoy_jax.sweep import distributed, export, local, recorded
+from ijoy_jax.sweep import distributed, export, local, models, recorded
 from ijoy_jax.sweep.columns import EXTRA_METRICS, METRICS, PHYSICS_METRICS, UNITS, WALK_METRICS, WALK_PHYSICS_METRICS
 from ijoy_jax.sweep.config import load_config, parse_config, set_values
 from ijoy_jax.sweep.execute import RunStats, run
@@ -76,6 +79,7 @@ from ijoy_jax.sweep.schema import (
     COMMAND_KEYS,
     MAX_OBJECT_SLOTS,
     MIN_RESOLUTION,
+    MODELS,
     ROBOT_DEFAULTS,
     SELECTOR_DEFAULTS,
     SIM_MIN_RESOLUTION,
@@ -108,6 +112,7 @@ __all__ = [
     "MAX_SCENARIOS",
     "MIN_RESOLUTION",
     "METRICS",
+    "MODELS",
     "PAPER_ACTIONS",
     "PHYSICS_METRICS",
     "PHYSICS_PLOT_METRICS",
@@ -136,6 +141,7 @@ __all__ = [
     "export",
     "export_drive",
     "local",
+    "models",
     "recorded",
     "load",
     "load_aggregates",

@@ -24,7 +24,7 @@ from ijoy_jax import robots
 from ijoy_jax.footcost import MAX_COORDINATE
 from ijoy_jax.limits import MAX_ACTIONS, MAX_DENSITY, MAX_HORIZON, MAX_MAP_CELLS, MAX_NUM_STEPS
 from ijoy_jax.select import KERNELS, METHODS
-from ijoy_jax.sweep import recorded
+from ijoy_jax.sweep import models, recorded
 from ijoy_jax.sweep.columns import METRICS, PHYSICS_METRICS
 from ijoy_jax.sweep.expansion import HOST_MEMORY_FRACTION, MAX_SCENARIOS, cells, scenarios, table_bytes
 from ijoy_jax.sweep.fits import (
@@ -42,6 +42,7 @@ from ijoy_jax.sweep.schema import (
     MAX_FLOAT,
     MAX_OBJECT_SLOTS,
     MIN_RESOLUTION,
+    MODELS,
     ROBOT_DEFAULTS,
     SELECTOR_DEFAULTS,
     SELECTOR_STATIC,
@@ -71,6 +72,7 @@ __all__ = [
     "MAX_OBJECT_SLOTS",
     "MAX_SCENARIOS",
     "MIN_RESOLUTION",
+    "MODELS",
     "ROBOT_DEFAULTS",
     "SweepConfig",
     "SweepConfigError",
@@ -96,7 +98,7 @@ _MAX_NAME_BYTES = 100
 
 _SECTIONS = ("sweep", "robot", "terrain", "command", "grid", "random", "sim")
 _SWEEP_KEYS = ("name", "description", "seed", "scenarios_per_cell", "num_steps", "method", "kernel",
-               "random_samples", "walker", "horizon", "beam", "refine", "discount")
+               "random_samples", "walker", "model", "horizon", "beam", "refine", "discount")
 
 _TERRAIN_KEYS = ("family", "shape", "resolution", "has_height", "max_count", "params")
 _RECORDING_KEY = "recording"  # [terrain] recording: a drive recording's terrain, instead of the _TERRAIN_KEYS
@@ -288,12 +290,14 @@ def _command_file(chk: Checker, command: dict, kw: dict, folder: Path, swept: tu
         # (the command range needs the action set alone: as for the sweep's base robot, the default or the
         # longest max_sole_distance the file sets lets hrp2 build the reach, which check_reach has checked
         # against the shortest)
-        msd = max(ROBOT_DEFAULTS["max_sole_distance"],
-                  *file_values(kw["robot"], kw["grid"], kw["random"], "max_sole_distance"))
+        model = kw.get("model", SweepConfig.model)
+        defaults = models.robot_defaults(model)
+        msd = max(defaults["max_sole_distance"],
+                  *file_values(kw["robot"], kw["grid"], kw["random"], "max_sole_distance", model=model))
         try:
-            robot = robots.hrp2(density=kw["robot"].get("density", ROBOT_DEFAULTS["density"]),
-                                reach=kw["robot"].get("reach", ROBOT_DEFAULTS["reach"]), max_sole_distance=msd,
-                                step_time=kw["robot"].get("step_time", ROBOT_DEFAULTS["step_time"]))
+            robot = models.build_robot(model, density=kw["robot"].get("density", defaults["density"]),
+                                       reach=kw["robot"].get("reach"), max_sole_distance=msd,
+                                       step_time=kw["robot"].get("step_time", defaults["step_time"]))
         except ValueError as e:
             chk.fail("robot", f"the trace's robot cannot be built: {e}")
     try:
@@ -367,6 +371,9 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
         kw["kernel"] = chk.string("sweep.kernel", sweep["kernel"], KERNELS)
     if "walker" in sweep:
         kw["walker"] = chk.string("sweep.walker", sweep["walker"], WALKERS)
+    if "model" in sweep:
+        kw["model"] = chk.string("sweep.model", sweep["model"], MODELS)
+    model = kw.get("model", SweepConfig.model)
     if "horizon" in sweep:
         kw["horizon"] = chk.integer("sweep.horizon", sweep["horizon"], lo=1, hi=_MAX_HORIZON)
     if "beam" in sweep:
@@ -392,6 +399,8 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
 
     robot = _flatten(chk.table("robot", raw.get("robot", {})))
     chk.unknown("robot.", robot, tuple(ROBOT_DEFAULTS))
+    for k in robot:
+        _model_takes(chk, f"robot.{k}", k, model)
     kw["robot"] = {k: _robot_value(chk, f"robot.{k}", k, v) for k, v in robot.items()}
 
     command = chk.table("command", raw.get("command", {}))
@@ -446,6 +455,8 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
                  + tuple(f"sim.{k}" for k in sim_fields) + tuple(f"selector.{k}" for k in SELECTOR_DEFAULTS))
         if key not in known:
             chk.fail(f"{section}.{key}", f"unknown parameter; known: {', '.join(known)}")
+        if head == "robot":
+            _model_takes(chk, f"{section}.{key}", name, model)
         if head == "selector":
             if name in sweep:
                 chk.fail(f"{section}.{key}", f"also set as a fixed value in [sweep] ({name}); set it in one place")
@@ -494,7 +505,7 @@ def parse_config(text: str, source: str = "<string>") -> SweepConfig:
     if not out_rand and kw.get("random_samples", 0) > 0:
         chk.fail("sweep.random_samples", "is set but [random] is empty")
 
-    check_reach(chk, kw["robot"], out_grid, out_rand)  # before a trace file's robot is built with it
+    check_reach(chk, kw["robot"], out_grid, out_rand)  # before a trace file's robot is built with it (HRP-2's)
     if "file" in command:
         _command_file(chk, command, kw, folder, (*out_grid, *out_rand))
     cfg = SweepConfig(**kw)
@@ -571,6 +582,14 @@ def _selector_value(chk: Checker, key: str, name: str, value):
 
 
 _REACH_FIXED = ("reach shapes the action set and is fixed per sweep: set it in [robot] (one sweep per reach)")
+
+
+def _model_takes(chk: Checker, key: str, name: str, model: str) -> None:
+    """Refuse a robot parameter ``name`` (as in ROBOT_DEFAULTS) that the sweep's ``model`` does not take."""
+    if name not in models.robot_keys(model):
+        chk.fail(key, f"{name} is an option of HRP-2's action set (robots.hrp2({name}=...)), not the G1's: "
+                      f'[sweep] model = "{model}" walks robots.g1, whose lattice spans the paper\'s '
+                      f"{robots.PAPER_REACH} m steps; leave it out, or use model = \"biped\"")
 
 
 def load_config(path) -> SweepConfig:

@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from ijoy_jax.sweep import seeding
+from ijoy_jax.sweep import models, seeding
 from ijoy_jax.sweep.columns import METRICS, PHYSICS_METRICS, walk_metrics
 from ijoy_jax.sweep.schema import (
     COMMAND_KEYS,
@@ -146,7 +146,8 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     ``np.random.default_rng([seed, 3, replicate])`` (paired across cells too).
 
     Columns: ``scenario``, ``cell``, ``replicate``, ``robot.<name>`` (all of
-    :data:`ROBOT_DEFAULTS`), ``terrain.<field>`` (all of the family's
+    :data:`ROBOT_DEFAULTS`; unless set, the model's defaults, :func:`ijoy_jax.sweep.models.robot_defaults`),
+    ``terrain.<field>`` (all of the family's
     parameters; none for a recorded terrain), ``command.vx`` (m/s), ``command.vy`` (m/s),
     ``command.wz`` (rad/s) (none when the commands come from ``[command] file``: every scenario
     takes :attr:`SweepConfig.command_steps`; nor with ``[command] random``: each scenario draws its own per step,
@@ -225,7 +226,7 @@ def scenarios(cfg: SweepConfig, max_scenarios: int | None = None, *, progress: b
     per_replicate(cols["replicate"], np.arange(reps, dtype=np.int64))
     defaults = None if cfg.params_class is None else cfg.params_class()
     fixed = {
-        **{f"robot.{n}": cfg.robot.get(n, d) for n, d in ROBOT_DEFAULTS.items()},
+        **{f"robot.{n}": cfg.robot.get(n, d) for n, d in models.robot_defaults(cfg.model).items()},
         **{f"terrain.{n}": cfg.terrain_params.get(n, getattr(defaults, n)) for n in fields},
         **{f"selector.{n}": getattr(cfg, n) for n in SELECTOR_DEFAULTS},
     }

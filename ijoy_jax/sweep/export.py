@@ -16,6 +16,7 @@ import numpy as np
 from ijoy_jax import recordings, robots
 from ijoy_jax.limits import MAX_DENSITY
 from ijoy_jax.robots import Robot
+from ijoy_jax.sweep import models
 from ijoy_jax.sweep.config import load_config, parse_config, toml_value
 from ijoy_jax.sweep.expansion import scenarios
 from ijoy_jax.sweep.programs import scenario
@@ -66,8 +67,8 @@ def _density(robot: Robot, spec: dict) -> float:
         if robots.density_counts(d) != counts:
             continue
         try:
-            theirs = np.asarray(robots.hrp2(density=d, foot_length=float(robot.foot_length),
-                                            foot_width=float(robot.foot_width)).actions)
+            theirs = np.asarray(models.build_robot("biped", density=d, foot_length=float(robot.foot_length),
+                                                   foot_width=float(robot.foot_width)).actions)
         except ValueError:
             continue
         if theirs.shape == actions.shape and np.array_equal(theirs, actions):

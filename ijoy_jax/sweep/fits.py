@@ -17,8 +17,9 @@ import numpy as np
 
 from ijoy_jax import robots
 from ijoy_jax.limits import MAX_ACTIONS
+from ijoy_jax.sweep import models
 from ijoy_jax.sweep.expansion import HOST_MEMORY_FRACTION, MAX_SCENARIOS, table_bytes
-from ijoy_jax.sweep.schema import ROBOT_DEFAULTS, SIM_MIN_RESOLUTION, Checker, SweepConfig, reach_of
+from ijoy_jax.sweep.schema import SIM_MIN_RESOLUTION, Checker, SweepConfig, reach_of
 
 __all__ = [
     "check_reach",
@@ -31,16 +32,17 @@ __all__ = [
 ]
 
 
-def file_values(robot: dict, grid: dict, rand: dict, name: str) -> tuple:
+def file_values(robot: dict, grid: dict, rand: dict, name: str, *, model: str = "biped") -> tuple:
     """Every value a sweep file gives robot parameter ``name``: its ``[grid]`` values and ``[random]`` bounds, or
-    else its fixed ``[robot]`` value (or default)."""
+    else its fixed ``[robot]`` value (or the ``model``'s default, :func:`ijoy_jax.sweep.models.robot_defaults`)."""
     swept = (*grid.get(f"robot.{name}", ()), *rand.get(f"robot.{name}", ()))
-    return swept or (robot.get(name, ROBOT_DEFAULTS[name]),)
+    return swept or (robot.get(name, models.robot_defaults(model)[name]),)
 
 
 def check_reach(chk: Checker, robot: dict, grid: dict, rand: dict) -> None:
     """``[robot] reach`` (with the file's fixed ``robot`` values, ``grid`` axes and ``random`` ranges): at most
-    :data:`MAX_ACTIONS` per density, every action within ``max_sole_distance``."""
+    :data:`MAX_ACTIONS` per density, every action within ``max_sole_distance``. Only HRP-2 takes a reach (the
+    G1 refuses the key as it is read)."""
     if "reach" not in robot:
         return
     reach = robot["reach"]
@@ -50,7 +52,7 @@ def check_reach(chk: Checker, robot: dict, grid: dict, rand: dict) -> None:
         if math.prod(counts) > 2 * MAX_ACTIONS:  # (refused before the lattice is built: reach may be huge)
             size = f"about {math.prod(counts):.3g}"
         else:
-            actions = robots.hrp2_actions(density, reach)
+            actions = models.actions("biped", density, reach)
             size = len(actions)
             farthest = float(np.max(np.hypot(actions[:, 0], actions[:, 1])))
             if farthest > limit:
@@ -85,8 +87,8 @@ def check_selector(chk: Checker, cfg: SweepConfig) -> None:
         chk.fail(where, f'a horizon above 1 needs [sweep] method = "lookahead", got method = {cfg.method!r}')
     if cfg.beam is not None and cfg.method != "lookahead":
         chk.fail("sweep.beam", f'the beam is an option of method = "lookahead", got method = {cfg.method!r}')
-    largest = max(file_values(cfg.robot, cfg.grid, cfg.random, "density"))
-    if cfg.beam is not None and cfg.beam > len(robots.hrp2_actions(largest, reach_of(cfg))):
+    largest = max(file_values(cfg.robot, cfg.grid, cfg.random, "density", model=cfg.model))
+    if cfg.beam is not None and cfg.beam > len(models.actions(cfg.model, largest, reach_of(cfg))):
         chk.fail("sweep.beam", f"must be at most the action set's size, got {cfg.beam}")
     refines = _selector_values(cfg, "refine")
     if any(refines) and cfg.method == "naive":
@@ -102,16 +104,23 @@ def check_selector(chk: Checker, cfg: SweepConfig) -> None:
 
 
 def check_walker(chk: Checker, cfg: SweepConfig) -> None:
-    """A ``walker = "mjx"`` sweep fits the simulated biped: its step time and resolution (before compute)."""
+    """A ``walker = "mjx"`` sweep fits the simulated robot: its step time, its feet (the G1's are its MJCF's) and
+    the resolution (before compute)."""
     from ijoy_jax.sim.controller import WalkConfig
 
+    defaults = models.robot_defaults(cfg.model)
     step = WalkConfig().step_time
-    if abs(cfg.robot.get("step_time", ROBOT_DEFAULTS["step_time"]) - step) > 1e-6:
+    if abs(cfg.robot.get("step_time", defaults["step_time"]) - step) > 1e-6:
         chk.fail(
             "robot.step_time",
             f'must be the simulated controller\'s {step} s with walker = "mjx" '
             f"(WalkConfig.step_time), got {cfg.robot['step_time']}",
         )
+    if cfg.model == "g1":
+        for k in ("foot_length", "foot_width"):
+            if k in cfg.robot and abs(cfg.robot[k] - defaults[k]) > 1e-6:
+                chk.fail(f"robot.{k}", f'must be the G1\'s {defaults[k]} m with model = "g1" and walker = "mjx" '
+                                       f"(the simulated G1 stands on its MJCF's foot boxes), got {cfg.robot[k]}")
     if cfg.resolution < SIM_MIN_RESOLUTION:
         chk.fail(
             "terrain.resolution",
@@ -125,9 +134,10 @@ def check_walker(chk: Checker, cfg: SweepConfig) -> None:
 def check_start_fits(chk: Checker, cfg: SweepConfig, start_x: float, start_y: float) -> None:
     """The simulated robot standing at the start point (feet side by side, the step-in-place width apart, facing
     +x) must stand on the map: MuJoCo's height field ends at its edges."""
-    length = cfg.robot.get("foot_length", ROBOT_DEFAULTS["foot_length"])
-    width = cfg.robot.get("foot_width", ROBOT_DEFAULTS["foot_width"])
-    apart = robots.HRP2_P0[1]  # the step in place, HRP-2's at every footprint and density
+    defaults = models.robot_defaults(cfg.model)
+    length = cfg.robot.get("foot_length", defaults["foot_length"])
+    width = cfg.robot.get("foot_width", defaults["foot_width"])
+    apart = models.step_in_place(cfg.model)  # the model's step in place, at every footprint and density
     ext_x, ext_y = cfg.shape[0] * cfg.resolution, cfg.shape[1] * cfg.resolution
     x, y = start_x * ext_x, start_y * ext_y
     half_x, half_y = length / 2, apart / 2 + width / 2
@@ -144,8 +154,9 @@ def check_start_fits(chk: Checker, cfg: SweepConfig, start_x: float, start_y: fl
 def check_recorded_start_fits(chk: Checker, cfg: SweepConfig) -> None:
     """The simulated robot standing on a recording's start feet must stand on its map (every sole corner)."""
     rec = cfg.terrain_recording
-    length = cfg.robot.get("foot_length", ROBOT_DEFAULTS["foot_length"])
-    width = cfg.robot.get("foot_width", ROBOT_DEFAULTS["foot_width"])
+    defaults = models.robot_defaults(cfg.model)
+    length = cfg.robot.get("foot_length", defaults["foot_length"])
+    width = cfg.robot.get("foot_width", defaults["foot_width"])
     lo = np.asarray(rec.terrain.origin, np.float64)
     hi = lo + np.asarray(cfg.shape) * cfg.resolution
     for x, y, yaw in np.asarray(rec.start, np.float64):

@@ -4,7 +4,8 @@ and its parts, each written atomically and read back with a one-line refusal whe
 Layout of an output folder::
 
     DIR/sweep.toml              the sweep file's text, as run
-    DIR/manifest.json           sweep text, plan, package versions, device, git commit, timings
+    DIR/manifest.json           sweep text, plan, the robot (model, actions per density), package versions,
+                                device, git commit, timings
     DIR/parts/part-00000.parquet  one file per completed chunk (written atomically), its plan record
                                 (sweep name, chunk plan and the plan's hash) in the parquet metadata
     DIR/processes/process-00001.json  sessions of process 1 of several (process 0's are in the manifest)
@@ -34,8 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ijoy_jax.sweep import models
+from ijoy_jax.sweep.fits import file_values
 from ijoy_jax.sweep.plan import PLAN_KEY, describe_plan, differences
-from ijoy_jax.sweep.schema import SweepConfig
+from ijoy_jax.sweep.schema import SweepConfig, reach_of
 
 __all__ = [
     "FolderLock",
@@ -452,6 +455,15 @@ def check_same_plan(out: Path, records, text: str, plan_key: dict, ndev: int) ->
             )
 
 
+def robot_record(cfg: SweepConfig) -> dict:
+    """The sweep's robot as its manifest records it: ``{"model": "g1", "name": "the Unitree G1",
+    "actions": {"1": 496}}``, the model (:data:`~ijoy_jax.sweep.schema.MODELS`), its name in words and its
+    action set's size at each density the sweep walks (keys as ``format(density, "g")``)."""
+    densities = file_values(cfg.robot, cfg.grid, cfg.random, "density", model=cfg.model)
+    actions = {format(d, "g"): len(models.actions(cfg.model, d, reach_of(cfg))) for d in densities}
+    return {"model": cfg.model, "name": models.MODEL_NAMES[cfg.model], "actions": actions}
+
+
 def start_session(
     out: Path,
     cfg: SweepConfig,
@@ -467,8 +479,9 @@ def start_session(
     """Record the start of a run's ``session`` in the folder and return the record and its path.
 
     Process 0 writes the manifest (``old``, continued, or a new one with versions and git commit), with the
-    process ``layout`` and the ``union`` of the slices asked, and ``sweep.toml``; process ``I > 0`` writes
-    only its own record (``mine``, or a new one) under ``processes/``. Makes ``parts/``.
+    process ``layout`` and the ``union`` of the slices asked, the ``robot`` (:func:`robot_record`) and
+    ``sweep.toml``; process ``I > 0`` writes only its own record (``mine``, or a new one) under ``processes/``.
+    Makes ``parts/``.
     """
     layout = {
         "num_processes": nproc,
@@ -486,6 +499,7 @@ def start_session(
             "sessions": [],
         }
         manifest.setdefault("plan_hash", phash)  # a manifest from before plans were hashed: same text and plan
+        manifest.setdefault("robot", robot_record(cfg))  # (one from before models: the same text, HRP-2's)
         manifest["layout"] = layout
         manifest["selection"] = union
         manifest.setdefault("complete", False)  # the whole sweep is in the folder (set when a session ends)

@@ -30,8 +30,9 @@ PAPER_ACTIONS = 496
 """Actions per foot in the paper's HRP-2 action set (``ijoy_jax.robots.hrp2(density=1.0)``)."""
 
 
-def action_counts(densities, reach=None) -> np.ndarray:
-    """Actions per foot of HRP-2's action set at each density (:func:`ijoy_jax.robots.hrp2`), as float64.
+def action_counts(densities, reach=None, model: str = "biped") -> np.ndarray:
+    """Actions per foot of ``model``'s action set at each density (:func:`ijoy_jax.sweep.models.actions`:
+    HRP-2's by default; the G1's lattice has the same counts at the paper's reach), as float64.
 
     ``reach`` (m): a number, or one per density (a sweep's ``robot.reach`` column); None: the paper's 0.20.
 
@@ -40,11 +41,12 @@ def action_counts(densities, reach=None) -> np.ndarray:
       ([52.0, 496.0, 3307.0], [720.0])
     """
     from ijoy_jax import robots
+    from ijoy_jax.sweep import models
 
     d = np.asarray(densities, np.float64)
     r = np.broadcast_to(np.asarray(robots.PAPER_REACH if reach is None else reach, np.float64), d.shape)
     pairs = list(zip(d.ravel().tolist(), r.ravel().tolist(), strict=True))
-    sizes = {p: len(robots.hrp2_actions(*p)) for p in dict.fromkeys(pairs)}
+    sizes = {p: len(models.actions(model, *p)) for p in dict.fromkeys(pairs)}
     return np.array([sizes[p] for p in pairs], np.float64).reshape(d.shape)
 
 

@@ -16,7 +16,7 @@ program either way, returning
 :meth:`ijoy_jax.Trajectory.summary` plus the family's extra metrics
 (:meth:`ijoy_jax.terrain.family.Family.metrics`; bars: whether the robot got past them).
 
-Physics (``walker = "mjx"``). The MJX biped (:func:`ijoy_jax.sim.walker.make_sim`
+Physics (``walker = "mjx"``). The MJX robot of the sweep's model (:func:`ijoy_jax.sim.walker.make_sim`
 for the sweep's grid and footprint, built once per run) walks instead of the
 perfect robot, each scenario with its :class:`ijoy_jax.sim.physics.Dynamics`
 (the ``sim.*`` columns) and noise key (``fold_in(terrain key, 1)``: replicate r
@@ -65,7 +65,7 @@ from ijoy_jax import robots
 from ijoy_jax.control import rollout
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.select_options import SelectOptions
-from ijoy_jax.sweep import seeding
+from ijoy_jax.sweep import models, seeding
 from ijoy_jax.sweep.expansion import scenarios
 from ijoy_jax.sweep.schema import COMMAND_KEYS, ROBOT_DEFAULTS, SweepConfig, SweepConfigError, reach_of
 from ijoy_jax.targets import make_targets
@@ -355,8 +355,8 @@ def compiled_programs() -> int:
 
 
 def base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
-    """The density's robot (at the sweep's reach) with static windows covering the sweep's largest footprint and
-    margin.
+    """The density's robot of the sweep's model (at the sweep's reach) with static windows covering the sweep's
+    largest footprint and margin (:func:`ijoy_jax.sweep.models.build_robot`).
 
     Raises SweepConfigError when the largest footprint makes an action overlap the stance foot.
     """
@@ -366,9 +366,10 @@ def base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
     reach = reach_of(cfg)
     # hrp2 refuses a reach beyond max_sole_distance; the scenarios' own values replace this one, and load_config
     # checked a sweep's reach against each (a shorter limit at the paper's reach only refuses the far steps)
-    msd = max(float(table["robot.max_sole_distance"].max()), ROBOT_DEFAULTS["max_sole_distance"])
+    msd = max(float(table["robot.max_sole_distance"].max()), models.robot_defaults(cfg.model)["max_sole_distance"])
     try:
-        return robots.hrp2(
+        return models.build_robot(
+            cfg.model,
             margin=0.0,
             density=density,
             reach=reach,
@@ -380,7 +381,7 @@ def base_robot(cfg: SweepConfig, table, density: float) -> robots.Robot:
     except ValueError as e:
         raise SweepConfigError(
             f"{cfg.source}: robot.foot_length/robot.foot_width: a {fl} x {fw} m footprint "
-            f"does not fit HRP-2's action set at density {density} and reach {reach} m: {e}"
+            f"does not fit {models.MODEL_NAMES[cfg.model]}'s action set at density {density} and reach {reach} m: {e}"
         ) from None
 
 
@@ -544,14 +545,15 @@ def chunk_static(cfg: SweepConfig, horizon: int | None = None, refine: bool | No
 
 
 def make_sim(cfg: SweepConfig, table):
-    """The MJX biped of a ``walker = "mjx"`` sweep (its map's grid, the sweep's fixed footprint; host-side, no
-    compile), or None for the perfect robot."""
+    """The MJX robot of a ``walker = "mjx"`` sweep: its model's (``make_sim(..., model=cfg.model)``: the
+    project's biped or the G1), its map's grid, the sweep's fixed footprint (host-side, no compile); or None for
+    the perfect robot."""
     if cfg.walker != "mjx":
         return None
     from ijoy_jax.sim import walker
 
     size = {k: float(table[f"robot.{k}"].iloc[0]) for k in ("foot_length", "foot_width")}
-    return walker.make_sim(cfg.shape, cfg.resolution, robot=robots.hrp2(**size))
+    return walker.make_sim(cfg.shape, cfg.resolution, robot=models.build_robot(cfg.model, **size), model=cfg.model)
 
 
 def physics_steps_per_scenario(sim, num_steps: int) -> int:

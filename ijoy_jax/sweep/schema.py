@@ -14,12 +14,13 @@ A sweep file has these tables (every key optional unless noted; units in bracket
     kernel = "xla"                # FootCost: "xla" or "pallas" (the fused kernel: GPU; interpreted elsewhere)
     random_samples = 0            # cells drawn from [random] (crossed with the grid)
     walker = "perfect"            # "perfect" (every step lands as sent) or "mjx" (the MuJoCo XLA biped)
+    model = "biped"               # the robot: "biped" (HRP-2; in MJX the project's biped) or "g1" (the Unitree G1)
     horizon = 1                   # method = "lookahead": steps scored per decision (1: the one-step selector)
     beam = 16                     # method = "lookahead", horizons >= 3: sequences kept per level (omit: exact)
     refine = false                # refine each step in continuous (dx, dy, dtheta) (ijoy_jax.refine)
     discount = 1.0                # the lookahead's discount gamma
 
-    [robot]                       # fixed robot values (HRP-2's defaults otherwise)
+    [robot]                       # fixed robot values (the model's defaults otherwise)
     margin = 0.02                 # [m]
     metrics.slope_weight = 0.5    # any TerrainMetrics field
 
@@ -67,7 +68,7 @@ Parameter names are ``robot.<name>`` (``w``, ``rotation_weight``, ``margin``,
 ``step_time``, ``foot_length``, ``foot_width``, ``max_sole_pitch``,
 ``max_sole_roll``, ``max_sole_distance``, ``density``, ``reach`` (the largest
 forward/backward step of :func:`ijoy_jax.robots.hrp2`, m: fixed in ``[robot]``,
-one per sweep; ``reach = 0.30`` for stairs),
+one per sweep; ``reach = 0.30`` for stairs; ``model = "biped"`` only),
 ``metrics.<TerrainMetrics field>``), ``terrain.<field of the family's
 parameter class>``, ``selector.<name>`` (the selector's options:
 ``selector.horizon`` and ``selector.refine`` in ``[grid]`` only, they are
@@ -81,7 +82,7 @@ horizons of 3 or more, horizon 2 is searched exactly) and, with
 ``[random]`` they may be written quoted (``"robot.w" = [...]``) or as nested tables
 (``[grid.robot] w = [...]``).
 
-The simulated walker (``walker = "mjx"``) walks the MJX biped
+The simulated walker (``walker = "mjx"``) walks the MJX robot of ``[sweep] model``
 (:func:`ijoy_jax.sim.walker.rollout_batch`) in place of the perfect robot: the same
 scenarios plus the per-scenario physics metrics (:data:`ijoy_jax.sweep.PHYSICS_METRICS`).
 It runs the one-step selectors (``exhaustive``, ``ordered``, ``naive``), refined or not
@@ -89,8 +90,9 @@ It runs the one-step selectors (``exhaustive``, ``ordered``, ``naive``), refined
 Its body is static, so the sweep must fit it, checked before compute: the step time
 is the controller's (``robot.step_time`` 0.8 s, not swept), the footprint is the
 physical foot's (``robot.foot_length``/``foot_width`` fixed in ``[robot]``, not
-swept), the map's cells are at least :data:`SIM_MIN_RESOLUTION` wide, and the robot
-standing at the start zone's centre stands on the map.
+swept; the G1's own, its MJCF's, not changed), the map's cells are at least
+:data:`SIM_MIN_RESOLUTION` wide, and the robot standing at the start zone's centre
+stands on the map.
 
 Commands and terrain from files (:mod:`ijoy_jax.sweep.recorded`, paths relative to the sweep
 file): ``[command] file`` replays a recorded drive's commands (or a trace file's) step by step,
@@ -109,6 +111,15 @@ gives replicate ``r`` a new command every step, uniform over the action set's ra
 ``np.random.default_rng([seed, 2, r]).random(3 * num_steps)`` (step by step, vx, vy, wz), the same in
 every cell. A walk sweep's results add :data:`ijoy_jax.sweep.WALK_METRICS` (steps made, progress along +x,
 and with ``walker = "mjx"`` the touch-down figures of the steps made).
+
+The robot (``[sweep] model``, one per sweep; :mod:`ijoy_jax.sweep.models`): ``"biped"`` (the default) walks
+HRP-2's selector (:func:`ijoy_jax.robots.hrp2`) and, with ``walker = "mjx"``, the project's HRP-2-like biped;
+``"g1"`` the Unitree G1's (:func:`ijoy_jax.robots.g1`) and Menagerie's G1 in MJX (the ``robots`` extra). The
+``[robot]`` keys and ``robot.<name>`` parameters are the same for both, their defaults the model's
+(:func:`ijoy_jax.sweep.models.robot_defaults`: the G1's 18 x 6 cm foot, its sole limits), except ``reach``,
+an option of HRP-2's action set the G1 refuses (its lattice spans the paper's 0.20 m steps); with ``walker =
+"mjx"`` the G1's footprint is its MJCF's feet, refused if changed. The model is the file's text (saved with the
+results as ``sweep.toml``) and the ``model`` of the folder's ``manifest.json``.
 
 A *cell* is one combination of grid values (times one random sample); each cell
 runs ``scenarios_per_cell`` scenarios, replicate ``r`` of every cell on the same
@@ -145,6 +156,7 @@ __all__ = [
     "MAX_FLOAT",
     "MAX_OBJECT_SLOTS",
     "MIN_RESOLUTION",
+    "MODELS",
     "ROBOT_DEFAULTS",
     "SELECTOR_DEFAULTS",
     "SELECTOR_STATIC",
@@ -170,7 +182,13 @@ Robot): density is a compile group of its own; reach is one per sweep."""
 
 
 ROBOT_DEFAULTS: Mapping[str, float] = MappingProxyType(_robot_defaults())
-"""Every sweepable robot parameter and its default (m, s, rad, cost units)."""
+"""Every sweepable robot parameter and its default (m, s, rad, cost units): HRP-2's, the ``"biped"`` model's
+(each model's: :func:`ijoy_jax.sweep.models.robot_defaults`)."""
+
+MODELS = ("biped", "g1")
+"""``[sweep] model``: the robot the sweep walks, named as :data:`ijoy_jax.sim.model.MODELS` names the simulated
+ones: ``"biped"``, HRP-2 (the project's HRP-2-like biped in MJX), or ``"g1"``, the Unitree G1
+(:mod:`ijoy_jax.sweep.models`)."""
 
 MAX_FLOAT = float(np.finfo(np.float32).max)
 """Largest magnitude of any number in a sweep file (a float32 robot leaf or command; beyond it float32 holds
@@ -221,11 +239,14 @@ class SweepConfig:
         kernel (the same decisions; several times faster on a GPU, slow interpreted on a CPU).
       random_samples: random cells drawn from ``random`` (0: none).
       walker: who executes the steps, one of :data:`WALKERS` (static).
+      model: the robot, one of :data:`MODELS` (static): its selector's robot and, with ``walker = "mjx"``, the
+        simulated one (:mod:`ijoy_jax.sweep.models`).
       horizon, refine, discount: the selector's options (:data:`SELECTOR_DEFAULTS`), unless swept as
         ``selector.<name>``; beam: the lookahead's beam for horizons >= 3 (None: exact).
       family: terrain family name (None: the terrain of ``terrain_recording`` or of ``walk``); shape (nx, ny) cells;
         resolution (m); has_height; max_count (static object slots, None: the family's default).
-      robot: fixed robot values, ``{name: float}`` (names as in :data:`ROBOT_DEFAULTS`).
+      robot: fixed robot values, ``{name: float}`` (names as in :data:`ROBOT_DEFAULTS`; the model's,
+        :func:`ijoy_jax.sweep.models.robot_keys`).
       terrain_params: fixed terrain parameters, ``{field: number}``.
       command: ``{component: (lo, hi)}``, lo == hi for a fixed value (m/s, rad/s); {} when the commands
         come from ``command_file``.
@@ -252,6 +273,7 @@ class SweepConfig:
     kernel: str = "xla"
     random_samples: int = 0
     walker: str = "perfect"
+    model: str = "biped"
     horizon: int = 1
     beam: int | None = None
     refine: bool = False
@@ -407,7 +429,8 @@ class Checker:
 
 
 def reach_of(cfg: SweepConfig) -> float:
-    """The sweep's ``robot.reach`` (m): HRP-2's largest forward/backward step, one per sweep (default the paper's)."""
+    """The sweep's ``robot.reach`` (m): HRP-2's largest forward/backward step, one per sweep (default the paper's,
+    the G1's always)."""
     return float(cfg.robot.get("reach", ROBOT_DEFAULTS["reach"]))
 
 
