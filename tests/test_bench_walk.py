@@ -12,6 +12,7 @@ bench run compiles the sweep's chunk program once per family.
 """
 
 import functools
+import json
 from typing import Any
 
 import jax
@@ -508,6 +509,7 @@ def test_the_table_equals_an_independent_computation_on_the_sweeps_maps():
     (dict(chunk=-1), "chunk must be a positive int"),
     (dict(commands=("sideways",)), "commands must be some of"),
     (dict(walkers=("real",)), "walkers must be some of"),
+    (dict(model="hrp2"), "model must be one of biped, g1, got 'hrp2'"),
     (dict(sweeps="/nonexistent"), "no sweep file /nonexistent/flat_random.toml"),
     (dict(resolution=0.03), r"flat_random\.toml: terrain\.resolution: .*whole cells"),
     (dict(seed=-1), r"flat_random\.toml: sweep\.seed: must be >= 0"),
@@ -611,7 +613,8 @@ def rows_for_table():
     return [dict(perfect, family="flat", commands="random"), dict(mjx, family="flat", commands="random"),
             dict(perfect, family="flat", commands="forward"), dict(mjx, family="flat", commands="forward"),
             dict(perfect, family="rough", commands="forward"),
-            dict(name="walk", family="stairs_up", skipped="no reach"), dict(name="walk_compiles", mjx_programs=1)]
+            dict(name="walk", family="stairs_up", robot="g1()", skipped="no reach"),
+            dict(name="walk_compiles", mjx_programs=1)]
 
 
 def test_markdown_table():
@@ -620,11 +623,57 @@ def test_markdown_table():
     assert all(line.startswith("| ") and line.endswith(" |") for line in lines)
     assert all(line.count("|") == lines[0].count("|") for line in lines)
     cells = [c.strip() for c in lines[2].strip("|").split("|")]
-    assert cells == ["flat", "random", "8", "12.50", "12.5 / 25.0", "4.10 / 3.95", "29.5 / 28.0", "0 / 3",
-                     "0.18 / 0.31", "-"]
+    assert cells == ["flat", "random", "-", "8", "12.50", "12.5 / 25.0", "4.10 / 3.95", "29.5 / 28.0", "0 / 3",
+                     "0.18 / 0.31", "-"]  # ("-": these rows name no robot)
     rough = [c.strip() for c in lines[4].strip("|").split("|")]
-    assert rough[:6] == ["rough", "forward", "8", "-", "12.5 / -", "4.10 / -"]
-    assert "skipped: no reach" in lines[5]
+    assert rough[:7] == ["rough", "forward", "-", "8", "-", "12.5 / -", "4.10 / -"]
+    assert lines[5].startswith("| stairs_up | - | g1() | skipped: no reach |")
+
+
+def test_the_model_is_set_in_each_files_text_and_the_g1_skips_the_stairs():
+    """``model`` sets ``[sweep] model`` (and names the sweep); the stairs' files set HRP-2's reach, which the G1 does
+    not take: :func:`unsupported` says so, and :func:`family_robot` refuses it."""
+    text = B.sweep_file("rough", "random").read_text()
+    cfg = sweep.parse_config(B.sweep_text(text, walker="perfect", model="g1"))
+    assert (cfg.model, cfg.name, cfg.walk) == ("g1", "walk_rough_random_g1_perfect", "rough")
+    assert sweep.parse_config(B.sweep_text(text, walker="mjx")).model == "biped"
+    assert sweep.parse_config(B.sweep_text(text, walker="mjx", model="biped")).name == "walk_rough_random_mjx"
+    stairs = B.sweep_file("stairs_up", "forward").read_text()
+    assert B.unsupported(stairs, "biped") is None and B.unsupported(text, "g1") is None
+    assert "robots.hrp2(reach=0.3)" in B.unsupported(stairs, "g1")
+    with pytest.raises(sweep.SweepConfigError, match="robot.reach: reach is an option of HRP-2's"):
+        sweep.parse_config(B.sweep_text(stairs, walker="perfect", model="g1"))
+    assert B.robot_label("g1") == "g1()" and B.robot_label("biped", {"reach": 0.3}) == "hrp2(reach=0.3)"
+    assert B.family_robot(B.FAMILIES["flat"], "g1").actions.shape == (496, 3)
+    with pytest.raises(ValueError, match="robots.g1 takes no reach"):
+        B.family_robot(B.FAMILIES["stairs_up"], "g1")
+
+
+@pytest.mark.slow
+def test_the_cli_walks_the_g1_with_the_perfect_robot_and_skips_the_stairs(tmp_path, capsys):
+    """``ijoy bench walk --model g1 --quick --walkers perfect``: a JSON line per row, the G1's (its robot, its
+    model, its sweeps' results in ``<file stem>_g1_perfect`` whose sweep.toml says model = "g1"), one skipped line
+    for the stairs with the reason, the table naming the robot and the plot titled with it."""
+    from ijoy_jax.apps import cli
+
+    status = cli.main(["bench", "walk", "--model", "g1", "--quick", "--walkers", "perfect", "--families",
+                       "flat,stairs_up", "--out", str(tmp_path / "out"), "--plot", str(tmp_path / "walk.png")])
+    out = capsys.readouterr().out
+    assert status in (0, None)
+    rows = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    walk = [r for r in rows if r["name"] == "walk"]
+    assert [(r["family"], r.get("commands")) for r in walk] == [("flat", "random"), ("flat", "forward"),
+                                                                 ("stairs_up", None)]
+    for r in walk[:2]:
+        assert (r["model"], r["robot"], r["walker"], r["robots"], r["steps"]) == ("g1", "g1()", "perfect", 4, 6)
+        assert r["results"] == str(tmp_path / "out" / f"flat_{r['commands']}_g1_perfect")
+        assert sweep.load_config(f"{r['results']}/sweep.toml").model == "g1"
+        assert (sweep.load(r["results"])["robot.foot_length"] == 0.18).all()
+    assert walk[0]["stops"] == 0 and walk[1]["progress_mean_m"] == pytest.approx(0.1 + 5 * 0.2, abs=1e-5)
+    assert "robots.hrp2(reach=0.3)" in walk[2]["skipped"] and rows[-1]["model"] == "g1"
+    assert "| flat | forward | g1() | 4 |" in out and "| stairs_up | - | g1() | skipped: its robot is" in out
+    with Image.open(tmp_path / "walk.png") as im:
+        assert im.format == "PNG"
 
 
 def test_plot_png(tmp_path):

@@ -47,6 +47,8 @@ CASES = [
     (["bench", "walk", "--sweeps", "no_such_folder"], "no sweep file no_such_folder/flat_random.toml"),
     (["bench", "walk", "--resolution", "0.03"], "terrain.resolution: resolution 0.03 m must divide"),
     (["bench", "walk", "--seed", "-1"], "sweep.seed: must be >= 0, got -1"),
+    (["bench", "walk", "--model", "hrp2"], "argument --model: invalid choice: 'hrp2'"),
+    (["bench", "sim", "--model", "g1"], "--model: options of 'ijoy bench walk' only"),
     (["bench", "sim", "--set", "w=2"], "--set: options of 'ijoy bench walk' only"),
     (["bench", "sim", "--calls", "5"], "--calls: options of 'ijoy bench haptics' and 'ijoy bench cue' only"),
     (["bench", "haptics", "--tick-only"], "--tick-only: options of 'ijoy bench cue' only, not of 'haptics'"),

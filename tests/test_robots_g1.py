@@ -32,6 +32,18 @@ def test_footprint_and_step_in_place_are_the_mjcfs():
     assert np.any(np.all(np.isclose(np.asarray(robot.actions), g1_model.G1_P0, atol=1e-6), axis=1))
 
 
+def test_g1_defaults_are_the_leaves_of_g1():
+    """Every scalar leaf of ``g1()`` read without building it (float32 leaves: equal to rounding), and its
+    density; HRP-2's selector weights and metrics, the G1's body."""
+    robot, d = ij.robots.g1(), ij.robots.g1_defaults()
+    assert set(d) == set(ij.robots.SCALAR_LEAVES) | {"density"} and d["density"] == 1.0
+    for name in ij.robots.SCALAR_LEAVES:
+        assert float(ij.robots.get_leaf(robot, name)) == pytest.approx(d[name], rel=1e-7), name
+    hrp2 = ij.robots.hrp2_defaults()
+    assert {k for k in d if d[k] != hrp2[k]} == {"foot_length", "foot_width", "max_sole_pitch", "max_sole_roll",
+                                                  "max_sole_distance"}
+
+
 def test_every_action_is_realisable_by_both_legs_and_a_wider_lattice_is_not_needed():
     desc = g1_description()
     acts = np.asarray(ij.robots.g1().actions)

@@ -80,6 +80,13 @@ def _walk_options(parser) -> None:
         default=None,
         help="comma-separated walkers: perfect (the paper's robot), mjx (the MJX biped) (default: both)",
     )
+    walk.add_argument(
+        "--model",
+        choices=["biped", "g1"],  # ijoy_jax.sweep.MODELS, without importing the sweep engine to parse the line
+        default=None,
+        help="the robot: biped (HRP-2 choosing, the project's HRP-2-like biped in MJX) or g1 (the Unitree G1 "
+        "choosing and in MJX; the stairs, whose robot is HRP-2 with a 0.30 m reach, are skipped) (default: biped)",
+    )
     walk.add_argument("--resolution", type=float, default=None, help="cell size in metres (default: the files' 0.02)")
     walk.add_argument(
         "--chunk",
@@ -145,6 +152,7 @@ def _walk(args) -> list[dict]:
         refine=args.refine,
         kernel=args.kernel,
         robot_leaves=number_assignments(args.set, robots.SELECTOR_LEAVES, "metrics.support_limit=0.003"),
+        model="biped" if args.model is None else args.model,
         sweeps=args.sweeps,
         out=args.out,
         emit=lambda row: print(json.dumps(row), flush=True),

@@ -26,6 +26,17 @@ robot's run is the same file with ``walker = "perfect"`` (:func:`sweep_text`). T
 (robots, steps, seed, search) are set in each file's text before it is parsed, so the text saved with each
 run's results (its folder's ``sweep.toml``) is what ran.
 
+The robot (``model``, ``ijoy bench walk --model g1``): every file walks HRP-2 (``"biped"``: its selector robot
+and the project's HRP-2-like biped in MJX) unless ``model = "g1"`` sets ``[sweep] model`` in its text
+(:data:`ijoy_jax.sweep.MODELS`): the Unitree G1 chooses (:func:`ijoy_jax.robots.g1`, with the files' other
+``[robot]`` values) and Menagerie's G1 walks in MJX. The stairs are skipped for the G1, with the reason in
+their row, the table and the printed JSON line: their robot is ``robots.hrp2(reach=0.30)``, whose 0.30 m steps
+put a foot past a riser between the feet, and the G1 takes no reach (:mod:`ijoy_jax.sweep.models`: its lattice
+steps at most 0.20 m, the range its legs were checked to realise, and at 0.30 m its widest step would be
+0.485 m from the stance foot, beyond its 0.48 m ``max_sole_distance``), so with the paper's steps it would only
+mark time before the first riser, which measures nothing. A G1 run's sweeps are named, and their results
+folders, ``<file stem>_g1_<walker>``; HRP-2's keep ``<file stem>_<walker>``.
+
 The table's numbers per (family, commands, walker) come from the sweep's per-scenario results
 (:func:`summarize`): falls, stops, progress along +x and the steps made (:data:`ijoy_jax.sweep.WALK_METRICS`),
 footholds on obstacles, and for the MJX biped obstacle contacts while standing and the touch-down errors of the
@@ -126,9 +137,32 @@ SWEEPS = Path(__file__).resolve().parents[2] / "sweeps" / "walk"
 """The shipped sweep files (a source checkout's ``sweeps/walk``; ``run(sweeps=...)``, ``--sweeps`` elsewhere)."""
 
 
-def family_robot(family: WalkFamily) -> robots.Robot:
-    """The family's robot: ``robots.hrp2()``, or ``robots.hrp2(reach=...)`` for a family with its own reach."""
-    return robots.hrp2() if family.reach is None else robots.hrp2(reach=family.reach)
+def family_robot(family: WalkFamily, model: str = "biped") -> robots.Robot:
+    """The family's robot of ``model`` (:func:`ijoy_jax.sweep.models.build_robot`): ``robots.hrp2()``, or
+    ``robots.hrp2(reach=...)`` for a family with its own reach; ``robots.g1()`` (ValueError for a family with its
+    own reach: the G1 takes none)."""
+    return sweep.models.build_robot(model, reach=family.reach)
+
+
+def robot_label(model: str, robot: Mapping[str, float] | None = None) -> str:
+    """The selector's robot of a walk sweep (its ``model`` and ``[robot]`` values) as a row names it: ``"hrp2()"``,
+    ``"hrp2(reach=0.3)"`` or ``"g1()"``."""
+    if model == "g1":
+        return "g1()"
+    return "hrp2()" if "reach" not in (robot or {}) else f"hrp2(reach={robot['reach']:g})"
+
+
+def unsupported(text: str, model: str) -> str | None:
+    """Why the walk sweep file of ``text`` does not run with ``model`` (None: it does): the ``[robot]`` keys it
+    sets that the model does not take (:func:`ijoy_jax.sweep.models.robot_keys`; the stairs' HRP-2 ``reach``
+    for the G1)."""
+    robot = tomllib.loads(text).get("robot", {})
+    keys = [k for k in robot if k not in sweep.models.robot_keys(model)]
+    if not keys:
+        return None
+    args = ", ".join(f"{k}={robot[k]!r}" for k in keys)
+    return (f"its robot is robots.hrp2({args}), an HRP-2 option {sweep.models.MODEL_NAMES[model]} does not take "
+            f"(its steps reach {robots.PAPER_REACH:g} m at most, too short to put a foot past a riser)")
 
 
 def sweep_file(family: str, commands: str, folder=None) -> Path:
@@ -138,15 +172,18 @@ def sweep_file(family: str, commands: str, folder=None) -> Path:
 
 def sweep_text(text: str, *, walker: str, batch: int | None = None, steps: int | None = None,
                seed: int | None = None, resolution: float | None = None, kernel: str | None = None,
-               refine: bool | None = None, robot_leaves: Mapping[str, float] | None = None) -> str:
+               refine: bool | None = None, robot_leaves: Mapping[str, float] | None = None,
+               model: str | None = None) -> str:
     """A walk sweep file's text with the benchmark's options set (:func:`ijoy_jax.sweep.set_values`): the
-    ``walker``, ``batch`` (``scenarios_per_cell``), ``steps`` (``num_steps``), ``seed``, ``kernel`` and
-    ``refine`` of ``[sweep]``, the map's ``resolution`` and the robot's leaves (``[robot]``, dotted names as
-    ``metrics.support_limit``); None leaves the file's value. The sweep name gets ``_<walker>``."""
+    ``walker``, ``batch`` (``scenarios_per_cell``), ``steps`` (``num_steps``), ``seed``, ``kernel``, ``refine``
+    and ``model`` of ``[sweep]``, the map's ``resolution`` and the robot's leaves (``[robot]``, dotted names as
+    ``metrics.support_limit``); None leaves the file's value. The sweep name gets ``_<walker>``, and
+    ``_<model>`` before it for a model other than ``"biped"``."""
     name = tomllib.loads(text).get("sweep", {}).get("name", "walk")
-    values = {"sweep.name": f"{name}_{walker}", "sweep.walker": walker}
+    tag = "" if model in (None, "biped") else f"_{model}"
+    values = {"sweep.name": f"{name}{tag}_{walker}", "sweep.walker": walker}
     for key, value in (("scenarios_per_cell", batch), ("num_steps", steps), ("seed", seed), ("kernel", kernel),
-                       ("refine", refine)):
+                       ("refine", refine), ("model", model)):
         if value is not None:
             values[f"sweep.{key}"] = value
     if resolution is not None:
@@ -214,7 +251,7 @@ def summarize(df) -> dict[str, Any]:
 
 
 def check_options(families: Sequence[str] | None, *, batch: int, steps: int, commands: Sequence[str],
-                  walkers: Sequence[str], chunk: int | None, folder=None) -> list[Path]:
+                  walkers: Sequence[str], chunk: int | None, folder=None, model: str = "biped") -> list[Path]:
     """Validate :func:`run`'s own options before any compute; returns the sweep files in table order (family
     by family in the registry's order, then :data:`COMMANDS`' order). The rest is checked with each file."""
     names = list(FAMILIES) if families is None else list(families)
@@ -230,6 +267,8 @@ def check_options(families: Sequence[str] | None, *, batch: int, steps: int, com
     bad = [w for w in walkers if w not in WALKERS]
     if bad or not walkers:
         raise ValueError(f"walkers must be some of {WALKERS}, got {list(walkers)}")
+    if model not in sweep.MODELS:
+        raise ValueError(f"model must be one of {', '.join(sweep.MODELS)}, got {model!r}")
     files = [sweep_file(n, c, folder) for n in FAMILIES if n in names for c in COMMANDS if c in commands]
     missing = [str(f) for f in files if not f.is_file()]
     if missing:
@@ -241,8 +280,8 @@ def check_options(families: Sequence[str] | None, *, batch: int, steps: int, com
 def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int = 30,
         commands: Sequence[str] = COMMANDS, walkers: Sequence[str] = WALKERS, seed: int | None = None,
         resolution: float | None = None, chunk: int | None = None, refine: bool | None = None,
-        kernel: str | None = None, robot_leaves: Mapping[str, float] | None = None, sweeps=None, out=None,
-        emit: Callable[[dict], None] | None = None) -> list[dict[str, Any]]:
+        kernel: str | None = None, robot_leaves: Mapping[str, float] | None = None, model: str = "biped",
+        sweeps=None, out=None, emit: Callable[[dict], None] | None = None) -> list[dict[str, Any]]:
     """Run the walk sweep files of ``families`` x ``commands`` with each walker; one record per row.
 
     Every file and walker is checked (:func:`ijoy_jax.sweep.parse_config` of :func:`sweep_text`) before the
@@ -261,30 +300,41 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
         :data:`CHUNK` on an accelerator and :data:`ijoy_jax.sweep.DEFAULT_CHUNK` on a CPU).
       robot_leaves: robot values set on every file (``[robot]``, dotted names as ``metrics.support_limit``;
         traced leaves of the choice, so they reuse the compiled programs). Recorded in each row.
+      model: the robot, ``"biped"`` (HRP-2) or ``"g1"`` (the Unitree G1), :data:`ijoy_jax.sweep.MODELS`: set as
+        each file's ``[sweep] model``. A file whose robot the model cannot be (the stairs' HRP-2 reach, for the
+        G1) is skipped: one row per family with ``skipped``, the reason (:func:`unsupported`).
       sweeps: the folder of the sweep files (None: :data:`SWEEPS`).
       out: the folder of the sweeps' results, one subfolder ``<file stem>_<walker>`` each (a folder of the same
         run is resumed, one of another refused by the sweep engine); None: a new temporary folder.
       emit: called with each record as soon as it exists (e.g. to print JSON lines).
 
     Returns:
-      Records (dicts) with ``name`` "walk": ``family``, ``commands``, ``walker``, the numbers of
+      Records (dicts) with ``name`` "walk": ``family``, ``commands``, ``walker``, ``model``, ``robot`` (as
+      :func:`robot_label` names it), the numbers of
       :func:`summarize`, ``compile_s`` and ``run_s`` (compile time from JAX's compile events, run time the rest
       of the run's wall time), ``physics_steps_per_s`` (MJX: robots x (steps + the standing step) x physics
       steps per step / run time) and ``new_compiles`` (MJX rollout programs the run compiled,
       :func:`ijoy_jax.sim.walker.compiled_programs`), or ``decisions_per_s`` (perfect), ``compiles`` (the
       sweep's chunk programs traced by the run), the ``sweep`` file, its results folder ``results`` and the
       setup; and a last record ``name`` "walk_compiles" with the totals (``mjx_programs``: MJX rollout programs
-      compiled).
+      compiled); a skipped family's record has ``name`` "walk", ``family``, ``model`` and ``skipped``.
     """
     from ijoy_jax.sim import walker as W
 
     files = check_options(families, batch=batch, steps=steps, commands=commands, walkers=walkers, chunk=chunk,
-                          folder=sweeps)
+                          folder=sweeps, model=model)
     options = dict(batch=batch, steps=steps, seed=seed, resolution=resolution, kernel=kernel, refine=refine,
-                   robot_leaves=robot_leaves)
-    planned = []  # every (file, walker) parsed before the first runs: a bad option fails before any compute
+                   robot_leaves=robot_leaves, model=model)
+    # every (file, walker, its config) parsed before the first runs: a bad option fails before any compute; a
+    # family the model cannot walk gets one (file, None, why) where its rows would be
+    planned: list[tuple[Path, str | None, Any]] = []
     for path in files:
         text = path.read_text(encoding="utf-8")
+        why = unsupported(text, model)
+        if why is not None:
+            if all(p[1] is not None or _family_of(p[0]) != _family_of(path) for p in planned):
+                planned.append((path, None, why))
+            continue
         for w in WALKERS:
             if w in walkers:
                 planned.append((path, w, sweep.parse_config(sweep_text(text, walker=w, **options), str(path))))
@@ -295,9 +345,14 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
     rows: list[dict[str, Any]] = []
     programs0, t_all = W.compiled_programs(), time.perf_counter()
     info = _device_info()
+    tag = "" if model == "biped" else f"_{model}"
     for path, w, cfg in planned:
+        if w is None:  # cfg: why the family is skipped
+            rows.append(dict(name="walk", family=_family_of(path), model=model, robot=robot_label(model), skipped=cfg))
+            emit(rows[-1])
+            continue
         family, kind = cfg.walk, path.stem.rpartition("_")[2]
-        folder = out / f"{path.stem}_{w}"
+        folder = out / f"{path.stem}{tag}_{w}"
         before = W.compiled_programs()
         with compile_seconds() as compiled:
             t0 = time.perf_counter()
@@ -305,12 +360,11 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
             wall = time.perf_counter() - t0
         run_s = max(wall - compiled[0], 1e-9)
         fam = FAMILIES[family]
-        row = dict(name="walk", family=family, commands=kind, walker=w,
-                   robot="hrp2()" if "reach" not in cfg.robot else f"hrp2(reach={cfg.robot['reach']:g})",
-                   ranges=fam.ranges, **summarize(sweep.load(folder)), compile_s=round(compiled[0], 3),
-                   run_s=round(run_s, 4), compiles=stats.compiles, chunk=min(stats.chunk_size, cfg.num_scenarios),
-                   batch=cfg.scenarios_per_cell,
-                   steps=cfg.num_steps, seed=cfg.seed, resolution=cfg.resolution, shape=list(cfg.shape),
+        row = dict(name="walk", family=family, commands=kind, walker=w, model=cfg.model,
+                   robot=robot_label(cfg.model, cfg.robot), ranges=fam.ranges, **summarize(sweep.load(folder)),
+                   compile_s=round(compiled[0], 3), run_s=round(run_s, 4), compiles=stats.compiles,
+                   chunk=min(stats.chunk_size, cfg.num_scenarios), batch=cfg.scenarios_per_cell, steps=cfg.num_steps,
+                   seed=cfg.seed, resolution=cfg.resolution, shape=list(cfg.shape),
                    refine=cfg.refine, kernel=cfg.kernel, forward_m_s=cfg.command.get("vx", (None,))[0],
                    robot_leaves={k: float(v) for k, v in (robot_leaves or {}).items()}, sweep=str(path),
                    results=str(folder), **info)
@@ -321,13 +375,18 @@ def run(families: Sequence[str] | None = None, *, batch: int = 1024, steps: int 
             row["decisions_per_s"] = stats.computed * cfg.num_steps / run_s
         rows.append(row)
         emit(row)
-    total = dict(name="walk_compiles", mjx_programs=W.compiled_programs() - programs0,
-                 mjx_compile_s=round(sum(r["compile_s"] for r in rows if r["walker"] == "mjx"), 3),
-                 perfect_compile_s=round(sum(r["compile_s"] for r in rows if r["walker"] == "perfect"), 3),
+    total = dict(name="walk_compiles", model=model, mjx_programs=W.compiled_programs() - programs0,
+                 mjx_compile_s=round(sum(r["compile_s"] for r in rows if r.get("walker") == "mjx"), 3),
+                 perfect_compile_s=round(sum(r["compile_s"] for r in rows if r.get("walker") == "perfect"), 3),
                  wall_s=round(time.perf_counter() - t_all, 2), results=str(out), **info)
     rows.append(total)
     emit(total)
     return rows
+
+
+def _family_of(path: Path) -> str:
+    """The family of a walk sweep file ``<family>_<commands>.toml``."""
+    return path.stem.rpartition("_")[0]
 
 
 def _device_info() -> dict[str, str]:
@@ -339,18 +398,19 @@ def _device_info() -> dict[str, str]:
 # --------------------------------------------------------------------------------------------- table and plot
 
 
-def _pairs(rows: Sequence[dict]) -> list[tuple[str, str, dict | None, dict | None, str | None]]:
-    """(family, commands, perfect row, simulated row, skip reason) per family and command kind, in run order."""
+def _pairs(rows: Sequence[dict]) -> list[tuple[str, str, dict | None, dict | None, str | None, str]]:
+    """(family, commands, perfect row, simulated row, skip reason, robot) per family and command kind, in run
+    order ("-" for a row without a robot)."""
     out: dict[tuple[str, str], list] = {}
     for r in rows:
         if r.get("name") != "walk":
             continue
         if "skipped" in r:
-            out[(r["family"], "")] = [None, None, r["skipped"]]
+            out[(r["family"], "")] = [None, None, r["skipped"], r.get("robot", "-")]
             continue
-        slot = out.setdefault((r["family"], r["commands"]), [None, None, None])
+        slot = out.setdefault((r["family"], r["commands"]), [None, None, None, r.get("robot", "-")])
         slot[WALKERS.index(r["walker"])] = r
-    return [(f, c, p, s, why) for (f, c), (p, s, why) in out.items()]
+    return [(f, c, *slot) for (f, c), slot in out.items()]
 
 
 def _cell(row: dict | None, key: str, fmt: str, scale: float = 1.0) -> str:
@@ -364,25 +424,25 @@ def markdown_table(rows: Sequence[dict]) -> str:
     the perfect robot and the simulated one side by side ("perfect / simulated"; "-" where a walker did not
     run or a number does not apply).
 
-    Columns (:func:`summarize`): robots; fell % (simulated); stops % and mean progress along +x (m); mean
-    steps made; obstacle contacts (perfect: footholds on obstacle cells; simulated: steps with a sole or shin
-    on one); the simulated placement error, its mean over every step made and the mean over robots of each
-    robot's p95 (cm); the sole tilt error's mean robot p95 (deg). Per-robot percentiles, since the sweep keeps
-    a row per robot: they run a few per cent below the p95 over every step pooled, which the tables before the
-    sweep files gave. A skipped family gets one line with the reason.
+    Columns: the selector's robot (:func:`robot_label`); then (:func:`summarize`) robots; fell % (simulated);
+    stops % and mean progress along +x (m); mean steps made; obstacle contacts (perfect: footholds on obstacle
+    cells; simulated: steps with a sole or shin on one); the simulated placement error, its mean over every step
+    made and the mean over robots of each robot's p95 (cm); the sole tilt error's mean robot p95 (deg).
+    Per-robot percentiles, since the sweep keeps a row per robot: they run a few per cent below the p95 over
+    every step pooled, which the tables before the sweep files gave. A skipped family gets one line with the reason.
     """
-    head = ("| family | commands | robots | fell % (sim) | stops % (perfect / sim) | progress m (perfect / sim) "
-            "| steps made (perfect / sim) | contacts (perfect / sim) | placement mean / robot p95 cm (sim) "
-            "| tilt robot p95 deg (sim) |")
+    head = ("| family | commands | robot | robots | fell % (sim) | stops % (perfect / sim) "
+            "| progress m (perfect / sim) | steps made (perfect / sim) | contacts (perfect / sim) "
+            "| placement mean / robot p95 cm (sim) | tilt robot p95 deg (sim) |")
     lines = [head, "|" + " --- |" * head.count(" | ") + " --- |"]
-    for family, kind, p, s, why in _pairs(rows):
+    for family, kind, p, s, why, robot in _pairs(rows):
         if why is not None:
-            lines.append(f"| {family} | - | skipped: {why} |" + " |" * 7)
+            lines.append(f"| {family} | - | {robot} | skipped: {why} |" + " |" * 7)
             continue
         def both(key, fmt, pkey=None, p=p, s=s):
             return f"{_cell(p, pkey or key, fmt)} / {_cell(s, key, fmt)}"
 
-        cells = [family, kind, str((p or s)["robots"]), _cell(s, "fell_pct", ".2f"), both("stops_pct", ".1f"),
+        cells = [family, kind, robot, str((p or s)["robots"]), _cell(s, "fell_pct", ".2f"), both("stops_pct", ".1f"),
                  both("progress_mean_m", ".2f"), both("steps_made_mean", ".1f"),
                  both("obstacle_contacts", "d", pkey="footholds_on_obstacles"),
                  f"{_cell(s, 'placement_error_mean_m', '.2f', 100)} / {_cell(s, 'placement_error_p95_m', '.2f', 100)}",
@@ -390,6 +450,9 @@ def markdown_table(rows: Sequence[dict]) -> str:
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
+
+_PLOT_ROBOTS = {"biped": ("HRP-2", "MJX biped"), "g1": ("Unitree G1", "MJX G1")}
+"""Per model: the selector's robot and the simulated one, as the plot's title names them."""
 
 PLOT_SIZE = (12.0, 8.0)
 """Figure size of :func:`plot` (inches); saved at :data:`PLOT_DPI`."""
@@ -400,7 +463,8 @@ def plot(rows: Sequence[dict], path=None):
     """Bars per family: falls %, stops % and mean progress (m), perfect and simulated side by side.
 
     One panel per measure; in each, four bars per family: perfect and simulated robot (colour) under
-    random and forward commands (hatched: forward). Skipped families are left out. Saved as a PNG of
+    random and forward commands (hatched: forward). Skipped families are left out; the title names the robot
+    (the rows' ``model``). Saved as a PNG of
     :data:`PLOT_SIZE` inches at :data:`PLOT_DPI` when ``path`` is given; returns the figure.
     """
     require("plot", "matplotlib", what="ijoy bench walk --plot")
@@ -413,7 +477,7 @@ def plot(rows: Sequence[dict], path=None):
     pairs = [x for x in _pairs(rows) if x[4] is None]
     families = list(dict.fromkeys(f for f, *_ in pairs))
     kinds = [k for k in COMMANDS if any(c == k for _, c, *_ in pairs)]
-    table = {(f, c): (p, s) for f, c, p, s, _ in pairs}
+    table = {(f, c): (p, s) for f, c, p, s, *_ in pairs}
     fig, axes = plt.subplots(3, 1, figsize=PLOT_SIZE, sharex=True)
     measures = (("fell_pct", "fell (% of robots)"), ("stops_pct", "stopped (% of robots)"),
                 ("progress_mean_m", "mean progress along +x (m)"))
@@ -438,8 +502,9 @@ def plot(rows: Sequence[dict], path=None):
     axes[0].legend(fontsize=8, ncol=2, loc="upper left")
     axes[-1].set_xticks(x, families, rotation=20)
     first = next((r for r in rows if r.get("name") == "walk" and "skipped" not in r), {})
-    axes[0].set_title(f"HRP-2 joystick per terrain family: {first.get('batch', '?')} robots x "
-                      f"{first.get('steps', '?')} steps, perfect robot vs MJX biped")
+    robot, body = _PLOT_ROBOTS[first.get("model", "biped")]
+    axes[0].set_title(f"{robot} joystick per terrain family: {first.get('batch', '?')} robots x "
+                      f"{first.get('steps', '?')} steps, perfect robot vs {body}")
     fig.tight_layout()
     if path is not None:
         fig.savefig(path, dpi=PLOT_DPI)
