@@ -31,6 +31,23 @@ def test_hrp2_matches_the_paper():
     assert set(np.round(a[np.isclose(a[:, 2], 0)][:, 0], 3)) == set(np.round(np.linspace(-0.2, 0.2, 9), 3))
 
 
+@pytest.mark.parametrize("name, factory", [("biped", robots.hrp2), ("g1", robots.g1)])
+def test_each_simulated_robot_has_its_selector_robot(name, factory):
+    # the walker's names (ijoy_jax.sim.bodies.MODELS, which needs MuJoCo) and the selector's robot for each
+    from ijoy_jax.sim import bodies
+
+    assert robots.MODELS == bodies.MODELS
+    got, want = robots.for_model(name, margin=0.05, density=0.5), factory(margin=0.05, density=0.5)
+    for a, b in zip(jax.tree_util.tree_leaves(got), jax.tree_util.tree_leaves(want), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("name", ["G1", "atlas", "", None])
+def test_an_unknown_robot_name_is_refused_naming_the_known(name):
+    with pytest.raises(ValueError, match="model must be one of biped, g1, got"):
+        robots.for_model(name)
+
+
 @pytest.mark.parametrize("margin", [0.02, 0.05, 0.10])
 def test_paper_margins_fit_the_default_window(margin):
     r = ij.robots.hrp2(margin=margin)

@@ -9,7 +9,8 @@ Every public name is exported here; the modules, from the ground up: :mod:`~ijoy
 :class:`Robot` and :class:`TerrainMetrics` pytrees), :mod:`~ijoy_jax.robots.leaves` (the scalar leaves by
 dotted name), :mod:`~ijoy_jax.robots.lattice` (action sets on lattices), :mod:`~ijoy_jax.robots.build`
 (building a valid robot and checking one), :mod:`~ijoy_jax.robots.hrp2_model` (the paper's HRP-2),
-:mod:`~ijoy_jax.robots.g1_model` (the Unitree G1, derived from its MJCF),
+:mod:`~ijoy_jax.robots.g1_model` (the Unitree G1, derived from its MJCF), :mod:`~ijoy_jax.robots.models`
+(each of them by the walker's name for its simulated robot),
 :mod:`~ijoy_jax.robots.sides` (left and right: mirroring and dist) and :mod:`~ijoy_jax.robots.commands`
 (the start stance and joystick commands).
 """
@@ -48,6 +49,8 @@ from ijoy_jax.robots.leaves import LeafSpec as LeafSpec
 from ijoy_jax.robots.leaves import get_leaf as get_leaf
 from ijoy_jax.robots.leaves import set_leaf as set_leaf
 from ijoy_jax.robots.leaves import set_leaves as set_leaves
+from ijoy_jax.robots.models import MODELS as MODELS
+from ijoy_jax.robots.models import for_model as for_model
 from ijoy_jax.robots.robot import Robot as Robot
 from ijoy_jax.robots.robot import TerrainMetrics as TerrainMetrics
 from ijoy_jax.robots.sides import LEFT as LEFT
@@ -68,6 +71,7 @@ __all__ = [
     "LeafSpec",
     "MAX_SIZE",
     "MIN_DENSITY",
+    "MODELS",
     "OVERLAP_TOL",
     "PAPER_REACH",
     "RIGHT",
@@ -85,6 +89,7 @@ __all__ = [
     "density_counts",
     "dist",
     "footprints_overlap",
+    "for_model",
     "g1",
     "g1_actions",
     "g1_defaults",
