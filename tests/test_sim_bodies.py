@@ -145,3 +145,38 @@ def test_make_sim_refuses_an_unknown_robot_and_a_model_that_contradicts_its_para
         walker.make_sim(SHAPE, RES, model.BipedParams(), model="g1")
     with pytest.raises(ValueError, match="BipedParams.model must be one of"):
         model.BipedParams(model="G1")
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_the_rendered_robot_replays_the_physics_qpos(name):
+    """The robot as rendered (``meshes=True``: the G1's visual meshes, which its physics leaves out) has the
+    physics' joints in the same order, the same bodies and masses and the same contacts, so a simulated qpos
+    puts every body where the physics had it."""
+    params = model.biped_params(model=name)
+    terrain = ij.terrain.flat(SHAPE, RES, origin=ORIGIN, has_height=True)
+    phys, looks = bodies.build_model(params, terrain), bodies.build_model(params, terrain, meshes=True)
+    assert (looks.nmesh > 0) == (name == "g1") and phys.nmesh == 0
+    for size in ("nq", "nv", "nu", "njnt", "nbody", "nsite", "nsensor"):
+        assert getattr(looks, size) == getattr(phys, size), size
+    names = lambda m, obj, n: [mujoco.mj_id2name(m, obj, i) for i in range(n)]  # noqa: E731
+    for obj, n in ((mujoco.mjtObj.mjOBJ_JOINT, "njnt"), (mujoco.mjtObj.mjOBJ_BODY, "nbody"),
+                   (mujoco.mjtObj.mjOBJ_ACTUATOR, "nu")):
+        assert names(looks, obj, getattr(looks, n)) == names(phys, obj, getattr(phys, n))
+    for field in ("jnt_qposadr", "jnt_type", "jnt_range", "body_parentid", "body_mass", "body_inertia", "body_ipos",
+                  "actuator_gainprm", "actuator_trnid"):
+        np.testing.assert_array_equal(getattr(looks, field), getattr(phys, field), err_msg=field)
+    # what touches: the same geoms, sizes and frictions (every added geom is visual: contype and conaffinity 0)
+    touching = lambda m: [(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g), m.geom_type[g], *m.geom_size[g],  # noqa: E731
+                           *m.geom_friction[g]) for g in range(m.ngeom) if m.geom_contype[g] or m.geom_conaffinity[g]]
+    assert touching(looks) == touching(phys)
+    meshes = looks.geom_type == mujoco.mjtGeom.mjGEOM_MESH
+    assert not (looks.geom_contype[meshes] | looks.geom_conaffinity[meshes]).any()
+    robot = ij.robots.for_model(name)
+    feet = jnp.asarray(ij.robots.start_stance(robot, 0.0, 0.0, 0.3))
+    qpos = np.asarray(bodies.stand_pose(params, feet, jnp.zeros(2), jnp.float32(bodies.pelvis_height(params)))[0])
+    d_phys, d_looks = mujoco.MjData(phys), mujoco.MjData(looks)
+    for m, d in ((phys, d_phys), (looks, d_looks)):
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(m, d)
+    np.testing.assert_array_equal(d_looks.xpos, d_phys.xpos)
+    np.testing.assert_array_equal(d_looks.site_xpos, d_phys.site_xpos)

@@ -1,5 +1,5 @@
-"""``ijoy sim render``: the MJX biped walking through clutter, written as a GIF (physics sweeps run with
-``ijoy sweep run`` on a file with ``walker = "mjx"``).
+"""``ijoy sim render``: the MJX biped (or the Unitree G1, ``--model g1``) walking through clutter, written as a GIF
+(physics sweeps run with ``ijoy sweep run`` on a file with ``walker = "mjx"``).
 
 Kept here so that :mod:`ijoy_jax.apps.cli` only registers the subcommand (:func:`add_parser`) and dispatches
 to :func:`main`.
@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 
 from ijoy_jax.apps.options import image_size, output_file, positive_int
+from ijoy_jax.robots import MODELS
 
 # ``ijoy sim render``'s map: sweeps/margin_physics.toml's clutter (4 x 2 m at 2 cm, 14 obstacles of 4-12 cm).
 _RENDER_SHAPE, _RENDER_RESOLUTION = (200, 100), 0.02
@@ -31,7 +32,8 @@ def add_parser(sub) -> None:
     rend = sim_sub.add_parser(
         "render",
         help="walk the simulated biped through clutter and write a GIF (offscreen; headless Linux uses EGL)",
-        description="Walk the MJX biped forward at 0.2 m/s through a 4 x 2 m clutter map "
+        description="Walk the MJX biped (--model g1: the Unitree G1, with its visual meshes; the robots "
+        "extra) forward at 0.2 m/s through a 4 x 2 m clutter map "
         "(sweeps/margin_physics.toml's) with the intelligent joystick and write "
         "the walk as a GIF (offscreen; headless Linux uses EGL), optionally a "
         "filmstrip PNG; prints the walk's summary as JSON. Compiling the walk "
@@ -42,6 +44,13 @@ def add_parser(sub) -> None:
     rend.add_argument("--strip", default=None, type=output_file, help="also write a filmstrip PNG of 5 frames")
     rend.add_argument("--steps", type=positive_int, default=12, help="steps to walk (default: %(default)s)")
     rend.add_argument("--frames", type=positive_int, default=10, help="frames per 0.8 s step (default: %(default)s)")
+    rend.add_argument(
+        "--model",
+        choices=MODELS,
+        default="biped",
+        help="the robot: the project's HRP-2-like biped or the Unitree G1 (its selector robot robots.g1) "
+        "(default: %(default)s)",
+    )
     rend.add_argument("--margin", type=float, default=0.02, help="safety margin in metres (default: %(default)s)")
     rend.add_argument("--seed", type=int, default=0, help="clutter map (default: %(default)s)")
     rend.add_argument(
@@ -60,8 +69,8 @@ def main(args) -> int:
     from ijoy_jax.terrain import generators
 
     width, height = args.size  # (pixels, pixels), checked as parsed
-    robot = robots.hrp2(margin=args.margin)
-    sim = W.make_sim(_RENDER_SHAPE, _RENDER_RESOLUTION, robot=robot)
+    robot = robots.for_model(args.model, margin=args.margin)
+    sim = W.make_sim(_RENDER_SHAPE, _RENDER_RESOLUTION, robot=robot, model=args.model)
     params = generators.ObstacleParams(**_RENDER_CLUTTER)
     terrain = generators.obstacles(
         jax.random.key(args.seed), params, shape=_RENDER_SHAPE, resolution=_RENDER_RESOLUTION, max_count=16

@@ -40,18 +40,21 @@ def _g1():
 
 
 def build_spec(params: model.BipedParams, shape=(200, 200), resolution: float = 0.02,
-               origin=(0.0, 0.0)) -> mujoco.MjSpec:
+               origin=(0.0, 0.0), *, meshes: bool = False) -> mujoco.MjSpec:
     """The robot of ``params.model`` and a terrain height field as an ``mujoco.MjSpec`` (see
-    :func:`ijoy_jax.sim.model.build_spec` for the grid's conventions)."""
+    :func:`ijoy_jax.sim.model.build_spec` for the grid's conventions; ``meshes``: the G1's visual meshes, for
+    rendering only, :func:`ijoy_jax.sim.g1.walker_spec`; the project's biped has none)."""
     if params.model == "g1":
-        return _g1().walker_spec(params, shape, resolution, origin)
+        return _g1().walker_spec(params, shape, resolution, origin, meshes=meshes)
     return model.build_spec(params, shape, resolution, origin)
 
 
-def build_model(params: model.BipedParams, terrain, *, edit=None) -> mujoco.MjModel:
+def build_model(params: model.BipedParams, terrain, *, edit=None, meshes: bool = False) -> mujoco.MjModel:
     """The compiled robot of ``params.model`` on ``terrain`` (:func:`ijoy_jax.sim.model.build_model`'s contract:
-    ``hfield_data`` is :func:`~ijoy_jax.sim.model.hfield_data`; ``edit`` changes the spec before compiling)."""
-    spec = build_spec(params, terrain.shape, terrain.resolution, np.asarray(terrain.origin))
+    ``hfield_data`` is :func:`~ijoy_jax.sim.model.hfield_data`; ``edit`` changes the spec before compiling;
+    ``meshes`` as :func:`build_spec`: the same joints, masses and contacts, so the physics' ``qpos`` replays on
+    it)."""
+    spec = build_spec(params, terrain.shape, terrain.resolution, np.asarray(terrain.origin), meshes=meshes)
     return model.compile_with_terrain(spec, params, terrain, edit=edit)
 
 

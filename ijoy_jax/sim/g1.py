@@ -62,18 +62,22 @@ def _gain(joint: str) -> float:
     return OTHER_KP["waist"] if name.startswith("waist") else OTHER_KP["other"]
 
 
-def walker_spec(params, shape=(200, 200), resolution: float = 0.02, origin=(0.0, 0.0)) -> mujoco.MjSpec:
+def walker_spec(params, shape=(200, 200), resolution: float = 0.02, origin=(0.0, 0.0), *,
+                meshes: bool = False) -> mujoco.MjSpec:
     """The G1 on a terrain height field, as the walker simulates it (see the module docstring).
 
     Args:
       params: :class:`ijoy_jax.sim.model.BipedParams` (its contact, simulation and terrain fields; the
         geometry and mass fields describe the project's own biped and are not read).
       shape, resolution, origin: the terrain grid, as :func:`ijoy_jax.sim.model.build_spec`.
+      meshes: keep the G1's visual meshes (for rendering, :mod:`ijoy_jax.sim.render`). They neither collide
+        nor weigh anything, so the model's joints, ``qpos`` layout, masses and contacts are the physics' own
+        and a simulated ``qpos`` replays on it as it is; the physics leaves them out (a fraction of the size).
 
     Raises:
       MissingExtraError: the ``robots`` extra is not installed.
     """
-    spec = menagerie.g1_spec(meshes=False)
+    spec = menagerie.g1_spec(meshes=meshes)
     spec.modelname = "ijoy_g1"
     for sensor in list(spec.sensors):
         spec.delete(sensor)

@@ -54,7 +54,13 @@ def _check_gl() -> None:
 
 
 def _add_looks(spec: mujoco.MjSpec) -> None:
-    """A sky and a 0.5 m checker on the ground (looks only: the physics' model has neither)."""
+    """A sky, a 0.5 m checker on the ground and MuJoCo's default headlight (looks only: the physics' model has
+    neither sky nor checker). The same for every robot: the G1's own scene's white sky and bright headlight
+    (MuJoCo Playground's) give way to them."""
+    for sky in [t for t in spec.textures if t.type == mujoco.mjtTexture.mjTEXTURE_SKYBOX]:
+        spec.delete(sky)
+    light, default = spec.visual.headlight, mujoco.MjSpec().visual.headlight
+    light.ambient, light.diffuse, light.specular = default.ambient, default.diffuse, default.specular
     spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
                      rgb1=[0.6, 0.75, 0.9], rgb2=[0.15, 0.17, 0.2], width=64, height=384)
     spec.add_texture(name="checker", type=mujoco.mjtTexture.mjTEXTURE_2D,
@@ -67,9 +73,9 @@ def _add_looks(spec: mujoco.MjSpec) -> None:
 
 
 def _host_model(sim, terrain, width: int, height: int) -> mujoco.MjModel:
-    """The biped on ``terrain`` as :func:`ijoy_jax.sim.model.build_model` makes it, with :func:`_add_looks` and an
-    offscreen buffer of at least ``width`` x ``height`` pixels."""
-    m = bodies.build_model(sim.params, terrain, edit=_add_looks)
+    """The robot on ``terrain`` as :func:`ijoy_jax.sim.bodies.build_model` makes it, with its visual meshes (the
+    G1's), :func:`_add_looks` and an offscreen buffer of at least ``width`` x ``height`` pixels."""
+    m = bodies.build_model(sim.params, terrain, edit=_add_looks, meshes=True)
     m.vis.global_.offwidth = max(int(width), m.vis.global_.offwidth)
     m.vis.global_.offheight = max(int(height), m.vis.global_.offheight)
     return m
@@ -90,7 +96,8 @@ def _add_footprints(scene: mujoco.MjvScene, footsteps, sides, heights, length: f
 def render(sim, terrain, qpos, *, width: int = 480, height: int = 320, footsteps=None, sides=None,
            distance: float = 3.2, azimuth: float = 60.0, elevation: float = -20.0, track: bool = True,
            lookat=None, smooth: int = 9, segmentation: bool = False) -> np.ndarray:
-    """Render states of the simulated biped on ``terrain``.
+    """Render states of the simulated robot on ``terrain`` (the G1 with its visual meshes, which its physics
+    leaves out: :func:`ijoy_jax.sim.bodies.build_model`).
 
     Args:
       sim: the :class:`ijoy_jax.sim.walker.Sim` the states come from.
@@ -106,7 +113,10 @@ def render(sim, terrain, qpos, *, width: int = 480, height: int = 320, footsteps
         the walking sway does not shake the view), else at ``lookat`` (3,) or
         the first frame's pelvis.
       segmentation: return (T, H, W) int32 geom ids per pixel (-1: none or a
-        drawn footprint) instead of colours.
+        drawn footprint) instead of colours: the rendered model's
+        (``bodies.build_model(sim.params, terrain, meshes=True)``), which are
+        ``sim.mj_model``'s for the project's biped, not for the G1 (its
+        meshes are geoms too).
 
     Returns:
       (T, H, W, 3) uint8 RGB frames, or (T, H, W) int32 geom ids.
