@@ -97,18 +97,21 @@ range); a rejected foothold's ``cost`` and terms are ``"inf"``."""
 
 _FRACTION = {"type": "number", "minimum": 0, "exclusiveMaximum": 1}
 _SETTINGS = {
-    "terrain": _OBJ, "body": {"type": "string"}, "margin": {"type": "number", "minimum": 0},
+    "terrain": _OBJ, "body": {"type": "string"}, "model": {"type": "string", "enum": list(robots.MODELS)},
+    "margin": {"type": "number", "minimum": 0},
     "start": {"anyOf": [{"type": "null"}, _vec(3)]}, "first_swing": {"type": "integer", "enum": [1, -1]},
     "deadzone": _FRACTION, "decide_at": _FRACTION, "control_dt": {"type": "number", "exclusiveMinimum": 0},
     "decider": {"type": "string"}, "server": {"anyOf": [{"type": "null"}, {"type": "string"}]},
 }
+_ADDED = ("model",)  # settings newer than the format: a recording made before one has its default (the biped)
 CONFIG_SCHEMA: dict = {
     "title": "ijoy.drive config", **_OBJ, "required": ["settings", "start"], "properties": {
-        "settings": {**_OBJ, "properties": _SETTINGS, "required": list(_SETTINGS)},
+        "settings": {**_OBJ, "properties": _SETTINGS, "required": [k for k in _SETTINGS if k not in _ADDED]},
         "start": {"type": "array", "items": _vec(3), "minItems": 2, "maxItems": 2}},
 }
 """The JSON Schema of the ``ijoy.drive`` metadata's ``config``: the drive's settings
-(:class:`ijoy_jax.live.DriveSettings`, each field typed and in range) and its start feet (2, 3) (m, rad).
+(:class:`ijoy_jax.live.DriveSettings`, each field typed and in range; each required but ``model``, which
+recordings made before the G1 lack) and its start feet (2, 3) (m, rad).
 Other keys (versions, date, machine) are free."""
 
 _POSITIVE = {"type": "number", "exclusiveMinimum": 0}

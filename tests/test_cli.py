@@ -57,6 +57,7 @@ CASES = [
     (["sim", "render", "--size", "big"], "argument --size: takes WIDTHxHEIGHT in pixels, e.g. 480x320, got 'big'"),
     (["sim", "render", "--frames", "0"], "argument --frames: takes an integer >= 1, got '0'"),
     (["sim", "render", "--strip", "no/such/folder/strip.png"], "argument --strip: no folder for"),
+    (["sim", "render", "--model", "atlas"], "argument --model: invalid choice: 'atlas' (choose from 'biped', 'g1')"),
     (["demo", "--out", "no/such/folder/demo.png"], "argument --out: no folder for 'no/such/folder/demo.png'"),
     (["demo", "--out", "."], "argument --out: '.' is a folder"),
     (["demo", "--steps", "abc"], "argument --steps: takes an integer >= 1, got 'abc'"),

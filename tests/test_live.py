@@ -20,6 +20,7 @@ import sys
 import textwrap
 import time
 
+import jax
 import numpy as np
 import pytest
 from _server_util import RES, SHAPE  # tests/ is on sys.path (pytest rootdir import)
@@ -546,6 +547,28 @@ def test_a_recording_without_decisions_exports_no_trace(tmp_path):
     assert len(str(e.value).splitlines()) == 1 and str(out) in str(e.value) and not out.exists()
 
 
+def test_a_drive_of_the_g1_steps_the_g1s_robot_records_and_replays(trace, tmp_path):
+    """``model="g1"`` (``ijoy drive --model g1``): the selector steps robots.g1 (its footprint, its stance width,
+    its action set), the recording says so and replays identically; a sweep cannot walk it, and says why."""
+    out = tmp_path / "g1.mcap"
+    res = live.run(live.DriveSettings(terrain=TERRAIN, model="g1"), live.ScriptInput(trace), realtime=False,
+                   record_to=out)
+    g1 = robots.g1()
+    rec = live.read_recording(out)
+    assert rec.config["settings"]["model"] == "g1" and rec.config["settings"]["body"] == "perfect"
+    for a, b in zip(jax.tree_util.tree_leaves(rec.robot), jax.tree_util.tree_leaves(g1), strict=True):
+        np.testing.assert_array_equal(a, b)
+    start = np.asarray(rec.config["start"])
+    assert start[0, 1] - start[1, 1] == pytest.approx(float(g1.p0[1]), abs=1e-6)  # the G1 stands 0.24 m wide
+    assert len(res.decisions) == 5 and all(d["valid"] for d in res.decisions)
+    feet = np.asarray(res.states[-1]["feet"])
+    assert feet[:, 0].mean() > start[:, 0].mean() + 0.2  # it walked forward
+    _, _, mismatches = live.replay(out)
+    assert mismatches == []
+    with pytest.raises(ValueError, match="the recording's robot is model 'g1': a sweep walks the project's biped"):
+        sweep.export_drive(rec, tmp_path / "g1.toml", out)
+
+
 @pytest.mark.slow
 def test_native_robot_drives_and_replays(trace, tmp_path):
     """The MuJoCo biped on native MuJoCo, driven by the scripted stick: it walks without falling, lands where
@@ -595,6 +618,32 @@ def test_mjx_robot_drives_through_the_cli_and_replays(trace, tmp_path, capsys):
     assert "footsteps identical" in capsys.readouterr().out
     info = sweep.export_drive(rec, tmp_path / "mjx.toml", out)
     assert info["walker"] == "mjx" and info["decisions"] == 3
+
+
+@pytest.mark.slow
+def test_the_g1_on_mjx_drives_through_the_cli_and_replays(trace, tmp_path, capsys):
+    """``ijoy drive --robot mjx --model g1``: the Unitree G1 on MJX, stepped by robots.g1, headless and scripted on
+    the 2.5D flat map of the biped's drive above; it walks without falling, lands where it was sent, says where
+    MJX runs, and its recording replays identically through the command line."""
+    out = tmp_path / "g1.mcap"
+    args = ["drive", "--robot", "mjx", "--model", "g1", "--script", str(trace), "--headless", "--record", str(out),
+            "--terrain", "flat", "--height", "--shape", f"{SHAPE[0]}x{SHAPE[1]}", "--resolution", str(RES), "--steps",
+            "3", "--ff", "off", "--json"]
+    assert cli.main(args) == 0
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out.strip().splitlines()[-1])
+    assert "the MJX G1 runs on" in captured.err
+    assert summary["decisions"] == 3 and summary["steps_taken"] == 3 and summary["late"] == 0
+    rec = live.read_recording(out)
+    assert rec.config["settings"]["model"] == "g1" and rec.config["settings"]["body"] == "mjx"
+    assert float(rec.robot.foot_length) == pytest.approx(0.18) and float(rec.robot.foot_width) == pytest.approx(0.06)
+    logs = [s["log"] for s in rec.states[1:]]
+    assert len(logs) == 3 and not any(bool(g["fallen"]) for g in logs)
+    assert max(float(g["placement_error"]) for g in logs) < 0.03
+    feet = np.asarray(rec.states[-1]["feet"])
+    assert feet[:, 0].mean() > np.asarray(rec.states[0]["feet"])[:, 0].mean() + 0.2  # it walked forward
+    assert cli.main(["drive", "--replay", str(out)]) == 0
+    assert "footsteps identical" in capsys.readouterr().out
 
 
 # ------------------------------------------------------------------------------------------- a drive as a sweep
@@ -724,6 +773,9 @@ def test_the_drives_trace_file_as_a_sweeps_commands_is_the_same_sweep(exports, r
                                                        "connection within 5 s"),
     (["--script", "TRACE", "--export-sweep", "out.toml"], "--export-sweep needs --replay FILE"),
     (["--replay", "/nonexistent.mcap", "--export-sweep", "out.toml"], "recording '/nonexistent.mcap' does not exist"),
+    (["--script", "TRACE", "--model", "G1"], "argument --model: invalid choice: 'G1' (choose from 'biped', 'g1')"),
+    (["--script", "TRACE", "--model", "g1", "--scenario", "sweeps/margin_physics.toml:0"],
+     "model 'g1' with a sweep scenario: its robot is the sweep's, HRP-2"),
 ])
 def test_bad_input_is_one_line(args, match, trace, tmp_path, capsys):
     bad = tmp_path / "bad.csv"

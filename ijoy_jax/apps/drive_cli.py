@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from ijoy_jax.apps.options import output_file, output_file_in_new_folder
+from ijoy_jax.robots import MODELS
 
 
 def add_parser(sub) -> None:
@@ -47,6 +48,10 @@ def add_parser(sub) -> None:
                      help="the paper's perfect walker, the MuJoCo biped on native MuJoCo (real time on a CPU), or "
                           "the same biped on MJX (on the CPU: one robot runs faster there than on a GPU; a late "
                           "tick is reported as tick lag) (default: %(default)s)")
+    rob.add_argument("--model", choices=MODELS, default="biped",
+                     help="the robot: the project's HRP-2-like biped (the selector's robots.hrp2) or the Unitree G1 "
+                          "(robots.g1; with --robot native or mjx the MuJoCo Menagerie G1, the robots extra) "
+                          "(default: %(default)s)")
     rob.add_argument("--margin", type=float, default=0.02, help="safety margin in m (default: %(default)s)")
     rob.add_argument("--start", default=None, metavar="X,Y,THETA", help="start of the feet's midpoint (default: the "
                                                                          "terrain's start zone)")
@@ -192,14 +197,16 @@ def main(args) -> int:
     if kind == "view" and args.headless:
         raise ValueError("--input view needs the view (drop --headless)")
     settings = live.DriveSettings(
-        terrain=_terrain_spec(args), body=args.robot, margin=args.margin, start=_start(args.start),
+        terrain=_terrain_spec(args), body=args.robot, model=args.model, margin=args.margin,
+        start=_start(args.start),
         deadzone=DEFAULT_DEADZONE if args.deadzone is None else args.deadzone,
         decide_at=args.decide_at, decider="server" if args.server else "local", server=args.server)
     if not 0.0 <= settings.deadzone < 1.0:
         raise ValueError(f"--deadzone must be in [0, 1), got {settings.deadzone}")
     if not 0.0 <= settings.decide_at < 1.0:
         raise ValueError(f"--decide-at must be in [0, 1), got {settings.decide_at}")
-    terrain, robot, start = live.open_terrain(settings.terrain, settings.margin)  # bad terrain: one line, now
+    # bad terrain: one line, now
+    terrain, robot, start = live.open_terrain(settings.terrain, settings.margin, settings.model)
     if settings.start is not None:
         start = live.session.start_feet(settings, robot, start)
     view = None
@@ -224,7 +231,7 @@ def main(args) -> int:
     feedback = feedback_device(args.ff)
     realtime = not args.headless or args.realtime or not args.script
     if args.robot == "mjx":
-        _say_where_mjx_runs(realtime)
+        _say_where_mjx_runs(realtime, "G1" if args.model == "g1" else "biped")
     try:
         result = live.run(settings, source, realtime=realtime, num_steps=args.steps, duration=args.duration,
                           record_to=args.record, on_tick=None if view is None else view.publish,
@@ -241,11 +248,11 @@ def main(args) -> int:
     return 0
 
 
-def _say_where_mjx_runs(realtime: bool) -> None:
+def _say_where_mjx_runs(realtime: bool, robot: str = "biped") -> None:
     import jax
 
     dev = jax.devices("cpu")[0]  # live.session.BODIES: the drive's MJX biped runs on the CPU
-    print(f"ijoy drive: the MJX biped runs on {dev.platform} ({dev.device_kind})"
+    print(f"ijoy drive: the MJX {robot} runs on {dev.platform} ({dev.device_kind})"
           + ("; its ticks may fall behind the wall clock on a busy machine (reported; --robot native has more "
              "headroom)" if realtime else ""), file=sys.stderr, flush=True)
 

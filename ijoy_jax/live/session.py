@@ -44,6 +44,10 @@ class DriveSettings:
 
       terrain: the terrain spec (:func:`open_terrain`).
       body: one of :data:`BODIES`.
+      model: the robot (:data:`ijoy_jax.robots.MODELS`): ``"biped"``, the project's HRP-2-like biped stepped by
+        ``robots.hrp2``, or ``"g1"``, the Unitree G1 stepped by ``robots.g1`` (the perfect body steps the
+        selector's robot; the MuJoCo bodies simulate the model's, the G1's with the ``robots`` extra). A
+        recording made before the G1 has no ``model``: it was the biped.
       margin: the robot's safety margin (m; ignored for a sweep scenario, whose robot is the sweep's).
       start: (x, y, theta) of the feet's midpoint (m, rad), or None: the terrain's start zone.
       first_swing: +1 left foot first, -1 right.
@@ -54,6 +58,7 @@ class DriveSettings:
 
     terrain: dict = dataclasses.field(default_factory=lambda: {"kind": "family", "family": "obstacles", "seed": 0})
     body: str = "perfect"
+    model: str = "biped"
     margin: float = 0.02
     start: tuple | None = None
     first_swing: int = 1
@@ -64,8 +69,11 @@ class DriveSettings:
     server: str | None = None
 
 
-def open_terrain(spec: dict, margin: float = 0.02) -> tuple[Terrain, Robot, np.ndarray]:
-    """The terrain, robot and start feet (2, 3) of a terrain spec. Raises ValueError (one line) for a bad spec.
+def open_terrain(spec: dict, margin: float = 0.02, model: str = "biped") -> tuple[Terrain, Robot, np.ndarray]:
+    """The terrain, robot and start feet (2, 3) of a terrain spec: the robot is ``model``'s
+    (:func:`ijoy_jax.robots.for_model`) with safety margin ``margin`` (m), but for a sweep scenario, whose robot
+    is the sweep's (the project's biped, HRP-2: ``model`` must be ``"biped"`` there). Raises ValueError (one
+    line) for a bad spec or model.
 
     Specs::
 
@@ -81,7 +89,7 @@ def open_terrain(spec: dict, margin: float = 0.02) -> tuple[Terrain, Robot, np.n
                                    robot and start
     """
     kind = spec.get("kind")
-    robot = robots.hrp2(margin=margin)
+    robot = robots.for_model(model, margin=margin)
     if kind == "family":
         name = spec.get("family")
         if name not in generators.FAMILIES:
@@ -120,6 +128,9 @@ def open_terrain(spec: dict, margin: float = 0.02) -> tuple[Terrain, Robot, np.n
     if kind == "scenario":
         from ijoy_jax import sweep
 
+        if model != "biped":
+            raise ValueError(f"model {model!r} with a sweep scenario: its robot is the sweep's, HRP-2 (a sweep "
+                             "walks the project's biped)")
         try:
             cfg = sweep.load_config(spec["sweep"])
             sc = sweep.scenario(cfg, int(spec["id"]))
@@ -138,11 +149,13 @@ def start_feet(settings: DriveSettings, robot: Robot, default) -> np.ndarray:
     return np.asarray(robots.start_stance(robot, x, y, theta), np.float32)
 
 
-def build_body(kind: str, terrain: Terrain, robot: Robot, start, first_swing=1, control_dt=DEFAULT_CONTROL_DT):
+def build_body(kind: str, terrain: Terrain, robot: Robot, start, first_swing=1, control_dt=DEFAULT_CONTROL_DT, *,
+               model: str = "biped"):
     """A standing robot of kind ``kind`` (:data:`BODIES`) at ``start`` (2, 3) (x, y, yaw of the feet, row 0 left).
 
-    ``control_dt`` (s) is the perfect body's tick; the MuJoCo bipeds tick at their controller's period. The MJX
-    biped's programs compile when the first one of a grid and terrain kind (2D or 2.5D) is built (about a
+    ``control_dt`` (s) is the perfect body's tick; the MuJoCo bipeds tick at their controller's period and
+    simulate ``model`` (:data:`ijoy_jax.robots.MODELS`; its selector robot is ``robot``). The MJX biped's
+    programs compile when the first one of a model, grid and terrain kind (2D or 2.5D) is built (about a
     minute on a 2-core CPU) and are shared by the next ones (a replay's).
     """
     if kind == "perfect":
@@ -150,12 +163,12 @@ def build_body(kind: str, terrain: Terrain, robot: Robot, start, first_swing=1, 
     if kind == "native":
         from ijoy_jax.sim import native
 
-        sim = _sim_for(float(terrain.resolution), robot)
+        sim = _sim_for(float(terrain.resolution), robot, model=model)
         return native.NativeBiped(sim, terrain, robot, start, first_swing)
     if kind == "mjx":
         from ijoy_jax.sim import mjx_biped
 
-        sim = _sim_for(float(terrain.resolution), robot, tuple(int(n) for n in terrain.shape))
+        sim = _sim_for(float(terrain.resolution), robot, tuple(int(n) for n in terrain.shape), model=model)
         # One robot runs faster on the CPU than on a GPU (BODIES): the drive's MJX body runs there on any machine.
         return mjx_biped.MjxBiped(sim, terrain, robot, start, first_swing, device=jax.devices("cpu")[0])
     raise ValueError(f"body must be one of {BODIES}, got {kind!r}")
@@ -164,15 +177,15 @@ def build_body(kind: str, terrain: Terrain, robot: Robot, start, first_swing=1, 
 _SIMS: dict = {}
 
 
-def _sim_for(resolution: float, robot: Robot, shape: tuple[int, int] = (2, 2)):
-    """One Sim per grid, footprint and step time in this process, so its compiled programs are shared (the
+def _sim_for(resolution: float, robot: Robot, shape: tuple[int, int] = (2, 2), *, model: str = "biped"):
+    """One Sim per model, grid, footprint and step time in this process, so its compiled programs are shared (the
     native biped builds its own model per terrain: its Sim's grid is a placeholder, (2, 2); the MJX biped's
     height field is the Sim's, of the terrain's grid)."""
     from ijoy_jax.sim import walker
 
-    key = (shape, resolution, float(robot.foot_length), float(robot.foot_width), float(robot.step_time))
+    key = (model, shape, resolution, float(robot.foot_length), float(robot.foot_width), float(robot.step_time))
     if key not in _SIMS:
-        _SIMS[key] = walker.make_sim(shape, resolution, robot=robot)
+        _SIMS[key] = walker.make_sim(shape, resolution, robot=robot, model=model)
     return _SIMS[key]
 
 
@@ -215,13 +228,14 @@ def run(settings: DriveSettings, source, *, realtime: bool = True, num_steps=Non
     exist (the view's scene); ``on_body(body)`` once the body is built, before the drive starts (the view's 3D
     robot: :meth:`ijoy_jax.live.view.ViewServer.set_body`)."""
     if terrain is None:
-        terrain, robot_spec, start_spec = open_terrain(settings.terrain, settings.margin)
+        terrain, robot_spec, start_spec = open_terrain(settings.terrain, settings.margin, settings.model)
         robot = robot_spec if robot is None else robot
         start = start_feet(settings, robot, start_spec) if start is None else start
     if on_ready is not None:
         on_ready(terrain, robot, start)
     prepared = select.prepare(terrain, robot)
-    body = build_body(settings.body, terrain, robot, start, settings.first_swing, settings.control_dt)
+    body = build_body(settings.body, terrain, robot, start, settings.first_swing, settings.control_dt,
+                      model=settings.model)
     if on_body is not None:
         on_body(body)
     decider = _decider(settings, terrain, robot, prepared)

@@ -123,6 +123,9 @@ def export_drive(recording: recordings.Recording, path, recording_path, *, terra
     settings = recording.config.get("settings", {})
     spec = settings.get("terrain", {})
     body = settings.get("body", "perfect")
+    if settings.get("model", "biped") != "biped":
+        raise ValueError(f"the recording's robot is model {settings['model']!r}: a sweep walks the project's biped "
+                         "(HRP-2) only")
     walker = {"perfect": "perfect", "native": "mjx", "mjx": "mjx"}.get(body)
     if walker is None:
         raise ValueError(f"the recording's body {body!r} has no sweep walker (perfect, native or mjx)")
