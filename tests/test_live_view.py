@@ -41,12 +41,14 @@ def _browser():
     return sync_playwright()
 
 
-def _drive_in_view(body: str, wait_s: float):
-    """A real-time drive of ``body`` on the small clutter map, its stick the view's, and the view's server with
-    its 3D body: yields the server once the drive ticks (within ``wait_s``), then stops the drive."""
-    settings = live.DriveSettings(terrain={"kind": "family", "family": "obstacles", "seed": 3, "shape": list(SHAPE),
-                                           "resolution": RES}, body=body)
-    terrain, robot, start = live.open_terrain(settings.terrain)
+SMALL_MAP = {"kind": "family", "family": "obstacles", "seed": 3, "shape": list(SHAPE), "resolution": RES}
+
+
+def _drive_in_view(body: str, wait_s: float, model: str = "biped"):
+    """A real-time drive of ``body`` (of ``model``) on the small clutter map, its stick the view's, and the view's
+    server with its 3D body: yields the server once the drive ticks (within ``wait_s``), then stops the drive."""
+    settings = live.DriveSettings(terrain=SMALL_MAP, body=body, model=model)
+    terrain, robot, start = live.open_terrain(settings.terrain, model=model)
     view = ViewServer(port=0).start()
     view.set_scene(terrain, robot, start)
     stop = threading.Event()
@@ -378,7 +380,38 @@ def test_perfect_body_geoms_are_its_soles_on_the_ground():
                                atol=1e-6)
     described = geoms.describe()
     assert described["types"] == ["box", "box"] and np.shape(described["rgba"]) == (2, 4)
+    assert described["mesh"] == [-1, -1] and geoms.meshes() == []
     assert geoms.obstacle_height is None
+
+
+def _parse_meshes(data: bytes) -> list:
+    """/meshes.bin as view3d.js's parseMeshes reads it: N, then N (vertex, triangle) counts, then the arrays."""
+    words = np.frombuffer(data, "<u4")
+    n = int(words[0])
+    counts, at, out = words[1 : 1 + 2 * n].reshape(n, 2), 4 * (1 + 2 * n), []
+    for nv, nf in counts:
+        v = np.frombuffer(data, "<f4", 3 * int(nv), at).reshape(-1, 3)
+        at += 12 * int(nv)
+        f = np.frombuffer(data, "<u4", 3 * int(nf), at).reshape(-1, 3)
+        at += 12 * int(nf)
+        out.append((v, f))
+    assert at == len(data)  # nothing after the last mesh
+    return out
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 40), st.integers(0, 30)), max_size=4), st.integers(0, 2**31))
+def test_mesh_bytes_are_what_the_page_reads(sizes, seed):
+    from ijoy_jax.live.view import mesh_bytes
+
+    rng = np.random.default_rng(seed)
+    meshes = [(rng.normal(size=(nv, 3)).astype(np.float32), rng.integers(0, nv, (nf, 3)).astype(np.uint32))
+              for nv, nf in sizes]
+    back = _parse_meshes(mesh_bytes(meshes))
+    assert len(back) == len(meshes)
+    for (v, f), (v2, f2) in zip(meshes, back, strict=True):
+        np.testing.assert_array_equal(v2, v)
+        np.testing.assert_array_equal(f2, f)
 
 
 def test_terrain_mesh_has_a_vertex_per_cell_and_samples_large_maps():
@@ -507,6 +540,100 @@ def test_3d_view_shows_the_robot_and_follows_it(native_drive_with_view, tmp_path
         assert len(on_screen) == len(legs) == 4, on_screen
         assert sum(n > 20 for n in on_screen.values()) >= 3, (shot, on_screen)  # the legs' blue where they are drawn
     print(f"3D view screenshots: {shots[0]} {shots[1]}")
+
+
+@slow
+def test_the_g1s_bodies_are_its_visual_meshes_where_the_renderer_draws_them():
+    # the G1 on native MuJoCo: what the 3D view draws of it is what ijoy_jax.sim.render draws, from the same model
+    # (sim.bodies.build_model(..., meshes=True)): its visible geoms (MuJoCo's default groups 0-2: the meshes, not
+    # the collision capsules), its meshes' vertices in their geoms' frames, at the kinematics of the body's qpos
+    import mujoco
+
+    from ijoy_jax.live.bodies import BodyGeoms
+    from ijoy_jax.live.view import mesh_bytes
+    from ijoy_jax.sim import bodies as sim_bodies
+
+    terrain, robot, start = live.open_terrain(SMALL_MAP, model="g1")
+    body = live.session.build_body("native", terrain, robot, start, model="g1")
+    geoms = BodyGeoms(body, terrain, robot)
+    m = sim_bodies.build_model(body.sim.params, terrain, meshes=True)
+    ids = [g for g in range(m.ngeom) if m.geom_bodyid[g] > 0 and m.geom_type[g] > 1 and m.geom_rgba[g, 3] > 0
+           and m.geom_group[g] <= 2]
+    is_mesh = np.array([m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH for g in ids])
+    assert len(geoms.names) == len(ids) and is_mesh.sum() > 50
+    assert [t == "mesh" for t in geoms.types] == is_mesh.tolist() and ((geoms.mesh >= 0) == is_mesh).all()
+    assert not {"left_thigh", "left_shin", "left_foot"} & set(geoms.names)  # the collision shapes are hidden
+    meshes = geoms.meshes()
+    assert len(meshes) == geoms.mesh.max() + 1 == len({int(m.geom_dataid[g]) for g in np.asarray(ids)[is_mesh]})
+    for k, g in enumerate(ids):
+        if not is_mesh[k]:
+            continue
+        v = meshes[geoms.mesh[k]][0]
+        lo, hi = v.min(0), v.max(0)  # MuJoCo's bounding box in the geom's frame is the vertices'
+        np.testing.assert_allclose(np.r_[(lo + hi) / 2, (hi - lo) / 2], m.geom_aabb[g], atol=1e-5)
+        assert meshes[geoms.mesh[k]][1].max() < len(v)
+    d = mujoco.MjData(m)
+    d.qpos[:] = body.d.qpos
+    mujoco.mj_kinematics(m, d)
+    pos, quat = geoms.poses()
+    np.testing.assert_allclose(pos[is_mesh], d.geom_xpos[np.asarray(ids)[is_mesh]], atol=1e-12)
+    mesh_rgb = {tuple(np.round(c[:3], 2)) for c in geoms.rgba[is_mesh]}
+    assert mesh_rgb == {(0.7, 0.7, 0.7), (0.2, 0.2, 0.2)}  # the G1's materials, silver and black
+    assert len(mesh_bytes(meshes)) > 10**6  # megabytes: served once per body, not with every state
+
+
+@pytest.fixture(scope="module")
+def g1_drive_with_view():
+    """A real-time drive of the Unitree G1 on native MuJoCo on the small clutter map, and the view's server."""
+    yield from _drive_in_view("native", 300, model="g1")
+
+
+GREY_SPREAD, GREY_MIN = 10, 70  # a G1 pixel: its silver or dark grey, lit (channels within this of each other;
+# the terrain's lightest green spreads 18, the background is darker)
+ROBOT_PX = 80  # px: how far the robot's pixels reach beyond the projected centres of its geoms
+
+
+@slow
+def test_3d_view_draws_the_g1_with_its_meshes(g1_drive_with_view, tmp_path):
+    # /3d in Chromium: the G1's visual meshes come from /meshes.bin after the scene and replace their placeholder
+    # boxes; on screen the robot is its grey, where the page projects its geoms, and nothing else is
+    from PIL import Image
+
+    view = g1_drive_with_view
+    scene = json.load(urllib.request.urlopen(view.url + "scene.json", timeout=10))
+    bodies = scene["bodies"]
+    uses = [k for k in bodies["mesh"] if k >= 0]
+    data = urllib.request.urlopen(view.url + "meshes.bin", timeout=30).read()
+    assert len(_parse_meshes(data)) == max(uses) + 1 and bodies["types"].count("mesh") == len(uses) > 50
+    shot = tmp_path / "view3d_g1.png"
+    with _browser() as p:
+        browser = _launch(p)
+        page = browser.new_page(viewport={"width": 1200, "height": 760})
+        errors = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(view.url + "3d")
+        page.wait_for_function("window.ijoy3d && ijoy3d.terrain && ijoy3d.meshes > 0 && ijoy3d.frames > 3",
+                               timeout=60000)
+        assert page.evaluate("ijoy3d.meshes") == max(uses) + 1
+        time.sleep(1.0)  # the camera's target settles on the robot
+        page.screenshot(path=str(shot))
+        pixels = page.evaluate("ijoy3d.bodyPixels()")
+        box = page.locator("#view3d canvas").bounding_box()
+        browser.close()
+    assert not errors, errors
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    x0, y0 = int(box["x"]), int(box["y"])
+    canvas = img[y0 : y0 + int(box["height"]), x0 : x0 + int(box["width"])]
+    grey = (canvas.max(2) - canvas.min(2) < GREY_SPREAD) & (canvas.max(2) > GREY_MIN)
+    at = np.array([(x - x0, y - y0) for _, x, y, front in pixels if front])
+    assert len(at) == len(pixels) > 50  # every geom in front of the camera
+    (lo_x, lo_y), (hi_x, hi_y) = at.min(0) - ROBOT_PX, at.max(0) + ROBOT_PX
+    ys, xs = np.nonzero(grey)
+    inside = (xs >= lo_x) & (xs <= hi_x) & (ys >= lo_y) & (ys <= hi_y)
+    assert grey.sum() > 5000 and inside.mean() > 0.99, (int(grey.sum()), float(inside.mean()))
+    tx, ty = np.round([(x - x0, y - y0) for name, x, y, _ in pixels if name == "torso_link"][0]).astype(int)
+    assert grey[ty - 4 : ty + 5, tx - 4 : tx + 5].sum() > 40  # the torso's silver where the page draws it
+    print(f"3D view screenshot: {shot}")
 
 
 @slow

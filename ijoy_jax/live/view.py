@@ -14,9 +14,10 @@ gamepad through the browser's Gamepad API send stick axes back over the WebSocke
 
 The same page at ``/3d`` (or its "3D view" button) shows the drive in 3D instead of the map (``static/view3d.js``,
 three.js vendored in ``static/``, no network needed): the terrain as a height-field mesh (obstacles dark), the
-robot's bodies at their simulated poses (every geom of a MuJoCo biped; the perfect robot's soles), the chosen
-foothold and the past ones, and a camera that follows the robot and orbits with the mouse. The bodies come
-from :meth:`ViewServer.set_body`; their poses travel in every published state.
+robot's bodies at their simulated poses (every visible geom of a MuJoCo robot, the G1's meshes as themselves;
+the perfect robot's soles), the chosen foothold and the past ones, and a camera that follows the robot and
+orbits with the mouse. The bodies come from :meth:`ViewServer.set_body`; their poses travel in every
+published state, their meshes once (``/meshes.bin``, :func:`mesh_bytes`).
 
 Every JSON text the server sends is strict JSON (:func:`finite_json`): a NaN or an infinity (a diverged
 simulation, an invalid candidate's cost) arrives as ``null``.
@@ -44,7 +45,7 @@ from ijoy_jax.robots import Robot
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["DEFAULT_OBSTACLE_HEIGHT", "DEFAULT_PORT", "MAX_FOOTHOLDS", "MAX_MESH_SIDE", "MAX_MESSAGE_BYTES",
-           "ViewServer", "finite_json", "page_html", "page_message", "terrain_image", "terrain_mesh"]
+           "ViewServer", "finite_json", "mesh_bytes", "page_html", "page_message", "terrain_image", "terrain_mesh"]
 
 DEFAULT_PORT = 8765
 """The view's default TCP port."""
@@ -194,6 +195,22 @@ def terrain_mesh(terrain: Terrain) -> dict:
             "has_height": bool(terrain.has_height)}
 
 
+def mesh_bytes(meshes) -> bytes:
+    """The bodies' meshes (:meth:`ijoy_jax.live.bodies.BodyGeoms.meshes`) as the 3D view reads them, at
+    ``/meshes.bin``: little-endian 4-byte words, the count N (uint32), each mesh's vertex and triangle counts
+    (2 N uint32), then each mesh's vertices (3 V float32, m) and triangles (3 F uint32), mesh after mesh.
+
+    Example:
+      >>> import numpy as np
+      >>> tri = (np.eye(3, dtype=np.float32), np.array([[0, 1, 2]], np.uint32))
+      >>> len(mesh_bytes([tri]))  # 4 (N) + 8 (counts) + 36 (vertices) + 12 (one triangle)
+      60
+    """
+    meshes = [(np.asarray(v, "<f4").reshape(-1, 3), np.asarray(f, "<u4").reshape(-1, 3)) for v, f in meshes]
+    counts = np.array([len(meshes)] + [n for v, f in meshes for n in (len(v), len(f))], "<u4")
+    return b"".join([counts.tobytes()] + [a.tobytes() for v, f in meshes for a in (v, f)])
+
+
 class ViewServer:
     """The live view's web server (start it, give it the scene and the body, publish states; it fills ``axes``).
 
@@ -212,6 +229,7 @@ class ViewServer:
         self._terrain = None
         self._mesh = "null"
         self._geoms: BodyGeoms | None = None
+        self._meshes = mesh_bytes([])
         self._bodies_version = 0
         self._footholds: list = []  # past chosen footholds: [x, y, z, yaw, side] (side +1 left)
         self._chosen = None  # the latest decision's foothold, until the next decision
@@ -244,23 +262,26 @@ class ViewServer:
             self._scene, self._png, self._mesh = scene, png, mesh
             self._robot, self._terrain = robot, terrain
             self._geoms, self._footholds, self._chosen, self._decision = None, [], None, None
+            self._meshes = mesh_bytes([])
 
     def set_body(self, body) -> None:
         """The robot that walks (once per drive, after :meth:`set_scene`; :func:`ijoy_jax.live.run`'s
         ``on_body``): the 3D view draws its geoms (:class:`~ijoy_jax.live.bodies.BodyGeoms`), their sizes in the
-        scene and their poses in every state :meth:`publish` sends. Publish from the thread that steps the body."""
+        scene, their meshes at ``/meshes.bin`` and their poses in every state :meth:`publish` sends. Publish from
+        the thread that steps the body."""
         with self._lock:
             terrain, robot = self._terrain, getattr(self, "_robot", None)
         if terrain is None:
             raise RuntimeError("set_scene(terrain, robot) first: the body stands on the scene's terrain")
         geoms = BodyGeoms(body, terrain, robot)
+        meshes = mesh_bytes(geoms.meshes())
         with self._lock:
             self._bodies_version += 1
             scene = dict(self._scene)
             scene["bodies"] = {"version": self._bodies_version, **geoms.describe()}
             if geoms.obstacle_height is not None:
                 scene["obstacle_height"] = geoms.obstacle_height
-            self._scene, self._geoms = scene, geoms
+            self._scene, self._geoms, self._meshes = scene, geoms, meshes
 
     def publish(self, state: dict) -> None:
         """The drive's latest state (:func:`ijoy_jax.live.drive`'s ``on_tick``); sent to every page."""
@@ -368,6 +389,12 @@ class ViewServer:
                 return web.Response(text=self._mesh, content_type="application/json",
                                     headers={"Cache-Control": "no-store"})
 
+        async def meshes(_):
+            with self._lock:
+                data = self._meshes
+            return web.Response(body=data, content_type="application/octet-stream",
+                                headers={"Cache-Control": "no-store"})
+
         async def png(_):
             with self._lock:
                 data = self._png
@@ -420,7 +447,7 @@ class ViewServer:
         app = web.Application()
         app.add_routes([web.get("/", page), web.get("/3d", page), web.get("/view.js", script),
                         web.get("/terrain.png", png), web.get("/terrain3d.json", mesh), web.get("/scene.json", scene),
-                        web.get("/state.json", state), web.get("/ws", socket)]
+                        web.get("/state.json", state), web.get("/meshes.bin", meshes), web.get("/ws", socket)]
                        + [web.get("/" + name, static_file(name)) for name in _VENDORED])
         runner = web.AppRunner(app, access_log=None)
         await runner.setup()

@@ -10,7 +10,26 @@ const FOLLOW = 0.15;   // fraction of the way to the robot the camera's target m
 
 function srgb(r, g, b) { return new THREE.Color().setRGB(r, g, b, THREE.SRGBColorSpace); }
 
-// A MuJoCo geom as a three.js geometry in the geom's frame (capsules and cylinders along z, as in MuJoCo).
+// The meshes of /meshes.bin (ijoy_jax.live.view.mesh_bytes): little-endian 4-byte words, the count N, each
+// mesh's vertex and triangle counts, then each mesh's vertices (float32 x, y, z) and triangles (uint32).
+function parseMeshes(buffer) {
+  const words = new DataView(buffer), n = words.getUint32(0, true), out = [];
+  let at = 4 * (1 + 2 * n);
+  for (let k = 0; k < n; k++) {
+    const nv = words.getUint32(4 * (1 + 2 * k), true), nf = words.getUint32(4 * (2 + 2 * k), true);
+    const g = new THREE.BufferGeometry();
+    g.setAttribute("position", new THREE.BufferAttribute(new Float32Array(buffer, at, 3 * nv), 3));
+    at += 12 * nv;
+    g.setIndex(new THREE.BufferAttribute(new Uint32Array(buffer, at, 3 * nf), 1));
+    at += 12 * nf;
+    g.computeVertexNormals();
+    out.push(g);
+  }
+  return out;
+}
+
+// A MuJoCo geom as a three.js geometry in the geom's frame (capsules and cylinders along z, as in MuJoCo; a mesh
+// is its bounding box until its vertices arrive).
 function geomGeometry(type, size) {
   const [a, b, c] = size;
   if (type === "sphere") return new THREE.SphereGeometry(a, 20, 14);
@@ -82,7 +101,7 @@ export function start(container, current) {
   let dirty = true;
   controls.addEventListener("change", () => { dirty = true; });
 
-  const api = window.ijoy3d = { frames: 0, bodies: 0, terrain: false, follow: null, version: 0 };
+  const api = window.ijoy3d = { frames: 0, bodies: 0, meshes: 0, terrain: false, follow: null, version: 0 };
   let terrain = null, meshText = null, bodies = [], bodiesVersion = null, fetching = false, lastState = null;
   let followed = null;
   const past = new THREE.Group(), chosen = new THREE.Group();
@@ -111,7 +130,24 @@ export function start(container, current) {
       return mesh;
     });
     bodiesVersion = desc.version;
-    api.bodies = bodies.length; api.version = desc.version; api.names = desc.names;
+    api.bodies = bodies.length; api.version = desc.version; api.names = desc.names; api.meshes = 0;
+    const uses = (desc.mesh || []).filter(k => k >= 0);
+    if (uses.length) loadMeshes(desc.version, desc.mesh, Math.max(...uses) + 1);
+  }
+
+  // The mesh geoms' vertices and faces, fetched once per body (they come after the scene: megabytes for the G1).
+  function loadMeshes(version, index, count) {
+    fetch("meshes.bin?v=" + version).then(r => r.arrayBuffer()).then(buffer => {
+      if (version !== bodiesVersion) return;   // another body since
+      const meshes = parseMeshes(buffer);
+      if (meshes.length !== count) return;    // the server holds another body's
+      bodies.forEach((m, g) => {
+        if (index[g] < 0) return;
+        m.geometry.dispose();
+        m.geometry = meshes[index[g]];
+      });
+      api.meshes = meshes.length; dirty = true;
+    }).catch(() => {});
   }
 
   // The bodies' geoms come with the scene; a state with another version (a body set after this page loaded)
