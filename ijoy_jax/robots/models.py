@@ -18,7 +18,7 @@ MODELS = ("biped", "g1")
 _FACTORIES = {"biped": hrp2, "g1": g1}
 
 
-def for_model(model: str, margin: float = 0.02, density: float = 1.0) -> Robot:
+def for_model(model: str, margin: float = 0.02, density: float = 1.0, **overrides) -> Robot:
     """The selector's robot for the walker's robot ``model`` (:data:`MODELS`): HRP-2's for ``"biped"``, the
     G1's for ``"g1"``.
 
@@ -26,6 +26,8 @@ def for_model(model: str, margin: float = 0.02, density: float = 1.0) -> Robot:
       model: one of :data:`MODELS`.
       margin: safety margin (m).
       density: action-set density (1.0 -> 496 actions per foot for either robot).
+      **overrides: the robot's other options (:func:`~ijoy_jax.robots.hrp2`'s, e.g. ``reach``, or
+        :func:`~ijoy_jax.robots.g1`'s: any :func:`~ijoy_jax.robots.make_robot` keyword).
 
     Raises:
       ValueError: ``model`` is not one of :data:`MODELS` (naming them).
@@ -37,4 +39,4 @@ def for_model(model: str, margin: float = 0.02, density: float = 1.0) -> Robot:
     """
     if model not in _FACTORIES:
         raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
-    return _FACTORIES[model](margin=margin, density=density)
+    return _FACTORIES[model](margin=margin, density=density, **overrides)

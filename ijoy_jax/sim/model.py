@@ -41,6 +41,7 @@ import numpy as np
 from mujoco import mjx
 
 from ijoy_jax._struct import check_real, check_whole
+from ijoy_jax.robots import models as robots_models
 from ijoy_jax.sim import kinematics
 
 __all__ = [
@@ -66,8 +67,9 @@ __all__ = [
 ]
 
 SIDES = ("left", "right")
-MODELS = ("biped", "g1")
-"""The robots the walker drives (``BipedParams.model``; :mod:`ijoy_jax.sim.bodies`)."""
+MODELS = robots_models.MODELS
+"""The robots the walker drives (``BipedParams.model``; :mod:`ijoy_jax.sim.bodies`), as
+:data:`ijoy_jax.robots.MODELS` names them."""
 _MODEL_DEFAULTS = {"biped": {}, "g1": {"foot_length": 0.18, "foot_width": 0.06, "stand_width": 0.24}}
 """The fields :func:`biped_params` sets for each model before the robot's footprint and the overrides."""
 JOINTS = ("hip_yaw", "hip_roll", "hip_pitch", "knee", "ankle_pitch", "ankle_roll")

@@ -84,8 +84,8 @@ def step_in_place(model: str) -> float:
 
 
 def build_robot(model: str, *, density: float = 1.0, reach: float | None = None, **overrides) -> robots.Robot:
-    """The selector's robot of ``model``: ``robots.hrp2(density=..., reach=..., **overrides)`` or
-    ``robots.g1(density=..., **overrides)``; the one place a sweep builds a robot.
+    """The selector's robot of ``model`` (:func:`ijoy_jax.robots.for_model`: ``robots.hrp2(density=..., reach=...,
+    **overrides)`` or ``robots.g1(density=..., **overrides)``); the one place a sweep builds a robot.
 
     Args:
       model: one of :data:`~ijoy_jax.sweep.schema.MODELS`.
@@ -103,8 +103,9 @@ def build_robot(model: str, *, density: float = 1.0, reach: float | None = None,
     """
     if _check(model) == "g1":
         _g1_reach(reach)
-        return robots.g1(density=density, **overrides)
-    return robots.hrp2(density=density, reach=robots.PAPER_REACH if reach is None else reach, **overrides)
+    else:
+        overrides["reach"] = robots.PAPER_REACH if reach is None else reach
+    return robots.for_model(model, density=density, **overrides)
 
 
 def _g1_reach(reach) -> None:

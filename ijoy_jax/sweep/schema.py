@@ -185,7 +185,7 @@ ROBOT_DEFAULTS: Mapping[str, float] = MappingProxyType(_robot_defaults())
 """Every sweepable robot parameter and its default (m, s, rad, cost units): HRP-2's, the ``"biped"`` model's
 (each model's: :func:`ijoy_jax.sweep.models.robot_defaults`)."""
 
-MODELS = ("biped", "g1")
+MODELS = robots.MODELS
 """``[sweep] model``: the robot the sweep walks, named as :data:`ijoy_jax.sim.model.MODELS` names the simulated
 ones: ``"biped"``, HRP-2 (the project's HRP-2-like biped in MJX), or ``"g1"``, the Unitree G1
 (:mod:`ijoy_jax.sweep.models`)."""
