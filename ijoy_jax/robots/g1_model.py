@@ -17,8 +17,9 @@ robot:
 * sole distance (FootCost's ``reach`` term): 0.48 m, the shortest distance the legs reach along the directions
   the action set spans (50 to 130 deg from the stance foot's heading), level soles;
 
-The step time (0.8 s), swing clearance and highest step are the walking controller's, as for HRP-2, until the
-G1 walks in MJX.
+The step time (0.8 s), swing clearance and highest step are the walking controller's, as for HRP-2; the MJX
+G1 (``ijoy_jax.sim.walker.make_sim(..., model="g1")``) walks with them (BENCHMARKS.md, "The Unitree G1 in MJX",
+says how well).
 """
 
 from __future__ import annotations

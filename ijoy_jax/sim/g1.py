@@ -28,7 +28,7 @@ import functools
 import mujoco
 import numpy as np
 
-from ijoy_jax.sim import menagerie, scene
+from ijoy_jax.sim import menagerie, model, scene
 from ijoy_jax.sim.description import BipedDescription, describe
 
 __all__ = ["LEG_KP", "OTHER_KP", "PELVIS_HEIGHT", "STAND_WIDTH", "description", "foot", "walker_spec"]
@@ -84,13 +84,7 @@ def walker_spec(params, shape=(200, 200), resolution: float = 0.02, origin=(0.0,
     for pair in [p for p in spec.pairs if {p.geomname1, p.geomname2} == set(_SOLES)]:
         spec.delete(pair)
     scene.terrain_scene(spec, soles=_SOLES, params=params, shape=shape, resolution=resolution, origin=origin)
-    opt = spec.option
-    opt.timestep = params.timestep
-    opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
-    opt.iterations = params.iterations
-    opt.ls_iterations = params.ls_iterations
-    opt.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+    model.set_options(spec, params)
     for act in spec.actuators:
         kp = _gain(act.target)
         act.set_to_position(kp=kp, kv=kp / 100.0)

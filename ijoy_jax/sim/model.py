@@ -62,6 +62,7 @@ __all__ = [
     "put_model",
     "put_terrain",
     "put_terrains",
+    "set_options",
     "sole_points",
     "standing_qpos",
 ]
@@ -385,6 +386,18 @@ def add_terrain(spec: mujoco.MjSpec, params: BipedParams, shape, resolution: flo
     spec.worldbody.add_light(name="sun", pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
 
 
+def set_options(spec: mujoco.MjSpec, params: BipedParams) -> None:
+    """The walker's physics options on any robot's ``spec``, in place: ``params.timestep``, implicitfast (implicit
+    in the actuators' damping), Newton with ``params.iterations`` / ``ls_iterations``, pyramidal friction cones."""
+    opt = spec.option
+    opt.timestep = params.timestep
+    opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
+    opt.iterations = params.iterations
+    opt.ls_iterations = params.ls_iterations
+    opt.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+
+
 def build_spec(params: BipedParams, shape=(200, 200), resolution: float = 0.02, origin=(0.0, 0.0)) -> mujoco.MjSpec:
     """The biped and a height field of a terrain grid as an (uncompiled) :class:`mujoco.MjSpec`.
 
@@ -407,13 +420,7 @@ def build_spec(params: BipedParams, shape=(200, 200), resolution: float = 0.02, 
     spec = mujoco.MjSpec()
     spec.modelname = "ijoy_biped"
     spec.compiler.degree = False  # every angle here is in radians (MjSpec defaults to degrees for ranges)
-    opt = spec.option
-    opt.timestep = params.timestep
-    opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
-    opt.iterations = params.iterations
-    opt.ls_iterations = params.ls_iterations
-    opt.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+    set_options(spec, params)
     add_terrain(spec, params, shape, resolution, origin)
     _add_robot(spec, params)
     qpos = standing_qpos(params)
