@@ -10,7 +10,9 @@ and its rollout), :mod:`.native` and :mod:`.mjx_biped` (one biped stepped tick
 by tick for a live drive: on native MuJoCo, or on MJX), :mod:`.physics` (the
 traced :class:`~ijoy_jax.sim.physics.Dynamics` a user varies per robot: friction,
 mass, actuator stiffness, control delay, stance noise, pushes), :mod:`.render`
-(offscreen images of a rollout). Other robots: :mod:`.description` (a biped read from its MJCF, with leg
+(offscreen images of a rollout). Other robots: :mod:`.bodies` (the robots the walker drives behind one
+interface: the biped and the Unitree G1, ``make_sim(..., model="g1")``), :mod:`.g1` (the G1 as the walker's
+robot), :mod:`.description` (a biped read from its MJCF, with leg
 kinematics for any 6-DoF leg), :mod:`.menagerie` (the Unitree G1's files, the ``robots`` extra),
 :mod:`.reach` (what a described biped's legs reach in double support: the derivation of its selector robot's
 limits) and :mod:`.scene` (any biped on the terrain's height field with sole spheres and the walker's sensors).
