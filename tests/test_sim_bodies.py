@@ -121,6 +121,7 @@ def test_the_ground_centre_of_pressure_from_the_ankle_sensors_is_the_contacts_ow
             np.testing.assert_allclose(np.asarray(cop[side]), want[:2], atol=1.5e-3)
 
 
+@pytest.mark.slow  # a World and the start state of each robot: 45 s of compiles
 @pytest.mark.parametrize("name", MODELS)
 def test_the_walker_starts_with_the_centre_of_mass_above_the_soles(name):
     robot = ij.robots.g1() if name == "g1" else ij.robots.hrp2()
