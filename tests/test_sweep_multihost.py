@@ -277,7 +277,7 @@ def test_ctrl_c_stops_a_process_waiting_for_process_0(script):
         p.kill()
         p.wait()
     err = p.stderr.read()
-    # Stopped by the KeyboardInterrupt, which Python then re-raises as SIGINT at exit. Rarely (1 run in about 30
+    # Stopped by the KeyboardInterrupt, which Python then re-raises as SIGINT at exit. Rarely (once in 16 runs
     # here) the native wait's thread is still unwinding as the interpreter exits and the C++ runtime aborts the
     # process instead ("terminate called ..."): the wait stopped on Ctrl-C all the same.
     aborted = p.returncode == -signal.SIGABRT and "terminate called" in err
