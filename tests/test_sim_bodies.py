@@ -41,7 +41,7 @@ def test_the_legs_come_first_in_qpos_and_one_actuator_drives_each_joint_in_that_
     np.testing.assert_array_equal(idx.actuator.ravel(), np.arange(12))
     assert m.nu == m.nq - 7  # ctrl = qpos[7:]: every joint after the free one has its servo, in qpos order
     np.testing.assert_array_equal(m.jnt_qposadr[m.actuator_trnid[:, 0]], np.arange(7, m.nq))
-    assert len(bodies.rest_joints(params)) == m.nq - 19
+    assert m.nq == 19  # the G1's waist and arms are welded (ijoy_jax.sim.g1)
 
 
 @settings(max_examples=25, deadline=None, derandomize=True)
@@ -146,6 +146,26 @@ def test_make_sim_refuses_an_unknown_robot_and_a_model_that_contradicts_its_para
         walker.make_sim(SHAPE, RES, model.BipedParams(), model="g1")
     with pytest.raises(ValueError, match="BipedParams.model must be one of"):
         model.BipedParams(model="G1")
+
+
+def test_the_g1s_welded_upper_body_stands_exactly_as_menageries_full_model_on_its_keyframe():
+    """The walker's G1 welds the waist and arms at the ``knees_bent`` angles (ijoy_jax.sim.g1): on that keyframe
+    every body sits where Menagerie's full model puts it, with the same masses, and only the legs move."""
+    from ijoy_jax.sim import menagerie
+
+    full = menagerie.g1_spec(meshes=False).compile()
+    welded = bodies.build_model(model.biped_params(model="g1"), ij.terrain.flat(SHAPE, RES, origin=ORIGIN,
+                                                                                has_height=True))
+    assert (full.nv, welded.nv, welded.nu) == (35, 18, 12)
+    poses = []
+    for m in (full, welded):
+        d = mujoco.MjData(m)
+        mujoco.mj_resetDataKeyframe(m, d, m.key(menagerie.G1_KEYFRAME).id)
+        mujoco.mj_kinematics(m, d)
+        ids = [m.body(full.body(b).name).id for b in range(1, full.nbody)]
+        poses.append((d.xpos[ids], d.xmat[ids], m.body_mass[ids], m.body_inertia[ids]))
+    for a, b in zip(*poses, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-9)
 
 
 @pytest.mark.parametrize("name", MODELS)

@@ -5,8 +5,8 @@ the params' own geometry (:mod:`.model`, with Kajita's analytic leg inverse kine
 ``"g1"``, MuJoCo Menagerie's Unitree G1 (:mod:`.g1`, its legs solved by damped least squares on the chains read
 from its MJCF, :mod:`.description`). Both have their 12 leg joints first in ``qpos[7:]`` (left leg, then right;
 hip three, knee, ankle pitch, ankle roll last) and one position actuator per joint in that order, so
-``ctrl = qpos[7:]`` for both; the G1's waist and arms follow its legs and are held at their standing angles
-(:func:`rest_joints`).
+``ctrl = qpos[7:]`` and ``nq = 19`` for both (the G1's waist and arms are welded at their standing angles,
+:mod:`.g1`).
 
 What the walker asks of a robot, here: its model on a terrain (:func:`build_model`), the legs' inverse
 kinematics (:func:`legs_ik`), the standing configuration over given soles (:func:`stand_pose`), its foot below
@@ -24,7 +24,7 @@ import numpy as np
 
 from ijoy_jax.sim import kinematics, model
 
-__all__ = ["MODELS", "build_model", "build_spec", "foot", "legs_ik", "pelvis_height", "rest_joints", "stand_pose"]
+__all__ = ["MODELS", "build_model", "build_spec", "foot", "legs_ik", "pelvis_height", "stand_pose"]
 
 MODELS = model.MODELS
 """The robots the walker drives: ``"biped"`` (the project's) and ``"g1"`` (the Unitree G1)."""
@@ -56,14 +56,6 @@ def build_model(params: model.BipedParams, terrain, *, edit=None, meshes: bool =
     it)."""
     spec = build_spec(params, terrain.shape, terrain.resolution, np.asarray(terrain.origin), meshes=meshes)
     return model.compile_with_terrain(spec, params, terrain, edit=edit)
-
-
-def rest_joints(params: model.BipedParams) -> np.ndarray:
-    """(nq - 19,) float64 rad: the joints after the legs in ``qpos`` (the G1's waist and arms), at their standing
-    angles, where the walker holds them (none for the project's biped)."""
-    if params.model == "g1":
-        return _g1().description(params).stand_qpos[19:].copy()
-    return np.zeros(0)
 
 
 @functools.lru_cache(maxsize=8)
@@ -118,7 +110,7 @@ def stand_pose(params: model.BipedParams, feet, ground, pelvis_z, shift=None, *,
 
     :func:`ijoy_jax.sim.model.stand_pose`'s contract for every robot: the pelvis level, yawed to the feet's mean
     yaw, ``pelvis_z`` high, above the feet's midpoint (moved by ``shift`` (2,) m); ``tilt`` (2, 2) roll and pitch
-    of each sole (rad); the joints after the legs at :func:`rest_joints`.
+    of each sole (rad).
     """
     if params.model != "g1":
         return model.stand_pose(params, feet, ground, pelvis_z, shift, tilt=tilt)
@@ -134,4 +126,4 @@ def stand_pose(params: model.BipedParams, feet, ground, pelvis_z, shift=None, *,
     q, ok = legs_ik(params, pelvis, kinematics.rot_z(yaw), soles)
     zero = jnp.zeros_like(yaw)
     quat = jnp.stack([jnp.cos(yaw / 2), zero, zero, jnp.sin(yaw / 2)])
-    return jnp.concatenate([pelvis, quat, q, jnp.asarray(rest_joints(params), dtype)]), ok
+    return jnp.concatenate([pelvis, quat, q]), ok

@@ -357,8 +357,7 @@ def foot_targets(cfg: WalkConfig, plan: StepPlan, t) -> jax.Array:
 def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPlan, cs: CtrlState,
             correction=None) -> tuple[jax.Array, CtrlState, jax.Array]:
     """One controller period of the pattern: the whole planned qpos (nq,) at the period's end (the free joint,
-    the legs, the robot's other joints at rest: :func:`ijoy_jax.sim.bodies.rest_joints`), the new state, and
-    the ZMP reference (2,) at its start.
+    the legs), the new state, and the ZMP reference (2,) at its start.
 
     ``correction`` (N, 2), when given, is subtracted from the ZMP reference the
     LIPM tracks over the horizon: the dynamics filter's estimate of how far the
@@ -394,8 +393,7 @@ def pattern(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: StepPla
     pelvis_pos = jnp.concatenate([pelvis_xy, (ground + cfg.pelvis_height)[None]])
     q = legs_ik(params, pelvis_pos, kinematics.rot_z(yaw_mid), feet)
     quat = jnp.stack([jnp.cos(yaw_mid / 2), jnp.zeros_like(yaw_mid), jnp.zeros_like(yaw_mid), jnp.sin(yaw_mid / 2)])
-    rest = jnp.asarray(bodies.rest_joints(params), q.dtype)
-    return jnp.concatenate([pelvis_pos, quat, q, rest]), cs._replace(lipm=lipm, err_sum=err_sum, t=t), zref[0]
+    return jnp.concatenate([pelvis_pos, quat, q]), cs._replace(lipm=lipm, err_sum=err_sum, t=t), zref[0]
 
 
 def standing_shift(cfg: WalkConfig, feet) -> jax.Array:

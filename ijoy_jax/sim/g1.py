@@ -1,13 +1,18 @@
 """The Unitree G1 (MuJoCo Menagerie) as the walker's robot: its model on the terrain and what the controller reads.
 
 The robot is Menagerie's G1 as MuJoCo Playground ships it for MJX (:func:`ijoy_jax.sim.menagerie.g1_spec`,
-the ``robots`` extra), its links, masses, inertias, joint axes, limits, armatures and torque limits unchanged,
-made the walker's by :func:`walker_spec`:
+the ``robots`` extra), its links, masses, inertias, leg joint axes, limits, armatures and torque limits
+unchanged, made the walker's by :func:`walker_spec`:
+
+* its waist and arms are welded at their ``knees_bent`` angles (the walker holds them still, and MJX's cost
+  grows with the degrees of freedom: 18 for 35); every body keeps its mass and inertia, and the robot on the
+  keyframe stands exactly as the full model does;
 
 * its world is the project's (:func:`ijoy_jax.sim.scene.terrain_scene`): the terrain's height field in place of
   its floor, the soles as a grid of spheres on the bottom of each foot box, the ankle force/torque sensors and
   the centre-of-mass sensors the controller reads; its own sensors (for learned policies) and the feet's
-  contact pair with each other (the selector keeps the footprints apart) are dropped, the hand-thigh pairs kept;
+  contact pair with each other (the selector keeps the footprints apart) are dropped, the hand-thigh pairs kept
+  (a swinging thigh may still meet a hand);
 * its servos are stiff position servos (:data:`LEG_KP`, ``kv = kp / 100``). Menagerie's gains (kp 75 on the
   hips and knees, 20 and 2 on the ankles) are those its learned policies command through; a ZMP walking
   controller tracks joint positions and needs servos that hold them under load, as the project's own biped
@@ -17,8 +22,8 @@ made the walker's by :func:`walker_spec`:
   iteration caps, pyramidal cones).
 
 :func:`description` reads that model back (:func:`ijoy_jax.sim.description.describe`): the leg chains the
-inverse kinematics solves, the standing posture of the ``knees_bent`` keyframe (waist and arms held there while
-walking), the foot's mass and where its ankle sensor sits.
+inverse kinematics solves, the standing posture of the ``knees_bent`` keyframe, the foot's mass and where its
+ankle sensor sits.
 """
 
 from __future__ import annotations
@@ -31,16 +36,13 @@ import numpy as np
 from ijoy_jax.sim import menagerie, model, scene
 from ijoy_jax.sim.description import BipedDescription, describe
 
-__all__ = ["LEG_KP", "OTHER_KP", "PELVIS_HEIGHT", "STAND_WIDTH", "description", "foot", "walker_spec"]
+__all__ = ["LEG_KP", "PELVIS_HEIGHT", "STAND_WIDTH", "description", "foot", "walker_spec"]
 
 LEG_KP = {"hip_pitch": 8000.0, "hip_roll": 8000.0, "hip_yaw": 4000.0, "knee": 8000.0, "ankle_pitch": 4000.0,
           "ankle_roll": 3000.0}
 """N m/rad: the walker's servo stiffness on each leg joint (kv = kp / 100 N m s/rad). Standing on its
 ``knees_bent`` keyframe they hold every leg joint within 1.7 mrad of its target (0.35 mrad at x2, 7 mrad at
 x0.25; all stable at the 2 ms timestep with the G1's own armatures)."""
-
-OTHER_KP = {"waist": 2000.0, "other": 500.0}
-"""N m/rad: the servos holding the waist and the arms at their standing angles (kv = kp / 100)."""
 
 PELVIS_HEIGHT = 0.72
 """m: the G1's pelvis origin above the lower sole while walking (the keyframe stands it at 0.758 m, its
@@ -55,11 +57,7 @@ _SOLES = menagerie.G1_SOLES
 
 
 def _gain(joint: str) -> float:
-    name = joint.removesuffix("_joint")
-    for side in _SIDES:
-        if name.startswith(side + "_") and name[len(side) + 1:] in LEG_KP:
-            return LEG_KP[name[len(side) + 1:]]
-    return OTHER_KP["waist"] if name.startswith("waist") else OTHER_KP["other"]
+    return LEG_KP[joint.removesuffix("_joint").split("_", 1)[1]]
 
 
 def walker_spec(params, shape=(200, 200), resolution: float = 0.02, origin=(0.0, 0.0), *,
@@ -79,6 +77,7 @@ def walker_spec(params, shape=(200, 200), resolution: float = 0.02, origin=(0.0,
     """
     spec = menagerie.g1_spec(meshes=meshes)
     spec.modelname = "ijoy_g1"
+    _weld_upper_body(spec)
     for sensor in list(spec.sensors):
         spec.delete(sensor)
     for pair in [p for p in spec.pairs if {p.geomname1, p.geomname2} == set(_SOLES)]:
@@ -89,6 +88,47 @@ def walker_spec(params, shape=(200, 200), resolution: float = 0.02, origin=(0.0,
         kp = _gain(act.target)
         act.set_to_position(kp=kp, kv=kp / 100.0)
     return spec
+
+
+def _is_leg(joint: str) -> bool:
+    name = joint.removesuffix("_joint")
+    return any(name.startswith(side + "_") and name[len(side) + 1:] in LEG_KP for side in _SIDES)
+
+
+def _weld_upper_body(spec: mujoco.MjSpec) -> None:
+    """Fix the waist and the arms rigidly at their :data:`~ijoy_jax.sim.menagerie.G1_KEYFRAME` angles.
+
+    Each body moved by a waist or arm joint gets, as its fixed pose in its parent, the pose the joint gives it
+    on the keyframe; the joints, their actuators and their entries in the keyframes go. The bodies, their masses
+    and inertias stay, so the robot standing on the keyframe is the same rigid body as before, now with 12
+    actuated joints (``nv`` 18 for 35): its upper body is the part the walker holds still, and MJX's cost grows
+    with ``nv``.
+    """
+    full = spec.compile()
+    data = mujoco.MjData(full)
+    mujoco.mj_resetDataKeyframe(full, data, mujoco.mj_name2id(full, mujoco.mjtObj.mjOBJ_KEY, menagerie.G1_KEYFRAME))
+    mujoco.mj_kinematics(full, data)
+    welded = [j for j in spec.joints if j.type == mujoco.mjtJoint.mjJNT_HINGE and not _is_leg(j.name)]
+    keep_q = [adr for j in range(full.njnt) if not any(w.name == full.joint(j).name for w in welded)
+              for adr in range(full.jnt_qposadr[j], full.jnt_qposadr[j] + (7 if full.jnt_type[j] == 0 else 1))]
+    keep_u = [a for a in range(full.nu) if full.actuator_trnid[a, 0] not in {full.joint(w.name).id for w in welded}]
+    for joint in welded:
+        body = joint.parent
+        child = full.body(body.name).id
+        parent = full.body_parentid[child]
+        rot = data.xmat[parent].reshape(3, 3)
+        body.pos = rot.T @ (data.xpos[child] - data.xpos[parent])
+        quat = np.zeros(4)
+        mujoco.mju_negQuat(quat, data.xquat[parent])
+        mujoco.mju_mulQuat(quat, quat, data.xquat[child])
+        body.quat = quat
+    for act in [a for a in spec.actuators if not _is_leg(a.target)]:
+        spec.delete(act)
+    for joint in welded:
+        spec.delete(joint)
+    for key in spec.keys:
+        key.qpos = np.asarray(key.qpos)[keep_q]
+        key.ctrl = np.asarray(key.ctrl)[keep_u]
 
 
 @functools.lru_cache(maxsize=4)
