@@ -49,6 +49,11 @@ G1 = ij.robots.g1(margin=0.02)
 HL, HW = 0.5 * float(G1.foot_length), 0.5 * float(G1.foot_width)
 P0_Y = float(G1.p0[1])  # the step in place's lateral offset: the feet stand this far apart
 L_MAX = float(np.max(np.asarray(G1.actions)[:, 0]))  # the longest forward step (m)
+# The paper's commands are HRP-2's full stick (a 0.2 m step in its 0.8 s); the G1 steps every 0.5 s
+# (robots.G1_STEP_TIME), so the same ideal steps take the commands scaled by the ratio of the step times.
+HRP2_STEP_TIME = 0.8
+G1_FORWARD = tuple(c * HRP2_STEP_TIME / float(G1.step_time) for c in FORWARD)
+G1_SIDE = tuple(c * HRP2_STEP_TIME / float(G1.step_time) for c in SIDE_COMMAND)
 LANE_Y = 1.0
 MARGINS = (0.02, 0.05)
 OVER_LENGTHS = (0.04, 0.10, 0.14, 0.16, 0.18, 0.22)
@@ -69,16 +74,17 @@ def scenarios():
     for m in MARGINS:
         for xw in WALL_XS:
             free = _free(SHAPE_2D, boxes=[(xw + 0.05, 1.0, 0.0, 0.1, 2.5)])
-            out[f"wall-m{m}-x{xw}"] = scenario(free, start=_start(), margin=m, wall_x=xw)
+            out[f"wall-m{m}-x{xw}"] = scenario(free, start=_start(), command=G1_FORWARD, margin=m, wall_x=xw)
     ell = _free(SHAPE_2D, boxes=[(1.2 + THICK / 2, 0.4, 0.0, THICK, 1.2), (2.7, 1.0 - THICK / 2, 0.0, 3.0, THICK)])
-    out["side-ell"] = scenario(ell, start=_start(y=SIDE_Y), command=SIDE_COMMAND, corner_y=1.0, wall_x=1.2)
+    out["side-ell"] = scenario(ell, start=_start(y=SIDE_Y), command=G1_SIDE, corner_y=1.0, wall_x=1.2)
     m = 0.02  # an obstacle in the right foot's lane, from the map's edge to just below the left foot's footprint
     top = int(math.floor((LANE_Y + 0.5 * P0_Y - HW - m) / RES + 1e-6))
     for b in OVER_LENGTHS:
         for x in OVER_X[::2]:
             i0 = int(round(x / RES))
             i1 = i0 + int(round(b / RES))
-            out[f"over-b{b}-x{x}"] = scenario(_free(SHAPE_2D, cells=[(i0, i1, 0, top)]), start=_start(), margin=m,
+            out[f"over-b{b}-x{x}"] = scenario(_free(SHAPE_2D, cells=[(i0, i1, 0, top)]), start=_start(),
+                                              command=G1_FORWARD, margin=m,
                                               obstacle=(i0 * RES, i1 * RES), b=b)
     return out
 
@@ -107,7 +113,9 @@ def runs():
 def test_the_g1s_numbers_are_its_own():
     """What every expectation below derives from: the G1's lattice and sole, not HRP-2's."""
     assert (HL, HW) == pytest.approx((0.09, 0.03)) and P0_Y == pytest.approx(0.24) and L_MAX == pytest.approx(0.2)
-    assert float(G1.step_time) * FORWARD[0] == pytest.approx(L_MAX)
+    assert float(G1.step_time) * G1_FORWARD[0] == pytest.approx(L_MAX)
+    assert float(ij.robots.hrp2().step_time) == pytest.approx(HRP2_STEP_TIME)
+    assert float(G1.step_time) == pytest.approx(ij.robots.G1_STEP_TIME)
     assert b_max(0.02) == pytest.approx(0.18)
 
 

@@ -41,7 +41,8 @@ def test_g1_defaults_are_the_leaves_of_g1():
         assert float(ij.robots.get_leaf(robot, name)) == pytest.approx(d[name], rel=1e-7), name
     hrp2 = ij.robots.hrp2_defaults()
     assert {k for k in d if d[k] != hrp2[k]} == {"foot_length", "foot_width", "max_sole_pitch", "max_sole_roll",
-                                                  "max_sole_distance"}
+                                                  "max_sole_distance", "step_time"}
+    assert d["step_time"] == ij.robots.G1_STEP_TIME == 0.5
 
 
 def test_every_action_is_realisable_by_both_legs_and_a_wider_lattice_is_not_needed():
@@ -79,5 +80,6 @@ def test_tilts_beyond_the_ankles_are_refused_by_the_legs():
 def test_the_g1_walks_forward_on_flat_ground_with_the_selector():
     robot = ij.robots.g1()
     terrain = ij.terrain.flat((150, 100), 0.02)
-    traj = ij.rollout(terrain, robot, ij.robots.start_stance(robot, 0.3, 1.0), [0.25, 0.0, 0.0], num_steps=6)
+    full = 0.2 / float(robot.step_time)  # the full stick: the lattice's longest step (0.2 m) every 0.5 s
+    traj = ij.rollout(terrain, robot, ij.robots.start_stance(robot, 0.3, 1.0), [full, 0.0, 0.0], num_steps=6)
     assert float(traj.summary()["distance_along"]) == pytest.approx(1.1, abs=1e-3)  # 0.1 + 5 * 0.2 m

@@ -28,6 +28,10 @@ def robot_model(request):
     return params, m, model.model_index(m)
 
 
+def _walk_height(params):
+    return controller.WalkConfig(**bodies.walk_defaults(params)).pelvis_height
+
+
 def _sites_at(m, idx, qpos):
     d = mujoco.MjData(m)
     d.qpos[:] = np.asarray(qpos, np.float64)
@@ -55,7 +59,7 @@ def test_stand_pose_puts_the_sole_sites_where_asked_as_mujoco_computes_them(robo
     ground = np.array([dz, 0.0])
     tilt = np.array([[roll, pitch], [0.0, 0.0]])
     qpos, ok = bodies.stand_pose(params, jnp.asarray(feet, jnp.float32), jnp.asarray(ground, jnp.float32),
-                                 jnp.float32(min(dz, 0.0) + bodies.pelvis_height(params)),
+                                 jnp.float32(min(dz, 0.0) + _walk_height(params)),
                                  tilt=jnp.asarray(tilt, jnp.float32))
     assert bool(ok)
     _, pos, rot = _sites_at(m, idx, qpos)
@@ -70,7 +74,7 @@ def test_an_unreachable_sole_is_flagged_not_reached(robot_model):
     params, _, _ = robot_model
     half = params.stand_width / 2
     feet = jnp.asarray([[0.9, half, 0.0], [0.0, -half, 0.0]], jnp.float32)  # a metre-long stride
-    _, ok = bodies.stand_pose(params, feet, jnp.zeros(2), jnp.float32(bodies.pelvis_height(params)))
+    _, ok = bodies.stand_pose(params, feet, jnp.zeros(2), jnp.float32(_walk_height(params)))
     assert not bool(ok)
 
 
@@ -93,7 +97,7 @@ def test_the_ground_centre_of_pressure_from_the_ankle_sensors_is_the_contacts_ow
     centre = -0.045 if params.model == "g1" else -0.01
     for shift in (centre - 0.025, centre, centre + 0.025):
         qpos, _ = bodies.stand_pose(params, jnp.asarray([[0.0, half, 0.0], [0.0, -half, 0.0]], jnp.float32),
-                                    jnp.zeros(2), jnp.float32(bodies.pelvis_height(params)),
+                                    jnp.zeros(2), jnp.float32(_walk_height(params)),
                                     jnp.asarray([shift, 0.01], jnp.float32))
         d = mujoco.MjData(m)
         d.qpos[:] = np.asarray(qpos)
@@ -127,7 +131,9 @@ def test_the_walker_starts_with_the_centre_of_mass_above_the_soles(name):
     robot = ij.robots.g1() if name == "g1" else ij.robots.hrp2()
     terrain = ij.terrain.flat(SHAPE, RES, origin=ORIGIN, has_height=True)
     sim = walker.make_sim(SHAPE, RES, robot=robot, model=name)
-    assert sim.params.model == name and sim.cfg.pelvis_height == bodies.pelvis_height(sim.params)
+    fitted = {k: getattr(sim.cfg, k) for k in ("com_height", "com_offset", "leg_share")}  # make_sim fits these
+    assert sim.params.model == name and sim.cfg == controller.WalkConfig(**bodies.walk_defaults(sim.params), **fitted)
+    assert sim.cfg.step_time == pytest.approx(float(robot.step_time))  # the G1: its own 0.5 s steps
     start = ij.robots.start_stance(robot, 0.0, 0.0, 0.4)
     state = walker.init_state(sim, walker.make_world(sim, terrain), robot, start, 1)
     d = mujoco.MjData(sim.mj_model)
@@ -194,7 +200,7 @@ def test_the_rendered_robot_replays_the_physics_qpos(name):
     assert not (looks.geom_contype[meshes] | looks.geom_conaffinity[meshes]).any()
     robot = ij.robots.for_model(name)
     feet = jnp.asarray(ij.robots.start_stance(robot, 0.0, 0.0, 0.3))
-    qpos = np.asarray(bodies.stand_pose(params, feet, jnp.zeros(2), jnp.float32(bodies.pelvis_height(params)))[0])
+    qpos = np.asarray(bodies.stand_pose(params, feet, jnp.zeros(2), jnp.float32(_walk_height(params)))[0])
     d_phys, d_looks = mujoco.MjData(phys), mujoco.MjData(looks)
     for m, d in ((phys, d_phys), (looks, d_looks)):
         d.qpos[:] = qpos

@@ -178,7 +178,7 @@ def test_the_models_actions_and_robots_are_the_robots_modules():
 def test_a_trace_files_commands_are_read_through_the_g1(tmp_path):
     """A trace's stick is read through the sweep's robot's command range and step time: the G1's (built by
     models.build_robot, as every robot of a sweep), whose range is HRP-2's (the same lattice shifted to its
-    wider stance)."""
+    wider stance) in its shorter step time."""
     trace = tmp_path / "drive.csv"
     trace.write_text("t,forward,left,turn\n0.0, 1.0, 0.5, -0.3\n2.0, 0.0, 0.0, 0.0\n")
     text = BASE.replace("num_steps = 3\n", "").replace("[command]\nvx = 0.25\n", '[command]\nfile = "drive.csv"\n')
@@ -186,8 +186,9 @@ def test_a_trace_files_commands_are_read_through_the_g1(tmp_path):
     want = sweep.recorded.read_commands(trace, robots.g1())
     np.testing.assert_array_equal(cfg.command_steps, want.commands)
     assert cfg.model == "g1" and len(want.commands) == cfg.num_steps >= 2
+    ratio = float(robots.hrp2().step_time) / float(robots.g1().step_time)  # 0.8 s / 0.5 s
     np.testing.assert_allclose(np.asarray(robots.command_range(robots.g1())),
-                               np.asarray(robots.command_range(robots.hrp2())), atol=LEAF_TOL)
+                               ratio * np.asarray(robots.command_range(robots.hrp2())), rtol=1e-6)
 
 
 # --------------------------------------------------------------------------------------------- runs

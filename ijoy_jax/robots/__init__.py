@@ -28,6 +28,7 @@ from ijoy_jax.robots.commands import command_range as command_range
 from ijoy_jax.robots.commands import random_commands as random_commands
 from ijoy_jax.robots.commands import start_stance as start_stance
 from ijoy_jax.robots.g1_model import G1_P0 as G1_P0
+from ijoy_jax.robots.g1_model import G1_STEP_TIME as G1_STEP_TIME
 from ijoy_jax.robots.g1_model import g1 as g1
 from ijoy_jax.robots.g1_model import g1_actions as g1_actions
 from ijoy_jax.robots.g1_model import g1_defaults as g1_defaults
@@ -66,6 +67,7 @@ from ijoy_jax.robots.sides import side_sign as side_sign
 __all__ = [
     "DX_SPACING",
     "G1_P0",
+    "G1_STEP_TIME",
     "HRP2_P0",
     "LEFT",
     "LeafSpec",

@@ -17,9 +17,9 @@ robot:
 * sole distance (FootCost's ``reach`` term): 0.48 m, the shortest distance the legs reach along the directions
   the action set spans (50 to 130 deg from the stance foot's heading), level soles;
 
-The step time (0.8 s), swing clearance and highest step are the walking controller's, as for HRP-2; the MJX
-G1 (``ijoy_jax.sim.walker.make_sim(..., model="g1")``) walks with them (BENCHMARKS.md, "The Unitree G1 in MJX",
-says how well).
+The step time is the MJX G1's (:data:`G1_STEP_TIME`, 0.5 s; ``ijoy_jax.sim.walker.make_sim(..., model="g1")``
+walks with it); the swing clearance and highest step are the walking controller's, as for HRP-2 (BENCHMARKS.md,
+"The Unitree G1 in MJX", says how well it walks).
 """
 
 from __future__ import annotations
@@ -43,10 +43,17 @@ G1_FOOT = (0.18, 0.06)
 G1_DY = (0.24, 0.38)
 """m: the G1's lateral range of the swing foot from the stance foot (the step in place and 14 cm wider)."""
 
+G1_STEP_TIME = 0.5
+"""s: the G1's step time, shorter than HRP-2's 0.8 s. Its soles are 6 cm wide, so its ankles can move the centre
+of pressure by only about 2 cm, and a lateral error of the body grows e^(omega t)-fold (omega 3.9/s) through each
+single support: 17-fold in the 0.72 s of a 0.8 s step, 6-fold in 0.45 s. At 0.8 s the MJX G1 fell within 5-9
+steps of 0.2 m on flat ground (CPU, 2 robots); at 0.5 s it walks them (BENCHMARKS.md, "The Unitree G1 in MJX",
+has the batch figures)."""
+
 G1_LIMITS = {"max_sole_pitch": math.radians(10.0), "max_sole_roll": math.radians(4.4), "max_sole_distance": 0.48}
 """The sole tilts (rad) and sole distance (m) the G1's legs realise in every stance of its action set."""
 
-_G1_BODY = {"foot_length": G1_FOOT[0], "foot_width": G1_FOOT[1], "step_time": 0.8, "p0": G1_P0, **G1_LIMITS}
+_G1_BODY = {"foot_length": G1_FOOT[0], "foot_width": G1_FOOT[1], "step_time": G1_STEP_TIME, "p0": G1_P0, **G1_LIMITS}
 
 
 def g1_actions(density: float = 1.0) -> np.ndarray:

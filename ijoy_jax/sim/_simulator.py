@@ -107,7 +107,7 @@ def make_sim(
     ``model`` picks the robot (:data:`ijoy_jax.sim.bodies.MODELS`): ``"biped"`` (the project's HRP-2-like
     biped, the default) or ``"g1"`` (the Unitree G1 of MuJoCo Menagerie; the ``robots`` extra); it sets
     ``params.model`` (when both are given they must agree). ``cfg`` defaults to :class:`WalkConfig` with the
-    robot's walking height (:func:`ijoy_jax.sim.bodies.pelvis_height`).
+    robot's walking height and step time (:func:`ijoy_jax.sim.bodies.walk_defaults`).
     ``cfg.com_height`` is replaced by the model's own CoM height at the
     standing posture with the pelvis ``cfg.pelvis_height`` above the ground,
     so the LIPM matches the robot. With ``robot`` given, its footprint sizes
@@ -122,7 +122,7 @@ def make_sim(
         params = model_mod.biped_params(robot, model=model or "biped")
     elif model is not None and params.model != model:
         raise ValueError(f"model {model!r} differs from params.model {params.model!r}")
-    cfg = WalkConfig(pelvis_height=bodies.pelvis_height(params)) if cfg is None else cfg
+    cfg = WalkConfig(**bodies.walk_defaults(params)) if cfg is None else cfg
     if robot is not None:
         check_robot_for_sim(robot, cfg)
     timestep = params.timestep

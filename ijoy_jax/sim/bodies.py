@@ -10,7 +10,7 @@ hip three, knee, ankle pitch, ankle roll last) and one position actuator per joi
 
 What the walker asks of a robot, here: its model on a terrain (:func:`build_model`), the legs' inverse
 kinematics (:func:`legs_ik`), the standing configuration over given soles (:func:`stand_pose`), its foot below
-the ankle sensor (:func:`foot`) and its walking height (:func:`pelvis_height`).
+the ankle sensor (:func:`foot`) and how it walks by default (:func:`walk_defaults`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import numpy as np
 
 from ijoy_jax.sim import kinematics, model
 
-__all__ = ["MODELS", "build_model", "build_spec", "foot", "legs_ik", "pelvis_height", "stand_pose"]
+__all__ = ["MODELS", "build_model", "build_spec", "foot", "legs_ik", "stand_pose", "walk_defaults"]
 
 MODELS = model.MODELS
 """The robots the walker drives: ``"biped"`` (the project's) and ``"g1"`` (the Unitree G1)."""
@@ -68,10 +68,13 @@ def foot(params: model.BipedParams) -> tuple[float, tuple[float, float, float]]:
     return float(params.foot_mass), (0.0, 0.0, float(params.ankle_height))
 
 
-def pelvis_height(params: model.BipedParams) -> float:
-    """m: the pelvis origin's height above the lower sole the walking controller holds by default
-    (``WalkConfig.pelvis_height``)."""
-    return _g1().PELVIS_HEIGHT if params.model == "g1" else 0.65
+def walk_defaults(params: model.BipedParams) -> dict[str, float]:
+    """The ``WalkConfig`` fields the robot of ``params.model`` walks with by default (the rest are
+    ``WalkConfig``'s own, which are the project's biped's): the G1's :data:`.g1.WALK` (its pelvis height, its
+    0.5 s step time, capture-point stepping); none for the biped."""
+    if params.model == "g1":
+        return dict(_g1().WALK)
+    return {}
 
 
 def legs_ik(params: model.BipedParams, pelvis_pos, pelvis_rot, feet) -> tuple[jax.Array, jax.Array]:

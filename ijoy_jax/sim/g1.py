@@ -33,10 +33,11 @@ import functools
 import mujoco
 import numpy as np
 
+from ijoy_jax.robots import G1_STEP_TIME
 from ijoy_jax.sim import menagerie, model, scene
 from ijoy_jax.sim.description import BipedDescription, describe
 
-__all__ = ["LEG_KP", "PELVIS_HEIGHT", "STAND_WIDTH", "description", "foot", "walker_spec"]
+__all__ = ["LEG_KP", "STAND_WIDTH", "WALK", "description", "foot", "walker_spec"]
 
 LEG_KP = {"hip_pitch": 8000.0, "hip_roll": 8000.0, "hip_yaw": 4000.0, "knee": 8000.0, "ankle_pitch": 4000.0,
           "ankle_roll": 3000.0}
@@ -44,9 +45,25 @@ LEG_KP = {"hip_pitch": 8000.0, "hip_roll": 8000.0, "hip_yaw": 4000.0, "knee": 80
 ``knees_bent`` keyframe they hold every leg joint within 1.7 mrad of its target (0.35 mrad at x2, 7 mrad at
 x0.25; all stable at the 2 ms timestep with the G1's own armatures)."""
 
-PELVIS_HEIGHT = 0.72
-"""m: the G1's pelvis origin above the lower sole while walking (the keyframe stands it at 0.758 m, its
-knees bent 0.67 rad; lower bends them further, so a long and wide step stays within the legs' reach)."""
+WALK = {"pelvis_height": 0.72, "step_time": G1_STEP_TIME, "filter_passes": 2, "clearance": 0.03,
+        "capture_gain": 2.0, "capture_max": 0.08}
+"""The ``WalkConfig`` fields the G1 walks with (:func:`ijoy_jax.sim.bodies.walk_defaults`; the others are the
+project's biped's):
+
+* ``pelvis_height``, m: the pelvis origin above the lower sole (its keyframe stands it at 0.758 m, the knees bent
+  0.67 rad; lower bends them further, so a long and wide step stays within the legs' reach);
+* ``step_time``, s: the selector robot's (:data:`ijoy_jax.robots.G1_STEP_TIME`, which says why 0.5 s);
+* ``filter_passes`` 2 and ``clearance`` 3 cm: the G1's legs carry 43 % of its mass (7.2 kg each of 33 kg), so
+  the swing foot's lift and descent, 24 cm beside the stance foot, move the pattern's multibody ZMP sideways by
+  up to 28 cm. One pass of the dynamics filter with the biped's 5 cm clearance left the pattern's ZMP up to 17 cm
+  (rms 3.2 cm) off its reference across the sole (the biped: 1.9 cm, rms 0.29 cm), more than the G1's 6 cm wide
+  sole can take, and it fell within a few 0.2 m steps; two passes with a 3 cm lift leave 1.9 cm (rms 0.39 cm);
+* ``capture_gain``, ``capture_max``: capture-point stepping on (2, at most 8 cm; off for the biped): with only
+  about 2 cm of centre of pressure under its soles, the lateral error a step leaves is caught by where the next
+  foot lands.
+
+BENCHMARKS.md ("The Unitree G1 in MJX") has the batch figures.
+"""
 
 STAND_WIDTH = 0.24
 """m: the G1's feet apart when standing (its keyframe's 0.237 m on the action lattice's 2 cm grid,

@@ -106,10 +106,12 @@ def check_selector(chk: Checker, cfg: SweepConfig) -> None:
 def check_walker(chk: Checker, cfg: SweepConfig) -> None:
     """A ``walker = "mjx"`` sweep fits the simulated robot: its step time, its feet (the G1's are its MJCF's) and
     the resolution (before compute)."""
+    from ijoy_jax.sim import bodies
     from ijoy_jax.sim.controller import WalkConfig
+    from ijoy_jax.sim.model import biped_params
 
     defaults = models.robot_defaults(cfg.model)
-    step = WalkConfig().step_time
+    step = WalkConfig(**bodies.walk_defaults(biped_params(model=cfg.model))).step_time
     if abs(cfg.robot.get("step_time", defaults["step_time"]) - step) > 1e-6:
         chk.fail(
             "robot.step_time",
