@@ -8,6 +8,7 @@ for both, so each module compiles the chunk function once; they differ only in t
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -49,6 +50,21 @@ def tiny_sweep(*, margins: bool) -> str:
     [0.0, 0.05] (4 cells, 12 scenarios; else 2 cells, 6 scenarios). It ends in its ``[grid]`` table, so a test
     may append grid keys."""
     return _HEAD + ('"robot.margin" = [0.0, 0.05]\n' if margins else "")
+
+
+def refused_by(source: str, text: str, key: str, reason: str) -> str:
+    """The message of the ``SweepConfigError`` that parsing ``text`` (as the file ``source``) raises: it must name
+    ``source`` and ``key`` first, and match the regular expression ``reason``."""
+    import pytest
+
+    from ijoy_jax import sweep
+
+    with pytest.raises(sweep.SweepConfigError) as e:
+        sweep.parse_config(text, source)
+    msg = str(e.value)
+    assert msg.startswith(f"{source}: {key}: "), msg
+    assert re.search(reason, msg), msg
+    return msg
 
 
 def write(tmp_path: Path, text: str, name: str = "s.toml") -> Path:

@@ -7,11 +7,11 @@ a run's replicate r walks the walk family's map ``maps(key(seed), B)[r]``. The r
 chunk program (slow tier); the table built from them is tests/test_bench_walk.py's.
 """
 
-import re
 
 import jax
 import numpy as np
 import pytest
+from _sweep_util import refused_by  # tests/ is on sys.path (pytest rootdir import)
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -39,12 +39,7 @@ def parse(text, source="walk.toml"):
 
 
 def refused(text, key, reason):
-    with pytest.raises(sweep.SweepConfigError) as e:
-        parse(text)
-    msg = str(e.value)
-    assert msg.startswith(f"walk.toml: {key}: "), msg
-    assert re.search(reason, msg), msg
-    return msg
+    return refused_by("walk.toml", text, key, reason)
 
 
 # --------------------------------------------------------------------------------------------- the schema
