@@ -46,9 +46,10 @@ G1_DY = (0.24, 0.38)
 G1_STEP_TIME = 0.5
 """s: the G1's step time, shorter than HRP-2's 0.8 s. Its soles are 6 cm wide, so its ankles can move the centre
 of pressure by only about 2 cm, and a lateral error of the body grows e^(omega t)-fold (omega 3.9/s) through each
-single support: 17-fold in the 0.72 s of a 0.8 s step, 6-fold in 0.45 s. At 0.8 s the MJX G1 fell within 5-9
-steps of 0.2 m on flat ground (CPU, 2 robots); at 0.5 s it walks them (BENCHMARKS.md, "The Unitree G1 in MJX",
-has the batch figures)."""
+single support: 17-fold in the 0.72 s of a 0.8 s step, 6-fold in 0.45 s. At 0.8 s the MJX G1 fell within 5-10
+steps of 0.2 m on flat ground (CPU, 2 robots, with or without its other settings, ``sim.g1.WALK``). At 0.5 s the
+same 2 robots walked 30 such steps, but of 1024 on the GPU 82 % fell: the full stick is still marginal; held at
+0.25 m/s (0.1-0.15 m steps) 0.49 % fell (BENCHMARKS.md, "The Unitree G1 in MJX", has the batch figures)."""
 
 G1_LIMITS = {"max_sole_pitch": math.radians(10.0), "max_sole_roll": math.radians(4.4), "max_sole_distance": 0.48}
 """The sole tilts (rad) and sole distance (m) the G1's legs realise in every stance of its action set."""
