@@ -669,7 +669,9 @@ def test_the_cli_walks_the_g1_with_the_perfect_robot_and_skips_the_stairs(tmp_pa
         assert r["results"] == str(tmp_path / "out" / f"flat_{r['commands']}_g1_perfect")
         assert sweep.load_config(f"{r['results']}/sweep.toml").model == "g1"
         assert (sweep.load(r["results"])["robot.foot_length"] == 0.18).all()
-    assert walk[0]["stops"] == 0 and walk[1]["progress_mean_m"] == pytest.approx(0.1 + 5 * 0.2, abs=1e-5)
+    # held forward at 0.25 m/s the G1's ideal step is 0.125 m (0.5 s steps): its lattice (0.05 m apart) has 0.10 and
+    # 0.15 m equally near and the selector takes 0.10; the first step, from the standing start, goes half as far
+    assert walk[0]["stops"] == 0 and walk[1]["progress_mean_m"] == pytest.approx(0.05 + 5 * 0.1, abs=1e-5)
     assert "robots.hrp2(reach=0.3)" in walk[2]["skipped"] and rows[-1]["model"] == "g1"
     assert "| flat | forward | g1() | 4 |" in out and "| stairs_up | - | g1() | skipped: its robot is" in out
     with Image.open(tmp_path / "walk.png") as im:
