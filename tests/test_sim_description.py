@@ -13,6 +13,8 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ijoy_jax.sim import description as D
 from ijoy_jax.sim import kinematics, menagerie, model
@@ -147,6 +149,28 @@ def test_leg_ik_out_of_reach_ends_finite_inside_the_limits_and_says_how_far():
     reached, _ = jax.vmap(_fk, in_axes=(None, 0))(chain, sol.q)
     np.testing.assert_allclose(sol.position_error, jnp.linalg.norm(reached - targets, axis=1), rtol=1e-4)
     assert float(sol.position_error.min()) > 0.05
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**31 - 1), rank=st.integers(0, 6), damping=st.sampled_from([1e-3, 1e-2, 1.0]))
+def test_spd_solve_is_numpys_solve_on_damped_normal_matrices(seed, rank, damping):
+    """``J J^T + d^2 I`` as leg_ik builds it, J of any rank (0: all zero, <6: a singular leg such as the straight
+    knee): the element-by-element Cholesky solves it as NumPy's LU does (float64), within float32's precision
+    times the matrix's condition; finite always."""
+    rng = np.random.default_rng(seed)
+    jac = rng.normal(size=(6, rank)) @ rng.normal(size=(rank, 6)) if rank else np.zeros((6, 6))
+    a = jac @ jac.T + damping**2 * np.eye(6)
+    b = rng.normal(size=6)
+    want = np.linalg.solve(a, b)
+    got = np.asarray(jax.jit(D.spd_solve)(jnp.asarray(a, jnp.float32), jnp.asarray(b, jnp.float32)), np.float64)
+    assert np.all(np.isfinite(got))
+    # float32 rounding of a and b, amplified by the condition number
+    tol = 5e-6 * np.linalg.cond(a) * np.linalg.norm(want) + 1e-6
+    assert np.linalg.norm(got - want) <= tol, (np.linalg.norm(got - want), tol)
+    with jax.enable_x64(True):
+        got64 = np.asarray(D.spd_solve(jnp.asarray(a), jnp.asarray(b)))
+    assert got64.dtype == np.float64
+    np.testing.assert_allclose(got64, want, rtol=1e-8 * np.linalg.cond(a), atol=1e-12)
 
 
 def test_leg_kinematics_run_in_float64_to_float64_precision():

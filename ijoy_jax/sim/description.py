@@ -32,8 +32,13 @@ LEG_DOF = 6
 """Joints per leg the walking controller drives (hip three, knee, ankle two)."""
 
 IK_ITERATIONS = 16
-"""Damped least-squares iterations of :func:`leg_ik`: from a standing seed, a walking target (a step of 0.4 m,
-a sole tilted 0.3 rad) is reached to below a micrometre in 6-8; the rest is margin for poses near the limits."""
+"""Damped least-squares iterations of :func:`leg_ik`. From the G1's standing seed, of 2000 random reachable
+walking targets (the sole up to 0.25 m ahead or behind, 6 cm up or down, 0.35 rad of yaw, 0.15 rad of pitch),
+6 iterations reach every one within 0.05 mm and 8 within 0.02 mm, the float32 floor. The rest is for the
+targets out of reach (38 % of the 2000), where the iterations creep toward the nearest pose: in one case of 20
+the sole ends 14 mm further from it after 8 iterations than after 200, 1.4 mm after 16. 8 iterations changed
+how the G1 walks (on an H200, of 4096 on rough ground 66 % fell within 10 random commands, 49 % with 16)."""
+
 
 IK_DAMPING = 1e-3
 """Damping of :func:`leg_ik` (m): the step is ``J^T (J J^T + d^2 I)^-1 e``; small against a leg's reach, so it
@@ -356,6 +361,33 @@ def _rotation_vector(r):
     return v * jnp.where(s > 1e-6, angle / s, 1.0)
 
 
+def spd_solve(a, b) -> jax.Array:
+    """``x`` with ``a @ x = b`` for a small symmetric positive definite ``a`` (n, n) and ``b`` (n,), by a
+    Cholesky factorisation written out element by element (n static).
+
+    Elementwise operations only, so under jit and vmap it fuses with the code around it, where a batched LU
+    solve is a library call of its own (on an H200, :func:`leg_ik` of 4096 legs took a third of the time with it,
+    and the G1's closed loop ran 1.27 times as fast; BENCHMARKS.md). Each pivot is kept at least ``n * eps`` times ``a``'s largest diagonal entry: a matrix
+    positive definite in exact arithmetic whose smallest pivot rounding made zero or negative (``J J^T`` plus a
+    small damping, J singular) gets a slightly larger regularisation there, and the result stays finite.
+    """
+    n = a.shape[-1]
+    floor = n * jnp.finfo(jnp.result_type(a)).eps * jnp.max(jnp.abs(jnp.diagonal(a)))
+    floor = jnp.maximum(floor, jnp.finfo(jnp.result_type(a)).tiny)
+    low = [[None] * n for _ in range(n)]
+    for j in range(n):
+        low[j][j] = jnp.sqrt(jnp.maximum(a[j, j] - sum(low[j][k] ** 2 for k in range(j)), floor))
+        for i in range(j + 1, n):
+            low[i][j] = (a[i, j] - sum(low[i][k] * low[j][k] for k in range(j))) / low[j][j]
+    y = []
+    for i in range(n):
+        y.append((b[i] - sum(low[i][k] * y[k] for k in range(i))) / low[i][i])
+    x = [None] * n
+    for i in reversed(range(n)):
+        x[i] = (y[i] - sum(low[k][i] * x[k] for k in range(i + 1, n))) / low[i][i]
+    return jnp.stack(x)
+
+
 def leg_ik(
     chain: LegChain, pos, rot, q_init, *, iterations: int = IK_ITERATIONS, damping: float = IK_DAMPING
 ) -> LegSolution:
@@ -389,7 +421,7 @@ def leg_ik(
 
     def step(q, _):
         e, jac = error(q)
-        dq = jac.T @ jnp.linalg.solve(jac @ jac.T + damping**2 * jnp.eye(6, dtype=dt), e)
+        dq = jac.T @ spd_solve(jac @ jac.T + damping**2 * jnp.eye(6, dtype=dt), e)
         dq = dq * jnp.minimum(1.0, IK_MAX_STEP / (jnp.max(jnp.abs(dq)) + jnp.finfo(dt).tiny))  # a trust region
         return jnp.clip(q + dq, lower, upper), None
 
