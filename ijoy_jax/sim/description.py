@@ -39,7 +39,6 @@ targets out of reach (38 % of the 2000), where the iterations creep toward the n
 the sole ends 14 mm further from it after 8 iterations than after 200, 1.4 mm after 16. 8 iterations changed
 how the G1 walks (on an H200, of 4096 on rough ground 66 % fell within 10 random commands, 49 % with 16)."""
 
-
 IK_DAMPING = 1e-3
 """Damping of :func:`leg_ik` (m): the step is ``J^T (J J^T + d^2 I)^-1 e``; small against a leg's reach, so it
 only matters near a singular pose (the straight knee), where it keeps the step bounded."""
@@ -366,10 +365,11 @@ def spd_solve(a, b) -> jax.Array:
     Cholesky factorisation written out element by element (n static).
 
     Elementwise operations only, so under jit and vmap it fuses with the code around it, where a batched LU
-    solve is a library call of its own (on an H200, :func:`leg_ik` of 4096 legs took a third of the time with it,
-    and the G1's closed loop ran 1.27 times as fast; BENCHMARKS.md). Each pivot is kept at least ``n * eps`` times ``a``'s largest diagonal entry: a matrix
-    positive definite in exact arithmetic whose smallest pivot rounding made zero or negative (``J J^T`` plus a
-    small damping, J singular) gets a slightly larger regularisation there, and the result stays finite.
+    solve is a library call of its own (on an H200, :func:`leg_ik` of 4096 legs took a third of the time with
+    it, and the G1's closed loop ran 1.27 times as fast; BENCHMARKS.md). Each pivot is kept at least ``n * eps``
+    times ``a``'s largest diagonal entry: a matrix positive definite in exact arithmetic whose smallest pivot
+    rounding made zero or negative (``J J^T`` plus a small damping, J singular) gets a slightly larger
+    regularisation there, and the result stays finite.
     """
     n = a.shape[-1]
     floor = n * jnp.finfo(jnp.result_type(a)).eps * jnp.max(jnp.abs(jnp.diagonal(a)))
