@@ -126,9 +126,10 @@ def _weld_upper_body(spec: mujoco.MjSpec) -> None:
     mujoco.mj_resetDataKeyframe(full, data, mujoco.mj_name2id(full, mujoco.mjtObj.mjOBJ_KEY, menagerie.G1_KEYFRAME))
     mujoco.mj_kinematics(full, data)
     welded = [j for j in spec.joints if j.type == mujoco.mjtJoint.mjJNT_HINGE and not _is_leg(j.name)]
-    keep_q = [adr for j in range(full.njnt) if not any(w.name == full.joint(j).name for w in welded)
-              for adr in range(full.jnt_qposadr[j], full.jnt_qposadr[j] + (7 if full.jnt_type[j] == 0 else 1))]
-    keep_u = [a for a in range(full.nu) if full.actuator_trnid[a, 0] not in {full.joint(w.name).id for w in welded}]
+    welded_ids = {full.joint(j.name).id for j in welded}
+    welded_q = {full.jnt_qposadr[j] for j in welded_ids}  # hinges: one qpos entry each
+    keep_q = [adr for adr in range(full.nq) if adr not in welded_q]
+    keep_u = [a for a in range(full.nu) if full.actuator_trnid[a, 0] not in welded_ids]
     for joint in welded:
         body = joint.parent
         child = full.body(body.name).id
