@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-__all__ = ["BipedDescription", "LegChain", "LegSolution", "describe", "leg_fk", "leg_ik", "quat_matrix"]
+__all__ = ["BipedDescription", "LegChain", "LegSolution", "describe", "leg_fk", "leg_ik", "quat_matrix", "spd_solve"]
 
 SIDES = ("left", "right")
 LEG_DOF = 6
@@ -372,8 +372,8 @@ def spd_solve(a, b) -> jax.Array:
     regularisation there, and the result stays finite.
     """
     n = a.shape[-1]
-    floor = n * jnp.finfo(jnp.result_type(a)).eps * jnp.max(jnp.abs(jnp.diagonal(a)))
-    floor = jnp.maximum(floor, jnp.finfo(jnp.result_type(a)).tiny)
+    info = jnp.finfo(jnp.result_type(a))
+    floor = jnp.maximum(n * info.eps * jnp.max(jnp.abs(jnp.diagonal(a))), info.tiny)
     low = [[None] * n for _ in range(n)]
     for j in range(n):
         low[j][j] = jnp.sqrt(jnp.maximum(a[j, j] - sum(low[j][k] ** 2 for k in range(j)), floor))
