@@ -290,7 +290,8 @@ def test_walk_config_checks_every_field(name):
     ("contact_force", 0.0), ("dcm_gain", -3.0), ("descent_drop", -0.1), ("descent_drop", 1.5),
     ("descent_drop", "0.3"), ("descent_drop", True), ("filter_passes", -1), ("filter_passes", 1.5),
     ("filter_passes", True), ("com_offset", None), ("step_time", jnp.float32(0.8)), ("capture_gain", -1.0),
-    ("capture_gain", 4.5), ("capture_max", 0.0), ("capture_max", -0.05),
+    ("capture_gain", 4.5), ("capture_max", 0.0), ("capture_max", -0.05), ("swing_adjust", -0.5),
+    ("swing_adjust", 4.5),
 ])
 def test_walk_config_refuses_values_outside_their_range(name, bad):
     with pytest.raises(ValueError, match=rf"WalkConfig\.{name} "):
@@ -685,3 +686,62 @@ def test_the_exact_selector_measures_its_candidates_from_the_stance_moved_by_bal
     assert bool(ok) and bool(ok2) and int(c0.index) == int(c1.index)
     np.testing.assert_allclose(np.asarray(moved[:2]) - np.asarray(base[:2]), [0.03, -0.02], atol=1e-5)
     np.testing.assert_allclose(np.asarray(moved[2:]), np.asarray(base[2:]), atol=1e-6)
+
+
+@pytest.mark.parametrize("step_time, ds, lift, want", [(0.8, 0.1, 0.2, 22), (0.5, 0.1, 0.2, 14), (0.8, 0.99, 0.5, 79)])
+def test_the_step_adjustment_acts_at_the_end_of_the_lift(step_time, ds, lift, want):
+    """``ds_time + swing_lift * swing time`` in control ticks (0.224 s -> 22; the G1's 0.14 s -> 14), never past
+    the step's last tick."""
+    cfg = controller.WalkConfig(step_time=step_time, ds_fraction=ds, swing_lift=lift)
+    assert controller.adjust_tick(cfg) == want
+
+
+def test_shift_plan_moves_the_touch_down_and_the_zmp_on_it_and_after():
+    """The touch-down moves by (dx, dy) and comes down at z; the ZMP waypoints of the previous support and the
+    stance stay, the two on and after the moved foot move alike; the apex stays ``clearance`` above the new
+    touch-down (a profile: its last entry). A standing plan keeps its apex."""
+    cfg = controller.WalkConfig()
+    stance = jnp.array([0.0, -0.1, 0.0, 0.0, 0.0, 0.0])
+    swing_from = jnp.array([-0.2, 0.1, 0.0, 0.0, 0.0, 0.0])
+    pose = jnp.array([0.2, 0.1, 0.01, 0.0, 0.0, 0.0])
+    adjust = jnp.array([0.03, -0.02, 0.2])
+    for top in (jnp.float32(0.0), jnp.zeros(5, jnp.float32)):
+        plan = controller.plan_step(jnp.zeros(2), stance, swing_from, pose, True, 1.0, top, cfg.clearance)
+        moved = controller.shift_plan(cfg, plan, adjust)
+        np.testing.assert_allclose(moved.swing_to, [0.23, 0.08, 0.2, 0.0, 0.0, 0.0], atol=1e-7)
+        np.testing.assert_allclose(moved.zmp[:2], plan.zmp[:2])
+        np.testing.assert_allclose(moved.zmp[2:], plan.zmp[2:] + jnp.array([0.03, -0.02]), atol=1e-7)
+        np.testing.assert_allclose(jnp.ravel(moved.apex)[-1], 0.2 + cfg.clearance, atol=1e-7)
+        np.testing.assert_allclose(jnp.ravel(moved.apex)[:-1], jnp.ravel(plan.apex)[:-1])
+        assert moved.stance is plan.stance and moved.swing_from is plan.swing_from
+    standing = controller.plan_step(jnp.zeros(2), stance, swing_from, pose, False, 1.0, 0.0, cfg.clearance)
+    np.testing.assert_allclose(controller.shift_plan(cfg, standing, adjust).apex, standing.apex)
+
+
+@pytest.mark.parametrize("go", [True, False])
+def test_swing_shift_is_the_capture_points_lead_at_the_moved_soles_rest_height(sim, go):
+    """``WalkConfig.swing_adjust`` x (measured - LIPM capture point), at most ``capture_max``, in the plan's frame
+    (NumPy's closed form); the foot comes down at the rest height of the sole moved there in the world, whose
+    yaw differs from the plan's: the plan's +x is the world's -y here, and only a move toward -y reaches the
+    4 cm block beside the foothold (the terrain arrays say where it is). A standing step does not move."""
+    from types import SimpleNamespace
+
+    s = dataclasses.replace(sim, cfg=dataclasses.replace(sim.cfg, swing_adjust=3.0, capture_max=0.1))
+    heights = np.zeros(sim.shape, np.float32)
+    heights[:, :90] = 0.04  # y < 1.8 m (cell centres up to 1.79 m)
+    world = W.make_world(s, T.from_arrays(heights, resolution=0.02))
+    target = jnp.array([2.0, 1.886, 0.0, 0.0, 0.0, 0.0], jnp.float32)  # sole sides at y 1.83, 1.942: on the low part
+    yaw = np.pi / 2  # world -> plan
+    to_plan = kinematics.rot_z(jnp.float32(yaw))
+    plan = controller.plan_step(jnp.zeros(2), target, target, target, go, 1.0, 0.0, s.cfg.clearance)
+    step = SimpleNamespace(plan=plan, target=target, go=jnp.asarray(go), to_plan=to_plan)
+    lipm = np.array([[0.3, -0.1], [0.2, 0.05], [0.0, 0.0]], np.float32)
+    com = (jnp.asarray(lipm[0] + [0.01, 0.0]), jnp.asarray(lipm[1] + [0.0583, 0.0]))
+    got = np.asarray(W.swing_shift(s, world, step, SimpleCtrl(lipm), com))
+    omega = np.sqrt(9.81 / s.cfg.com_height)
+    want = 3.0 * np.array([0.01 + 0.0583 / omega, 0.0])  # 8 cm along the plan's x, within the 10 cm cap
+    if go:
+        np.testing.assert_allclose(got[:2], want, atol=2e-5)
+        assert got[2] == pytest.approx(0.04, abs=1e-6)  # moved 8 cm toward -y: its sides at 1.75, 1.862 m
+    else:
+        np.testing.assert_allclose(got, [0.0, 0.0, float(plan.swing_to[2])], atol=1e-7)

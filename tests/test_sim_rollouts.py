@@ -103,6 +103,28 @@ def test_capture_point_stepping_moves_pushed_steps_and_they_land_where_sent():
     assert 1e-3 < shift.max() <= sim.cfg.capture_max + 0.05  # moved; by at most the cap (+ the lattice's pick)
 
 
+@pytest.mark.slow
+def test_the_swing_adjustment_moves_pushed_touch_downs_within_the_step():
+    """``WalkConfig.swing_adjust`` (its own compiled walker): under the same 10 N s pushes, the first decision is
+    the default walker's (it follows a standing step), but pushed feet come down away from the selector's
+    footholds, by up to ``capture_max`` (the default walker lands within PLACEMENT_TOL of them), and no robot
+    falls."""
+    from ijoy_jax.sim.controller import WalkConfig
+
+    f = _tiny_walk.field()
+    sim = W.make_sim(f.shape, f.resolution, cfg=WalkConfig(swing_adjust=2.0), robot=ij.robots.hrp2(margin=0.02))
+    fields, robots, starts, commands, _ = _tiny_walk.inputs()
+    kw = dict(num_steps=_tiny_walk.STEPS, frames_per_step=_tiny_walk.FRAMES,
+              dynamics=physics.Dynamics(push=jnp.array([10.0, 10.0])), key=3)
+    args = (fields, robots, starts, commands)
+    moved = jax.tree_util.tree_map(np.asarray, W.rollout_batch(sim, *args, **kw))
+    plain = jax.tree_util.tree_map(np.asarray, W.rollout_batch(_tiny_walk.sim(), *args, **kw))
+    assert not moved.log.fallen.any() and moved.taken.all()
+    np.testing.assert_allclose(moved.commanded[:, 0], plain.commanded[:, 0], atol=1e-5)
+    assert plain.log.placement_error.max() < PLACEMENT_TOL
+    assert PLACEMENT_TOL < moved.log.placement_error.max() <= sim.cfg.capture_max + PLACEMENT_TOL
+
+
 def _bound_ends(name):
     """A field's two ends as float32 (the smallest float32 above a strict lower bound)."""
     b = physics.BOUNDS[name]

@@ -318,6 +318,30 @@ class TickState(NamedTuple):
     low: jax.Array  # () m, the lowest pelvis height above `Step.ground` so far
     tilt: jax.Array  # () rad, the largest torso tilt so far
     sent: jax.Array  # (latency ticks + 1, nu) the last joint targets, newest first
+    # (3,) the touch-down's move dx, dy (m, the plan's frame) and its new height z (m): WalkConfig.swing_adjust's
+    # (swing_shift), (0, 0, the planned height) until it acts; None while swing_adjust is 0
+    adjust: jax.Array | None = None
+
+
+def swing_shift(sim: Sim, world: World, step: Step, cs: controller.CtrlState, com) -> jax.Array:
+    """(3,) the swing foot's step adjustment (``WalkConfig.swing_adjust``): its touch-down moves by
+    ``swing_adjust`` times the divergent component of motion's error (:func:`ijoy_jax.sim.controller.dcm_error`,
+    the measured capture point minus the LIPM's), at most ``capture_max`` long, in the plan's frame (dx, dy,
+    m), and comes down at the resting height of the sole moved there (z, m; :func:`_rest`).
+
+    A robot running ahead of its plan within a step steps further that way before the foot comes down
+    (Englsberger 2015, Khadiv 2020's step adjustment), where :func:`balance_shift` waits for the next decision.
+    ``cs`` is the controller's state at the period's start, ``com`` the measured centre of mass (position,
+    velocity) in the plan's frame.
+    """
+    cfg = sim.cfg
+    shift = cfg.swing_adjust * controller.dcm_error(cfg, (cs.lipm[0], cs.lipm[1]), com)
+    norm = geometry.safe_norm(shift[0], shift[1])
+    shift = jnp.where(norm > cfg.capture_max, shift * (cfg.capture_max / jnp.maximum(norm, 1e-9)), shift)
+    shift = jnp.where(step.go, shift, 0.0)
+    moved = step.target.at[:2].add(step.to_plan[:2, :2].T @ shift)
+    z = jnp.where(step.go, _rest(sim, world, moved)[2], step.plan.swing_to[2])  # the plan's heights are the world's
+    return jnp.concatenate([shift, z[None]])
 
 
 def begin_step(sim: Sim, world: World, state: SimState, foothold, go) -> tuple[Step, TickState]:
@@ -382,7 +406,8 @@ def begin_step(sim: Sim, world: World, state: SimState, foothold, go) -> tuple[S
     # World -> the plan's frame: the planar transform that takes the measured stance sole onto the planned one.
     to_plan = kinematics.rot_z(pst[5] - st[5])
     step = Step(plan, target, go, st, pst, to_plan, ground, corr, kick_tick, dv, key, k_belief)
-    return step, TickState(s.data, cs, jnp.bool_(False), jnp.float32(jnp.inf), jnp.float32(0), s.sent)
+    adjust = None if cfg.swing_adjust == 0 else jnp.concatenate([jnp.zeros(2, jnp.float32), plan.swing_to[2:3]])
+    return step, TickState(s.data, cs, jnp.bool_(False), jnp.float32(jnp.inf), jnp.float32(0), s.sent, adjust)
 
 
 def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
@@ -401,14 +426,18 @@ def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
       k: () int, this tick's index in the step (0 to ``cfg.ticks_per_step - 1``).
     """
     params, cfg = sim.params, sim.cfg
-    d, cs, touched, low, tilt, sent = ticks
+    d, cs, touched, low, tilt, sent, adjust = ticks
     window = None if cfg.filter_passes == 0 else lax.dynamic_slice_in_dim(step.corr, k, cfg.horizon)
     st, pst, to_plan = step.stance, step.planned_stance, step.to_plan
     base = (to_plan @ (d.qpos[:3] - st[:3]) + pst[:3], to_plan @ kinematics.quat_to_rot(d.qpos[3:7]))
     c, v = centre_of_mass(sim, d)
     com = ((to_plan @ (c - st[:3]) + pst[:3])[:2], (to_plan @ v)[:2])
+    plan = step.plan
+    if adjust is not None:  # static: WalkConfig.swing_adjust is on
+        adjust = jnp.where(k == controller.adjust_tick(cfg), swing_shift(sim, world, step, cs, com), adjust)
+        plan = controller.shift_plan(cfg, plan, adjust)
     q, cs, _ = controller.control_tick(
-        params, cfg, world.gains, step.plan, cs, window, base, ankle_wrench(sim, d), com, world.delay * cfg.control_dt
+        params, cfg, world.gains, plan, cs, window, base, ankle_wrench(sim, d), com, world.delay * cfg.control_dt
     )
     sent = jnp.concatenate([q[None], sent[:-1]])
     q = sent[world.delay]  # what the actuators receive now: the targets of `delay` ticks ago
@@ -429,7 +458,7 @@ def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
         return (d, start, touched, low, tilt), None
 
     (d, start, touched, low, tilt), _ = lax.scan(step_physics, (d, step_start(d), touched, low, tilt), fractions)
-    return TickState(read_sensors(world.m, d, start), cs, touched, low, tilt, sent)
+    return TickState(read_sensors(world.m, d, start), cs, touched, low, tilt, sent, adjust)
 
 
 def end_step(
@@ -446,10 +475,11 @@ def end_step(
         lambda new, old: jnp.where(diverged, old, new), (d, ticks.ctrl, ticks.sent), (s.data, s.ctrl, s.sent)
     )
     pst = step.planned_stance
+    plan = step.plan if ticks.adjust is None else controller.shift_plan(sim.cfg, step.plan, ticks.adjust)
     soles = measured_soles(sim, d)
     left_swings = s.swing > 0
     landed = jnp.where(left_swings, soles[0], soles[1])
-    planned = jnp.where(left_swings, jnp.stack([step.plan.swing_to, pst]), jnp.stack([pst, step.plan.swing_to]))
+    planned = jnp.where(left_swings, jnp.stack([plan.swing_to, pst]), jnp.stack([pst, plan.swing_to]))
     fallen = s.last.fallen | (ticks.low < sim.fall_height) | (ticks.tilt > sim.fall_tilt) | diverged
     err = jnp.where(go, jnp.hypot(landed[0] - target[0], landed[1] - target[1]), 0.0)
     yaw_err = jnp.where(go, jnp.abs(geometry.wrap_angle(landed[5] - target[5])), 0.0)

@@ -70,6 +70,7 @@ _RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "land_ramp": (0.0, 1.0, False, True),
     "descent_drop": (0.0, 1.0, True, True),
     "capture_gain": (0.0, 4.0, True, True),
+    "swing_adjust": (0.0, 4.0, True, True),
     "com_offset": (-_INF, _INF, False, False),
 }
 
@@ -130,12 +131,22 @@ class WalkConfig:
         fall on rough ground (docs/walk_families.md, "Control delay and
         pushes", has the figures).
       capture_gain, capture_max: capture-point stepping (0 = off, which
-        compiles the walker without it): at each step's end the next step is
+        compiles the walker without it; ``capture_max`` also bounds
+        ``swing_adjust``'s shift): at each step's end the next step is
         moved by ``capture_gain`` times how far the measured capture point
         runs ahead of the LIPM's (:func:`dcm_error`), at most ``capture_max``
         metres, before the selector chooses its foothold on the terrain (the
         walker's ``StanceInfo.balance``): a robot pushed ahead of its plan
         steps further that way.
+      swing_adjust: the swing foot's step adjustment (0 = off, which compiles
+        the walker without it; :func:`ijoy_jax.sim.walker.swing_shift`): once
+        the swing foot has lifted (``ds_time`` plus ``swing_lift`` of the
+        swing, before it moves across), its touch-down and the ZMP plan after
+        it move by ``swing_adjust`` times the DCM error measured then, at most
+        ``capture_max`` metres, and the foot comes down at that point's
+        resting height. It answers within the step, where ``capture_gain``
+        waits for the next decision; the moved foothold is not the selector's
+        (no candidate check), so ``StepLog.placement_error`` counts the shift.
       stance_gain: the same feedback on the legs that carry the body (0 = the
         offsets only fade), low-passed with ``land_decay``: the soles are held
         partly level against the measured body tilt (foot compliance). Off by
@@ -208,6 +219,7 @@ class WalkConfig:
     descent_drop: float = 0.15
     capture_gain: float = 0.0
     capture_max: float = 0.05
+    swing_adjust: float = 0.0
 
     def __post_init__(self):
         # Every field is checked here, so dataclasses.replace is checked too: the config is static (hashed into
@@ -323,6 +335,26 @@ def prepare_plan(stance, swing_from, swing_side) -> StepPlan:
         swing_side=jnp.asarray(swing_side, jnp.float32),
         go=jnp.bool_(False),
     )
+
+
+def adjust_tick(cfg: WalkConfig) -> int:
+    """The control tick (0-based, within a step) at whose start ``WalkConfig.swing_adjust`` moves the swing
+    foot's touch-down: the end of its lift (``ds_time`` plus ``swing_lift`` of the swing), when it has risen
+    and not yet moved across."""
+    lift_end = cfg.ds_time + cfg.swing_lift * (cfg.step_time - cfg.ds_time)
+    return min(int(round(lift_end / cfg.control_dt)), cfg.ticks_per_step - 1)
+
+
+def shift_plan(cfg: WalkConfig, plan: StepPlan, adjust) -> StepPlan:
+    """``plan`` with its touch-down moved by ``adjust`` (3,) = (dx, dy, z) m: by (dx, dy) in the horizontal
+    plane, set at height z, the ZMP waypoints on that foot and after it moved alike, and the swing's apex
+    kept ``clearance`` above the new touch-down (``WalkConfig.swing_adjust``)."""
+    if plan.apex.ndim == 0:
+        apex = jnp.maximum(plan.apex, adjust[2] + cfg.clearance)
+    else:  # a profile along the path: its last entry is the touch-down's
+        apex = plan.apex.at[-1].max(adjust[2] + cfg.clearance)
+    return plan._replace(swing_to=plan.swing_to.at[:2].add(adjust[:2]).at[2].set(adjust[2]),
+                         zmp=plan.zmp.at[2:].add(adjust[:2]), apex=jnp.where(plan.go, apex, plan.apex))
 
 
 def swing_phase(cfg: WalkConfig, t) -> jax.Array:

@@ -73,6 +73,7 @@ from ijoy_jax.sim._step import (
     init_state,
     make_world,
     stance_info,
+    swing_shift,
     tick,
 )
 from ijoy_jax.targets import Targets
@@ -98,6 +99,7 @@ __all__ = [
     "init_state",
     "balance_shift",
     "stance_info",
+    "swing_shift",
     "Step",
     "TickState",
     "begin_step",
