@@ -724,8 +724,6 @@ def test_swing_shift_is_the_capture_points_lead_at_the_moved_soles_rest_height(s
     (NumPy's closed form); the foot comes down at the rest height of the sole moved there in the world, whose
     yaw differs from the plan's: the plan's +x is the world's -y here, and only a move toward -y reaches the
     4 cm block beside the foothold (the terrain arrays say where it is). A standing step does not move."""
-    from types import SimpleNamespace
-
     s = dataclasses.replace(sim, cfg=dataclasses.replace(sim.cfg, swing_adjust=3.0, capture_max=0.1))
     heights = np.zeros(sim.shape, np.float32)
     heights[:, :90] = 0.04  # y < 1.8 m (cell centres up to 1.79 m)
@@ -734,10 +732,9 @@ def test_swing_shift_is_the_capture_points_lead_at_the_moved_soles_rest_height(s
     yaw = np.pi / 2  # world -> plan
     to_plan = kinematics.rot_z(jnp.float32(yaw))
     plan = controller.plan_step(jnp.zeros(2), target, target, target, go, 1.0, 0.0, s.cfg.clearance)
-    step = SimpleNamespace(plan=plan, target=target, go=jnp.asarray(go), to_plan=to_plan)
     lipm = np.array([[0.3, -0.1], [0.2, 0.05], [0.0, 0.0]], np.float32)
     com = (jnp.asarray(lipm[0] + [0.01, 0.0]), jnp.asarray(lipm[1] + [0.0583, 0.0]))
-    got = np.asarray(W.swing_shift(s, world, step, SimpleCtrl(lipm), com))
+    got = np.asarray(W.swing_shift(s, world.phys, plan, target, to_plan, SimpleCtrl(lipm), com))
     omega = np.sqrt(9.81 / s.cfg.com_height)
     want = 3.0 * np.array([0.01 + 0.0583 / omega, 0.0])  # 8 cm along the plan's x, within the 10 cm cap
     if go:
@@ -745,3 +742,27 @@ def test_swing_shift_is_the_capture_points_lead_at_the_moved_soles_rest_height(s
         assert got[2] == pytest.approx(0.04, abs=1e-6)  # moved 8 cm toward -y: its sides at 1.75, 1.862 m
     else:
         np.testing.assert_allclose(got, [0.0, 0.0, float(plan.swing_to[2])], atol=1e-7)
+
+
+@pytest.mark.slow
+def test_the_native_robot_moves_a_pushed_swing_foot_as_the_mjx_walker(sim):
+    """The native robot makes ``WalkConfig.swing_adjust``'s move too (:attr:`native.Programs.adjust`, at the MJX
+    walker's tick): pushed forward (50 N on the pelvis through one step) its swing foot comes down further ahead
+    than the same robot's without the adjustment, by at most ``capture_max``, away from the foothold it was
+    sent to, where the robot without it lands within PLACEMENT_TOL of its foothold; neither falls."""
+    adjusted = dataclasses.replace(sim, cfg=dataclasses.replace(sim.cfg, swing_adjust=2.0))
+
+    def pushed(s):
+        walk = _Native(s)
+        walk.step((0.1, 0.19, 0.0))
+        walk.d.xfrc_applied[s.index.pelvis, 0] = 50.0  # 11 N s by the adjustment's tick (0.224 s)
+        err, fell = walk.step((0.1, 0.19, 0.0))  # the right foot swings
+        walk.d.xfrc_applied[s.index.pelvis, 0] = 0.0
+        _, fell_after = walk.step((0.1, 0.19, 0.0))
+        return float(walk.soles()[1][0]), err, fell or fell_after
+
+    x_plain, err_plain, fell_plain = pushed(sim)
+    x_moved, err_moved, fell_moved = pushed(adjusted)
+    assert not fell_plain and not fell_moved
+    assert err_plain < PLACEMENT_TOL < err_moved <= sim.cfg.capture_max + PLACEMENT_TOL
+    assert 0.02 < x_moved - x_plain <= sim.cfg.capture_max + PLACEMENT_TOL  # measured: 4.0 cm ahead

@@ -165,11 +165,11 @@ def make_world(
     return World(m, free, terrain, phys, dyn, dyn_invalid, delay, push_dv, controller.gains(cfg))
 
 
-def _rest(sim: Sim, world: World, foothold) -> jax.Array:
-    """The foothold (6,) with z where the tilted sole's spheres first touch the physical terrain."""
+def _rest(sim: Sim, phys: Terrain, foothold) -> jax.Array:
+    """The foothold (6,) with z where the tilted sole's spheres first touch the physical terrain ``phys``."""
     p = sim.params
     points = jnp.asarray(model.sole_points(p)[:, :2], jnp.float32)
-    return foothold.at[2].set(swing.resting_height(world.phys, foothold, p.foot_length, p.foot_width, points=points))
+    return foothold.at[2].set(swing.resting_height(phys, foothold, p.foot_length, p.foot_width, points=points))
 
 
 def _tilt_drop(sim: Sim, sole) -> jax.Array:
@@ -213,7 +213,7 @@ def init_state(
     params, cfg = sim.params, sim.cfg
     keep = frame_ticks(sim, frames_per_step)
     start = jnp.asarray(start, jnp.float32)
-    planned = jax.vmap(lambda p: _rest(sim, world, select.foothold(world.terrain, robot, p)))(start)
+    planned = jax.vmap(lambda p: _rest(sim, world.phys, select.foothold(world.terrain, robot, p)))(start)
     # the pelvis cfg.pelvis_height above the lower sole and the CoM above the soles, as the controller holds them
     qpos = bodies.stand_pose(
         params, start, planned[:, 2], jnp.min(planned[:, 2]) + cfg.pelvis_height,
@@ -323,24 +323,25 @@ class TickState(NamedTuple):
     adjust: jax.Array | None = None
 
 
-def swing_shift(sim: Sim, world: World, step: Step, cs: controller.CtrlState, com) -> jax.Array:
+def swing_shift(sim: Sim, phys: Terrain, plan: controller.StepPlan, target, to_plan, cs: controller.CtrlState,
+                com) -> jax.Array:
     """(3,) the swing foot's step adjustment (``WalkConfig.swing_adjust``): its touch-down moves by
-    ``swing_adjust`` times the divergent component of motion's error (:func:`ijoy_jax.sim.controller.dcm_error`,
-    the measured capture point minus the LIPM's), at most ``capture_max`` long, in the plan's frame (dx, dy,
-    m), and comes down at the resting height of the sole moved there (z, m; :func:`_rest`).
+    :func:`ijoy_jax.sim.controller.swing_adjustment` (``swing_adjust`` times the capture point's lead over the
+    LIPM's, at most ``capture_max``) in the plan's frame (dx, dy, m), and comes down at the resting height of
+    the sole moved there on the physical terrain ``phys`` (z, m); nothing moves when ``plan`` stands.
 
     A robot running ahead of its plan within a step steps further that way before the foot comes down
     (Englsberger 2015, Khadiv 2020's step adjustment), where :func:`balance_shift` waits for the next decision.
-    ``cs`` is the controller's state at the period's start, ``com`` the measured centre of mass (position,
-    velocity) in the plan's frame.
+
+    Args:
+      plan: the step's :class:`~ijoy_jax.sim.controller.StepPlan`; target: (6,) the foothold it was sent to,
+        resting on ``phys`` (world frame); to_plan: (3, 3) world -> the plan's frame (:attr:`Step.to_plan`).
+      cs: the controller's state at the period's start; com: the measured centre of mass (position (2,),
+        velocity (2,)) in the plan's frame (m, m/s).
     """
-    cfg = sim.cfg
-    shift = cfg.swing_adjust * controller.dcm_error(cfg, (cs.lipm[0], cs.lipm[1]), com)
-    norm = geometry.safe_norm(shift[0], shift[1])
-    shift = jnp.where(norm > cfg.capture_max, shift * (cfg.capture_max / jnp.maximum(norm, 1e-9)), shift)
-    shift = jnp.where(step.go, shift, 0.0)
-    moved = step.target.at[:2].add(step.to_plan[:2, :2].T @ shift)
-    z = jnp.where(step.go, _rest(sim, world, moved)[2], step.plan.swing_to[2])  # the plan's heights are the world's
+    shift = jnp.where(plan.go, controller.swing_adjustment(sim.cfg, cs, com), 0.0)
+    moved = jnp.asarray(target, jnp.float32).at[:2].add(to_plan[:2, :2].T @ shift)
+    z = jnp.where(plan.go, _rest(sim, phys, moved)[2], plan.swing_to[2])  # the plan's heights are the world's
     return jnp.concatenate([shift, z[None]])
 
 
@@ -362,7 +363,7 @@ def begin_step(sim: Sim, world: World, state: SimState, foothold, go) -> tuple[S
     st, sw = _split(s.soles, s.swing)
     pst, psw = _split(s.planned, s.swing)
     foothold = jnp.asarray(foothold, jnp.float32)
-    target = _rest(sim, world, foothold)
+    target = _rest(sim, world.phys, foothold)
     pose = target[PLANAR]
     # the sole's lowest corner clears the swept terrain by the clearance, whatever the soles' tilts
     top = swing.corridor_profile(world.phys, sw[PLANAR], pose, params.foot_length, params.foot_width) + jnp.maximum(
@@ -434,7 +435,8 @@ def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
     com = ((to_plan @ (c - st[:3]) + pst[:3])[:2], (to_plan @ v)[:2])
     plan = step.plan
     if adjust is not None:  # static: WalkConfig.swing_adjust is on
-        adjust = jnp.where(k == controller.adjust_tick(cfg), swing_shift(sim, world, step, cs, com), adjust)
+        now = swing_shift(sim, world.phys, plan, step.target, to_plan, cs, com)
+        adjust = jnp.where(k == controller.adjust_tick(cfg), now, adjust)
         plan = controller.shift_plan(cfg, plan, adjust)
     q, cs, _ = controller.control_tick(
         params, cfg, world.gains, plan, cs, window, base, ankle_wrench(sim, d), com, world.delay * cfg.control_dt

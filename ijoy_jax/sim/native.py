@@ -47,7 +47,7 @@ from ijoy_jax import control, geometry, select
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import bodies, controller, kinematics, model, swing
 from ijoy_jax.sim.stepped import SteppedBiped
-from ijoy_jax.sim.walker import PLANAR, Sim, StepLog, ankle_wrench, centre_of_mass, check_robot_for_sim
+from ijoy_jax.sim.walker import PLANAR, Sim, StepLog, ankle_wrench, centre_of_mass, check_robot_for_sim, swing_shift
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["NativeBiped", "Programs", "programs"]
@@ -64,6 +64,10 @@ class Programs:
       plan: ``(phys terrain, planned (2, 6), soles (2, 6), swing, anchor, foothold (6,), go, fresh)
         -> (StepPlan, target (6,))``: a step's plan, as the MJX walker's ``execute`` makes it.
       start: ``(phys terrain, robot, start (2, 3)) -> (2, 6)``: the start feet's soles resting on the ground.
+      adjust: ``(phys terrain, StepPlan, target (6,), to_plan (3, 3), ctrl state, com) -> StepPlan``: the plan
+        with the swing foot's step adjustment made (``WalkConfig.swing_adjust``, as the MJX walker's
+        :func:`~ijoy_jax.sim.walker.tick` makes it at :func:`~ijoy_jax.sim.controller.adjust_tick`); None while
+        it is off.
     """
 
     def __init__(self, sim: Sim):
@@ -104,6 +108,9 @@ class Programs:
             sim.mjx_free, params, cfg, pg, p, cs, cfg.filter_passes, init=controller.carry_correction(cfg, corr)))
         self.plan = jax.jit(plan)
         self.start = jax.jit(start)
+        self.adjust = None if not cfg.swing_adjust else jax.jit(
+            lambda phys, p, target, to_plan, cs, com: controller.shift_plan(
+                cfg, p, swing_shift(sim, phys, p, target, to_plan, cs, com)))
         self.gains = pg
 
 
@@ -267,6 +274,8 @@ class NativeBiped(SteppedBiped):
         com = (np.asarray((s["to_plan"] @ (c - s["st"][:3]) + s["pst"][:3])[:2], np.float32),
                np.asarray((s["to_plan"] @ v)[:2], np.float32))
         window = self.corr[s["k"]:s["k"] + n] if self.cfg.filter_passes else None
+        if self.programs.adjust is not None and s["k"] == controller.adjust_tick(self.cfg):
+            s["plan"] = self.programs.adjust(self.phys, s["plan"], s["target"], s["to_plan"], self.cs, com)
         q, self.cs, _ = self.programs.tick(s["plan"], self.cs, window, base, wrench, com)
         q0, q = d.ctrl.copy(), np.asarray(q)
         sub = self.sim.substeps
