@@ -144,7 +144,8 @@ class WalkConfig:
         swing, before it moves across), its touch-down and the ZMP plan after
         it move by ``swing_adjust`` times the DCM error measured then, at most
         ``capture_max`` metres, and the foot comes down at that point's
-        resting height. It answers within the step, where ``capture_gain``
+        resting height (the dynamics filter's correction stays the one of the
+        step as planned). It answers within the step, where ``capture_gain``
         waits for the next decision; the moved foothold is not the selector's
         (no candidate check), so ``StepLog.placement_error`` counts the shift.
       stance_gain: the same feedback on the legs that carry the body (0 = the
