@@ -278,9 +278,7 @@ def balance_shift(sim: Sim, d: mjx.Data, cs: controller.CtrlState, stance, plann
     c, v = centre_of_mass(sim, d)
     com = ((to_plan @ (c - stance[:3]) + planned_stance[:3])[:2], (to_plan @ v)[:2])
     err = controller.dcm_error(cfg, (cs.lipm[0], cs.lipm[1]), com)
-    shift = cfg.capture_gain * (to_plan[:2, :2].T @ err)
-    norm = geometry.safe_norm(shift[0], shift[1])
-    return jnp.where(norm > cfg.capture_max, shift * (cfg.capture_max / jnp.maximum(norm, 1e-9)), shift)
+    return controller.cap_shift(cfg, cfg.capture_gain * (to_plan[:2, :2].T @ err))
 
 
 def stance_info(state: SimState) -> control.StanceInfo:

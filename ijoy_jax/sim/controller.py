@@ -346,14 +346,19 @@ def adjust_tick(cfg: WalkConfig) -> int:
     return min(int(round(lift_end / cfg.control_dt)), cfg.ticks_per_step - 1)
 
 
+def cap_shift(cfg: WalkConfig, shift) -> jax.Array:
+    """A balance step's move ``shift`` (2,) m, at most ``capture_max`` long (then along the same direction): the
+    bound of capture-point stepping and of the swing foot's step adjustment alike."""
+    norm = geometry.safe_norm(shift[0], shift[1])
+    return jnp.where(norm > cfg.capture_max, shift * (cfg.capture_max / jnp.maximum(norm, 1e-9)), shift)
+
+
 def swing_adjustment(cfg: WalkConfig, cs: CtrlState, com) -> jax.Array:
     """(2,) m: how far ``WalkConfig.swing_adjust`` moves the swing foot's touch-down, ``swing_adjust`` times the
     capture point's lead over the LIPM's (:func:`dcm_error`; ``cs`` the state at the period's start, ``com`` the
     measured centre of mass (position (2,), velocity (2,)), m and m/s, in the plan's frame), at most
-    ``capture_max`` long (then along the same direction)."""
-    shift = cfg.swing_adjust * dcm_error(cfg, (cs.lipm[0], cs.lipm[1]), com)
-    norm = geometry.safe_norm(shift[0], shift[1])
-    return jnp.where(norm > cfg.capture_max, shift * (cfg.capture_max / jnp.maximum(norm, 1e-9)), shift)
+    ``capture_max`` long (:func:`cap_shift`)."""
+    return cap_shift(cfg, cfg.swing_adjust * dcm_error(cfg, (cs.lipm[0], cs.lipm[1]), com))
 
 
 def shift_plan(cfg: WalkConfig, plan: StepPlan, adjust) -> StepPlan:
