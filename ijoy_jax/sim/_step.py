@@ -433,8 +433,10 @@ def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
     com = ((to_plan @ (c - st[:3]) + pst[:3])[:2], (to_plan @ v)[:2])
     plan = step.plan
     if adjust is not None:  # static: WalkConfig.swing_adjust is on
-        now = swing_shift(sim, world.phys, plan, step.target, to_plan, cs, com)
-        adjust = jnp.where(k == controller.adjust_tick(cfg), now, adjust)
+        # computed at its one tick only (the tick index is the rollout's scan counter, the same for every robot
+        # of a batch, so the cond stays a branch under vmap)
+        adjust = lax.cond(k == controller.adjust_tick(cfg),
+                          lambda: swing_shift(sim, world.phys, plan, step.target, to_plan, cs, com), lambda: adjust)
         plan = controller.shift_plan(cfg, plan, adjust)
     q, cs, _ = controller.control_tick(
         params, cfg, world.gains, plan, cs, window, base, ankle_wrench(sim, d), com, world.delay * cfg.control_dt
