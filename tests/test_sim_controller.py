@@ -766,3 +766,27 @@ def test_the_native_robot_moves_a_pushed_swing_foot_as_the_mjx_walker(sim):
     assert not fell_plain and not fell_moved
     assert err_plain < PLACEMENT_TOL < err_moved <= sim.cfg.capture_max + PLACEMENT_TOL
     assert 0.02 < x_moved - x_plain <= sim.cfg.capture_max + PLACEMENT_TOL  # measured: 4.0 cm ahead
+
+
+_finite = st.floats(-5.0, 5.0, allow_nan=False, width=32)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(_finite, min_size=3, max_size=3), st.lists(_finite, min_size=6, max_size=6),
+       st.lists(_finite, min_size=6, max_size=6))
+def test_plan_frame_position_moves_the_point_with_the_stance_horizontally_and_keeps_the_worlds_height(p, st_, pst):
+    """Horizontally the rigid planar motion that takes the measured stance sole onto the planned one (NumPy's
+    rotation about z by the yaw difference); the height is the point's own world height, whatever the measured
+    stance's height: a stance sole measured hovering or sunk by millimetres moves nothing up or down (anchored
+    on it, the G1 turning in place landed 1.3 mm higher with each step and fell)."""
+    p, st_, pst = (np.asarray(a, np.float32) for a in (p, st_, pst))
+    to_plan = kinematics.rot_z(jnp.float32(pst[5] - st_[5]))
+    got = np.asarray(W.plan_frame_position(jnp.asarray(p), jnp.asarray(st_), jnp.asarray(pst), to_plan))
+    c, s = np.cos(float(pst[5]) - float(st_[5])), np.sin(float(pst[5]) - float(st_[5]))
+    d = p[:2].astype(np.float64) - st_[:2]
+    want = np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]]) + pst[:2]
+    np.testing.assert_allclose(got[:2], want, atol=1e-5)  # float32 sums of |terms| <= 20 m: 1e-5 m
+    assert got[2] == p[2]
+    moved = np.asarray(W.plan_frame_position(jnp.asarray(p), jnp.asarray(st_).at[2].add(0.005), jnp.asarray(pst),
+                                             to_plan))
+    np.testing.assert_array_equal(moved, got)

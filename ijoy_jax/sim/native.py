@@ -47,7 +47,16 @@ from ijoy_jax import control, geometry, select
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import bodies, controller, kinematics, model, swing
 from ijoy_jax.sim.stepped import SteppedBiped
-from ijoy_jax.sim.walker import PLANAR, Sim, StepLog, ankle_wrench, centre_of_mass, check_robot_for_sim, swing_shift
+from ijoy_jax.sim.walker import (
+    PLANAR,
+    Sim,
+    StepLog,
+    ankle_wrench,
+    centre_of_mass,
+    check_robot_for_sim,
+    plan_frame_position,
+    swing_shift,
+)
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["NativeBiped", "Programs", "programs"]
@@ -266,7 +275,7 @@ class NativeBiped(SteppedBiped):
         if s is None:
             raise RuntimeError("no step in progress: call begin() first")
         d, idx, n = self.d, self.sim.index, self.cfg.horizon
-        base = (s["to_plan"] @ (d.qpos[:3] - s["st"][:3]) + s["pst"][:3],
+        base = (plan_frame_position(d.qpos[:3], s["st"], s["pst"], s["to_plan"]),
                 s["to_plan"] @ d.xmat[idx.pelvis].reshape(3, 3))
         base = tuple(np.asarray(b, np.float32) for b in base)
         wrench = np.asarray(ankle_wrench(self.sim, d), np.float32)
