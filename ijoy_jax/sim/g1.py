@@ -64,9 +64,10 @@ project's biped's):
 * ``swing_adjust`` 1: the swing foot's step adjustment on (off for the biped): once the foot has lifted, its
   touch-down moves by the capture point's lead measured then (at most ``capture_max``), where capture-point
   stepping waits for the next step. 1024 G1s x 30 steps on one H200, against the same walker without it
-  (fell; progress m, the perfect robot's in brackets): held forward on flat ground 0 % (0.29 %; 2.97 m, 2.57 m
-  [2.95]), up and down slopes to 6 deg 0 % (5 %, 0.94 %), random commands on flat ground 69 % (93 %),
-  held forward on ``rough`` 86 % (86 %; 0.47 m, 0.20 m [0.70]). A gain of 2 fell less under random commands
+  (measured before the plan's heights were the world's, :func:`ijoy_jax.sim.walker.plan_frame_position`; fell;
+  progress m, the perfect robot's in brackets): held forward on flat ground 0 % (0.29 %; 2.97 m, 2.57 m [2.95]),
+  up and down slopes to 6 deg 0 % (5 %, 0.94 %), random commands on flat ground 69 % (93 %), held forward on
+  ``rough`` 86 % (86 %; 0.47 m, 0.20 m [0.70]). A gain of 2 fell less under random commands
   (50 %) but more on ``rough`` (97 %) and outran the command held forward (3.40 m); the placement error
   counts the moved footholds (p95 2.1 cm on flat ground at 1, 4.4 cm at 2).
 
