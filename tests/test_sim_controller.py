@@ -790,3 +790,8 @@ def test_plan_frame_position_moves_the_point_with_the_stance_horizontally_and_ke
     moved = np.asarray(W.plan_frame_position(jnp.asarray(p), jnp.asarray(st_).at[2].add(0.005), jnp.asarray(pst),
                                              to_plan))
     np.testing.assert_array_equal(moved, got)
+    # the native robot's host-side tick passes NumPy arrays and gets NumPy back, the same values
+    host = W.plan_frame_position(p.astype(np.float64), st_.astype(np.float64), pst.astype(np.float64),
+                                 np.asarray(to_plan, np.float64))
+    assert isinstance(host, np.ndarray)
+    np.testing.assert_allclose(host, got, atol=1e-5)

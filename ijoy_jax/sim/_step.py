@@ -265,7 +265,8 @@ def init_state(
 def plan_frame_position(p, stance, planned_stance, to_plan) -> jax.Array:
     """(3,) a measured world point ``p`` (3,) in the plan's frame: horizontally, moved with the measured stance
     sole ``stance`` (6,) onto the one the controller commanded, ``planned_stance`` (6,), through ``to_plan``
-    (3, 3) (:attr:`Step.to_plan`); its height stays the world's.
+    (3, 3) (:attr:`Step.to_plan`); its height stays the world's. NumPy arrays in, a NumPy array out (the native
+    robot's control tick, on the host); JAX arrays otherwise.
 
     The plan's heights are the terrain's: every foothold rests on the height map as it is. Anchored on the
     stance sole's height as measured when the step began (just after its touch-down, before it carries the
@@ -273,11 +274,12 @@ def plan_frame_position(p, stance, planned_stance, to_plan) -> jax.Array:
     off by as much, relative to a frame that the next step anchored on that landing again: an integrator. The
     G1 turning in place at 0.7 rad/s landed each foot about 1.3 mm higher than the last, until a foot touched
     down in the air and the robot fell after 8-10 steps; with the world's height it turned 14 steps
-    without falling, and 1024 G1s x 30 steps fell less under random commands (69 % -> 49 %) and held forward
-    on ``rough`` (86 % -> 53 %) on one H200.
+    without falling, and 1024 G1s x 30 steps fell less under random commands (69 % -> 50 %) and held forward
+    on ``rough`` (86 % -> 55 %) on one H200.
     """
     xy = (to_plan @ (p - stance[:3]) + planned_stance[:3])[:2]
-    return jnp.concatenate([xy, p[2:3]])
+    xp = np if isinstance(xy, np.ndarray) else jnp
+    return xp.concatenate([xy, p[2:3]])
 
 
 def balance_shift(sim: Sim, d: mjx.Data, cs: controller.CtrlState, stance, planned_stance) -> jax.Array:
