@@ -263,10 +263,10 @@ def init_state(
 
 
 def plan_frame_position(p, stance, planned_stance, to_plan) -> jax.Array:
-    """(3,) a measured world point ``p`` (3,) in the plan's frame: horizontally, moved with the measured stance
-    sole ``stance`` (6,) onto the one the controller commanded, ``planned_stance`` (6,), through ``to_plan``
-    (3, 3) (:attr:`Step.to_plan`); its height stays the world's. NumPy arrays in, a NumPy array out (the native
-    robot's control tick, on the host); JAX arrays otherwise.
+    """(3,) a measured world point ``p`` (3,) (the pelvis, the centre of mass) in the plan's frame: horizontally,
+    moved with the measured stance sole ``stance`` (6,) onto the one the controller commanded, ``planned_stance``
+    (6,), through ``to_plan`` (3, 3) (:attr:`Step.to_plan`); its height stays the world's. NumPy arrays in, a
+    NumPy array out (the native robot's control tick, on the host); JAX arrays otherwise.
 
     The plan's heights are the terrain's: every foothold rests on the height map as it is. Anchored on the
     stance sole's height as measured when the step began (just after its touch-down, before it carries the
@@ -296,7 +296,7 @@ def balance_shift(sim: Sim, d: mjx.Data, cs: controller.CtrlState, stance, plann
     cfg = sim.cfg
     to_plan = kinematics.rot_z(planned_stance[5] - stance[5])
     c, v = centre_of_mass(sim, d)
-    com = ((to_plan @ (c - stance[:3]) + planned_stance[:3])[:2], (to_plan @ v)[:2])
+    com = (plan_frame_position(c, stance, planned_stance, to_plan)[:2], (to_plan @ v)[:2])
     err = controller.dcm_error(cfg, (cs.lipm[0], cs.lipm[1]), com)
     return controller.cap_shift(cfg, cfg.capture_gain * (to_plan[:2, :2].T @ err))
 
@@ -450,7 +450,7 @@ def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
     st, pst, to_plan = step.stance, step.planned_stance, step.to_plan
     base = (plan_frame_position(d.qpos[:3], st, pst, to_plan), to_plan @ kinematics.quat_to_rot(d.qpos[3:7]))
     c, v = centre_of_mass(sim, d)
-    com = ((to_plan @ (c - st[:3]) + pst[:3])[:2], (to_plan @ v)[:2])
+    com = (plan_frame_position(c, st, pst, to_plan)[:2], (to_plan @ v)[:2])
     plan = step.plan
     if adjust is not None:  # static: WalkConfig.swing_adjust is on
         # computed at its one tick only (the tick index is the rollout's scan counter, the same for every robot

@@ -280,7 +280,7 @@ class NativeBiped(SteppedBiped):
         base = tuple(np.asarray(b, np.float32) for b in base)
         wrench = np.asarray(ankle_wrench(self.sim, d), np.float32)
         c, v = centre_of_mass(self.sim, d)
-        com = (np.asarray((s["to_plan"] @ (c - s["st"][:3]) + s["pst"][:3])[:2], np.float32),
+        com = (np.asarray(plan_frame_position(c, s["st"], s["pst"], s["to_plan"])[:2], np.float32),
                np.asarray((s["to_plan"] @ v)[:2], np.float32))
         window = self.corr[s["k"]:s["k"] + n] if self.cfg.filter_passes else None
         if self.programs.adjust is not None and s["k"] == controller.adjust_tick(self.cfg):
