@@ -46,7 +46,7 @@ LEG_KP = {"hip_pitch": 8000.0, "hip_roll": 8000.0, "hip_yaw": 4000.0, "knee": 80
 x0.25; all stable at the 2 ms timestep with the G1's own armatures)."""
 
 WALK = {"pelvis_height": 0.72, "step_time": G1_STEP_TIME, "filter_passes": 2, "clearance": 0.03,
-        "capture_gain": 2.0, "capture_max": 0.08, "swing_adjust": 1.0}
+        "capture_gain": 2.0, "capture_max": 0.08, "swing_adjust": 1.0, "dcm_gain": 1.5}
 """The ``WalkConfig`` fields the G1 walks with (:func:`ijoy_jax.sim.bodies.walk_defaults`; the others are the
 project's biped's):
 
@@ -69,7 +69,17 @@ project's biped's):
   up and down slopes to 6 deg 0 % (5 %, 0.94 %), random commands on flat ground 69 % (93 %), held forward on
   ``rough`` 86 % (86 %; 0.47 m, 0.20 m [0.70]). A gain of 2 fell less under random commands
   (50 %) but more on ``rough`` (97 %) and outran the command held forward (3.40 m); the placement error
-  counts the moved footholds (p95 2.1 cm on flat ground at 1, 4.4 cm at 2).
+  counts the moved footholds (p95 2.1 cm on flat ground at 1, 4.4 cm at 2);
+* ``dcm_gain`` 1.5 (the biped's 3): half the DCM feedback the ankles' damping control steers by. Traced tick by
+  tick while turning in place, the stance foot's ground force swings between 0 and twice the weight at
+  12-15 Hz (the robot's vertical mode on its stiff servos: about 17 Hz standing on both feet); the feedback's
+  measured capture point carries that oscillation into the centre of pressure: the force's standard deviation
+  within a step averaged 129 N at 3, 81 N at 1.5 and 81 N at 0 (10 steps, CPU). 1024 G1s x 30 steps on one
+  H200 (fell, against 3 in the previous commit's runs): random commands on flat ground 43 % (50 %; 0: 36 %),
+  held forward on ``rough`` 55 % (55 %; 0: 71 %) with 0.60 m of progress (0.51 m), on 2D clutter 61 % (64 %),
+  up and down slopes 1.0 % and 6.0 % (1.7 %, 8.9 %; to 6 deg 0 % either way), on flat ground 0 % (0 %; 2.67 m
+  of 2.95, against 2.87). A smaller gain trades the rough ground for flat ground's random commands; low-passing
+  the DCM error did not help (BENCHMARKS.md, "The DCM feedback's gain").
 
 BENCHMARKS.md ("The Unitree G1 in MJX") has the batch figures.
 """
