@@ -282,6 +282,14 @@ def plan_frame_position(p, stance, planned_stance, to_plan) -> jax.Array:
     return xp.concatenate([xy, p[2:3]])
 
 
+def plan_frame_com(sim: Sim, d, stance, planned_stance, to_plan) -> tuple[jax.Array, jax.Array]:
+    """The measured centre of mass in the plan's frame, as the DCM feedback reads it: its position (2,) m
+    (:func:`plan_frame_position`) and velocity (2,) m/s (turned by ``to_plan``), horizontal parts. ``d`` is MJX's
+    or MuJoCo's data (NumPy in, NumPy out, as :func:`plan_frame_position`)."""
+    c, v = centre_of_mass(sim, d)
+    return plan_frame_position(c, stance, planned_stance, to_plan)[:2], (to_plan @ v)[:2]
+
+
 def balance_shift(sim: Sim, d: mjx.Data, cs: controller.CtrlState, stance, planned_stance) -> jax.Array:
     """(2,) m, world frame: how far the next step moves for balance, ``WalkConfig.capture_gain`` times the
     divergent component of motion's error (:func:`ijoy_jax.sim.controller.dcm_error`: the measured capture point
@@ -295,8 +303,7 @@ def balance_shift(sim: Sim, d: mjx.Data, cs: controller.CtrlState, stance, plann
     """
     cfg = sim.cfg
     to_plan = kinematics.rot_z(planned_stance[5] - stance[5])
-    c, v = centre_of_mass(sim, d)
-    com = (plan_frame_position(c, stance, planned_stance, to_plan)[:2], (to_plan @ v)[:2])
+    com = plan_frame_com(sim, d, stance, planned_stance, to_plan)
     err = controller.dcm_error(cfg, (cs.lipm[0], cs.lipm[1]), com)
     return controller.cap_shift(cfg, cfg.capture_gain * (to_plan[:2, :2].T @ err))
 
@@ -449,8 +456,7 @@ def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
     window = None if cfg.filter_passes == 0 else lax.dynamic_slice_in_dim(step.corr, k, cfg.horizon)
     st, pst, to_plan = step.stance, step.planned_stance, step.to_plan
     base = (plan_frame_position(d.qpos[:3], st, pst, to_plan), to_plan @ kinematics.quat_to_rot(d.qpos[3:7]))
-    c, v = centre_of_mass(sim, d)
-    com = (plan_frame_position(c, st, pst, to_plan)[:2], (to_plan @ v)[:2])
+    com = plan_frame_com(sim, d, st, pst, to_plan)
     plan = step.plan
     if adjust is not None:  # static: WalkConfig.swing_adjust is on
         # computed at its one tick only (the tick index is the rollout's scan counter, the same for every robot

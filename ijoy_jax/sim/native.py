@@ -54,6 +54,7 @@ from ijoy_jax.sim.walker import (
     ankle_wrench,
     centre_of_mass,
     check_robot_for_sim,
+    plan_frame_com,
     plan_frame_position,
     swing_shift,
 )
@@ -279,9 +280,7 @@ class NativeBiped(SteppedBiped):
                 s["to_plan"] @ d.xmat[idx.pelvis].reshape(3, 3))
         base = tuple(np.asarray(b, np.float32) for b in base)
         wrench = np.asarray(ankle_wrench(self.sim, d), np.float32)
-        c, v = centre_of_mass(self.sim, d)
-        com = (np.asarray(plan_frame_position(c, s["st"], s["pst"], s["to_plan"])[:2], np.float32),
-               np.asarray((s["to_plan"] @ v)[:2], np.float32))
+        com = tuple(np.asarray(x, np.float32) for x in plan_frame_com(self.sim, d, s["st"], s["pst"], s["to_plan"]))
         window = self.corr[s["k"]:s["k"] + n] if self.cfg.filter_passes else None
         if self.programs.adjust is not None and s["k"] == controller.adjust_tick(self.cfg):
             s["plan"] = self.programs.adjust(self.phys, s["plan"], s["target"], s["to_plan"], self.cs, com)
