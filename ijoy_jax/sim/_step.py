@@ -165,7 +165,7 @@ def make_world(
     return World(m, free, terrain, phys, dyn, dyn_invalid, delay, push_dv, controller.gains(cfg))
 
 
-def _rest(sim: Sim, phys: Terrain, foothold) -> jax.Array:
+def resting_foothold(sim: Sim, phys: Terrain, foothold) -> jax.Array:
     """The foothold (6,) with z where the tilted sole's spheres first touch the physical terrain ``phys``."""
     p = sim.params
     points = jnp.asarray(model.sole_points(p)[:, :2], jnp.float32)
@@ -213,7 +213,7 @@ def init_state(
     params, cfg = sim.params, sim.cfg
     keep = frame_ticks(sim, frames_per_step)
     start = jnp.asarray(start, jnp.float32)
-    planned = jax.vmap(lambda p: _rest(sim, world.phys, select.foothold(world.terrain, robot, p)))(start)
+    planned = jax.vmap(lambda p: resting_foothold(sim, world.phys, select.foothold(world.terrain, robot, p)))(start)
     # the pelvis cfg.pelvis_height above the lower sole and the CoM above the soles, as the controller holds them
     qpos = bodies.stand_pose(
         params, start, planned[:, 2], jnp.min(planned[:, 2]) + cfg.pelvis_height,
@@ -366,8 +366,47 @@ def swing_shift(sim: Sim, phys: Terrain, plan: controller.StepPlan, target, to_p
     """
     shift = jnp.where(plan.go, controller.swing_adjustment(sim.cfg, cs, com), 0.0)
     moved = jnp.asarray(target, jnp.float32).at[:2].add(to_plan[:2, :2].T @ shift)
-    z = jnp.where(plan.go, _rest(sim, phys, moved)[2], plan.swing_to[2])  # the plan's heights are the world's
+    # the plan's heights are the world's
+    z = jnp.where(plan.go, resting_foothold(sim, phys, moved)[2], plan.swing_to[2])
     return jnp.concatenate([shift, z[None]])
+
+
+def plan_to(sim: Sim, phys: Terrain, soles, planned, swing_side, anchor, foothold, go, fresh,
+            belief=None) -> tuple[controller.StepPlan, jax.Array]:
+    """The step to the selector's ``foothold`` (6,) x, y, z, roll, pitch, yaw, in the controller's own frame: the
+    plan of :func:`begin_step` and of the biped stepped tick by tick (:mod:`ijoy_jax.sim.native`).
+
+    The foothold rests on the physical terrain ``phys`` (:func:`resting_foothold`); the swing path clears the
+    swept terrain by the clearance, whatever the soles' tilts. The step, taken relative to the measured stance
+    sole (as the robot believes it: moved by ``belief`` (2,) m, its position error; None: none), is applied to
+    the commanded one, so the plan stays continuous (no jump to the measured soles' millimetres) and the foot
+    lands where the selector chose relative to where the stance foot really is. A ``fresh`` robot gets the
+    warm-up plan (:func:`ijoy_jax.sim.controller.prepare_plan`).
+
+    Args:
+      soles, planned: (2, 6) the measured and the commanded soles (row 0 left); swing_side: () +1 if the left
+        foot swings; anchor: (2,) the previous support; go: () bool, False to stand; fresh: () bool.
+
+    Returns:
+      ``(plan, target)``: the :class:`~ijoy_jax.sim.controller.StepPlan` and the foothold resting on ``phys``
+      (world frame).
+    """
+    params, cfg = sim.params, sim.cfg
+    st, sw = _split(soles, swing_side)
+    pst, psw = _split(planned, swing_side)
+    target = resting_foothold(sim, phys, jnp.asarray(foothold, jnp.float32))
+    pose = target[PLANAR]
+    top = swing.corridor_profile(phys, sw[PLANAR], pose, params.foot_length, params.foot_width) + jnp.maximum(
+        _tilt_drop(sim, psw), _tilt_drop(sim, target)
+    )
+    stance = st[PLANAR] if belief is None else st[PLANAR].at[:2].add(belief)
+    planar = geometry.compose(pst[PLANAR], geometry.relative(stance, pose))
+    ptarget = jnp.concatenate([planar[:2], target[2:5], planar[2:]])
+    plan = controller.plan_step(anchor, pst, psw, ptarget, go, swing_side, top, cfg.clearance)
+    plan = jax.tree_util.tree_map(
+        lambda a, b: jnp.where(fresh, a, b), controller.prepare_plan(pst, psw, swing_side), plan
+    )
+    return plan, target
 
 
 def begin_step(sim: Sim, world: World, state: SimState, foothold, go) -> tuple[Step, TickState]:
@@ -385,26 +424,9 @@ def begin_step(sim: Sim, world: World, state: SimState, foothold, go) -> tuple[S
     params, cfg = sim.params, sim.cfg
     s = state
     go = jnp.asarray(go) & ~s.last.fallen & ~s.fresh
-    st, sw = _split(s.soles, s.swing)
-    pst, psw = _split(s.planned, s.swing)
-    foothold = jnp.asarray(foothold, jnp.float32)
-    target = _rest(sim, world.phys, foothold)
-    pose = target[PLANAR]
-    # the sole's lowest corner clears the swept terrain by the clearance, whatever the soles' tilts
-    top = swing.corridor_profile(world.phys, sw[PLANAR], pose, params.foot_length, params.foot_width) + jnp.maximum(
-        _tilt_drop(sim, psw), _tilt_drop(sim, target)
-    )
-    # The step relative to the measured stance foot, applied to the commanded one: the plan stays
-    # continuous (no jump to the measured soles' millimetres), the foot lands where the selector chose
-    # relative to where the stance foot really is (as the robot believes it: with stance noise, off by
-    # the error the decision was given).
-    rel = geometry.relative(_believed(st[PLANAR], s), pose)
-    planar = geometry.compose(pst[PLANAR], rel)
-    ptarget = jnp.concatenate([planar[:2], target[2:5], planar[2:]])
-    plan = controller.plan_step(s.anchor, pst, psw, ptarget, go, s.swing, top, cfg.clearance)
-    plan = jax.tree_util.tree_map(
-        lambda a, b: jnp.where(s.fresh, a, b), controller.prepare_plan(pst, psw, s.swing), plan
-    )
+    plan, target = plan_to(sim, world.phys, s.soles, s.planned, s.swing, s.anchor, foothold, go, s.fresh, s.belief)
+    st, _ = _split(s.soles, s.swing)
+    pst = plan.stance
     key, k_belief, k_tick, k_dir = jax.random.split(s.key, 4)
     angle = jax.random.uniform(k_dir, (), jnp.float32, 0.0, 2 * jnp.pi)
     dv = jnp.where(s.fresh, 0.0, world.push_dv) * jnp.stack([jnp.cos(angle), jnp.sin(angle)])

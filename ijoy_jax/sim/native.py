@@ -45,7 +45,7 @@ import numpy as np
 
 from ijoy_jax import control, geometry, select
 from ijoy_jax.robots import LEFT, Robot
-from ijoy_jax.sim import bodies, controller, kinematics, model, swing
+from ijoy_jax.sim import bodies, controller, kinematics, model
 from ijoy_jax.sim.stepped import SteppedBiped
 from ijoy_jax.sim.walker import (
     PLANAR,
@@ -56,6 +56,8 @@ from ijoy_jax.sim.walker import (
     check_robot_for_sim,
     plan_frame_com,
     plan_frame_position,
+    plan_to,
+    resting_foothold,
     swing_shift,
 )
 from ijoy_jax.terrain import Terrain
@@ -72,7 +74,8 @@ class Programs:
         :func:`ijoy_jax.sim.controller.control_tick` with the Sim's parameters.
       filter: ``(plan, ctrl state, previous correction) -> correction``: the dynamics filter, warm-started.
       plan: ``(phys terrain, planned (2, 6), soles (2, 6), swing, anchor, foothold (6,), go, fresh)
-        -> (StepPlan, target (6,))``: a step's plan, as the MJX walker's ``execute`` makes it.
+        -> (StepPlan, target (6,))``: a step's plan, the MJX walker's own (:func:`ijoy_jax.sim.walker.plan_to`,
+        without stance noise).
       start: ``(phys terrain, robot, start (2, 3)) -> (2, 6)``: the start feet's soles resting on the ground.
       adjust: ``(phys terrain, StepPlan, target (6,), to_plan (3, 3), ctrl state, com) -> StepPlan``: the plan
         with the swing foot's step adjustment made (``WalkConfig.swing_adjust``, as the MJX walker's
@@ -83,34 +86,13 @@ class Programs:
     def __init__(self, sim: Sim):
         params, cfg = sim.params, sim.cfg
         pg = controller.gains(cfg)
-        foot = (params.foot_length, params.foot_width)
-        points = jnp.asarray(model.sole_points(params)[:, :2], jnp.float32)
-
-        def rest(phys, foothold):
-            return foothold.at[2].set(swing.resting_height(phys, foothold, *foot, points=points))
-
-        def tilt_drop(sole):
-            return 0.5 * foot[0] * jnp.abs(jnp.sin(sole[4])) + 0.5 * foot[1] * jnp.abs(jnp.sin(sole[3]))
 
         def plan(phys, planned, soles, swing_side, anchor, foothold, go, fresh):
-            left_swings = swing_side > 0
-            st, sw = (jnp.where(left_swings, soles[1], soles[0]), jnp.where(left_swings, soles[0], soles[1]))
-            pst, psw = (jnp.where(left_swings, planned[1], planned[0]),
-                        jnp.where(left_swings, planned[0], planned[1]))
-            target = rest(phys, jnp.asarray(foothold, jnp.float32))
-            pose = target[PLANAR]
-            top = (swing.corridor_profile(phys, sw[PLANAR], pose, *foot)
-                   + jnp.maximum(tilt_drop(psw), tilt_drop(target)))
-            rel = geometry.relative(st[PLANAR], pose)
-            planar = geometry.compose(pst[PLANAR], rel)
-            ptarget = jnp.concatenate([planar[:2], target[2:5], planar[2:]])
-            p = controller.plan_step(anchor, pst, psw, ptarget, go & ~fresh, swing_side, top, cfg.clearance)
-            p = jax.tree_util.tree_map(lambda a, b: jnp.where(fresh, a, b),
-                                       controller.prepare_plan(pst, psw, swing_side), p)
-            return p, target
+            return plan_to(sim, phys, soles, planned, swing_side, anchor, foothold, go & ~fresh, fresh)
 
         def start(phys, robot, feet):
-            return jax.vmap(lambda f: rest(phys, select.foothold(phys, robot, f)))(jnp.asarray(feet, jnp.float32))
+            return jax.vmap(lambda f: resting_foothold(sim, phys, select.foothold(phys, robot, f)))(
+                jnp.asarray(feet, jnp.float32))
 
         self.tick = jax.jit(lambda p, cs, window, base, wrench, com: controller.control_tick(
             params, cfg, pg, p, cs, window, base, wrench, com))
