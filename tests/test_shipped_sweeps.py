@@ -226,6 +226,24 @@ def test_the_walk_sweeps_are_one_per_family_and_command_kind_and_in_the_readme()
     assert "`walk/<family>_<commands>.toml`" in (DIR / "README.md").read_text()
 
 
+
+def test_the_walk_sweeps_ship_inside_the_package():
+    """``ijoy bench walk`` finds its files in an installed package, not only in a checkout: they are package data
+    (the wheel's ``ijoy_jax/apps/walk_sweeps``, declared in pyproject's package-data), and the checkout's
+    sweeps/walk is that same folder."""
+    import tomllib
+
+    from ijoy_jax.apps import bench_walk
+
+    package = Path(bench_walk.__file__).resolve().parent
+    assert bench_walk.SWEEPS.resolve().parent == package
+    assert sorted(p.name for p in bench_walk.SWEEPS.glob("*.toml")) == [p.name for p in WALK_SWEEPS]
+    assert (DIR / "walk").resolve() == bench_walk.SWEEPS.resolve()
+    pyproject = tomllib.loads((DIR.parent / "pyproject.toml").read_text())
+    globs = pyproject["tool"]["setuptools"]["package-data"]["ijoy_jax.apps"]
+    assert any(Path(bench_walk.SWEEPS.name, "x.toml").match(g) for g in globs)
+    assert bench_walk.sweep_file("flat", "random") == bench_walk.SWEEPS / "flat_random.toml"
+
 @pytest.mark.parametrize("path", WALK_SWEEPS, ids=lambda p: p.stem)
 def test_walk_sweep_says_what_ijoy_bench_walk_runs(path):
     """The family's maps at 2 cm, 1024 robots x 30 steps of the ordered selector with the MJX biped, the random or

@@ -119,7 +119,7 @@ def _walk_options(parser) -> None:
     walk.add_argument(
         "--sweeps",
         default=None,
-        help="folder of the walk sweep files <family>_<commands>.toml (default: the checkout's sweeps/walk)",
+        help="folder of the walk sweep files <family>_<commands>.toml (default: the ones shipped with the package)",
     )
     walk.add_argument(
         "--out",

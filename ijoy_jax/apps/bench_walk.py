@@ -1,6 +1,7 @@
 """Walking benchmark per terrain family: ``ijoy bench walk``, the perfect robot next to the MJX biped.
 
-The benchmark is a set of sweep files, ``sweeps/walk/<family>_<commands>.toml``, one per terrain family of
+The benchmark is a set of sweep files, ``<family>_<commands>.toml`` (:data:`SWEEPS`: shipped with the package, a
+source checkout's ``sweeps/walk``), one per terrain family of
 :data:`ijoy_jax.terrain.walk_families.FAMILIES` and command kind (:data:`COMMANDS`), run by the sweep engine
 (:func:`ijoy_jax.sweep.run`); this module runs the files asked for with each walker and summarises the sweep
 results into the table of BENCHMARKS.md (:func:`markdown_table`) and a bar plot (:func:`plot`).
@@ -133,8 +134,10 @@ CHUNK = 1024
 engine's :data:`ijoy_jax.sweep.DEFAULT_CHUNK`): a rollout holds tens of MB of selector windows, and 1024 ran
 more physics steps/s than 512 (docs/benchmarks_history.md). Given, the sweep engine does not size the chunk to
 the device's memory, which costs an ahead-of-time compile of each file's program."""
-SWEEPS = Path(__file__).resolve().parents[2] / "sweeps" / "walk"
-"""The shipped sweep files (a source checkout's ``sweeps/walk``; ``run(sweeps=...)``, ``--sweeps`` elsewhere)."""
+SWEEPS = Path(__file__).resolve().parent / "walk_sweeps"
+"""The shipped sweep files: package data (``ijoy_jax/apps/walk_sweeps``, installed with the package; a source
+checkout's ``sweeps/walk`` links to it), so ``ijoy bench walk`` runs from an installed package as from a
+checkout; ``run(sweeps=...)`` and ``--sweeps`` take another folder."""
 
 
 def family_robot(family: WalkFamily, model: str = "biped") -> robots.Robot:
@@ -272,8 +275,8 @@ def check_options(families: Sequence[str] | None, *, batch: int, steps: int, com
     files = [sweep_file(n, c, folder) for n in FAMILIES if n in names for c in COMMANDS if c in commands]
     missing = [str(f) for f in files if not f.is_file()]
     if missing:
-        raise ValueError(f"no sweep file {missing[0]} (the walk sweeps ship in sweeps/walk of a source checkout; "
-                         "give their folder with --sweeps)")
+        raise ValueError(f"no sweep file {missing[0]} (the walk sweeps ship with the package, in {SWEEPS}; "
+                         "--sweeps names another folder of <family>_<commands>.toml files)")
     return files
 
 
