@@ -112,7 +112,7 @@ def action_dists(robot: Robot, stance_side, command, targets: Targets, *, quanti
       >>> import ijoy_jax as ij
       >>> robot = ij.robots.hrp2()
       >>> d, target, ok = ij.select.action_dists(robot, -1, [0.25, 0.0, 0.0], ij.make_targets(robot))
-      >>> d.shape, [round(float(v), 2) for v in target], float(d.min())
+      >>> d.shape, [round(float(v), 2) for v in target], round(float(d.min()), 6)
       ((496,), [0.2, 0.19, 0.0], 0.0)
     """
     side = side_sign(stance_side)

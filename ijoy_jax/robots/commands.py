@@ -26,7 +26,7 @@ def start_stance(robot: Robot, x, y, theta=0.0, *, width=None) -> jax.Array:
 
     Example:
       >>> import numpy as np, ijoy_jax as ij
-      >>> np.round(ij.robots.start_stance(ij.robots.hrp2(), 0.3, 1.0), 3).tolist()
+      >>> np.asarray(ij.robots.start_stance(ij.robots.hrp2(), 0.3, 1.0), np.float64).round(3).tolist()
       [[0.3, 1.095, 0.0], [0.3, 0.905, 0.0]]
     """
     half = 0.5 * (robot.p0[1] if width is None else jnp.asarray(width, jnp.float32))
