@@ -35,7 +35,7 @@ def test_the_package_has_examples_to_check():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", MODULES)
 def test_docstring_examples(name):
-    runner = doctest.DocTestRunner()
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)  # as pytest's doctests: "0.05..." is a float32 0.05
     out = io.StringIO()
     for test in _examples(name):
         runner.run(test, out=out.write)
