@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ijoy_jax as ij
-from ijoy_jax.sim import model
+from ijoy_jax.sim import hfield, model
 
 P = model.BipedParams()
 RES = 0.02
@@ -45,7 +45,7 @@ def _with_ball(terrain):
     ball.add_freejoint()
     ball.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[BALL_R, 0, 0], mass=0.1, contype=1, conaffinity=0)
     m = spec.compile()
-    m.hfield_data[:] = np.asarray(model.hfield_data(P, terrain))
+    m.hfield_data[:] = np.asarray(hfield.hfield_data(P, terrain))
     return m
 
 
@@ -150,11 +150,11 @@ def test_hfield_data_matches_build_model_and_mujoco_rescales_user_data():
     free = rng.uniform(size=SHAPE) > 0.2
     for t in (ij.terrain.from_arrays(height, free, RES, ORIGIN), ij.terrain.from_arrays(None, free, RES, ORIGIN)):
         m = model.build_model(P, t)
-        data = jax.jit(model.hfield_data, static_argnums=0)(P, t)
+        data = jax.jit(hfield.hfield_data, static_argnums=0)(P, t)
         assert data.dtype == jnp.float32 and data.shape == (SHAPE[0] * SHAPE[1],)
         np.testing.assert_array_equal(m.hfield_data, np.asarray(data))
         assert m.hfield_nrow[0] == SHAPE[1] and m.hfield_ncol[0] == SHAPE[0]
-        h = np.asarray(model.physical_heights(t, P.obstacle_height))
+        h = np.asarray(hfield.physical_heights(t, P.obstacle_height))
         i, j = 7, 11  # row j (y), column i (x)
         z = P.z_lo + m.hfield_data[j * SHAPE[0] + i] * m.hfield_size[0, 2]
         assert abs(z - np.clip(h[i, j], P.z_lo, P.z_hi)) < 1e-6
@@ -199,11 +199,11 @@ def test_mjx_put_terrains_ball_contact_and_standing():
     m = _with_ball(flat)  # compiled with the flat terrain; the batch swaps in both
     mx = mjx.put_model(m)
     terrains = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), flat, _obstacle_terrain())
-    mb, axes = model.put_terrains(mx, P, terrains)
+    mb, axes = hfield.put_terrains(mx, P, terrains)
     assert mb.hfield_data.shape == (2, SHAPE[0] * SHAPE[1])
-    vmapped = jax.eval_shape(jax.vmap(lambda t: model.put_terrain(mx, P, t)), terrains)  # a batch of models
+    vmapped = jax.eval_shape(jax.vmap(lambda t: hfield.put_terrain(mx, P, t)), terrains)  # a batch of models
     assert vmapped.hfield_data.shape == (2, SHAPE[0] * SHAPE[1]) and vmapped.body_mass.shape[0] == 2
-    single = jax.jit(model.put_terrain, static_argnums=1)(mx, P, _obstacle_terrain())
+    single = jax.jit(hfield.put_terrain, static_argnums=1)(mx, P, _obstacle_terrain())
     np.testing.assert_array_equal(np.asarray(single.hfield_data), np.asarray(mb.hfield_data[1]))
 
     qpos = np.array(m.qpos0)
@@ -245,9 +245,9 @@ def test_put_terrain_places_the_height_field_on_the_terrains_grid():
     terrains = [ij.terrain.flat(shape, res, origin=o, has_height=True) for o in origins]
     for t in terrains:
         want = model.build_model(params, t).geom_pos[gid]
-        np.testing.assert_allclose(model.put_terrain(m, params, t).geom_pos[gid], want, atol=1e-6)
+        np.testing.assert_allclose(hfield.put_terrain(m, params, t).geom_pos[gid], want, atol=1e-6)
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *terrains)
-    mb, axes = model.put_terrains(m, params, batch)
+    mb, axes = hfield.put_terrains(m, params, batch)
     assert axes.geom_pos == 0
     for k, t in enumerate(terrains):
         np.testing.assert_allclose(mb.geom_pos[k, gid], model.build_model(params, t).geom_pos[gid], atol=1e-6)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import ijoy_jax as ij
-from ijoy_jax.sim import menagerie, model, scene
+from ijoy_jax.sim import hfield, menagerie, model, scene
 
 ORIGIN, SHAPE, RES = (-0.6, -0.6), (60, 60), 0.02
 
@@ -20,7 +20,7 @@ ORIGIN, SHAPE, RES = (-0.6, -0.6), (60, 60), 0.02
 def g1_on_flat():
     m = scene.terrain_scene(menagerie.g1_spec(meshes=False), shape=SHAPE, resolution=RES, origin=ORIGIN).compile()
     flat = ij.terrain.flat(SHAPE, RES, origin=ORIGIN, has_height=True)
-    m.hfield_data[:] = np.asarray(model.hfield_data(model.BipedParams(), flat))
+    m.hfield_data[:] = np.asarray(hfield.hfield_data(model.BipedParams(), flat))
     d = mujoco.MjData(m)
     mujoco.mj_resetDataKeyframe(m, d, m.key(menagerie.G1_KEYFRAME).id)
     mujoco.mj_kinematics(m, d)

@@ -33,7 +33,7 @@ from jax import lax
 from mujoco import mjx
 
 from ijoy_jax import robots, terrain
-from ijoy_jax.sim import model
+from ijoy_jax.sim import hfield, model
 from ijoy_jax.terrain import Terrain
 
 SHAPE = (100, 100)
@@ -58,7 +58,7 @@ def mjx_physics(batch: int, steps: int, params: model.BipedParams | None = None,
     params = model.biped_params() if params is None else params
     mj_model, qpos = _setup(params)
     m = model.put_model(mj_model)
-    batched, axes = model.put_terrains(m, params, _terrains(jax.random.key(seed), batch))
+    batched, axes = hfield.put_terrains(m, params, _terrains(jax.random.key(seed), batch))
     d0 = mjx.make_data(m).replace(qpos=jnp.asarray(qpos, jnp.float32), ctrl=jnp.asarray(qpos[7:], jnp.float32))
     data = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (batch, *x.shape)), d0)
 

@@ -1,6 +1,7 @@
 """Physically simulated walking: an HRP-2-like biped in MuJoCo XLA that executes the joystick's footsteps.
 
-Modules: :mod:`.model` (the MjSpec robot and the terrain's height field),
+Modules: :mod:`.model` (the MjSpec robot), :mod:`.hfield` (the terrain as the height field every robot
+stands on),
 :mod:`.kinematics` (leg forward and analytic inverse kinematics),
 :mod:`.preview` (LIPM/ZMP preview control), :mod:`.swing` (swing-foot paths
 over the terrain), :mod:`.controller` (the walking pattern generator: a

@@ -26,7 +26,7 @@ from mujoco import mjx
 from ijoy_jax import control, geometry, select
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot
-from ijoy_jax.sim import bodies, controller, kinematics, model, physics, preview, swing
+from ijoy_jax.sim import bodies, controller, hfield, kinematics, model, physics, preview, swing
 from ijoy_jax.sim._sensors import (
     ankle_wrench,
     centre_of_mass,
@@ -146,17 +146,17 @@ def make_world(
       terrain: one :class:`Terrain` of ``sim.shape`` cells at ``sim.resolution`` m.
       dynamics: the robot's :class:`~ijoy_jax.sim.physics.Dynamics` (scalar leaves; sanitized, never
         NaN); None: :func:`nominal_dynamics`.
-      m: the model with the terrain's height field (default: ``model.put_terrain`` of ``sim.mjx_model``);
+      m: the model with the terrain's height field (default: ``hfield.put_terrain`` of ``sim.mjx_model``);
         the dynamics are written into it (:func:`ijoy_jax.sim.physics.put_dynamics`).
       free: the controller's nominal model for its dynamics filter (default ``sim.mjx_free``).
     """
     params, cfg = sim.params, sim.cfg
-    # the heights the robot meets: MuJoCo's height field clips them to [z_lo, z_hi] (model.hfield_data)
+    # the heights the robot meets: MuJoCo's height field clips them to [z_lo, z_hi] (hfield.hfield_data)
     phys = terrain.replace(
-        height=jnp.clip(model.physical_heights(terrain, params.obstacle_height), params.z_lo, params.z_hi),
+        height=jnp.clip(hfield.physical_heights(terrain, params.obstacle_height), params.z_lo, params.z_hi),
         has_height=True,
     )
-    m = model.put_terrain(sim.mjx_model, params, terrain) if m is None else m
+    m = hfield.put_terrain(sim.mjx_model, params, terrain) if m is None else m
     free = sim.mjx_free if free is None else free
     dyn, dyn_invalid = physics.sanitize(nominal_dynamics(sim) if dynamics is None else dynamics)
     m = physics.put_dynamics(m, dyn)

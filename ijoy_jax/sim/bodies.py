@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from ijoy_jax.sim import kinematics, model
+from ijoy_jax.sim import hfield, kinematics, model
 
 __all__ = ["MODELS", "build_model", "build_spec", "foot", "legs_ik", "stand_pose", "walk_defaults"]
 
@@ -51,11 +51,11 @@ def build_spec(params: model.BipedParams, shape=(200, 200), resolution: float = 
 
 def build_model(params: model.BipedParams, terrain, *, edit=None, meshes: bool = False) -> mujoco.MjModel:
     """The compiled robot of ``params.model`` on ``terrain`` (:func:`ijoy_jax.sim.model.build_model`'s contract:
-    ``hfield_data`` is :func:`~ijoy_jax.sim.model.hfield_data`; ``edit`` changes the spec before compiling;
+    ``hfield_data`` is :func:`~ijoy_jax.sim.hfield.hfield_data`; ``edit`` changes the spec before compiling;
     ``meshes`` as :func:`build_spec`: the same joints, masses and contacts, so the physics' ``qpos`` replays on
     it)."""
     spec = build_spec(params, terrain.shape, terrain.resolution, np.asarray(terrain.origin), meshes=meshes)
-    return model.compile_with_terrain(spec, params, terrain, edit=edit)
+    return hfield.compile_with_terrain(spec, params, terrain, edit=edit)
 
 
 @functools.lru_cache(maxsize=8)

@@ -1,4 +1,4 @@
-"""The HRP-2-like biped as a MuJoCo model built with MjSpec, and the terrain as its height field.
+"""The HRP-2-like biped as a MuJoCo model built with MjSpec, on the terrain's height field.
 
 The robot: a free-floating pelvis (the hips' frame: hip joints at
 ``(0, +-hip_offset_y, 0)``), the upper body (torso, head, arms) lumped as rigid
@@ -9,14 +9,7 @@ the terrain: MJX collides a sphere with a height field through a 2 x 2
 sub-grid of prisms, a box through ``(ceil(2 rbound / res) + 1)^2`` prisms
 (hundreds per foot), so the foot box is visual and inertial only.
 
-The terrain: a :class:`ijoy_jax.terrain.Terrain` becomes one height field
-whose samples sit at the cell centres (MuJoCo's ``nrow`` is the terrain's
-``ny``, ``ncol`` its ``nx``). MuJoCo interpolates the surface linearly between
-samples, so a raised cell is a plateau between its raised neighbours with
-walls one cell wide. Heights are stored normalised,
-``z = z_lo + data * (z_hi - z_lo)``, and a batch of terrains only swaps the
-traced ``hfield_data`` leaf of one compiled model (:func:`put_terrain`,
-:func:`put_terrains`).
+The terrain it stands on is a height field (:mod:`ijoy_jax.sim.hfield`, which any robot's spec shares).
 
 Example:
   >>> import mujoco, ijoy_jax as ij
@@ -42,7 +35,7 @@ from mujoco import mjx
 
 from ijoy_jax._struct import check_real, check_whole
 from ijoy_jax.robots import models as robots_models
-from ijoy_jax.sim import kinematics
+from ijoy_jax.sim import hfield, kinematics
 
 __all__ = [
     "JOINTS",
@@ -50,18 +43,12 @@ __all__ = [
     "SIDES",
     "BipedParams",
     "ModelIndex",
-    "add_terrain",
     "biped_params",
     "build_model",
     "build_spec",
-    "compile_with_terrain",
     "contacts",
-    "hfield_data",
     "model_index",
-    "physical_heights",
     "put_model",
-    "put_terrain",
-    "put_terrains",
     "set_options",
     "sole_points",
     "standing_qpos",
@@ -357,35 +344,6 @@ def _add_robot(spec: mujoco.MjSpec, p: BipedParams) -> None:
             act.forcerange = [-p.force[k], p.force[k]]
 
 
-def _hfield_geometry(p: BipedParams, shape, resolution: float, origin) -> tuple[list, list]:
-    """MuJoCo hfield size and geom position for a grid: sample (i, j) at cell (i, j)'s centre."""
-    nx, ny = (int(v) for v in shape)
-    rx, ry = (nx - 1) * resolution / 2, (ny - 1) * resolution / 2
-    ox, oy = (float(v) for v in np.asarray(origin, np.float64))
-    size = [rx, ry, p.z_hi - p.z_lo, p.base_depth]
-    pos = [ox + resolution / 2 + rx, oy + resolution / 2 + ry, p.z_lo]
-    return size, pos
-
-
-def add_terrain(spec: mujoco.MjSpec, params: BipedParams, shape, resolution: float, origin) -> None:
-    """Add the terrain's height field (geom and asset "terrain", zero data) and a light to ``spec``, in place.
-
-    The geom collides with geoms of ``contype`` 1 (the sole spheres) and is given ``params.friction``; its
-    samples and elevation are those :func:`build_spec` describes. Any robot's spec can stand on it.
-    """
-    nx, ny = (int(v) for v in shape)
-    if nx < 2 or ny < 2:
-        raise ValueError(f"the terrain grid needs at least 2 x 2 cells for a height field, got {shape}")
-    if not (math.isfinite(resolution) and resolution > 0):
-        raise ValueError(f"resolution must be a positive finite number of metres, got {resolution!r}")
-    size, pos = _hfield_geometry(params, (nx, ny), float(resolution), origin)
-    spec.add_hfield(name="terrain", nrow=ny, ncol=nx, size=size, userdata=[0.0] * (nx * ny))
-    spec.worldbody.add_geom(name="terrain", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="terrain", pos=pos,
-                            contype=0, conaffinity=1, condim=3, friction=[params.friction, 0.005, 0.0001],
-                            rgba=[0.55, 0.6, 0.5, 1])
-    spec.worldbody.add_light(name="sun", pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
-
-
 def set_options(spec: mujoco.MjSpec, params: BipedParams) -> None:
     """The walker's physics options on any robot's ``spec``, in place: ``params.timestep``, implicitfast (implicit
     in the actuators' damping), Newton with ``params.iterations`` / ``ls_iterations``, pyramidal friction cones."""
@@ -405,7 +363,8 @@ def build_spec(params: BipedParams, shape=(200, 200), resolution: float = 0.02, 
     columns (along x), its samples at the cell centres
     ``origin + (i + 0.5, j + 0.5) * resolution``, elevation
     ``z_lo + data * (z_hi - z_lo)``, and zero data (set it with
-    :func:`build_model` or :func:`put_terrain`). The geom is named "terrain".
+    :func:`build_model` or :func:`~ijoy_jax.sim.hfield.put_terrain`). The geom is named "terrain"
+    (:func:`~ijoy_jax.sim.hfield.add_terrain`).
 
     Args:
       params: :class:`BipedParams`.
@@ -421,47 +380,18 @@ def build_spec(params: BipedParams, shape=(200, 200), resolution: float = 0.02, 
     spec.modelname = "ijoy_biped"
     spec.compiler.degree = False  # every angle here is in radians (MjSpec defaults to degrees for ranges)
     set_options(spec, params)
-    add_terrain(spec, params, shape, resolution, origin)
+    hfield.add_terrain(spec, params, shape, resolution, origin)
     _add_robot(spec, params)
     qpos = standing_qpos(params)
     spec.add_key(name="stand", qpos=qpos.tolist(), ctrl=qpos[7:].tolist())
     return spec
 
 
-def physical_heights(terrain, obstacle_height: float = 0.1) -> jax.Array:
-    """(nx, ny) float32 surface heights (metres) the simulated robot meets.
-
-    2D terrains (``has_height=False``): 0 on free cells, ``obstacle_height`` on
-    obstacle cells (walls the robot must not touch). 2.5D terrains: their
-    heights unchanged, also on non-free cells: a 2.5D map's heights already
-    describe its obstacles (a 5 cm bar is 5 cm high), and ``free`` is a
-    planning label (too steep, too rough), not extra geometry.
-    """
-    height = jnp.asarray(terrain.height, jnp.float32)
-    if terrain.has_height:
-        return height
-    return jnp.where(terrain.free, height, jnp.float32(obstacle_height))
-
-
-def hfield_data(params: BipedParams, terrain) -> jax.Array:
-    """(ny * nx,) float32 height field data of a terrain, in MuJoCo's order, normalised to [0, 1].
-
-    ``data[j * nx + i] = clip((h[i, j] - z_lo) / (z_hi - z_lo), 0, 1)`` with
-    ``h = physical_heights(terrain, params.obstacle_height)``: row j runs along
-    y, column i along x. Heights outside ``[z_lo, z_hi]`` are clipped to the
-    range (the robot meets a surface at ``z_lo`` or ``z_hi`` there). Pure JAX:
-    jit and vmap over terrains freely.
-    """
-    h = physical_heights(terrain, params.obstacle_height)
-    data = jnp.clip((h - params.z_lo) / (params.z_hi - params.z_lo), 0.0, 1.0)
-    return data.T.reshape(-1).astype(jnp.float32)
-
-
 def build_model(params: BipedParams, terrain, *, edit=None) -> mujoco.MjModel:
     """The compiled :class:`mujoco.MjModel` of the biped on ``terrain`` (concrete).
 
     The height field data is written into the compiled model (``hfield_data``
-    equals :func:`hfield_data` exactly); passing it to the spec instead would
+    equals :func:`~ijoy_jax.sim.hfield.hfield_data` exactly); passing it to the spec instead would
     let MuJoCo's compiler rescale it to span [0, 1] (user hfield data is
     min-max normalised at compile time, which would lose the absolute heights).
     Keyframe 0 ("stand") is :func:`standing_qpos` on flat ground at z = 0 with matching ``ctrl``.
@@ -469,18 +399,7 @@ def build_model(params: BipedParams, terrain, *, edit=None) -> mujoco.MjModel:
     compiled (e.g. textures for :mod:`ijoy_jax.sim.render`).
     """
     spec = build_spec(params, terrain.shape, terrain.resolution, np.asarray(terrain.origin))
-    return compile_with_terrain(spec, params, terrain, edit=edit)
-
-
-def compile_with_terrain(spec: mujoco.MjSpec, params: BipedParams, terrain, *, edit=None) -> mujoco.MjModel:
-    """Compile a robot's spec with its height field (added by :func:`add_terrain` for ``terrain``'s grid) and write
-    ``terrain``'s heights into the compiled model (:func:`build_model`'s contract; ``edit`` changes the spec in
-    place before it is compiled)."""
-    if edit is not None:
-        edit(spec)
-    m = spec.compile()
-    m.hfield_data[:] = np.asarray(hfield_data(params, terrain), np.float32)
-    return m
+    return hfield.compile_with_terrain(spec, params, terrain, edit=edit)
 
 
 def put_model(mj_model: mujoco.MjModel):
@@ -490,53 +409,6 @@ def put_model(mj_model: mujoco.MjModel):
     process 0's device, which another process can neither compute on nor read.
     """
     return mjx.put_model(mj_model, device=jax.local_devices()[0])
-
-
-def put_terrain(mjx_model, params: BipedParams, terrain):
-    """An ``mjx.Model`` with its height field data replaced by ``terrain``'s (same grid shape).
-
-    Pure and jit-able; MJX reads ``hfield_data`` inside its collision functions,
-    so the replaced data is what the robot meets. Vmapping this over terrains
-    batches every model leaf; :func:`put_terrains` batches only the height field.
-    """
-    data = hfield_data(params, terrain)
-    if data.shape != mjx_model.hfield_data.shape:
-        raise ValueError(f"terrain grid {terrain.shape} does not match the model's height field "
-                         f"({mjx_model.hfield_data.shape[0]} samples)")
-    return mjx_model.replace(hfield_data=data.astype(mjx_model.hfield_data.dtype),
-                             geom_pos=_terrain_geom_pos(mjx_model, params, terrain))
-
-
-def _terrain_geom_pos(mjx_model, params: BipedParams, terrain) -> jax.Array:
-    """The model's geom positions with the height field's centred on ``terrain``'s grid (its origin may differ
-    from the one the model was built with)."""
-    gid = int(np.flatnonzero(np.asarray(mjx_model.geom_type) == int(mujoco.mjtGeom.mjGEOM_HFIELD))[0])
-    centre = jnp.asarray(terrain.origin, jnp.float32) + 0.5 * terrain.resolution * jnp.asarray(terrain.shape,
-                                                                                                jnp.float32)
-    pos = jnp.concatenate([centre, jnp.full((1,), params.z_lo, jnp.float32)])
-    return mjx_model.geom_pos.at[gid].set(pos.astype(mjx_model.geom_pos.dtype))
-
-
-def put_terrains(mjx_model, params: BipedParams, terrains):
-    """A batch of terrains (a Terrain with a leading batch axis) in one ``mjx.Model``.
-
-    Returns:
-      (model, in_axes): the model with (B, ny * nx) ``hfield_data`` and (B, ngeom, 3)
-      ``geom_pos`` (the height field placed on each terrain's grid) and its other
-      leaves shared, and the matching ``in_axes`` pytree for ``jax.vmap``
-      (0 for ``hfield_data``, None elsewhere), as in mujoco_playground's randomize.
-
-    Example:
-      >>> # m, axes = put_terrains(mjx.put_model(mj), p, batch)
-      >>> # jax.vmap(mjx.step, in_axes=(axes, 0))(m, d)
-    """
-    data = jax.vmap(lambda t: hfield_data(params, t))(terrains)
-    if data.shape[1:] != mjx_model.hfield_data.shape:
-        raise ValueError(f"terrain grids do not match the model's height field ({mjx_model.hfield_data.shape[0]})")
-    geom_pos = jax.vmap(lambda t: _terrain_geom_pos(mjx_model, params, t))(terrains)
-    model = mjx_model.replace(hfield_data=data.astype(mjx_model.hfield_data.dtype), geom_pos=geom_pos)
-    in_axes = jax.tree_util.tree_map(lambda _: None, mjx_model).replace(hfield_data=0, geom_pos=0)
-    return model, in_axes
 
 
 # ----------------------------------------------------------------------------------------------------------------

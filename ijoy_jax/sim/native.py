@@ -45,7 +45,7 @@ import numpy as np
 
 from ijoy_jax import control, geometry, select
 from ijoy_jax.robots import LEFT, Robot
-from ijoy_jax.sim import bodies, controller, kinematics, model
+from ijoy_jax.sim import bodies, controller, hfield, kinematics
 from ijoy_jax.sim.stepped import SteppedBiped
 from ijoy_jax.sim.walker import (
     PLANAR,
@@ -119,7 +119,7 @@ def programs(sim: Sim) -> Programs:
 def _physical(sim: Sim, terrain: Terrain) -> Terrain:
     """The terrain as the robot meets it (2D obstacles raised, heights clipped to the height field's range)."""
     p = sim.params
-    h = np.clip(np.asarray(model.physical_heights(terrain, p.obstacle_height)), p.z_lo, p.z_hi)
+    h = np.clip(np.asarray(hfield.physical_heights(terrain, p.obstacle_height)), p.z_lo, p.z_hi)
     return terrain.replace(height=jnp.asarray(h, jnp.float32), has_height=True)
 
 

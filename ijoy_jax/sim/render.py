@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from ijoy_jax.sim import bodies, model
+from ijoy_jax.sim import bodies, hfield
 
 LEFT_RGBA = (0.95, 0.75, 0.1, 0.6)  # commanded footholds of the left foot
 RIGHT_RGBA = (0.1, 0.7, 0.95, 0.6)  # and of the right
@@ -138,7 +138,7 @@ def render(sim, terrain, qpos, *, width: int = 480, height: int = 320, footsteps
             raise ValueError(f"sides must have shape ({len(foot)},), got {sides.shape}")
         from ijoy_jax.sim import swing  # the sole's ground height, as the walker places it
 
-        phys = terrain.replace(height=model.physical_heights(terrain, sim.params.obstacle_height), has_height=True)
+        phys = terrain.replace(height=hfield.physical_heights(terrain, sim.params.obstacle_height), has_height=True)
         ground = np.asarray(jax.vmap(lambda p: swing.footprint_height(
             phys, p, sim.params.foot_length, sim.params.foot_width))(jnp.asarray(foot, jnp.float32)))
     pelvis = qpos[:, :3]

@@ -16,7 +16,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from ijoy_jax.sim import model
+from ijoy_jax.sim import hfield, model
 from ijoy_jax.sim.description import quat_matrix
 
 __all__ = ["terrain_scene"]
@@ -56,7 +56,7 @@ def terrain_scene(robot: mujoco.MjSpec, *, soles: tuple[str, str] = ("left_foot"
     """
     params = model.BipedParams() if params is None else params
     _drop_floors(robot)
-    model.add_terrain(robot, params, shape, resolution, origin)
+    hfield.add_terrain(robot, params, shape, resolution, origin)
     r = params.sole_radius
     nx, ny = params.sole_grid
     for side, name in zip(SIDES, soles, strict=True):

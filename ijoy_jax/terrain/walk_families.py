@@ -233,14 +233,14 @@ CLUTTER = dict(count=17, size_min=0.04, size_max=0.12)
 """2D clutter: `sweeps/margin_physics.toml`'s obstacles at its density (14 on 8 m^2, here 17 on 10 m^2)."""
 CLUTTER_HEIGHT = 0.1
 """Height (m) of the clutter's obstacles: ``BipedParams.obstacle_height``, the height the simulation gives a 2D
-map's obstacle cells (:func:`ijoy_jax.sim.model.physical_heights`)."""
+map's obstacle cells (:func:`ijoy_jax.sim.hfield.physical_heights`)."""
 
 
 def clutter2d(key, batch: int, *, shape, resolution: float) -> Terrain:
     """2D obstacles (the margin sweep's clutter), stored as the 2.5D map the physics makes of them.
 
     A 2D map's obstacle cells stand ``BipedParams.obstacle_height`` (:data:`CLUTTER_HEIGHT`, 0.1 m) tall in the
-    simulation (:func:`ijoy_jax.sim.model.physical_heights`); here they carry that height and stay obstacles
+    simulation (:func:`ijoy_jax.sim.hfield.physical_heights`); here they carry that height and stay obstacles
     (``free`` False), so the map shares the other families' 2.5D compile. The registry's "obstacles" family
     draws them on a 2.5D map with every top at that height: the cells a 2D map would block, raised to it. The
     selector chooses the steps it chooses on the 2D map (tested): a foothold's grown footprint must be free
