@@ -195,7 +195,8 @@ def plot(agg, out=None, x=None, metrics=None, title: str = ""):
         ax.set_ylabel(f"mean ({UNITS[m]})")
         ax.set_title(_TITLES.get(m, f"{m.replace('_', ' ')} ({UNITS[m]})"), fontsize=10)
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=8)
+    if axes[0][0].get_legend_handles_labels()[0]:  # a single series with no default line has nothing to name
+        axes[0][0].legend(fontsize=8)
     return _finish(fig, agg, title, out)
 
 
