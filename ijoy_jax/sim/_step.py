@@ -184,9 +184,10 @@ def _split(soles, swing_side):
     return jnp.where(left_swings, soles[1], soles[0]), jnp.where(left_swings, soles[0], soles[1])
 
 
-def _believed(pose, s: SimState) -> jax.Array:
-    """A planar pose (3,) as the robot believes it: shifted by its current position error."""
-    return pose.at[:2].add(s.belief)
+def _believed(pose, belief) -> jax.Array:
+    """A planar pose (3,) as the robot believes it: shifted by its current position error ``belief`` (2,) m
+    (``SimState.belief``)."""
+    return pose.at[:2].add(belief)
 
 
 def _believed_error(world: World, k) -> jax.Array:
@@ -313,7 +314,7 @@ def stance_info(state: SimState) -> control.StanceInfo:
     yaw), as the robot believes them (shifted by :attr:`SimState.belief`), the stance side, and the next
     step's capture-point shift (:func:`balance_shift`; None while ``WalkConfig.capture_gain`` is 0)."""
     st, sw = _split(state.soles, state.swing)
-    return control.StanceInfo(_believed(st[PLANAR], state), -state.swing, _believed(sw[PLANAR], state),
+    return control.StanceInfo(_believed(st[PLANAR], state.belief), -state.swing, _believed(sw[PLANAR], state.belief),
                               state.balance)
 
 
@@ -399,7 +400,7 @@ def plan_to(sim: Sim, phys: Terrain, soles, planned, swing_side, anchor, foothol
     top = swing.corridor_profile(phys, sw[PLANAR], pose, params.foot_length, params.foot_width) + jnp.maximum(
         _tilt_drop(sim, psw), _tilt_drop(sim, target)
     )
-    stance = st[PLANAR] if belief is None else st[PLANAR].at[:2].add(belief)
+    stance = st[PLANAR] if belief is None else _believed(st[PLANAR], belief)
     planar = geometry.compose(pst[PLANAR], geometry.relative(stance, pose))
     ptarget = jnp.concatenate([planar[:2], target[2:5], planar[2:]])
     plan = controller.plan_step(anchor, pst, psw, ptarget, go, swing_side, top, cfg.clearance)
