@@ -29,11 +29,11 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry, select
-from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.limits import check_num_steps
 from ijoy_jax.robots import LEFT, Robot, footprints_overlap, side_actions
 from ijoy_jax.select_options import SelectOptions, checked
+from ijoy_jax.struct import as_array, as_pose, check_numeric, is_traced
 from ijoy_jax.targets import Targets
 from ijoy_jax.terrain import Terrain
 

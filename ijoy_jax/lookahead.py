@@ -58,8 +58,8 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry, limits
-from ijoy_jax._struct import is_traced
 from ijoy_jax.robots import Robot, side_actions, side_sign
+from ijoy_jax.struct import is_traced
 
 __all__ = ["DEFAULT_CHUNK", "CostsFrom", "Plan", "check_options", "discount_supported", "search"]
 

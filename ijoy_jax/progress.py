@@ -34,7 +34,7 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any, TextIO
 
-from ijoy_jax._struct import is_traced
+from ijoy_jax.struct import is_traced
 
 __all__ = ["LINE_EVERY_S", "SHOW_AFTER_S", "THREAD_NAME", "TTY_EVERY_S", "compile_and_call", "compiling"]
 

@@ -48,9 +48,9 @@ import numpy as np
 from jax import lax
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import is_traced, pytree_dataclass, static_field
 from ijoy_jax.footcost import TerrainIndex, foot_cost_terms
 from ijoy_jax.robots import Robot, dist, overlaps_stance, side_actions, side_sign
+from ijoy_jax.struct import is_traced, pytree_dataclass, static_field
 from ijoy_jax.terrain import Terrain
 
 __all__ = ["MOVES_PER_LEVEL", "RefineParams", "Refined", "check_params", "lattice_spacing", "params",

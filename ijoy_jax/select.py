@@ -48,7 +48,6 @@ from jax import lax
 
 from ijoy_jax import geometry, lookahead, select_options
 from ijoy_jax import refine as refine_mod
-from ijoy_jax._struct import as_array, as_pose, check_numeric, is_traced
 from ijoy_jax.footcost import TerrainIndex, foot_cost_fused, foot_cost_terms, index_terrain, query_supported
 from ijoy_jax.footcost import validate as validate_foot_cost
 from ijoy_jax.footcost.plane import plane_metrics
@@ -58,6 +57,7 @@ from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.robots import Robot, check_robot, mirror, side_actions, side_p0, side_sign
 from ijoy_jax.select_options import SelectOptions as SelectOptions
 from ijoy_jax.select_options import checked
+from ijoy_jax.struct import as_array, as_pose, check_numeric, is_traced
 from ijoy_jax.targets import Targets as Targets
 from ijoy_jax.targets import action_dists as action_dists
 from ijoy_jax.targets import ideal_step as ideal_step

@@ -25,7 +25,7 @@ import numpy as np
 
 from ijoy_jax import lookahead
 from ijoy_jax import refine as refine_mod
-from ijoy_jax._struct import is_traced, pytree_dataclass, static_field
+from ijoy_jax.struct import is_traced, pytree_dataclass, static_field
 
 __all__ = ["KERNELS", "METHODS", "SelectOptions", "checked"]
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ijoy_jax._struct import pytree_dataclass, static_field
 from ijoy_jax.robots import Robot, dist, mirror, side_actions, side_p0, side_sign
+from ijoy_jax.struct import pytree_dataclass, static_field
 
 
 @pytree_dataclass

@@ -35,10 +35,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax import control, geometry, select
-from ijoy_jax._struct import is_traced, pytree_dataclass, static_field
 from ijoy_jax.refine import lattice_spacing
 from ijoy_jax.robots import Robot, side_p0, side_sign, start_stance
 from ijoy_jax.select_options import SelectOptions
+from ijoy_jax.struct import is_traced, pytree_dataclass, static_field
 from ijoy_jax.terrain import Terrain, flat
 
 __all__ = ["HeadingHold", "OvershootResult", "body_heading", "heading_hold", "overshoot_study"]

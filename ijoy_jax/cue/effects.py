@@ -17,10 +17,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax._struct import as_array, check_numeric, is_traced
 from ijoy_jax.cue.feasible import MIN_UNIT, FeasibleCommands, check_command, check_feasible
 from ijoy_jax.cue.forces import CueForce
 from ijoy_jax.haptics import effects as fx
+from ijoy_jax.struct import as_array, check_numeric, is_traced
 
 DEFAULT_TRAVEL = 0.03
 """m: stick deflection at full scale for :func:`device_effects` (half of a consumer stick's ~6 cm travel)."""

@@ -25,11 +25,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax import select
-from ijoy_jax._struct import as_pose, check_numeric, is_traced, pytree_dataclass
 from ijoy_jax.footcost import TerrainIndex, query_supported
 from ijoy_jax.footcost.query import poses_supported
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.robots import Robot, side_actions, side_p0, side_sign
+from ijoy_jax.struct import as_pose, check_numeric, is_traced, pytree_dataclass
 from ijoy_jax.terrain import Terrain
 
 GAP_TOL = 1e-6

@@ -60,10 +60,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax._struct import as_array, pytree_dataclass
 from ijoy_jax.cue.feasible import MIN_UNIT, FeasibleCommands, check_command, check_feasible
 from ijoy_jax.cue.params import DEFAULT_C1, DEFAULT_DECAY, DEFAULT_TEMPERATURE, CueParams, check_params, make_params
 from ijoy_jax.jit_cache import compiled_count
+from ijoy_jax.struct import as_array, pytree_dataclass
 
 CLIP_SLACK = 1.0
 """Distance units: commands further than this outside the cells' hull are clipped hard before the soft clip

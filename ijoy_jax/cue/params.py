@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax._struct import check_numeric, is_traced, pytree_dataclass
+from ijoy_jax.struct import check_numeric, is_traced, pytree_dataclass
 
 DEFAULT_C1 = 0.8
 """Largest cue force, as a fraction of the device's maximum (leaves 20 % for the device's own centring)."""

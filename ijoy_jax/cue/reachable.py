@@ -16,9 +16,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax._struct import check_numeric, is_traced
 from ijoy_jax.cue.feasible import MIN_UNIT, FeasibleCommands, check_feasible
 from ijoy_jax.jit_cache import compiled_count
+from ijoy_jax.struct import check_numeric, is_traced
 
 
 def is_open(feasible: FeasibleCommands, commands) -> jax.Array:

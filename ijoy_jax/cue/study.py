@@ -62,7 +62,6 @@ import numpy as np
 import optax
 
 from ijoy_jax import geometry, optim, select
-from ijoy_jax._struct import pytree_dataclass, static_field
 from ijoy_jax.control import perfect_walker
 from ijoy_jax.cue import field
 from ijoy_jax.footcost import foot_cost_terms, index_terrain
@@ -70,6 +69,7 @@ from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot, side_p0, side_sign, start_stance
 from ijoy_jax.stats import mean_ci
+from ijoy_jax.struct import pytree_dataclass, static_field
 from ijoy_jax.targets import Targets, make_targets
 from ijoy_jax.terrain import Terrain, flat, scene
 

@@ -11,9 +11,9 @@ import jax.numpy as jnp
 from jax import lax
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import pytree_dataclass, static_field
 from ijoy_jax.limits import check_window
 from ijoy_jax.robots import Robot
+from ijoy_jax.struct import pytree_dataclass, static_field
 from ijoy_jax.terrain import Terrain
 
 

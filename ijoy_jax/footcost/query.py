@@ -16,9 +16,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import as_pose, check_numeric, is_traced
 from ijoy_jax.footcost.index import TerrainIndex
 from ijoy_jax.robots import Robot, check_robot, robot_supported
+from ijoy_jax.struct import as_pose, check_numeric, is_traced
 from ijoy_jax.terrain import Terrain, check_terrain, terrain_supported
 
 MAX_COORDINATE = 8192.0
@@ -188,7 +188,7 @@ def validate(terrain, robot, stance, stance_side, steps, swing_from=None, index=
 
 def checked_query(terrain, robot, stance, stance_side, steps, swing_from=None, index=None):
     """The boundary of both FootCost paths: lists (of numbers or traced scalars) as float32 arrays
-    (:func:`~ijoy_jax._struct.as_array`), then :func:`validate`; returns ``(stance, steps, swing_from)``."""
+    (:func:`~ijoy_jax.struct.as_array`), then :func:`validate`; returns ``(stance, steps, swing_from)``."""
     stance, steps, swing_from = (
         as_pose(n, v) for n, v in (("stance", stance), ("steps", steps), ("swing_from", swing_from))
     )

@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax._struct import pytree_dataclass, static_field
+from ijoy_jax.struct import pytree_dataclass, static_field
 
 
 @pytree_dataclass

@@ -57,7 +57,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax._struct import pytree_dataclass
+from ijoy_jax.struct import pytree_dataclass
 
 # |z| below this uses the power series of cosh(sqrt z) and sinh(sqrt z)/sqrt z
 # (truncation error < z^4/8! < 3e-17, so exact in float64; also keeps

@@ -46,8 +46,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax._struct import pytree_dataclass
 from ijoy_jax.haptics.workspace import Workspace, check_repulsion, check_stroke, decay_rate_of, linearize, plane_forces
+from ijoy_jax.struct import pytree_dataclass
 
 #: The paper's example (section 3.3): cylinder positions (m) and foot position (m), a right leg.
 PAPER_Q = (0.15875, 0.10656, 0.08319, 0.04366)

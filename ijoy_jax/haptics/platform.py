@@ -30,9 +30,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax._struct import pytree_dataclass
 from ijoy_jax.haptics.leg import PAPER_Q, LegGeometry, alduro_leg, forward_kinematics
 from ijoy_jax.haptics.workspace import Planes, check_repulsion, check_stroke, decay_rate_of, linearize, plane_forces
+from ijoy_jax.struct import pytree_dataclass
 
 LEG_NAMES = ("front-left", "front-right", "rear-left", "rear-right")
 

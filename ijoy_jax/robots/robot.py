@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import jax
 
-from ijoy_jax._struct import pytree_dataclass, static_field
+from ijoy_jax.struct import pytree_dataclass, static_field
 
 
 @pytree_dataclass

@@ -50,8 +50,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax import geometry
-from ijoy_jax._struct import check_real, check_whole
 from ijoy_jax.sim import bodies, dynamics, kinematics, preview, swing
+from ijoy_jax.struct import check_real, check_whole
 
 _INF = math.inf
 # WalkConfig's numeric fields: (low, high, low allowed, high allowed). The open ends are divisors (times, the

@@ -33,9 +33,9 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from ijoy_jax._struct import check_real, check_whole
 from ijoy_jax.robots import models as robots_models
 from ijoy_jax.sim import hfield, kinematics
+from ijoy_jax.struct import check_real, check_whole
 
 __all__ = [
     "JOINTS",

@@ -60,7 +60,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from ijoy_jax._struct import as_array, is_traced, pytree_dataclass
+from ijoy_jax.struct import as_array, is_traced, pytree_dataclass
 
 __all__ = ["BOUNDS", "FIELDS", "MAX_LATENCY", "NOMINAL", "Bound", "Dynamics", "array_leaves", "check", "latency_ticks",
            "max_latency_ticks", "put_dynamics", "put_dynamics_batch", "sanitize"]

@@ -18,9 +18,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax._struct import pytree_dataclass, static_field
 from ijoy_jax.extras import require
 from ijoy_jax.limits import MAX_MAP_CELLS, check_map_shape
+from ijoy_jax.struct import pytree_dataclass, static_field
 
 
 @pytree_dataclass

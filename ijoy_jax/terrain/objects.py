@@ -19,8 +19,8 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ijoy_jax._struct import pytree_dataclass
 from ijoy_jax.prng import as_key
+from ijoy_jax.struct import pytree_dataclass
 from ijoy_jax.terrain import scene
 from ijoy_jax.terrain.family import (
     ANY,

@@ -15,8 +15,8 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from ijoy_jax._struct import pytree_dataclass
 from ijoy_jax.prng import as_key
+from ijoy_jax.struct import pytree_dataclass
 from ijoy_jax.terrain.family import (
     COUNT,
     NONNEG,

@@ -1,6 +1,8 @@
-"""A small frozen-dataclass pytree helper (static fields are metadata, the rest are leaves), and the two
-boundary helpers every public function shares (:func:`is_traced`, :func:`as_array`), and the range checks of
-the static configuration classes (:func:`check_real`, :func:`check_whole`).
+"""The package's shared building blocks: a small frozen-dataclass pytree helper (static fields are metadata,
+the rest are leaves), the boundary helpers every public function shares (:func:`is_traced`, :func:`as_array`,
+:func:`as_pose`, :func:`check_numeric`), and the range checks of the static configuration classes
+(:func:`check_real`, :func:`check_whole`). Public because the modules of every part use them, and so may a
+user's own pytree types and entry points.
 
 Like ``mjx._src.dataclasses`` and ``flax.struct``: a field declared with
 ``static_field()`` is part of the tree's structure (hashable, never traced:
@@ -20,6 +22,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ijoy_jax import geometry
+
+__all__ = ["as_array", "as_pose", "check_numeric", "check_real", "check_whole", "is_traced", "pytree_dataclass",
+           "static_field"]
 
 T = TypeVar("T")
 
