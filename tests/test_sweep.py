@@ -710,6 +710,27 @@ def test_the_tradeoff_plot_puts_each_cell_at_its_price_and_safety(tmp_path):
         sweep.plot_tradeoff(agg, tmp_path / "u.png", safety="collided")
 
 
+def test_the_tradeoff_plot_gives_a_third_swept_column_the_labels_and_the_second_the_markers(tmp_path):
+    """rough_robustness.toml's grid (amplitude x w x support limit): colour by amplitude, a marker per w, the
+    support limit as each point's label; each (amplitude, w) pair one set of points at its cells' means."""
+    amp, w, lim = (g.ravel() for g in np.meshgrid([0.01, 0.03], [1.0, 4.0], [0.015, 0.04], indexing="ij"))
+    agg = pd.DataFrame({"cell": range(8), "terrain.amplitude": amp, "robot.w": w,
+                        "robot.metrics.support_limit": lim, "n": 256, "fell.mean": amp * w + lim,
+                        "fell.ci95": 0.02, "distance_along.mean": w / amp / 100 - lim, "distance_along.ci95": 0.1})
+    fig = sweep.plot_tradeoff(agg, tmp_path / "t.png")
+    (ax,) = fig.axes
+    assert len(ax.containers) == 4  # one per (amplitude, w)
+    for container, (a, ww) in zip(ax.containers, [(0.01, 1.0), (0.01, 4.0), (0.03, 1.0), (0.03, 4.0)],
+                                  strict=True):
+        want = agg[(agg["terrain.amplitude"] == a) & (agg["robot.w"] == ww)]
+        np.testing.assert_allclose(container.lines[0].get_xydata(),
+                                   want[["distance_along.mean", "fell.mean"]].to_numpy())
+        assert container.lines[0].get_marker() == {1.0: "o", 4.0: "s"}[ww]
+    assert [t.get_text() for t in ax.texts] == [f"support_limit {v:g}" for v in lim]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == [
+        "amplitude = 0.01", "amplitude = 0.03", "w = 1", "w = 4"]
+
+
 def test_summary_plot_is_a_grid_of_distinct_panels(tmp_path):
     """The default six metrics: 2 rows x 3 columns (not one 2772 px row), each panel titled with its metric
     and unit, one line per value of the other swept parameter."""

@@ -228,8 +228,9 @@ def plot_tradeoff(agg, out=None, safety: str = "fell", price: str = "distance_al
       title: figure title.
 
     The first swept column (e.g. the terrain's amplitude, or the family's parameter) picks each point's
-    colour; the other swept columns label the point, so a reader sees which settings buy safety with
-    progress. A fraction metric's interval is clipped to [0, 1].
+    colour; with three or more swept columns the second picks its marker (both in the legend); the others
+    label the point, so a reader sees which settings buy safety with progress without labels piling up
+    where cells cluster. A fraction metric's interval is clipped to [0, 1].
 
     Returns:
       The matplotlib figure (one axes).
@@ -245,31 +246,37 @@ def plot_tradeoff(agg, out=None, safety: str = "fell", price: str = "distance_al
             raise ValueError(f"{m!r} is not a metric of this sweep; known: {', '.join(known)}")
     # the swept parameters (aggregate groups by them)
     swept = [c for c in agg.columns if c.startswith(PARAMETER_PREFIXES)]
-    colour_by, labels = (swept[0], swept[1:]) if swept else (None, [])
+    colour_by = swept[0] if swept else None
+    marker_by = swept[1] if len(swept) >= 3 else None
+    labels = swept[2:] if marker_by is not None else swept[1:]
     fig, ax = plt.subplots(figsize=(8.0, 5.4))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    markers = "os^Dvp*hX"
+    marker_of = {} if marker_by is None else {v: markers[i % len(markers)]
+                                              for i, v in enumerate(sorted(agg[marker_by].unique()))}
     groups = [(None, agg)] if colour_by is None else list(agg.groupby(colour_by, sort=True))
     for i, (value, g) in enumerate(groups):
-        x, y = (g[f"{m}.mean"].to_numpy(np.float64) for m in (price, safety))
-        xe, ye = (np.nan_to_num(g[f"{m}.ci95"].to_numpy(np.float64)) for m in (price, safety))
-        y_lo, y_hi = y - ye, y + ye
-        if UNITS.get(safety) == "fraction":
-            y_lo, y_hi = np.clip(y_lo, 0, 1), np.clip(y_hi, 0, 1)
+        colour = colours[i % len(colours)]
         name = "all cells" if colour_by is None else f"{_short(colour_by)} = {value:g}"
-        ax.errorbar(
-            x, y, xerr=xe, yerr=[y - y_lo, y_hi - y], fmt="o", capsize=2, color=colours[i % len(colours)], label=name
-        )
-        for (_, row), xi, yi in zip(g.iterrows(), x, y, strict=True):
-            text = ", ".join(f"{_short(c)} {row[c]:g}" for c in labels)
-            if text:
-                ax.annotate(
-                    text,
-                    (xi, yi),
-                    textcoords="offset points",
-                    xytext=(4, 3),
-                    fontsize=6,
-                    color=colours[i % len(colours)],
-                )
+        parts = [(None, g)] if marker_by is None else list(g.groupby(marker_by, sort=True))
+        for mark, part in parts:
+            x, y = (part[f"{m}.mean"].to_numpy(np.float64) for m in (price, safety))
+            xe, ye = (np.nan_to_num(part[f"{m}.ci95"].to_numpy(np.float64)) for m in (price, safety))
+            y_lo, y_hi = y - ye, y + ye
+            if UNITS.get(safety) == "fraction":
+                y_lo, y_hi = np.clip(y_lo, 0, 1), np.clip(y_hi, 0, 1)
+            ax.errorbar(
+                x, y, xerr=xe, yerr=[y - y_lo, y_hi - y], fmt=marker_of.get(mark, "o"), capsize=2, color=colour,
+                label=name if marker_by is None else None,
+            )
+            for (_, row), xi, yi in zip(part.iterrows(), x, y, strict=True):
+                text = ", ".join(f"{_short(c)} {row[c]:g}" for c in labels)
+                if text:
+                    ax.annotate(text, (xi, yi), textcoords="offset points", xytext=(4, 3), fontsize=6, color=colour)
+        if marker_by is not None:  # the colour's legend entry, drawn once
+            ax.plot([], [], "o", color=colour, label=name)
+    for mark, shape in marker_of.items():
+        ax.plot([], [], shape, color="0.4", label=f"{_short(marker_by)} = {mark:g}")
     ax.set_xlabel(f"{price.replace('_', ' ')} ({UNITS.get(price, '')})")
     ax.set_ylabel(_TITLES.get(safety, f"{safety.replace('_', ' ')} ({UNITS.get(safety, '')})"))
     ax.grid(alpha=0.3)
