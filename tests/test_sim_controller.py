@@ -795,3 +795,28 @@ def test_plan_frame_position_moves_the_point_with_the_stance_horizontally_and_ke
                                  np.asarray(to_plan, np.float64))
     assert isinstance(host, np.ndarray)
     np.testing.assert_allclose(host, got, atol=1e-5)
+    # anchored (WalkConfig.stance_anchor 1, the biped's): exactly the rigid motion in all three axes, the height
+    # measured from the stance sole and carried onto the planned one's (the controller before the G1's fix);
+    # halfway: the mean of both heights
+    rigid = to_plan @ (jnp.asarray(p) - jnp.asarray(st_)[:3]) + jnp.asarray(pst)[:3]
+    anchored = W.plan_frame_position(jnp.asarray(p), jnp.asarray(st_), jnp.asarray(pst), to_plan, 1.0)
+    np.testing.assert_array_equal(np.asarray(anchored), np.asarray(rigid))
+    np.testing.assert_allclose(float(rigid[2]), float(p[2]) - float(st_[2]) + float(pst[2]), atol=1e-5)
+    half = W.plan_frame_position(jnp.asarray(p), jnp.asarray(st_), jnp.asarray(pst), to_plan, 0.5)
+    np.testing.assert_allclose(np.asarray(half)[2], 0.5 * (float(p[2]) + float(rigid[2])), atol=1e-5)
+    np.testing.assert_array_equal(np.asarray(half)[:2], got[:2])
+    host = W.plan_frame_position(p.astype(np.float64), st_.astype(np.float64), pst.astype(np.float64),
+                                 np.asarray(to_plan, np.float64), 1.0)
+    np.testing.assert_allclose(host, np.asarray(rigid), atol=1e-5)
+
+
+def test_the_biped_measures_its_pelvis_from_the_stance_sole_and_the_g1_at_its_world_height():
+    """WalkConfig.stance_anchor: the biped's default anchors (it walks down stairs better so), the G1's settings
+    take the world's height (anchored, it landed ever higher turning in place); outside [0, 1] refused."""
+    from ijoy_jax.sim import g1
+
+    assert controller.WalkConfig().stance_anchor == 1.0
+    assert controller.WalkConfig(**g1.WALK).stance_anchor == 0.0
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="WalkConfig.stance_anchor"):
+            controller.WalkConfig(stance_anchor=bad)

@@ -263,24 +263,29 @@ def init_state(
     )
 
 
-def plan_frame_position(p, stance, planned_stance, to_plan) -> jax.Array:
+def plan_frame_position(p, stance, planned_stance, to_plan, anchor=0.0):
     """(3,) a measured world point ``p`` (3,) (the pelvis, the centre of mass) in the plan's frame: horizontally,
     moved with the measured stance sole ``stance`` (6,) onto the one the controller commanded, ``planned_stance``
-    (6,), through ``to_plan`` (3, 3) (:attr:`Step.to_plan`); its height stays the world's. NumPy arrays in, a
-    NumPy array out (the native robot's control tick, on the host); JAX arrays otherwise.
+    (6,), through ``to_plan`` (3, 3) (:attr:`Step.to_plan`); its height the world's (``anchor`` 0), or moved
+    with the stance sole too (``anchor`` 1: measured from the stance sole, carried onto the planned one's
+    height), or that blend (``WalkConfig.stance_anchor``; both ends exact). NumPy arrays in, a NumPy array out
+    (the native robot's control tick, on the host); JAX arrays otherwise.
 
     The plan's heights are the terrain's: every foothold rests on the height map as it is. Anchored on the
     stance sole's height as measured when the step began (just after its touch-down, before it carries the
-    robot), the pelvis seen by the stabiliser was off by that sole's hover or sink, and the swing foot landed
-    off by as much, relative to a frame that the next step anchored on that landing again: an integrator. The
+    robot), the pelvis seen by the stabiliser is off by that sole's hover or sink, and the swing foot lands
+    off by as much, relative to a frame that the next step anchors on that landing again: an integrator. The
     G1 turning in place at 0.7 rad/s landed each foot about 1.3 mm higher than the last, until a foot touched
     down in the air and the robot fell after 8-10 steps; with the world's height it turned 14 steps
     without falling, and 1024 G1s x 30 steps fell less under random commands (69 % -> 50 %) and held forward
-    on ``rough`` (86 % -> 55 %) on one H200.
+    on ``rough`` (86 % -> 55 %) on one H200. The project's biped, on 13 cm soles, walks down refined stairs
+    better anchored (0.05 % fell against 0.55 %): its swing foot lands relative to where its stance foot is.
     """
-    xy = (to_plan @ (p - stance[:3]) + planned_stance[:3])[:2]
-    xp = np if isinstance(xy, np.ndarray) else jnp
-    return xp.concatenate([xy, p[2:3]])
+    moved = to_plan @ (p - stance[:3]) + planned_stance[:3]
+    xp = np if isinstance(moved, np.ndarray) else jnp
+    # (1 - a) z + a z_moved: exactly the world's height at a = 0 and the moved one at a = 1
+    z = (1.0 - anchor) * p[2:3] + anchor * moved[2:3]
+    return xp.concatenate([moved[:2], z.astype(moved.dtype)])
 
 
 def plan_frame_com(sim: Sim, d, stance, planned_stance, to_plan) -> tuple[jax.Array, jax.Array]:
@@ -478,7 +483,8 @@ def tick(sim: Sim, world: World, step: Step, ticks: TickState, k) -> TickState:
     d, cs, touched, low, tilt, sent, adjust = ticks
     window = None if cfg.filter_passes == 0 else lax.dynamic_slice_in_dim(step.corr, k, cfg.horizon)
     st, pst, to_plan = step.stance, step.planned_stance, step.to_plan
-    base = (plan_frame_position(d.qpos[:3], st, pst, to_plan), to_plan @ kinematics.quat_to_rot(d.qpos[3:7]))
+    base = (plan_frame_position(d.qpos[:3], st, pst, to_plan, cfg.stance_anchor),
+            to_plan @ kinematics.quat_to_rot(d.qpos[3:7]))
     com = plan_frame_com(sim, d, st, pst, to_plan)
     plan = step.plan
     if adjust is not None:  # static: WalkConfig.swing_adjust is on

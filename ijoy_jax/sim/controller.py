@@ -66,6 +66,7 @@ _RANGES: dict[str, tuple[float, float, bool, bool]] = {
                      "dcm_gain"), _NON_NEGATIVE),
     "ds_fraction": (0.0, 1.0, True, False),
     "leg_share": (0.0, 1.0, True, False),
+    "stance_anchor": (0.0, 1.0, True, True),
     "swing_lift": (0.0, 0.5, False, True),
     "land_ramp": (0.0, 1.0, False, True),
     "descent_drop": (0.0, 1.0, True, True),
@@ -148,6 +149,17 @@ class WalkConfig:
         step as planned). It answers within the step, where ``capture_gain``
         waits for the next decision; the moved foothold is not the selector's
         (no candidate check), so ``StepLog.placement_error`` counts the shift.
+      stance_anchor: where the controller measures the pelvis's height from
+        (:func:`ijoy_jax.sim.walker.plan_frame_position`), in [0, 1]: 1 from
+        the stance sole as measured at the step's start (just after its
+        touch-down), carried onto the planned one, so a foot that landed
+        lower or higher than planned moves the body's reference with it;
+        0 the world's height, which the plan's footholds are in. Between,
+        that blend. 1 for this biped: at 0, 1024 robots held forward down
+        refined stairs fell 0.55 % against 0.05 % (three and two runs of the
+        same maps, one H200); 0 for the G1 (``sim.g1.WALK``), which turning
+        in place at 1 landed each foot 1.3 mm higher than the last and fell
+        (docs/walk_families.md has the figures).
       stance_gain: the same feedback on the legs that carry the body (0 = the
         offsets only fade), low-passed with ``land_decay``: the soles are held
         partly level against the measured body tilt (foot compliance). Off by
@@ -221,6 +233,7 @@ class WalkConfig:
     capture_gain: float = 0.0
     capture_max: float = 0.05
     swing_adjust: float = 0.0
+    stance_anchor: float = 1.0
 
     def __post_init__(self):
         # Every field is checked here, so dataclasses.replace is checked too: the config is static (hashed into

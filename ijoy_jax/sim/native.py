@@ -258,7 +258,7 @@ class NativeBiped(SteppedBiped):
         if s is None:
             raise RuntimeError("no step in progress: call begin() first")
         d, idx, n = self.d, self.sim.index, self.cfg.horizon
-        base = (plan_frame_position(d.qpos[:3], s["st"], s["pst"], s["to_plan"]),
+        base = (plan_frame_position(d.qpos[:3], s["st"], s["pst"], s["to_plan"], self.cfg.stance_anchor),
                 s["to_plan"] @ d.xmat[idx.pelvis].reshape(3, 3))
         base = tuple(np.asarray(b, np.float32) for b in base)
         wrench = np.asarray(ankle_wrench(self.sim, d), np.float32)
