@@ -13,6 +13,8 @@ through ``walker.rollout_batch``, compiled once:
 * the safety margin in clutter: two clutter maps at 0 and 10 cm (the margin sweep with physics is
   ``sweeps/margin_physics.toml``, run by the sweep engine; tests/test_sweep_physics.py).
 * the states recorded for rendering, and the renderer (``ijoy_jax.sim.render``).
+* starting on rough ground with no flat pad under the feet (issue #48), in a 2.5D program of its own: two
+  robots on 2 m x 1.2 m maps.
 
 The controller's physics is tested with native MuJoCo in test_sim_controller.py.
 """
@@ -477,3 +479,38 @@ def test_refine_reaches_the_simulated_walker(sim):
     assert jax.tree_util.tree_structure(refined.out_avals) == jax.tree_util.tree_structure(plain.out_avals)
     with pytest.raises(TypeError, match="refine must be a bool or an ijoy_jax.refine.RefineParams"):
         W.rollout(*args, ij.SelectOptions(refine="yes"), num_steps=2)
+
+
+@pytest.mark.slow
+def test_the_biped_starts_standing_on_rough_ground_with_no_flat_pad():
+    """Issue #48: no flat pad under the feet. Two robots on 1.5 cm RMS rough maps with ``start_radius`` 0 (the
+    ground under each start sole spans over a centimetre, from the terrain arrays): the walker stands each sole
+    at its rest pose on the ground there and walks 6 steps held forward without falling, each step landing
+    where it was sent on a tilted foothold."""
+    shape, res = (100, 60), 0.02
+    params = generators.RoughParams(amplitude=0.015, correlation_length=0.15, start_x=0.2, start_y=0.5,
+                                    start_radius=0.0)
+    fields = jax.vmap(lambda k: generators.rough(k, params, shape=shape, resolution=res, has_height=True))(
+        jax.random.split(jax.random.key(7), 2))
+    robot = ij.robots.hrp2(margin=0.02)
+    x, y = np.asarray(generators.start_point(params, shape=shape, resolution=res))
+    start = np.asarray(ij.robots.start_stance(robot, x, y))
+    h = np.asarray(fields.height)
+    # no pad: the cells under each start sole (its 24 x 13 cm rectangle) span more than a centimetre
+    for b in range(2):
+        for fx, fy, _ in start:
+            i0, j0 = int(fx / res), int(fy / res)
+            under = h[b, i0 - 6:i0 + 6, j0 - 3:j0 + 3]
+            assert np.ptp(under) > 0.01, np.ptp(under)
+    sim = W.make_sim(shape, res, robot=robot)
+    commands = np.tile(np.array([[0.25, 0.0, 0.0]], np.float32), (2, 6, 1))
+    traj = jax.tree_util.tree_map(np.asarray, W.rollout_batch(
+        sim, fields, jax.vmap(lambda _: robot)(jnp.arange(2)), np.stack([start, start]), commands, num_steps=6,
+        frames_per_step=2, key=0))
+    assert not traj.log.fallen.any()
+    assert traj.taken.sum(axis=1).min() >= 5, traj.taken  # measured: all 6 taken
+    assert traj.log.placement_error.max() < PLACEMENT_TOL, traj.log.placement_error  # measured 0.74 cm
+    progress = traj.footsteps[:, -1, 0] - start[:, 0].mean()
+    assert progress.min() > 0.4, progress  # measured 0.86 and 1.12 m: it walks, not only marks time
+    tilt = np.degrees(np.abs(traj.footholds[..., 3:5])).max(axis=(1, 2))
+    assert tilt.min() > 1.0, tilt  # the footholds rest tilted on the ground (measured 6.6 and 9.6 deg)
