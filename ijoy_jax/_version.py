@@ -1,5 +1,5 @@
-"""The package's version, ``project.version`` of pyproject.toml (``tests/test_cli.py`` holds them equal): in
-a module of its own so that parts below the package root (the footstep server's hello) can name it without
-importing the root."""
+"""The package's version, ``project.version`` of pyproject.toml (``tests/test_cli.py`` holds them equal), which
+the package root re-exports as ``ijoy_jax.__version__``: the name the rest of the package reads (the footstep
+server's hello), once the root has imported."""
 
 __version__ = "0.1.0"

@@ -36,8 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ijoy_jax import geometry, robots, select
-from ijoy_jax._version import __version__
+from ijoy_jax import __version__, geometry, robots, select
 from ijoy_jax.footcost import FootCostTerms, TerrainIndex, foot_cost_terms, index_terrain, window_cells
 from ijoy_jax.footcost.index import update_columns
 from ijoy_jax.footcost.query import check_frame
