@@ -172,6 +172,27 @@ def test_the_robustness_sweep_draws_playgrounds_dynamics_per_replicate_alike_in_
     assert set(table["command.vx"]) == {0.25} and set(table["command.vy"]) == {0.0}
 
 
+def test_the_robustness_sweeps_perfect_robot_copy_is_the_one_its_comment_describes():
+    """rough_robustness.toml says the perfect robot walks the same maps in a copy with ``walker = "perfect"`` and
+    no [sim] table: that copy loads and gives the same scenarios without the dynamics, and the copy with [sim]
+    kept is refused, naming the walker (so the comment's recipe is the one that works)."""
+    text = (DIR / "rough_robustness.toml").read_text()
+    perfect = re.sub(r'^walker = "mjx"', 'walker = "perfect"', text, count=1, flags=re.M)
+    assert perfect != text
+    with pytest.raises(ValueError, match=r"sim\.friction.*walker = .mjx."):
+        sweep.parse_config(perfect)
+    no_sim = re.sub(r"^\[sim\].*?(?=^\[grid\])", "", perfect, count=1, flags=re.M | re.S)
+    assert not re.search(r"^\[sim\]", no_sim, flags=re.M)
+    mjx, copy = sweep.scenarios(sweep.load_config(DIR / "rough_robustness.toml")), sweep.scenarios(
+        sweep.parse_config(no_sim))
+    assert len(copy) == len(mjx) == 27 * 256
+    shared = [c for c in mjx.columns if not c.startswith("sim.") and c in copy.columns]
+    assert {"terrain.amplitude", "robot.w", "robot.metrics.support_limit", "replicate", "command.vx"} <= set(shared)
+    for c in shared:
+        assert mjx[c].tolist() == copy[c].tolist(), c
+    assert not any(c.startswith("sim.") for c in copy.columns)  # no dynamics drawn for the perfect robot
+
+
 def test_stairs_sweep_walks_the_longer_reach_past_the_top_riser_and_within_the_map():
     """What stairs_physics.toml's comments say: HRP-2 at reach 0.30 (720 actions, 15 cm risers), refined, held
     forward at one 0.30 m step per 0.8 s; 16 steps carry it past the top riser of every stair (two steps per
