@@ -39,7 +39,11 @@ CASES = [
     (["bench", "walk", "--plot", "no/such/folder/walk.png"], "no folder for"),
     (["bench", "sim", "--batch", "4"], "--batch: options of 'ijoy bench walk' only"),
     (["bench", "select", "--refine"], "--refine: options of 'ijoy bench walk' only"),
-    (["bench", "footcost", "--kernel", "pallas"], "--kernel: options of 'ijoy bench walk' only"),
+    (["bench", "footcost", "--kernel", "pallas"],
+     "--kernel: options of 'ijoy bench select' and 'ijoy bench walk' only"),
+    (["bench", "walk", "--parts", "numpy"], "--parts: options of 'ijoy bench select' only, not of 'walk'"),
+    (["bench", "select", "--parts", "numpy,lava"], "argument --parts: unknown parts ['lava']; known: decisions, "
+                                                   "rollouts, numpy"),
     (["bench", "walk", "--set", "metrics.support_limit"], "--set takes NAME=VALUE, e.g. metrics.support_limit="),
     (["bench", "walk", "--set", "w=abc"], "--set 'w=abc': 'abc' is not a number"),
     (["bench", "walk", "--set", "foot_length=0.3"], "--set 'foot_length=0.3': 'foot_length' is not one of ['w',"),
@@ -236,6 +240,44 @@ def test_each_benchmark_has_its_own_help():
         assert ("--calls" in out) == (name in ("haptics", "cue")) and ("--tick-only" in out) == (name == "cue"), out
 
 
+def test_bench_select_runs_the_parts_and_kernels_asked_for(tmp_path):
+    """``ijoy bench select --parts numpy`` times the NumPy baseline alone (no selector program compiled); the fused
+    kernel is timed on a GPU only: on a CPU ``--kernel pallas`` is refused, naming the device, and on a GPU
+    accepted; a kernel not XLA's or the fused one is refused by name."""
+    import jax
+
+    from ijoy_jax.apps import bench
+
+    out = tmp_path / "select.json"
+    status, _, err = _main(["bench", "select", "--quick", "--parts", "numpy", "--json", str(out)])
+    assert status == 0, err
+    rows = json.loads(out.read_text())
+    assert [(r["bench"], r["method"]) for r in rows] == [("select", "numpy-ordered")]
+    assert rows[0]["decisions_per_s"] > 0
+    status, _, err = _main(["bench", "select", "--quick", "--kernel", "pallas", "--parts", "numpy"])
+    if jax.default_backend() == "cpu":
+        assert status == 2 and "--kernel pallas: the fused kernel's speed needs a GPU" in err, err
+    else:
+        assert status == 0 and bench.select_kernels(["pallas"]) == ("pallas",), err
+    with pytest.raises(ValueError, match=r"kernel must be xla or pallas, got \['cuda'\]"):
+        bench.select_kernels(["cuda"])
+    assert bench.select_kernels(["xla"]) == ("xla",)
+    assert bench.select_kernels() == (("xla",) if jax.default_backend() == "cpu" else ("xla", "pallas"))
+
+
+@pytest.mark.slow
+def test_bench_select_decisions_and_rollouts_with_xla_only():
+    """``--parts decisions,rollouts --kernel xla`` (quick sizes): XLA's decision and rollout rows, no fused
+    kernel's and no NumPy row, each with a positive rate."""
+    from ijoy_jax.apps import bench
+
+    rows = bench.run("select", quick=True, kernels=["xla"], parts=["decisions", "rollouts"])
+    assert {r["kernel"] for r in rows} == {"xla"}
+    assert {r["bench"] for r in rows} == {"select", "rollout"}
+    assert {r["method"] for r in rows if r["bench"] == "select"} == {"exhaustive", "ordered"}
+    assert all(r.get("decisions_per_s", r.get("steps_per_s", 0)) > 0 for r in rows)
+
+
 def test_every_subcommand_is_a_module_of_its_own():
     """``ijoy NAME`` lives in ijoy_jax/apps/NAME_cli.py: ``add_parser(sub)`` registers it, ``main(args)`` runs it."""
     import importlib
@@ -251,7 +293,7 @@ def test_every_subcommand_is_a_module_of_its_own():
 BAD_VALUE = {"int": "abc", "float": "abc", "positive_int": "0", "positive_ints": "1,x", "image_size": "big",
              "output_file": "no/such/folder/x.out", "output_folder": "/dev/null/x",
              "output_file_in_new_folder": "/dev/null/x/y.toml", "_walk_families": "lava",
-             "_walkers": "real"}
+             "_walkers": "real", "_parts": "lava"}
 
 
 def test_every_typed_option_refuses_a_bad_value_in_one_line_naming_it(tmp_path, monkeypatch):

@@ -16,11 +16,14 @@ the lent machine.
             exhaustive with it on a map of posts taller than the clearance, where its corridor broad phase fails),
             closed-loop rollout steps per second (robots on one shared terrain, and each on its own
             2 m x 2 m terrain as in sweeps), and the NumPy implementation
-            of the paper's algorithm in the same run, for the ratio.
+            of the paper's algorithm in the same run, for the ratio. ``--kernel`` and ``--parts`` run some
+            of it (``--kernel pallas --parts decisions``: the fused kernel's decision rates alone, a few
+            minutes on a GPU).
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import platform
 import time
@@ -154,20 +157,59 @@ def bench_footcost(rows, quick: bool, chunk: int):
                              bytes_per_eval=nbytes / (b * n_act)))
 
 
-def bench_select(rows, quick: bool, chunk: int):
+SELECT_PARTS = ("decisions", "rollouts", "numpy")
+"""The parts of ``ijoy bench select``, in the order they run: batched decisions per second, closed-loop rollout
+steps per second of the perfect walker, and the paper's algorithm in NumPy."""
+
+
+def select_kernels(kernels=None) -> tuple[str, ...]:
+    """The FootCost implementations ``ijoy bench select`` times: ``kernels`` (some of "xla", "pallas") checked,
+    or by default XLA's and, on a GPU, the fused kernel's. ValueError for the fused kernel on a CPU, where it only
+    runs interpreted (a test of its arithmetic, not a speed)."""
+    if kernels is None:
+        return ("xla",) if _cpu() else ("xla", "pallas")
+    kernels = tuple(kernels)
+    unknown = [k for k in kernels if k not in ("xla", "pallas")]
+    if unknown or not kernels:
+        raise ValueError(f"kernel must be xla or pallas, got {list(kernels)}")
+    if "pallas" in kernels and _cpu():
+        raise ValueError("--kernel pallas: the fused kernel's speed needs a GPU (on a CPU it runs interpreted); "
+                         "this machine's JAX device is a CPU")
+    return kernels
+
+
+def bench_select(rows, quick: bool, chunk: int, kernels=None, parts=SELECT_PARTS):
+    """``ijoy bench select``: the ``parts`` of :data:`SELECT_PARTS` asked for, with the FootCost implementations
+    ``kernels`` (:func:`select_kernels`); the NumPy part has no kernel."""
+    kernels = select_kernels(kernels)
+    unknown = [p for p in parts if p not in SELECT_PARTS]
+    if unknown or not parts:
+        raise ValueError(f"unknown parts {unknown or list(parts)}; known: {', '.join(SELECT_PARTS)}")
     robot = ij.robots.hrp2(margin=0.02)
     targets = ij.make_targets(robot)
     terrain = workload_terrain(True)
     index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
+    if "decisions" in parts:
+        _select_decisions(rows, quick, chunk, kernels, robot, targets, terrain, index)
+    if "rollouts" in parts:
+        _select_rollouts(rows, quick, kernels, robot, targets, terrain)
+    if "numpy" in parts:
+        _select_numpy(rows, quick, robot, targets, terrain)
+
+
+def _select_decisions(rows, quick, chunk, kernels, robot, targets, terrain, index):
+    """Batched decisions per second of every selector case on the benchmark map, with each of ``kernels``."""
     sizes = [1, 16] if quick else ([1, 16, 256, 1024] if _cpu() else [1, 16, 256, 4096, 32768])
     # The default windows cover margins up to 10 cm (a margin sweep never recompiles); the last case sizes them
     # for the 2 cm in use (``max_margin=0.02``): the same decisions, less work per candidate.
     tight = ij.robots.hrp2(margin=0.02, max_margin=0.02)
     tight_index = jax.jit(lambda t: footcost.index_terrain(t, tight))(terrain)
-    cases = [("exhaustive", "xla", robot, index, sizes), ("ordered", "xla", robot, index, sizes),
-             ("ordered", "xla", tight, tight_index, sizes[:2])]
-    cases = [("2.5D", terrain, *case) for case in cases]
-    if not _cpu():  # the fused Pallas kernel (on a CPU it only runs interpreted)
+    cases = []
+    if "xla" in kernels:
+        cases += [("2.5D", terrain, "exhaustive", "xla", robot, index, sizes),
+                  ("2.5D", terrain, "ordered", "xla", robot, index, sizes),
+                  ("2.5D", terrain, "ordered", "xla", tight, tight_index, sizes[:2])]
+    if "pallas" in kernels:  # the fused Pallas kernel (select_kernels refuses it on a CPU)
         big = sizes + ([] if quick else [131072])
         cases += [("2.5D", terrain, "exhaustive", "pallas", robot, index, big),
                   ("2.5D", terrain, "ordered", "pallas", robot, index, big)]
@@ -197,10 +239,14 @@ def bench_select(rows, quick: bool, chunk: int):
                              compile_s=round(comp, 3), run_s=run, decisions_per_s=b / run,
                              us_per_decision=1e6 * run / b, flops_per_decision=flops / b,
                              bytes_per_decision=nbytes / b))
+
+
+def _select_rollouts(rows, quick, kernels, robot, targets, terrain):
+    """Closed-loop rollout steps per second of the perfect walker, with each of ``kernels``."""
     # Closed loop: B robots walking 16 steps on the same 2.5D terrain.
     steps = 16
     cmd = jnp.array([0.2, 0.0, 0.1], jnp.float32)
-    loops = [("ordered", "xla")] + ([] if _cpu() else [("ordered", "pallas"), ("exhaustive", "pallas")])
+    loops = [(m, k) for m, k in (("ordered", "xla"), ("ordered", "pallas"), ("exhaustive", "pallas")) if k in kernels]
     for method, kernel in loops:
         for b in ([1, 8] if quick else ([1, 64] if _cpu() else [1, 64, 1024, 8192, 32768])):
             if kernel == "xla" and b > 8192:
@@ -227,7 +273,10 @@ def bench_select(rows, quick: bool, chunk: int):
             comp, run, _, _ = _time(f, terrains, starts, repeats=3, min_seconds=0.2)
             _emit(rows, dict(_env(), bench="rollout", method=method, kernel=kernel, terrain="2.5D, one per robot",
                              batch=b, steps=steps, compile_s=round(comp, 3), run_s=run, steps_per_s=b * steps / run))
-    # The paper's algorithm in plain NumPy, same terrain and queries, one decision at a time.
+
+
+def _select_numpy(rows, quick, robot, targets, terrain):
+    """The paper's algorithm in plain NumPy, same terrain and queries, one decision at a time."""
     from ijoy_jax.testing import NumpyFootCost, ordered_select
 
     ref = NumpyFootCost(terrain, robot)
@@ -454,11 +503,15 @@ def check(rows, quick: bool, chunk: int, path: str | None = None):
         _emit(rows, dict(_env(), bench="check", saved=path))
 
 
-def run(name: str, quick: bool = False, chunk: int = 1024, path: str | None = None) -> list:
-    """Run benchmark ``name`` ("footcost", "select", "lookahead" or "check"); print and return JSON rows."""
+def run(name: str, quick: bool = False, chunk: int = 1024, path: str | None = None, kernels=None,
+        parts=SELECT_PARTS) -> list:
+    """Run benchmark ``name`` ("footcost", "select", "lookahead" or "check"); print and return JSON rows.
+    ``kernels`` and ``parts``: ``select``'s only (:func:`bench_select`)."""
     rows: list = []
     if name == "check":
         check(rows, quick, chunk, path)
+    elif name == "select":
+        bench_select(rows, quick, chunk, kernels, parts)
     else:
         {"footcost": bench_footcost, "select": bench_select, "lookahead": bench_lookahead}[name](rows, quick, chunk)
     return rows
@@ -470,6 +523,25 @@ def add_check_options(parser) -> None:
                         help="npz of reference decisions: compared with where it exists, else written")
 
 
+def _parts(text: str) -> list[str]:
+    """``--parts`` as a list of :data:`SELECT_PARTS` (ArgumentTypeError otherwise)."""
+    names = [p.strip() for p in text.split(",") if p.strip()]
+    unknown = [p for p in names if p not in SELECT_PARTS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown parts {unknown}; known: {', '.join(SELECT_PARTS)}")
+    return names
+
+
+def add_select_options(parser) -> None:
+    """``ijoy bench select``'s own options, beside every benchmark's ``--quick`` and ``--json``."""
+    parser.add_argument("--kernel", choices=["xla", "pallas"], default=None,
+                        help="time FootCost's XLA path or the fused kernel only (default: XLA's, and on a GPU both)")
+    parser.add_argument("--parts", type=_parts, default=None,
+                        help=f"comma-separated parts to run, of {', '.join(SELECT_PARTS)} (default: all)")
+
+
 def report(args) -> list:
     """``ijoy bench footcost`` (``select``, ``lookahead``, ``check``) from parsed options: :func:`run`'s rows."""
-    return run(args.name, quick=args.quick, path=getattr(args, "ref", None))
+    kernel, parts = getattr(args, "kernel", None), getattr(args, "parts", None)
+    return run(args.name, quick=args.quick, path=getattr(args, "ref", None),
+               kernels=None if kernel is None else [kernel], parts=SELECT_PARTS if parts is None else parts)

@@ -185,8 +185,10 @@ BENCHMARKS = {
     "select": Benchmark(
         "decisions/s, rollout steps/s and the NumPy baseline",
         "select_step's decisions per second (exhaustive and ordered, batched), rollout steps per second, and "
-        "the paper's algorithm in plain NumPy on the same terrain and queries.",
+        "the paper's algorithm in plain NumPy on the same terrain and queries; --kernel and --parts run some of "
+        "it.",
         run=bench.report,
+        add_options=bench.add_select_options,
     ),
     "lookahead": Benchmark(
         "the lookahead and refining selectors' decision time and the beam's loss",
