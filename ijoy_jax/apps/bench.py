@@ -23,7 +23,6 @@ the lent machine.
 
 from __future__ import annotations
 
-import argparse
 import json
 import platform
 import time
@@ -34,7 +33,7 @@ import numpy as np
 
 import ijoy_jax as ij
 from ijoy_jax import footcost, select
-from ijoy_jax.apps.options import output_file
+from ijoy_jax.apps.options import names_of, output_file
 from ijoy_jax.control import rollout
 
 GRID = (200, 200)  # 4 m x 4 m
@@ -525,11 +524,7 @@ def add_check_options(parser) -> None:
 
 def _parts(text: str) -> list[str]:
     """``--parts`` as a list of :data:`SELECT_PARTS` (ArgumentTypeError otherwise)."""
-    names = [p.strip() for p in text.split(",") if p.strip()]
-    unknown = [p for p in names if p not in SELECT_PARTS]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(f"unknown parts {unknown}; known: {', '.join(SELECT_PARTS)}")
-    return names
+    return names_of(text, SELECT_PARTS, "parts")
 
 
 def add_select_options(parser) -> None:

@@ -20,7 +20,7 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from ijoy_jax.apps import bench, bench_cue, bench_haptics, bench_serve, tune_cli
-from ijoy_jax.apps.options import output_file, output_folder, positive_int
+from ijoy_jax.apps.options import names_of, output_file, output_folder, positive_int
 
 
 class Benchmark(NamedTuple):
@@ -37,11 +37,7 @@ def _walk_families(text: str) -> list[str]:
     """``--families`` as a list of :data:`ijoy_jax.apps.bench_walk.FAMILIES` names (ArgumentTypeError otherwise)."""
     from ijoy_jax.apps import bench_walk
 
-    names = [f.strip() for f in text.split(",") if f.strip()]
-    unknown = [n for n in names if n not in bench_walk.FAMILIES]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(f"unknown terrain families {unknown}; known: {', '.join(bench_walk.FAMILIES)}")
-    return names
+    return names_of(text, bench_walk.FAMILIES, "terrain families")
 
 
 def _walkers(text: str) -> list[str]:

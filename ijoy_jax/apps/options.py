@@ -141,6 +141,21 @@ def positive_ints(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"takes comma-separated integers >= 1, e.g. 1,64,1024, got {text!r}") from None
 
 
+def names_of(text: str, known: Iterable[str], what: str) -> list[str]:
+    """A comma-separated list of some of ``known``, for a ``type=`` function that fixes ``known`` and ``what``
+    (e.g. ``names_of(text, FAMILIES, "terrain families")``).
+
+    Raises:
+      argparse.ArgumentTypeError: an empty list or a name not in ``known``, naming them and the known ones.
+    """
+    known = list(known)
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in known]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown {what} {unknown}; known: {', '.join(known)}")
+    return names
+
+
 def image_size(text: str) -> tuple[int, int]:
     """``type=`` of an image size ``WIDTHxHEIGHT`` in pixels, e.g. ``480x320``: ``(width, height)``, each in
     ``[1, MAX_IMAGE_SIDE]``.
