@@ -512,7 +512,7 @@ def run(name: str, quick: bool = False, chunk: int = 1024, path: str | None = No
     elif name == "select":
         bench_select(rows, quick, chunk, kernels, parts)
     else:
-        {"footcost": bench_footcost, "select": bench_select, "lookahead": bench_lookahead}[name](rows, quick, chunk)
+        {"footcost": bench_footcost, "lookahead": bench_lookahead}[name](rows, quick, chunk)
     return rows
 
 
