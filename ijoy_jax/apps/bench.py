@@ -156,6 +156,9 @@ def bench_footcost(rows, quick: bool, chunk: int):
                              bytes_per_eval=nbytes / (b * n_act)))
 
 
+KERNELS = ("xla", "pallas")
+"""FootCost's implementations ``ijoy bench select --kernel`` chooses between: XLA's and the fused Pallas kernel."""
+
 SELECT_PARTS = ("decisions", "rollouts", "numpy")
 """The parts of ``ijoy bench select``, in the order they run: batched decisions per second, closed-loop rollout
 steps per second of the perfect walker, and the paper's algorithm in NumPy."""
@@ -168,7 +171,7 @@ def select_kernels(kernels=None) -> tuple[str, ...]:
     if kernels is None:
         return ("xla",) if _cpu() else ("xla", "pallas")
     kernels = tuple(kernels)
-    unknown = [k for k in kernels if k not in ("xla", "pallas")]
+    unknown = [k for k in kernels if k not in KERNELS]
     if unknown or not kernels:
         raise ValueError(f"kernel must be xla or pallas, got {list(kernels)}")
     if "pallas" in kernels and _cpu():
@@ -201,10 +204,10 @@ def _select_decisions(rows, quick, chunk, kernels, robot, targets, terrain, inde
     sizes = [1, 16] if quick else ([1, 16, 256, 1024] if _cpu() else [1, 16, 256, 4096, 32768])
     # The default windows cover margins up to 10 cm (a margin sweep never recompiles); the last case sizes them
     # for the 2 cm in use (``max_margin=0.02``): the same decisions, less work per candidate.
-    tight = ij.robots.hrp2(margin=0.02, max_margin=0.02)
-    tight_index = jax.jit(lambda t: footcost.index_terrain(t, tight))(terrain)
-    cases = []
+    cases, tight = [], None
     if "xla" in kernels:
+        tight = ij.robots.hrp2(margin=0.02, max_margin=0.02)
+        tight_index = jax.jit(lambda t: footcost.index_terrain(t, tight))(terrain)
         cases += [("2.5D", terrain, "exhaustive", "xla", robot, index, sizes),
                   ("2.5D", terrain, "ordered", "xla", robot, index, sizes),
                   ("2.5D", terrain, "ordered", "xla", tight, tight_index, sizes[:2])]
@@ -529,7 +532,7 @@ def _parts(text: str) -> list[str]:
 
 def add_select_options(parser) -> None:
     """``ijoy bench select``'s own options, beside every benchmark's ``--quick`` and ``--json``."""
-    parser.add_argument("--kernel", choices=["xla", "pallas"], default=None,
+    parser.add_argument("--kernel", choices=list(KERNELS), default=None,
                         help="time FootCost's XLA path or the fused kernel only (default: XLA's, and on a GPU both)")
     parser.add_argument("--parts", type=_parts, default=None,
                         help=f"comma-separated parts to run, of {', '.join(SELECT_PARTS)} (default: all)")
