@@ -250,11 +250,16 @@ def validate(terrain, robot, stance, stance_side, command, options: SelectOption
     return options
 
 
-def _costs_of(terrain, robot, stance, side, steps, idx, swing_from, index, kernel) -> jax.Array:
-    """FootCost totals of the actions ``idx`` put down at world ``steps``: the one mechanism of every selector."""
-    cost = foot_cost_fused if kernel == "pallas" else foot_cost_terms
-    out = cost(terrain, robot, stance, side, steps, swing_from=swing_from, action_index=idx, index=index)
-    return out if kernel == "pallas" else out.total
+def _costs_of(terrain, robot, stance, side, steps, idx, swing_from, index, kernel, active=True) -> jax.Array:
+    """FootCost totals of the actions ``idx`` put down at world ``steps``: the one mechanism of every selector.
+
+    ``active`` False (traced: a vmapped search's finished query) lets the fused kernel skip the work; its totals
+    are then +inf, and the caller discards them. The XLA path evaluates every query of a batch either way."""
+    if kernel == "pallas":
+        return foot_cost_fused(terrain, robot, stance, side, steps, swing_from=swing_from, action_index=idx,
+                               index=index, active=active)
+    return foot_cost_terms(terrain, robot, stance, side, steps, swing_from=swing_from, action_index=idx,
+                           index=index).total
 
 
 def action_foot_costs(terrain: Terrain, robot: Robot, stance, stance_side, *, swing_from=None,
@@ -315,8 +320,8 @@ def _select(terrain, robot, stance, stance_side, command, swing_from, targets, i
     dists, target_rel, ok = action_dists(robot, side, command, targets, quantize=quantize)
     steps = geometry.compose(stance, side_actions(robot, swing))  # (N, 3)
 
-    def terms_of(idx):
-        return _costs_of(terrain, robot, stance, side, steps[idx], idx, swing_from, index, kernel)
+    def terms_of(idx, active=True):
+        return _costs_of(terrain, robot, stance, side, steps[idx], idx, swing_from, index, kernel, active)
 
     supported = query_supported(terrain, robot) & poses_ok  # FootCost's own rules
     plan_rest = None  # the lookahead's planned steps after this one (refinement keeps them valid)
@@ -454,7 +459,12 @@ def _lexmin(cost, dists):
 
 
 def _ordered(terms_of, order, dists, w, n, chunk):
-    """The paper's ordered traversal of L_i, a chunk of actions at a time."""
+    """The paper's ordered traversal of L_i, a chunk of actions at a time.
+
+    Vmapped over queries, the loop runs until the batch's slowest query is done and every query goes through
+    the body each time: ``terms_of`` is told which queries are still searching (``active``), so that the
+    fused kernel does no work for the finished ones (most queries finish in a few chunks, the slowest of a
+    large batch near the last)."""
     chunk = min(chunk, n)
     num_chunks = -(-n // chunk)
     pad = num_chunks * chunk - n
@@ -462,7 +472,7 @@ def _ordered(terms_of, order, dists, w, n, chunk):
     order = jnp.concatenate([order, jnp.full((pad,), order[-1], jnp.int32)])
     d_sorted = jnp.concatenate([dists[order[:n]], jnp.full((pad,), jnp.inf, dists.dtype)]).astype(jnp.float32)
 
-    def cond(state):
+    def searching(state):
         k, best_cost, _, _ = state
         nxt = jnp.minimum(k * chunk, n - 1)
         # Stop once the best so far cannot be beaten by anything not yet seen.
@@ -473,7 +483,7 @@ def _ordered(terms_of, order, dists, w, n, chunk):
         k, best_cost, best_fc, best_pos = state
         pos = k * chunk + jnp.arange(chunk, dtype=jnp.int32)
         idx = lax.dynamic_slice(order, (k * chunk,), (chunk,))
-        fc = terms_of(idx)
+        fc = terms_of(idx, searching(state))  # False only for a finished query of a vmapped batch
         c = (fc + w * lax.dynamic_slice(d_sorted, (k * chunk,), (chunk,))).astype(jnp.float32)
         c = jnp.where(pos < n, c, jnp.inf)
         j = jnp.argmin(c)  # first in L_i order among equal costs
@@ -482,7 +492,7 @@ def _ordered(terms_of, order, dists, w, n, chunk):
                 jnp.where(better, pos[j], best_pos))
 
     init = (jnp.int32(0), jnp.float32(jnp.inf), jnp.float32(jnp.inf), jnp.int32(0))
-    k, best_cost, best_fc, best_pos = lax.while_loop(cond, body, init)
+    k, best_cost, best_fc, best_pos = lax.while_loop(searching, body, init)
     return order[best_pos], best_cost, best_fc, jnp.minimum(k * chunk, n).astype(jnp.int32)
 
 

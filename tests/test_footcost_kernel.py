@@ -52,17 +52,19 @@ BATCH = 6
 
 
 @functools.partial(jax.jit, static_argnames="fused")
-def _totals(terrain, robot, stance, swing, steps, fused):
-    """Fused totals (B, K), or the XLA path's terms (each (B, K)), of ``steps`` (B, K, 3) from each stance (B, 3)."""
+def _totals(terrain, robot, stance, swing, steps, active, fused):
+    """Fused totals (B, K), or the XLA path's terms (each (B, K)), of ``steps`` (B, K, 3) from each stance (B, 3);
+    ``active`` (B,) bool is the fused kernel's (the XLA path has none)."""
     index = footcost.index_terrain(terrain, robot)
     idx = jnp.arange(steps.shape[1]) % robot.num_actions
 
-    def one(s, w, cand):
+    def one(s, w, cand, on):
         if fused:
-            return foot_cost_fused(terrain, robot, s, -1, cand, swing_from=w, action_index=idx, index=index)
+            return foot_cost_fused(terrain, robot, s, -1, cand, swing_from=w, action_index=idx, index=index,
+                                   active=on)
         return footcost.foot_cost_terms(terrain, robot, s, -1, cand, swing_from=w, action_index=idx, index=index)
 
-    return jax.vmap(one, in_axes=(0, 0 if swing is not None else None, 0))(stance, swing, steps)
+    return jax.vmap(one, in_axes=(0, 0 if swing is not None else None, 0, 0))(stance, swing, steps, active)
 
 
 @jax.jit
@@ -71,9 +73,10 @@ def _action_steps(robot, stance):
     return jax.vmap(lambda s: ij.action_steps(robot, s, -1))(stance)
 
 
-def _both_terms(terrain, robot, stance, swing, steps=None):
+def _both_terms(terrain, robot, stance, swing, steps=None, active=None):
     """(XLA terms, fused totals) of every action of each of the n stances (or of the given (K, 3) steps from each),
-    each (n, N) or (n, K): computed on the BATCH x num_actions harness, so shapes never add a compile."""
+    each (n, N) or (n, K): computed on the BATCH x num_actions harness, so shapes never add a compile. ``active``
+    (n,) bool: the fused kernel's (None: every query)."""
     n = stance.shape[0]
     assert n <= BATCH
     stance = jnp.asarray(np.resize(np.asarray(stance), (BATCH, 3)))
@@ -87,8 +90,9 @@ def _both_terms(terrain, robot, stance, swing, steps=None):
         assert k <= num
         padded = np.concatenate([np.asarray(steps), np.repeat(np.asarray(steps)[:1], num - k, axis=0)])
         cand = jnp.broadcast_to(jnp.asarray(padded), (BATCH, num, 3))
-    terms = jax.tree.map(lambda a: np.asarray(a)[:n, :k], _totals(terrain, robot, stance, swing, cand, False))
-    fused = np.asarray(_totals(terrain, robot, stance, swing, cand, True))[:n, :k]
+    on = jnp.asarray(np.resize(np.ones(n, bool) if active is None else np.asarray(active, bool), BATCH))
+    terms = jax.tree.map(lambda a: np.asarray(a)[:n, :k], _totals(terrain, robot, stance, swing, cand, on, False))
+    fused = np.asarray(_totals(terrain, robot, stance, swing, cand, on, True))[:n, :k]
     return terms, fused
 
 
@@ -316,10 +320,13 @@ def test_select_step_with_the_kernel_chooses_the_same_steps(method):
     def one(s, c, kernel):
         ch = select.select_step(terrain, robot, s, -1, c, options=ij.SelectOptions(method=method, kernel=kernel),
                                 targets=targets, index=index)
-        return ch.index, ch.cost, ch.valid, ch.foothold
+        return ch.index, ch.cost, ch.valid, ch.foothold, ch.evaluated
 
     run = jax.jit(jax.vmap(one, in_axes=(0, 0, None)), static_argnums=2)
-    (ia, ca, va, fa), (ib, cb, vb, fb) = run(stance, command, "xla"), run(stance, command, "pallas")
+    (ia, ca, va, fa, ea), (ib, cb, vb, fb, eb) = run(stance, command, "xla"), run(stance, command, "pallas")
+    np.testing.assert_array_equal(np.asarray(eb), np.asarray(ea))
+    if method == "ordered":  # queries that finish before the batch's slowest: the kernel idles on them
+        assert len(set(np.asarray(ea).tolist())) > 1, np.asarray(ea)
     np.testing.assert_array_equal(np.asarray(ib), np.asarray(ia))
     np.testing.assert_allclose(np.asarray(fb), np.asarray(fa), atol=1e-6)  # the same step's plane: one XLA fit
     np.testing.assert_array_equal(np.asarray(vb), np.asarray(va))
@@ -342,6 +349,30 @@ def test_public_select_step_kernel_option_and_no_recompile():
     assert select.compiled_programs() == n
     with pytest.raises(ValueError, match="kernel must be one of"):
         ij.select_step(terrain, robot, [0.5, 0.5, 0.0], -1, [0.2, 0.0, 0.0], options=ij.SelectOptions(kernel="cuda"))
+
+
+def test_an_inactive_query_is_inf_everywhere_and_leaves_the_batchs_others_alone():
+    """``active=False`` (a vmapped ordered search's finished query) makes every total of that query +inf, the
+    kernel skipping its loops; the batch's active queries get exactly the totals of an all-active batch."""
+    robot = ij.robots.hrp2(margin=0.02)
+    terrain = _terrain("2d", seed=3)
+    stance, _ = _queries(BATCH, seed=4)
+    active = np.arange(BATCH) % 2 == 0
+    xla, every = _both(terrain, robot, stance, None)
+    _, some = _both_terms(terrain, robot, stance, None, active=active)  # the same program: no compile
+    assert np.isfinite(every[~active]).sum() >= 50  # the idle queries had valid steps to skip
+    assert np.isinf(some[~active]).all()
+    np.testing.assert_array_equal(some[active], every[active])
+    _assert_same(xla, every)
+
+
+@pytest.mark.parametrize("active, why", [(1.0, "float"), (jnp.float32(1.0), "float32\\[\\]"),
+                                         (jnp.ones(2, bool), "bool\\[2\\]"), ("yes", "str")])
+def test_active_must_be_one_bool(active, why):
+    robot = ij.robots.hrp2(margin=0.02)
+    terrain = _terrain("2d", seed=0)
+    with pytest.raises(ValueError, match=f"active must be a \\(\\) bool.*{why}"):
+        foot_cost_fused(terrain, robot, jnp.zeros(3), -1, jnp.zeros((4, 3)), active=active)
 
 
 def test_block_must_be_a_power_of_two():

@@ -206,9 +206,10 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
     zero_f = jnp.zeros_like(cx)
     grown = _Rect(cx, cy, c, s, p[_GHL], p[_GHW], res, native)
     ix0 = grown.ix_first
-    too_big = (p[_TOO_BIG] > 0.0) | grown.overflow(ix0, k)
+    idle = p[_TOO_BIG] > 0.0  # the whole query is unsupported or inactive: every total +inf, no loop runs
+    too_big = idle | grown.overflow(ix0, k)
     # Columns this block must visit: its widest grown footprint (past ix_last nothing is touched).
-    num_cols = jnp.clip(jnp.max(grown.ix_last - ix0 + 1), 0, k)
+    num_cols = jnp.where(idle, 0, jnp.clip(jnp.max(grown.ix_last - ix0 + 1), 0, k))
 
     def off_map(ix, j0, j1):
         """(C,) bool: rows j0..j1 of column ix reach beyond the map."""
@@ -302,7 +303,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
             return tuple(a + b for a, b in zip(acc, terms, strict=True))
 
         # Pass 1 visits the foot's columns only (the grown footprint's are up to two more).
-        foot_cols = jnp.clip(jnp.max(foot.ix_last - foot.ix_first + 1), 0, k)
+        foot_cols = jnp.where(idle, 0, jnp.clip(jnp.max(foot.ix_last - foot.ix_first + 1), 0, k))
         n, su, suu, sv, suv, svv, sh, suh, svh = _column_loop(foot_cols, foot.ix_first, (foot,), sums_column,
                                                               (zero_f,) * 9)
         n = jnp.maximum(n, 1.0)
@@ -390,7 +391,7 @@ def _kernel(*refs, shape, res, pad, has_height, has_swing, swing_cols, unroll, w
                          0.5 * length, p[_FHW], res, native)
             pix0 = path.ix_first
             too_big = too_big | path.overflow(pix0, swing_cols) | (length + p[_FW] > p[_SWING_MAX])
-            path_cols = jnp.clip(jnp.max(path.ix_last - pix0 + 1), 0, swing_cols)
+            path_cols = jnp.where(idle, 0, jnp.clip(jnp.max(path.ix_last - pix0 + 1), 0, swing_cols))
             floor_h = jnp.maximum(p[_START_H], height)  # the corridor is measured from the higher foothold
             # Broad phase: every corridor of a lane that can still be valid lies in the box from the swing
             # start to the lanes' steps, grown by the foot's half width and a cell. If that box is on the map
@@ -497,6 +498,7 @@ def foot_cost_fused(
     num_warps: int | None = 1,
     interpret: bool | None = None,
     broad_phase: bool = True,
+    active=True,
 ) -> jax.Array:
     """(N,) FootCost totals of candidate steps, the same numbers as ``foot_cost_terms(...).total``.
 
@@ -520,6 +522,11 @@ def foot_cost_fused(
         candidates when a bound proves every corridor clear (the highest cell
         of a box holding them all is within each step's clearance); the
         totals are the same either way. False: always walk (tests, timing).
+      active: () bool, may be traced: False returns +inf for every step and
+        skips the kernel's loops. A search vmapped over queries gives its
+        finished queries False, so they cost no work while the batch's
+        slowest query goes on (:func:`ijoy_jax.select_step`'s ordered
+        method does).
 
     Returns:
       (N,) float32: +inf where invalid, else >= 0. Not differentiable (the
@@ -530,6 +537,11 @@ def foot_cost_fused(
     check_action_index(robot, action_index, steps.shape[0])
     if block < 1 or block & (block - 1):
         raise ValueError(f"block must be a power of two, got {block}")
+    given = (f"{active.dtype}{list(active.shape)}" if hasattr(active, "dtype") and hasattr(active, "shape")
+             else type(active).__name__)
+    if not isinstance(active, bool) and given != "bool[]":
+        raise ValueError(f"active must be a () bool (one per query: vmap for batches), got {given}")
+    active = jnp.asarray(active, jnp.bool_)  # a Python bool's ~ is an integer's
     if index is None:
         index = index_terrain(terrain, robot)
     if interpret is None:
@@ -549,7 +561,8 @@ def foot_cost_fused(
     zero = f32(0.0)
     stance_h = start_h = zero
     swx = swy = zero
-    unsupported = ~query_supported(terrain, robot) | ~query_ok  # the XLA path's rules, for the whole query
+    # the XLA path's rules, for the whole query; an inactive query is refused the same way (no work, +inf)
+    unsupported = ~query_supported(terrain, robot) | ~query_ok | ~active
     _, blocks, window, _ = index.height_sums.shape
     window = (window - 1) // 2  # rows per window step (>= k, the longest span)
     if has_height:
