@@ -20,11 +20,11 @@ A, B = HL - INSET, HW - INSET
 P = np.stack([XS, YS], axis=1)  # (6, 2)
 
 
-_REST = jax.jit(lambda z, tol: sole.rest_on_points(XS, YS, tuple(z.T), tol))
+_REST = jax.jit(lambda z, tol: sole.rest_on_contacts(A, B, tuple(z.T), tol))
 
 
 def _rest(z, tol=0.003):
-    """rest_on_points on a batch (N, 6) of heights, float32 (one compile per batch size)."""
+    """rest_on_contacts on a batch (N, 6) of heights, float32 (one compile per batch size)."""
     return _REST(jnp.asarray(z, jnp.float32), jnp.float32(tol))
 
 
@@ -40,7 +40,7 @@ def test_the_kernels_unrolled_layout_rests_the_sole_as_the_stacked_one():
         np.round(rng.normal(0.0, 2.0, (1000, 6))) * 0.01,
         rng.choice([-0.5, 0.0, 0.02, 0.5], (1000, 6)),
     ])
-    unrolled = jax.jit(lambda z, tol: sole.rest_on_points(XS, YS, tuple(z.T), tol, unrolled=True))
+    unrolled = jax.jit(lambda z, tol: sole.rest_on_contacts(A, B, tuple(z.T), tol, unrolled=True))
     for tol in (0.0, 0.003, 0.02):
         a = _rest(z, tol)
         b = unrolled(jnp.asarray(z, jnp.float32), jnp.float32(tol))

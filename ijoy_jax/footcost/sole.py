@@ -9,20 +9,22 @@ As a linear program in the plane's height ``h`` at the centre and gradient ``g``
 
   minimise h  subject to  h + g . p_i >= z_i  for every contact point i
 
-whose optimum is a vertex, a triple of points. Every triple is solved and checked (20 for six points; the
-coefficients depend on the sole's size only, so per candidate a triple costs a few multiply-adds): the rest pose
-is the lowest plane under the centre among those above every point. Where several are lowest (the sole rests on
-an edge through its centre, such as the line of its middle points, and can turn about it), it takes the middle
-of their range: the plane halfway between the two that touch a point on either side. It is exact, has no
+Its dual makes it a closed form: the lowest such plane is as high at the centre as the highest interpolation of
+the heights at the centre among the points whose convex hull holds it. In the contact points' layout (two rows
+of three, the centre halfway between the middle points) those are five: the three segments through the centre
+(the middle points' line and the two long diagonals) and the two triangles of a row's ends and the other row's
+middle. A triangle that reaches the highest fixes the plane. A segment leaves the sole free to turn about it,
+between the two planes that touch a point on either side; the sole takes the middle one (the bounds of its
+turn are differences of the heights). The rest pose costs a few dozen additions per candidate, is exact, has no
 iteration to converge, and uses only arithmetic and selects.
 
-Two layouts of the same arithmetic. The XLA path (:mod:`ijoy_jax.footcost.xla`) stacks the points, triples and
-point pairs on leading axes (:func:`rest_on_points`): a few dozen array operations instead of hundreds, which
-XLA compiles far faster (the unrolled rested sole was a large part of a 2.5D selector program's compile). The
-fused kernel (:mod:`ijoy_jax.footcost.pallas`) unrolls them into operations on its blocks
-(``unrolled=True``): a Triton block holds power-of-two shapes only, and the kernel has no gathers. Both compute
-every plane, check and edge with the same formulas in the same order; XLA may contract a multiply-add
-differently in the two layouts, so they agree to float32 rounding (tests/test_sole.py compares them).
+The contact polygon's nearest edge is found the same way: which points lie on which side of the line through two
+of them depends on the layout alone, so an edge of the polygon is a test of the contact set's bits, and the
+centre's distance to its line one of four numbers of the sole's size. Two layouts of the edge test: the XLA
+path (:mod:`ijoy_jax.footcost.xla`) stacks the 15 point pairs on a leading axis (a few array operations, which
+XLA compiles fast), the fused kernel (:mod:`ijoy_jax.footcost.pallas`) unrolls them into operations on its
+blocks (``unrolled=True``: a Triton block holds power-of-two shapes only, and the kernel has no gathers). They
+give the same results (tests/test_sole.py compares them).
 
 The contact polygon is the convex hull of the points within ``tol`` of the rested sole; its ``margin`` is the
 distance from the centre (the ankle, where the centre of pressure sits at rest) to its nearest edge: how far the
@@ -68,7 +70,7 @@ def contact_offsets(half_length, half_width, inset, cos, sin):
 
 
 class Rest(NamedTuple):
-    """A rested sole (:func:`rest_on_points`; arrays of the heights' shape).
+    """A rested sole (:func:`rest_on_contacts`; arrays of the heights' shape).
 
     The sole's plane is ``z = height + grad_along * x + grad_across * y`` in its own frame about its centre.
     """
@@ -81,170 +83,131 @@ class Rest(NamedTuple):
     gap: object  # the largest gap between the rested sole and the ground at one of its points (m)
 
 
-def _plane_through(p, q, r):
-    """Coefficients of the plane through three sole-frame points: (cz, cx, cy), each three weights of the points'
-    heights giving the plane's height at the centre, its gradient along and across; and the determinant (0 for
-    collinear points)."""
-    (x1, y1), (x2, y2), (x3, y3) = p, q, r
-    det = (x2 - x1) * (y3 - y1) - (x3 - x1) * (y2 - y1)
-    # Cramer's rule on [1 x y] [h gx gy]^T = z, as weights of (z1, z2, z3).
-    cx = ((y2 - y3), (y3 - y1), (y1 - y2))
-    cy = ((x3 - x2), (x1 - x3), (x2 - x1))
-    cz = ((x2 * y3 - x3 * y2), (x3 * y1 - x1 * y3), (x1 * y2 - x2 * y1))
-    return cz, cx, cy, det
+# The contact points in units of the grid's half extents (a, b): point i sits at (a * X[i], b * Y[i]), in
+# contact_points' order (toe, middle, heel of the left edge, then of the right edge).
+_X = (1, 0, -1, 1, 0, -1)
+_Y = (1, 1, 1, -1, -1, -1)
+
+
+def _rest_plane(z):
+    """The rested sole's plane in grid units from the six heights ``z``: (height at the centre, rise per unit
+    along ``GX``, per unit across ``GY``), elementwise.
+
+    The linear program's dual: the lowest plane above the points, at the centre, is as high as the highest
+    interpolation of the heights at the centre by points whose hull holds it. In this layout those are five:
+    the three segments through the centre (the middle points 1-4 and the diagonals 0-5 and 2-3) and the two
+    triangles 0-2-4 and 1-3-5, which hold it inside. A triangle that reaches the highest holds the one plane that
+    does; a segment leaves the plane free to turn about it between the extreme planes that stay above the other
+    four points, and the sole takes the middle one (in closed form below; the range is empty, to rounding, only
+    where a triangle or another segment reaches as high, and then the plane is unique and both agree)."""
+    z0, z1, z2, z3, z4, z5 = z
+    cases = []  # (height, GX, GY), the triangles first: where several reach the highest, the first is taken
+    cases.append((0.25 * (z0 + z2) + 0.5 * z4, 0.5 * (z0 - z2), 0.25 * (z0 + z2) - 0.5 * z4))  # 0-2-4
+    cases.append((0.25 * (z3 + z5) + 0.5 * z1, 0.5 * (z3 - z5), 0.5 * z1 - 0.25 * (z3 + z5)))  # 1-3-5
+    # 1-4: GY fixed by the two middle points; GX between the toes' and the heels' bounds.
+    gx = 0.5 * (jnp.maximum(z0 - z1, z3 - z4) + jnp.minimum(z1 - z2, z4 - z5))
+    cases.append((0.5 * (z1 + z4), gx, 0.5 * (z1 - z4)))
+    # 0-5 (toe left, heel right): GX + GY = (z0 - z5) / 2, GX between the bounds of points 4, 3 and 1, 2.
+    gx = 0.5 * (jnp.maximum(z4 - z5, 0.5 * (z3 - z5)) + jnp.minimum(z0 - z1, 0.5 * (z0 - z2)))
+    cases.append((0.5 * (z0 + z5), gx, 0.5 * (z0 - z5) - gx))
+    # 2-3 (heel left, toe right): GX - GY = (z3 - z2) / 2, GX between the bounds of points 0, 1 and 5, 4.
+    gx = 0.5 * (jnp.maximum(0.5 * (z0 - z2), z1 - z2) + jnp.minimum(0.5 * (z3 - z5), z3 - z4))
+    cases.append((0.5 * (z2 + z3), gx, gx - 0.5 * (z3 - z2)))
+    best = functools.reduce(jnp.maximum, [h for h, _, _ in cases])
+    _, big_x, big_y = cases[-1]
+    for h, cx, cy in reversed(cases[:-1]):
+        take = h >= best
+        big_x, big_y = jnp.where(take, cx, big_x), jnp.where(take, cy, big_y)
+    return best, big_x, big_y
 
 
 @functools.cache
-def _combinations(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """The k-subsets of n points in ``itertools.combinations`` order, (C, k) int, and (C, n) bool: point j lies
-    outside subset c (static, NumPy)."""
-    sets = np.array(list(itertools.combinations(range(n), k)), np.int32).reshape(-1, k)
-    return sets, ~np.any(sets[:, :, None] == np.arange(n), axis=1)
+def _edges():
+    """The 15 point pairs (i, j) as candidate edges of a contact polygon (static): per pair the bits of i and j,
+    the bits of the points strictly to its right and strictly to its left (the sides depend on the layout only,
+    a, b > 0), and the centre's signed distance to its line as weights (of a, of b, of
+    ``a b / sqrt(a^2 + 4 b^2)``: every slanted pair that misses the centre has that length's direction)."""
+    edges = []
+    for i, j in itertools.combinations(range(6), 2):
+        al, be = _X[j] - _X[i], _Y[j] - _Y[i]  # the edge is (al a, be b)
+        sides = [al * (_Y[k] - _Y[i]) - be * (_X[k] - _X[i]) for k in range(6)]  # times a b
+        right = sum(1 << k for k in range(6) if sides[k] < 0)
+        left = sum(1 << k for k in range(6) if sides[k] > 0)
+        inner = be * _X[i] - al * _Y[i]  # cross(edge, centre - p_i) / (a b): > 0 when the centre is on its left
+        if be == 0:
+            w = (0.0, inner / abs(al), 0.0)
+        elif al == 0:
+            w = (inner / abs(be), 0.0, 0.0)
+        else:
+            assert inner == 0 or (abs(al), abs(be)) == (1, 2), (i, j)
+            w = (0.0, 0.0, float(inner))
+        edges.append(((1 << i) | (1 << j), right, left, w))
+    return tuple(edges)
 
 
-def _lead(a, ndim: int):
-    """(K,) or (K, M) coefficients reshaped to broadcast against (K, ...) or (K, M, ...) arrays of ``ndim``
-    trailing axes."""
-    return jnp.reshape(a, jnp.shape(a) + (1,) * ndim)
+def _edge_scale(a, b):
+    """a b / sqrt(a^2 + 4 b^2) (m): the centre's distance to the slanted edges' lines, per unit of weight."""
+    return a * b / jnp.sqrt(a * a + 4.0 * b * b)
 
 
-def _margin(x, y, flags):
-    """Distance from the origin to the nearest edge of the convex hull of the points (``x``, ``y``: (n,) arrays)
-    flagged in ``flags`` (an (n, ...) bool array), negative when the origin lies outside, -inf with fewer than two
-    points. The stacked layout of :func:`_margin_unrolled`: pairs (i, j) and the other points k on leading axes."""
-    n = x.shape[0]
-    extra = flags.ndim - 1
-    pairs, others = _combinations(n, 2)
-    xi, yi, xj, yj = x[pairs[:, 0]], y[pairs[:, 0]], x[pairs[:, 1]], y[pairs[:, 1]]
-    ex, ey = xj - xi, yj - yi
-    length = jnp.sqrt(ex * ex + ey * ey)
-    inner = ex * (-yi) - ey * (-xi)  # cross(e, origin - p_i): > 0 when the origin lies left of i -> j
-    side = _lead(ex[:, None] * (y[None, :] - yi[:, None]) - ey[:, None] * (x[None, :] - xi[:, None]), extra)
-    ignore = _lead(jnp.asarray(others), extra) & ~flags[None]  # (pairs, n, ...): not a touching other point
-    plus = flags[pairs[:, 0]] & flags[pairs[:, 1]]
-    minus = plus & jnp.all(ignore | (side <= SIDE_EPS), axis=1)
-    plus = plus & jnp.all(ignore | (side >= -SIDE_EPS), axis=1)
-    d = _lead(inner / length, extra)
-    margin = jnp.min(jnp.minimum(jnp.where(plus, d, jnp.inf), jnp.where(minus, -d, jnp.inf)), axis=0)
+def _margin(code, a, b, *, unrolled: bool = False):
+    """Distance from the centre to the nearest edge of the convex hull of the contact points in ``code`` (int32,
+    bit i: point i touches; any shape), negative when the centre lies outside, -inf with fewer than two points.
+
+    An edge (i, j) of the hull has both ends touching and no touching point strictly on one side: on its right
+    (the centre's distance counts with its sign), or on its left (with the opposite sign); a segment is both.
+    ``unrolled``: each pair its own operations (the fused kernel's layout) instead of the pairs on a leading axis.
+    """
+    q = _edge_scale(a, b)
+    edges = _edges()
+    if unrolled:
+        margin = None
+        for ends, right, left, (wa, wb, wq) in edges:
+            d = wa * a + wb * b + wq * q
+            plus = (code & (ends | right)) == ends
+            minus = (code & (ends | left)) == ends
+            both = jnp.minimum(jnp.where(plus, d, jnp.inf), jnp.where(minus, -d, jnp.inf))
+            margin = both if margin is None else jnp.minimum(margin, both)
+    else:
+        extra = (1,) * jnp.ndim(code)
+        # Python weights of the sizes' scalars: the distances keep the sizes' dtype (also under x64)
+        d = jnp.reshape(jnp.stack([wa * a + wb * b + wq * q for _, _, _, (wa, wb, wq) in edges]), (-1,) + extra)
+        ends, right, left = (np.reshape(np.array(v, np.int32), (-1,) + extra) for v in list(zip(*edges))[:3])
+        plus = (code[None] & (ends | right)) == ends
+        minus = (code[None] & (ends | left)) == ends
+        margin = jnp.min(jnp.minimum(jnp.where(plus, d, jnp.inf), jnp.where(minus, -d, jnp.inf)), axis=0)
     return jnp.where(jnp.isfinite(margin), margin, -jnp.inf)
 
 
-def _margin_unrolled(xs, ys, contact):
-    """:func:`_margin` unrolled over the pairs and points (the fused kernel's layout); ``contact``: a tuple of n
-    bool arrays."""
-    n = len(xs)
-    margin = None
-    for i, j in itertools.combinations(range(n), 2):
-        ex, ey = xs[j] - xs[i], ys[j] - ys[i]
-        length = jnp.sqrt(ex * ex + ey * ey)
-        inner = ex * (-ys[i]) - ey * (-xs[i])  # cross(e, origin - p_i): > 0 when the origin lies left of i -> j
-        plus = contact[i] & contact[j]
-        minus = plus
-        for k in range(n):
-            if k in (i, j):
-                continue
-            side = ex * (ys[k] - ys[i]) - ey * (xs[k] - xs[i])
-            plus = plus & (~contact[k] | (side >= -SIDE_EPS))
-            minus = minus & (~contact[k] | (side <= SIDE_EPS))
-        d = inner / length
-        both = jnp.minimum(jnp.where(plus, d, jnp.inf), jnp.where(minus, -d, jnp.inf))
-        margin = both if margin is None else jnp.minimum(margin, both)
-    return jnp.where(jnp.isfinite(margin), margin, -jnp.inf)
-
-
-def rest_on_points(xs, ys, z, tol, *, unrolled: bool = False) -> Rest:
-    """The rest pose of a rigid sole on the ground heights ``z`` under its points (see the module's docstring).
+def rest_on_contacts(a, b, z, tol, *, unrolled: bool = False) -> Rest:
+    """The rest pose of a rigid sole on the ground heights ``z`` under its contact points (see the module's
+    docstring).
 
     Args:
-      xs, ys: the points in the sole's frame (m; tuples of P scalars, :func:`contact_points`; any values whose
-        convex hull holds the centre).
-      z: a tuple of P arrays of one shape: the ground's height under each point (m, any common reference).
+      a, b: the contact points' half extents along and across the sole (m, > 0): ``half_length - inset`` and
+        ``half_width - inset`` (:func:`contact_points`).
+      z: a tuple of six arrays of one shape: the ground's height under each point, in :func:`contact_points`'
+        order (m, any common reference).
       tol: the contact tolerance (m): points within it of the rested sole form the contact polygon.
-      unrolled: the fused kernel's layout (every triple, point and edge its own operations) instead of the
-        stacked one; the same results to float32 rounding.
+      unrolled: the fused kernel's layout (each edge of the contact polygon its own operations) instead of the
+        edges on a leading axis; the same results.
 
     Returns:
       :class:`Rest` of arrays of ``z``'s shape; finite wherever the heights are.
     """
-    if unrolled:
-        return _rest_unrolled(xs, ys, z, tol)
-    n = len(xs)
-    x, y = jnp.stack(xs), jnp.stack(ys)  # (n,)
-    heights = jnp.stack(z)  # (n, ...)
-    extra = heights.ndim - 1
-    triples, outside = _combinations(n, 3)
-    corners = [(x[triples[:, j]], y[triples[:, j]]) for j in range(3)]
-    cz, cx, cy, det = _plane_through(*corners)  # each a (T,) array per point of the triples
-    ok_det = jnp.abs(det) > 1e-9  # collinear points define no plane (m^2; a real triple spans ~1e-2)
-    inv = _lead(1.0 / jnp.where(ok_det, det, 1.0), extra)
-    zt = [heights[triples[:, j]] for j in range(3)]  # (T, ...) the heights under each triple's points
-    h = (_lead(cz[0], extra) * zt[0] + _lead(cz[1], extra) * zt[1] + _lead(cz[2], extra) * zt[2]) * inv
-    gx = (_lead(cx[0], extra) * zt[0] + _lead(cx[1], extra) * zt[1] + _lead(cx[2], extra) * zt[2]) * inv
-    gy = (_lead(cy[0], extra) * zt[0] + _lead(cy[1], extra) * zt[1] + _lead(cy[2], extra) * zt[2]) * inv
-    over = h[:, None] + gx[:, None] * _lead(x[None, :], extra) + gy[:, None] * _lead(y[None, :], extra)
-    above = ~_lead(jnp.asarray(outside), extra) | (over >= heights[None] - HEIGHT_EPS)  # (T, n, ...)
-    valid = _lead(ok_det, extra) & jnp.all(above, axis=1)
-    h = jnp.where(valid, h, jnp.inf)  # +inf where the triple's plane passes under a point
-    best = jnp.min(h, axis=0)
-    # Ties: as in the unrolled layout, the middle of the lowest planes' gradients.
-    tie = h <= best + HEIGHT_EPS
-    lo_x, hi_x = jnp.min(jnp.where(tie, gx, jnp.inf), axis=0), jnp.max(jnp.where(tie, gx, -jnp.inf), axis=0)
-    lo_y, hi_y = jnp.min(jnp.where(tie, gy, jnp.inf), axis=0), jnp.max(jnp.where(tie, gy, -jnp.inf), axis=0)
-    found = jnp.isfinite(best) & jnp.isfinite(lo_x + hi_x + lo_y + hi_y)
-    height = jnp.where(found, best, jnp.max(heights, axis=0))
-    gx = jnp.where(found, 0.5 * (lo_x + hi_x), 0.0)
-    gy = jnp.where(found, 0.5 * (lo_y + hi_y), 0.0)
-    gaps = height[None] + gx[None] * _lead(x, extra) + gy[None] * _lead(y, extra) - heights  # (n, ...)
-    contact = gaps <= tol + HEIGHT_EPS
-    return Rest(height=height, grad_along=gx, grad_across=gy, margin=_margin(x, y, contact),
-                contacts=jnp.sum(contact.astype(jnp.int32), axis=0), gap=jnp.maximum(jnp.max(gaps, axis=0), 0.0))
-
-
-def _rest_unrolled(xs, ys, z, tol) -> Rest:
-    """:func:`rest_on_points` unrolled over the triples and points (the fused kernel's layout)."""
-    n = len(xs)
-    planes = []  # (h, gx, gy) of each triple, h = +inf where its plane passes under a point
-    for t in itertools.combinations(range(n), 3):
-        cz, cx, cy, det = _plane_through(*((xs[i], ys[i]) for i in t))
-        ok_det = jnp.abs(det) > 1e-9  # collinear points define no plane (m^2; a real triple spans ~1e-2)
-        inv = 1.0 / jnp.where(ok_det, det, 1.0)
-        h = sum(c * z[i] for c, i in zip(cz, t, strict=True)) * inv
-        gx = sum(c * z[i] for c, i in zip(cx, t, strict=True)) * inv
-        gy = sum(c * z[i] for c, i in zip(cy, t, strict=True)) * inv
-        valid = ok_det
-        for k in range(n):
-            if k not in t:
-                valid = valid & (h + gx * xs[k] + gy * ys[k] >= z[k] - HEIGHT_EPS)
-        planes.append((jnp.where(valid, h, jnp.inf), gx, gy))
-    best = planes[0][0]
-    for h, _, _ in planes[1:]:
-        best = jnp.minimum(best, h)
-    # Ties: where the lowest planes rest on an edge through the centre (the middle points' line, a diagonal),
-    # they turn about it between two extremes; the sole takes the middle one (mirrored ground, mirrored sole).
-    lo_x = lo_y = jnp.inf
-    hi_x = hi_y = -jnp.inf
-    for h, gx, gy in planes:
-        tie = h <= best + HEIGHT_EPS
-        lo_x, hi_x = jnp.minimum(lo_x, jnp.where(tie, gx, jnp.inf)), jnp.maximum(hi_x, jnp.where(tie, gx, -jnp.inf))
-        lo_y, hi_y = jnp.minimum(lo_y, jnp.where(tie, gy, jnp.inf)), jnp.maximum(hi_y, jnp.where(tie, gy, -jnp.inf))
-    # No valid triple only through rounding or non-finite heights: a level sole on the highest point (above all).
-    found = jnp.isfinite(best) & jnp.isfinite(lo_x + hi_x + lo_y + hi_y)
-    top = z[0]
-    for zi in z[1:]:
-        top = jnp.maximum(top, zi)
-    height = jnp.where(found, best, top)
-    gx = jnp.where(found, 0.5 * (lo_x + hi_x), 0.0)
-    gy = jnp.where(found, 0.5 * (lo_y + hi_y), 0.0)
-    gaps = [height + gx * xs[i] + gy * ys[i] - z[i] for i in range(n)]
-    contact = tuple(g <= tol + HEIGHT_EPS for g in gaps)
-    gap = gaps[0]
-    count = contact[0].astype(jnp.int32)
-    for i in range(1, n):
-        gap = jnp.maximum(gap, gaps[i])
-        count = count + contact[i].astype(jnp.int32)
-    return Rest(height=height, grad_along=gx, grad_across=gy, margin=_margin_unrolled(xs, ys, contact),
-                contacts=count,
-                gap=jnp.maximum(gap, 0.0))
+    height, big_x, big_y = _rest_plane(z)
+    gaps = []
+    for zi, xi, yi in zip(z, _X, _Y, strict=True):
+        g = height - zi
+        g = g + big_x if xi > 0 else (g - big_x if xi < 0 else g)
+        gaps.append(g + big_y if yi > 0 else g - big_y)
+    code = sum(jnp.where(g <= tol + HEIGHT_EPS, jnp.int32(1 << i), jnp.int32(0)) for i, g in enumerate(gaps))
+    count = sum((g <= tol + HEIGHT_EPS).astype(jnp.int32) for g in gaps)
+    ok_a, ok_b = a > 0, b > 0  # a degenerate sole (flagged at the API boundary and by robot_supported): level
+    return Rest(height=height, grad_along=jnp.where(ok_a, big_x, 0.0) / jnp.where(ok_a, a, 1.0),
+                grad_across=jnp.where(ok_b, big_y, 0.0) / jnp.where(ok_b, b, 1.0),
+                margin=_margin(code, a, b, unrolled=unrolled), contacts=count,
+                gap=jnp.maximum(functools.reduce(jnp.maximum, gaps), 0.0))
 
 
 def full_margin(half_length, half_width, inset):
@@ -272,9 +235,8 @@ def sole_on_ground(ground, half_length, half_width, inset, tol, *, unrolled: boo
     """The rested sole of FootCost's ``support`` term and of the footholds, from the ground ``ground`` (a tuple
     of six arrays, m) under its :func:`contact_points` (half sizes and inset in m, tol: the contact tolerance,
     m). The one code both FootCost paths run, in the fused kernel's layout where ``unrolled``
-    (:func:`rest_on_points`)."""
-    xs, ys = contact_points(half_length, half_width, inset)
-    r = rest_on_points(xs, ys, ground, tol, unrolled=unrolled)
+    (:func:`rest_on_contacts`)."""
+    r = rest_on_contacts(half_length - inset, half_width - inset, ground, tol, unrolled=unrolled)
     pitch, roll = tilt(r.grad_along, r.grad_across)
     support = full_margin(half_length, half_width, inset) - r.margin
     # a sole on all of its points: the margins differ by rounding (~1e-8 m); 0, so that level ground costs nothing
@@ -292,15 +254,15 @@ def soft_sole_on_ground(ground, half_length, half_width, inset, tol, temp) -> So
     function of the sole's size, clamped to plus or minus the whole sole's). Returns :class:`SoleOnGround`.
     """
     xs, ys = contact_points(half_length, half_width, inset)
-    r = rest_on_points(xs, ys, ground, tol)
+    r = rest_on_contacts(half_length - inset, half_width - inset, ground, tol)
     n = len(xs)
     p = jnp.stack([jax.nn.sigmoid((tol - (r.height + r.grad_along * xs[i] + r.grad_across * ys[i] - ground[i]))
                                   / temp + 2.0) for i in range(n)], axis=-1)  # (..., n)
     full = full_margin(half_length, half_width, inset)
-    sets = jnp.asarray(list(itertools.product((False, True), repeat=n)))  # (2^n, n), every contact set
-    # each set's margin depends on the sole's size alone: one traced copy, vmapped over the sets
-    x, y = jnp.stack(xs), jnp.stack(ys)
-    margins = jnp.clip(jax.vmap(lambda flags: _margin(x, y, flags))(sets), -full, full)
+    codes = np.arange(1 << n, dtype=np.int32)  # every contact set, bit i: point i touches
+    sets = jnp.asarray((codes[:, None] >> np.arange(n)) & 1 == 1)  # (2^n, n)
+    # each set's margin depends on the sole's size alone
+    margins = jnp.clip(_margin(jnp.asarray(codes), half_length - inset, half_width - inset), -full, full)
     weights = jnp.prod(jnp.where(sets, p[..., None, :], 1.0 - p[..., None, :]), axis=-1)  # (..., 2^n)
     expected = jnp.sum(weights * margins, axis=-1)
     pitch, roll = tilt(r.grad_along, r.grad_across)
