@@ -29,11 +29,10 @@ def _rest(z, tol=0.003):
 
 
 def test_the_kernels_unrolled_layout_rests_the_sole_as_the_stacked_one():
-    """The fused kernel's layout (``unrolled=True``) and the XLA path's (stacked triples, points and edges) on the
-    same heights: the same contacts, and the rest pose, gap and margin equal to float32 rounding (measured: 2e-7
-    m/m on the gradients, 2e-8 m on heights and margins at a few centimetres of relief; XLA contracts multiply-adds
-    differently in the two layouts). Gaussian ground at four scales, ground in whole centimetres (ties: the sole
-    rests on an edge, on a face of several triples), steps and cliffs of half a metre."""
+    """The fused kernel's layout (``unrolled=True``) and the XLA path's (the contact polygon's 15 point pairs
+    stacked) on the same heights: the same contacts, and the rest pose, gap and margin equal to float32 rounding
+    (XLA contracts multiply-adds differently in the two layouts). Gaussian ground at four scales, ground in whole
+    centimetres (ties: the sole rests on an edge), steps and cliffs of half a metre."""
     rng = np.random.default_rng(11)
     z = np.concatenate([
         rng.normal(0.0, 1.0, (4, 500, 6)).reshape(-1, 6) * np.repeat([0.001, 0.01, 0.02, 0.05], 500)[:, None],
@@ -217,9 +216,10 @@ def test_hostile_heights_give_a_finite_rest_above_the_ground(z, tol):
     assert vals[3] >= -1e-6  # the contact polygon holds the centre (on its edge where it rests on two points)
 
 
-def test_every_triple_is_checked_as_brute_force_does():
-    """The rested height is the lowest centre height over the triples whose plane lies above all six points
-    (testing.lowest_planes: an independent float64 loop over the 20 triples)."""
+def test_the_closed_forms_height_is_the_brute_force_over_every_triple():
+    """The rested height (the linear program's dual: the highest of five interpolations at the centre) is the
+    lowest centre height over the triples whose plane lies above all six points (testing.lowest_planes: an
+    independent float64 loop over the 20 triples)."""
     rng = np.random.default_rng(5)
     z = rng.normal(0.0, 0.02, (200, 6))
     r = _rest(z)
