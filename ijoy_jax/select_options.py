@@ -50,7 +50,9 @@ class SelectOptions:
     Static fields (the tree's structure: each value compiles its own program)::
 
       method: "exhaustive" (FootCost of every action, then the argmin), "ordered" (the paper's search:
-        the actions in order of dist to the target, stopping once nothing later can win; the same steps),
+        the actions in order of dist to the target, stopping once nothing later can win; the same steps.
+        Vmapped, a batch searches until its slowest query is done: on a GPU with the fused kernel the
+        exhaustive search decides large batches faster, BENCHMARKS.md),
         "naive" (the conventional joystick: the action nearest the target, whatever the terrain) or
         "lookahead" (the first step of the best ``horizon``-step sequence, :mod:`ijoy_jax.lookahead`).
       kernel: how FootCost is computed: "xla" or "pallas", one fused kernel per decision
