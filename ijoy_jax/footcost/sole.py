@@ -172,7 +172,8 @@ def _margin(code, a, b, *, unrolled: bool = False):
         extra = (1,) * jnp.ndim(code)
         # Python weights of the sizes' scalars: the distances keep the sizes' dtype (also under x64)
         d = jnp.reshape(jnp.stack([wa * a + wb * b + wq * q for _, _, _, (wa, wb, wq) in edges]), (-1,) + extra)
-        ends, right, left = (np.reshape(np.array(v, np.int32), (-1,) + extra) for v in list(zip(*edges))[:3])
+        columns = list(zip(*edges, strict=True))[:3]  # the pairs' bits, those to their right, to their left
+        ends, right, left = (np.reshape(np.array(v, np.int32), (-1,) + extra) for v in columns)
         plus = (code[None] & (ends | right)) == ends
         minus = (code[None] & (ends | left)) == ends
         margin = jnp.min(jnp.minimum(jnp.where(plus, d, jnp.inf), jnp.where(minus, -d, jnp.inf)), axis=0)
