@@ -28,13 +28,15 @@ SUBSET = " or ".join([
     "test_the_walker_gets_the_full_foothold",  # the rollout's footholds on a ramp
     "test_a_sole_tilted_beyond_the_ankles",  # the ankle term
     "test_soles_farther_apart_than_the_legs_reach",  # the reach term, 2D and 2.5D
+    "test_an_inactive_query_is_inf_everywhere",  # the fused kernel (interpreted), 2D, against the XLA path
 ])
 
 
 def test_core_tests_pass_under_x64():
     env = dict(os.environ, JAX_ENABLE_X64="1")
     cmd = [sys.executable, "-m", "pytest", "-q", "-n", "0", "-p", "no:cacheprovider", "-o", "addopts=",
-           "tests/test_footcost.py", "tests/test_select.py", "tests/test_control.py", "-k", SUBSET]
+           "tests/test_footcost.py", "tests/test_select.py", "tests/test_control.py", "tests/test_footcost_kernel.py",
+           "-k", SUBSET]
     out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stdout[-4000:] + out.stderr[-2000:]
     assert " passed" in out.stdout and "failed" not in out.stdout and "deselected" in out.stdout
