@@ -276,6 +276,14 @@ def test_bench_select_decisions_and_rollouts_with_xla_only():
     assert {r["bench"] for r in rows} == {"select", "rollout"}
     assert {r["method"] for r in rows if r["bench"] == "select"} == {"exhaustive", "ordered"}
     assert all(r.get("decisions_per_s", r.get("steps_per_s", 0)) > 0 for r in rows)
+    # the work a decision did, from the timed program's own output: the whole action set, or the ordered
+    # search's share of it (whole chunks of 32, at least one)
+    n = ijoy_jax.robots.hrp2().num_actions
+    work = {(r["method"], r["max_margin"], r["batch"]): r["actions_per_decision"]
+            for r in rows if r["bench"] == "select"}
+    assert all(v == n for (method, *_), v in work.items() if method == "exhaustive"), work
+    ordered = [v for (method, *_), v in work.items() if method == "ordered"]
+    assert all(32 <= v <= n for v in ordered) and min(ordered) < n, work
 
 
 def test_every_subcommand_is_a_module_of_its_own():

@@ -14,7 +14,8 @@ the lent machine.
   select    full decisions per second (exhaustive and ordered, 2.5D with swing path; ordered also with
             windows sized for the 2 cm margin; on a GPU both again with the fused Pallas FootCost kernel, and
             exhaustive with it on a map of posts taller than the clearance, where its corridor broad phase fails),
-            closed-loop rollout steps per second (robots on one shared terrain, and each on its own
+            each row with the FootCosts a decision evaluated on average (``actions_per_decision``: the action
+            set's size for the exhaustive search, fewer for the paper's ordered one), closed-loop rollout steps per second (robots on one shared terrain, and each on its own
             2 m x 2 m terrain as in sweeps), and the NumPy implementation
             of the paper's algorithm in the same run, for the ratio. ``--kernel`` and ``--parts`` run some
             of it (``--kernel pallas --parts decisions``: the fused kernel's decision rates alone, a few
@@ -85,11 +86,15 @@ def _starts(robot, b: int, x: float, y0: float, rows: int):
     return jax.vmap(lambda yi: ij.robots.start_stance(robot, x, yi))(jnp.asarray(y, jnp.float32))
 
 
-def _time(fn, *args, repeats: int = 10, min_seconds: float = 0.5, max_seconds: float = 8.0):
+def _time(fn, *args, repeats: int = 10, min_seconds: float = 0.5, max_seconds: float = 8.0, outputs=None):
+    """(compile s, median run s, flops, bytes) of ``fn(*args)``, compiled ahead of time; ``outputs``: a list that
+    gets the first call's result appended (what the timed program returned, without compiling it again)."""
     t0 = time.perf_counter()
     compiled = fn.lower(*args).compile()
     compile_s = time.perf_counter() - t0
-    jax.block_until_ready(compiled(*args))
+    first = jax.block_until_ready(compiled(*args))
+    if outputs is not None:
+        outputs.append(first)
     times = []
     start = time.perf_counter()
     while len(times) < 2 or (
@@ -225,19 +230,22 @@ def _select_decisions(rows, quick, chunk, kernels, robot, targets, terrain, inde
         def one(stance, command, swing, tmap=tmap, options=options, rb=rb, ix=ix):
             c = select.select_step(tmap, rb, stance, -1, command, options, swing_from=swing, targets=targets,
                                    index=ix)
-            return c.index, c.cost
+            return c.index, c.cost, c.evaluated
 
         # The kernel keeps its intermediates on chip, so a whole batch fits at once.
         f = _batched(one, chunk if kernel == "xla" else 1 << 20)
         max_margin = 0.02 if rb is tight else 0.1
         for b in batches:
             stance, command, swing = workload_queries(b)
+            out = []
             if b == 1:  # one decision as a user makes it: no vmap over a batch of one (slower; benchmarks_history)
-                comp, run, flops, nbytes = _time(jax.jit(one), stance[0], command[0], swing[0])
+                comp, run, flops, nbytes = _time(jax.jit(one), stance[0], command[0], swing[0], outputs=out)
             else:
-                comp, run, flops, nbytes = _time(f, stance, command, swing)
+                comp, run, flops, nbytes = _time(f, stance, command, swing, outputs=out)
             _emit(rows, dict(_env(), bench="select", method=method, kernel=kernel, max_margin=max_margin,
                              terrain=terrain_name, batch=b,
+                             # FootCosts a decision evaluated, on average (exhaustive: the action set's size)
+                             actions_per_decision=float(np.mean(np.asarray(out[0][2]))),
                              compile_s=round(comp, 3), run_s=run, decisions_per_s=b / run,
                              us_per_decision=1e6 * run / b, flops_per_decision=flops / b,
                              bytes_per_decision=nbytes / b))

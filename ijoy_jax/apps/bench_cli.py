@@ -180,7 +180,8 @@ BENCHMARKS = {
     ),
     "select": Benchmark(
         "decisions/s, rollout steps/s and the NumPy baseline",
-        "select_step's decisions per second (exhaustive and ordered, batched), rollout steps per second, and "
+        "select_step's decisions per second (exhaustive and ordered, batched) with the FootCosts a decision "
+        "evaluated, rollout steps per second, and "
         "the paper's algorithm in plain NumPy on the same terrain and queries; --kernel and --parts run some of "
         "it.",
         run=bench.report,
