@@ -15,8 +15,9 @@ the lent machine.
             windows sized for the 2 cm margin; on a GPU both again with the fused Pallas FootCost kernel, and
             exhaustive with it on a map of posts taller than the clearance, where its corridor broad phase fails),
             each row with the FootCosts a decision evaluated on average (``actions_per_decision``: the action
-            set's size for the exhaustive search, fewer for the paper's ordered one), closed-loop rollout steps per second (robots on one shared terrain, and each on its own
-            2 m x 2 m terrain as in sweeps), and the NumPy implementation
+            set's size for the exhaustive search, fewer for the paper's ordered one), closed-loop rollout
+            steps per second (robots on one shared terrain, and each on its own 2 m x 2 m terrain as in
+            sweeps), and the NumPy implementation
             of the paper's algorithm in the same run, for the ratio. ``--kernel`` and ``--parts`` run some
             of it (``--kernel pallas --parts decisions``: the fused kernel's decision rates alone, a few
             minutes on a GPU).
