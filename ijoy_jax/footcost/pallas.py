@@ -537,9 +537,9 @@ def foot_cost_fused(
     check_action_index(robot, action_index, steps.shape[0])
     if block < 1 or block & (block - 1):
         raise ValueError(f"block must be a power of two, got {block}")
-    given = (f"{active.dtype}{list(active.shape)}" if hasattr(active, "dtype") and hasattr(active, "shape")
-             else type(active).__name__)
-    if not isinstance(active, bool) and given != "bool[]":
+    shape, dtype = getattr(active, "shape", None), getattr(active, "dtype", None)
+    if not (isinstance(active, bool) or (shape == () and dtype == jnp.bool_)):
+        given = type(active).__name__ if shape is None or dtype is None else f"{dtype}{list(shape)}"
         raise ValueError(f"active must be a () bool (one per query: vmap for batches), got {given}")
     active = jnp.asarray(active, jnp.bool_)  # a Python bool's ~ is an integer's
     if index is None:

@@ -43,11 +43,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-# m: a point counts as under (or on) a candidate plane, and as in contact, within this of it: float32 rounding of
-# the plane through three heights of a few decimetres' relief, measured below 1e-7 m (tests/test_sole.py).
+# m: a point counts as in contact within this (plus the tolerance) of the rested sole: float32 rounding of the
+# rest plane over heights of a few decimetres' relief, measured below 1e-7 m (tests/test_sole.py).
 HEIGHT_EPS = 1e-6
-# m^2: a point counts as on the inner side of a polygon edge within this cross product (a 1 um offset at 0.1 m).
-SIDE_EPS = 1e-7
 # m: a support metric below this is float32 rounding of two equal margins (measured ~2e-8 m) and reads 0.
 SUPPORT_EPS = 1e-6
 
@@ -202,8 +200,9 @@ def rest_on_contacts(a, b, z, tol, *, unrolled: bool = False) -> Rest:
         g = height - zi
         g = g + big_x if xi > 0 else (g - big_x if xi < 0 else g)
         gaps.append(g + big_y if yi > 0 else g - big_y)
-    code = sum(jnp.where(g <= tol + HEIGHT_EPS, jnp.int32(1 << i), jnp.int32(0)) for i, g in enumerate(gaps))
-    count = sum((g <= tol + HEIGHT_EPS).astype(jnp.int32) for g in gaps)
+    touches = [g <= tol + HEIGHT_EPS for g in gaps]
+    code = sum(jnp.where(t, jnp.int32(1 << i), jnp.int32(0)) for i, t in enumerate(touches))
+    count = sum(t.astype(jnp.int32) for t in touches)
     ok_a, ok_b = a > 0, b > 0  # a degenerate sole (flagged at the API boundary and by robot_supported): level
     return Rest(height=height, grad_along=jnp.where(ok_a, big_x, 0.0) / jnp.where(ok_a, a, 1.0),
                 grad_across=jnp.where(ok_b, big_y, 0.0) / jnp.where(ok_b, b, 1.0),
