@@ -48,7 +48,7 @@ def test_build_passes_with_warnings_as_errors(html):
     ("api/stick.html", 'id="ijoy_jax.stick.scripted_commands"'),
     ("api/sweep.html", 'id="ijoy_jax.sweep.recorded.read_commands"'),
     ("api/sim.html", 'id="ijoy_jax.sim.mjx_biped.MjxBiped"'),  # ijoy drive --robot mjx's body
-    ("api/sim.html", 'id="ijoy_jax.sim.walker.tick"'),  # the walker's step in public parts
+    ("api/sim.html", 'id="ijoy_jax.sim.walk_step.tick"'),  # the walker's step in public parts (walker re-exports)
     ("api/robots.html", "forward/backward step of HRP-2"),  # a constant's docstring, from the module assigning it
     ("drive.html", "A recorded drive as a sweep"),
     ("sweeps.html", "plan.inputs"),  # the section on a person's commands (sweeps/README.md)

@@ -33,7 +33,7 @@ import pytest
 from test_experiments import HL, RES, SHAPE_2D, STEPS_2D, _start, scenario, scenarios_2d
 
 import ijoy_jax as ij
-from ijoy_jax.sim import _checks, physics, render
+from ijoy_jax.sim import checks, physics, render
 from ijoy_jax.sim import walker as W
 from ijoy_jax.terrain import generators
 
@@ -173,7 +173,7 @@ def test_a_nan_terrain_is_refused_where_concrete_and_stands_flagged_where_traced
     first = jnp.ones(2, jnp.float32)
     dyn = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float32), (2,)), dyn)  # as given
     traj = W._rollout_batch(_tiny_walk.sim(), bad, robots, jnp.asarray(starts, jnp.float32),
-                            jnp.asarray(commands, jnp.float32), first, None, dyn, _checks.rollout_keys(0, 2),
+                            jnp.asarray(commands, jnp.float32), first, None, dyn, checks.rollout_keys(0, 2),
                             ij.SelectOptions(), num_steps=_tiny_walk.STEPS, frames_per_step=_tiny_walk.FRAMES)
     traj = jax.tree_util.tree_map(np.asarray, traj)
     assert traj.unsupported[0].all() and not traj.taken[0].any() and not traj.unsupported[1].any()

@@ -7,7 +7,8 @@ stands on),
 over the terrain), :mod:`.controller` (the walking pattern generator: a
 footstep to joint targets, tick by tick), :mod:`.walker` (the MJX robot as a
 :class:`ijoy_jax.control.Walker`, its step in public parts: begin, tick, end,
-and its rollout), :mod:`.native` and :mod:`.mjx_biped` (one biped stepped tick
+and its rollout; it re-exports :mod:`.simulator`, :mod:`.sensors`, :mod:`.walk_step`, :mod:`.checks`
+and :mod:`.metrics`, where those parts are written), :mod:`.native` and :mod:`.mjx_biped` (one biped stepped tick
 by tick for a live drive: on native MuJoCo, or on MJX), :mod:`.physics` (the
 traced :class:`~ijoy_jax.sim.physics.Dynamics` a user varies per robot: friction,
 mass, actuator stiffness, control delay, stance noise, pushes), :mod:`.render`

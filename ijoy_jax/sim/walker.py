@@ -23,11 +23,10 @@ same code: :func:`make_world` (the robot's models on a terrain, its dynamics),
 :func:`init_state`, :func:`stance_info`, and a step as :func:`begin_step`, one
 :func:`tick` per control period, :func:`end_step`.
 
-This module is the walking API's one public face (its ``__all__``); the parts
-are written in private modules of one concept each, beside it: ``_simulator``
-(:class:`Sim`, :func:`make_sim`), ``_sensors`` (what the robot measures),
-``_step`` (the step in public parts and its state), ``_checks`` (the rollout's
-input checks) and ``_metrics`` (:func:`summary`). This module holds the Walker
+This module is the walking API's one public face (its ``__all__`` re-exports the parts); the parts are
+written in modules of one concept each, beside it: :mod:`.simulator` (:class:`Sim`, :func:`make_sim`),
+:mod:`.sensors` (what the robot measures), :mod:`.walk_step` (the step in public parts and its state),
+:mod:`.checks` (the rollout's input checks) and :mod:`.metrics` (:func:`summary`). This module holds the Walker
 and the jitted rollout programs.
 """
 
@@ -48,9 +47,9 @@ from ijoy_jax.progress import compile_and_call
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.select_options import SelectOptions, checked
 from ijoy_jax.sim import physics
-from ijoy_jax.sim._checks import as_flag, check_rollout_inputs, check_terrain_grid, rollout_keys
-from ijoy_jax.sim._metrics import summary
-from ijoy_jax.sim._sensors import (
+from ijoy_jax.sim.checks import as_flag, check_rollout_inputs, check_terrain_grid, rollout_keys
+from ijoy_jax.sim.metrics import summary
+from ijoy_jax.sim.sensors import (
     ankle_wrench,
     centre_of_mass,
     measured_soles,
@@ -58,8 +57,8 @@ from ijoy_jax.sim._sensors import (
     step_start,
     without_sensors,
 )
-from ijoy_jax.sim._simulator import Sim, check_robot_for_sim, make_sim, nominal_dynamics
-from ijoy_jax.sim._step import (
+from ijoy_jax.sim.simulator import Sim, check_robot_for_sim, make_sim, nominal_dynamics
+from ijoy_jax.sim.walk_step import (
     PLANAR,
     SimState,
     Step,

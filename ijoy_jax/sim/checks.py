@@ -18,8 +18,8 @@ from ijoy_jax.limits import check_num_steps
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import LEFT, Robot
 from ijoy_jax.sim import physics
-from ijoy_jax.sim._simulator import Sim, check_robot_for_sim
-from ijoy_jax.sim._step import frame_ticks
+from ijoy_jax.sim.simulator import Sim, check_robot_for_sim
+from ijoy_jax.sim.walk_step import frame_ticks
 from ijoy_jax.struct import is_traced
 from ijoy_jax.terrain import Terrain
 

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 
 from ijoy_jax import control
-from ijoy_jax.sim._step import StepLog
+from ijoy_jax.sim.walk_step import StepLog
 
 
 def summary(traj: control.Trajectory) -> dict[str, jax.Array]:

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from ijoy_jax.sim._simulator import Sim
+from ijoy_jax.sim.simulator import Sim
 
 
 def measured_soles(sim: Sim, d: mjx.Data) -> jax.Array:

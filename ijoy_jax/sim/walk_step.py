@@ -27,7 +27,7 @@ from ijoy_jax import control, geometry, select
 from ijoy_jax.prng import as_key
 from ijoy_jax.robots import Robot
 from ijoy_jax.sim import bodies, controller, hfield, kinematics, model, physics, preview, swing
-from ijoy_jax.sim._sensors import (
+from ijoy_jax.sim.sensors import (
     ankle_wrench,
     centre_of_mass,
     measured_soles,
@@ -35,7 +35,7 @@ from ijoy_jax.sim._sensors import (
     step_start,
     without_sensors,
 )
-from ijoy_jax.sim._simulator import Sim, nominal_dynamics
+from ijoy_jax.sim.simulator import Sim, nominal_dynamics
 from ijoy_jax.terrain import Terrain
 
 
