@@ -379,7 +379,9 @@ BAD = [
      "also set as a fixed value in [sim]"),
     ('[sweep]\nwalker = "mjx"\n[grid]\n"robot.step_time" = [0.6, 0.8]\n', "grid.robot.step_time",
      "the simulated controller's step time"),
-    ('[sweep]\nwalker = "mjx"\n[robot]\nstep_time = 0.6\n', "robot.step_time", "must be the simulated controller's"),
+    ('[sweep]\nwalker = "mjx"\n[robot]\nstep_time = 0.605\n', "robot.step_time",
+     "must be a whole number of the controller's 0.01 s periods, at least 20"),
+    ('[sweep]\nwalker = "mjx"\n[robot]\nstep_time = 0.1\n', "robot.step_time", "at least 20 (WalkConfig"),
     ('[sweep]\nwalker = "mjx"\nrandom_samples = 2\n[random]\n"robot.foot_length" = [0.2, 0.25]\n',
      "random.robot.foot_length", "the simulated foot's size"),
     ('[sweep]\nwalker = "mjx"\n[terrain]\nresolution = 0.005\n', "terrain.resolution", "must be >= 0.01 m"),
@@ -401,3 +403,17 @@ def test_the_perfect_robots_table_has_no_physics():
     cfg = sweep.parse_config("[sweep]\nscenarios_per_cell = 2\n")
     assert cfg.walker == "perfect"
     assert not any(c.startswith("sim.") for c in sweep.scenarios(cfg).columns)
+
+
+def test_a_fixed_step_time_is_the_simulated_controllers_too():
+    """``[robot] step_time`` with ``walker = "mjx"`` sets the selector's p_next and the controller's step alike
+    (host-side: the Sim is built, nothing compiles); a step time the file leaves alone is the model's."""
+    from ijoy_jax.sweep import programs
+
+    for fixed, ticks in (("step_time = 0.6\n", 60), ("", 80)):
+        cfg = sweep.parse_config(PHYSICS.replace("[robot]\n", f"[robot]\n{fixed}"))
+        table = sweep.scenarios(cfg)
+        sim = programs.make_sim(cfg, table)
+        assert sim.cfg.ticks_per_step == ticks
+        np.testing.assert_allclose(table["robot.step_time"], ticks / 100, rtol=1e-6)
+        assert programs.physics_steps_per_scenario(sim, STEPS) == (STEPS + 1) * ticks * sim.substeps

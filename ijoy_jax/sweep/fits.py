@@ -22,6 +22,7 @@ from ijoy_jax.sweep.expansion import HOST_MEMORY_FRACTION, MAX_SCENARIOS, table_
 from ijoy_jax.sweep.schema import SIM_MIN_RESOLUTION, Checker, SweepConfig, reach_of
 
 __all__ = [
+    "MIN_STEP_TICKS",
     "check_reach",
     "check_recorded_start_fits",
     "check_selector",
@@ -29,7 +30,28 @@ __all__ = [
     "check_start_fits",
     "check_walker",
     "file_values",
+    "walk_config",
 ]
+
+MIN_STEP_TICKS = 20
+"""The fewest control periods (of 10 ms) a simulated step may last with ``walker = "mjx"``: double support,
+lift-off, swing and landing each take a few (``WalkConfig``'s fractions of the step)."""
+
+
+def walk_config(cfg: SweepConfig):
+    """The :class:`~ijoy_jax.sim.controller.WalkConfig` of a ``walker = "mjx"`` sweep: the model's own
+    (:func:`ijoy_jax.sim.bodies.walk_defaults`) with the step time of ``[robot] step_time`` where the file fixes
+    it (one value per sweep: the step's length in control ticks is a static shape)."""
+    import dataclasses
+
+    from ijoy_jax.sim import bodies
+    from ijoy_jax.sim.controller import WalkConfig
+    from ijoy_jax.sim.model import biped_params
+
+    walk = WalkConfig(**bodies.walk_defaults(biped_params(model=cfg.model)))
+    if "step_time" in cfg.robot:
+        walk = dataclasses.replace(walk, step_time=float(cfg.robot["step_time"]))
+    return walk
 
 
 def file_values(robot: dict, grid: dict, rand: dict, name: str, *, model: str = "biped") -> tuple:
@@ -104,20 +126,19 @@ def check_selector(chk: Checker, cfg: SweepConfig) -> None:
 
 
 def check_walker(chk: Checker, cfg: SweepConfig) -> None:
-    """A ``walker = "mjx"`` sweep fits the simulated robot: its step time, its feet (the G1's are its MJCF's) and
-    the resolution (before compute)."""
-    from ijoy_jax.sim import bodies
-    from ijoy_jax.sim.controller import WalkConfig
-    from ijoy_jax.sim.model import biped_params
-
+    """A ``walker = "mjx"`` sweep fits the simulated robot: its step time (a fixed ``[robot] step_time`` is the
+    controller's too: :func:`walk_config`), its feet (the G1's are its MJCF's) and the resolution (before
+    compute)."""
+    if "step_time" in cfg.robot:
+        control_dt = walk_config(cfg).control_dt
+        ticks = cfg.robot["step_time"] / control_dt
+        if abs(ticks - round(ticks)) > 1e-6 or round(ticks) < MIN_STEP_TICKS:
+            chk.fail(
+                "robot.step_time",
+                f'with walker = "mjx" must be a whole number of the controller\'s {control_dt} s periods, at '
+                f"least {MIN_STEP_TICKS} (WalkConfig.step_time), got {cfg.robot['step_time']}",
+            )
     defaults = models.robot_defaults(cfg.model)
-    step = WalkConfig(**bodies.walk_defaults(biped_params(model=cfg.model))).step_time
-    if abs(cfg.robot.get("step_time", defaults["step_time"]) - step) > 1e-6:
-        chk.fail(
-            "robot.step_time",
-            f'must be the simulated controller\'s {step} s with walker = "mjx" '
-            f"(WalkConfig.step_time), got {cfg.robot['step_time']}",
-        )
     if cfg.model == "g1":
         for k in ("foot_length", "foot_width"):
             if k in cfg.robot and abs(cfg.robot[k] - defaults[k]) > 1e-6:

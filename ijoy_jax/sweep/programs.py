@@ -65,7 +65,7 @@ from ijoy_jax import robots
 from ijoy_jax.control import rollout
 from ijoy_jax.jit_cache import compiled_count
 from ijoy_jax.select_options import SelectOptions
-from ijoy_jax.sweep import models, seeding
+from ijoy_jax.sweep import fits, models, seeding
 from ijoy_jax.sweep.expansion import scenarios
 from ijoy_jax.sweep.schema import COMMAND_KEYS, ROBOT_DEFAULTS, SweepConfig, SweepConfigError, reach_of
 from ijoy_jax.targets import make_targets
@@ -546,14 +546,15 @@ def chunk_static(cfg: SweepConfig, horizon: int | None = None, refine: bool | No
 
 def make_sim(cfg: SweepConfig, table):
     """The MJX robot of a ``walker = "mjx"`` sweep: its model's (``make_sim(..., model=cfg.model)``: the
-    project's biped or the G1), its map's grid, the sweep's fixed footprint (host-side, no compile); or None for
-    the perfect robot."""
+    project's biped or the G1), its map's grid, the sweep's fixed footprint and step time
+    (:func:`ijoy_jax.sweep.fits.walk_config`; host-side, no compile); or None for the perfect robot."""
     if cfg.walker != "mjx":
         return None
     from ijoy_jax.sim import walker
 
-    size = {k: float(table[f"robot.{k}"].iloc[0]) for k in ("foot_length", "foot_width")}
-    return walker.make_sim(cfg.shape, cfg.resolution, robot=models.build_robot(cfg.model, **size), model=cfg.model)
+    fixed = {k: float(table[f"robot.{k}"].iloc[0]) for k in ("foot_length", "foot_width", "step_time")}
+    return walker.make_sim(cfg.shape, cfg.resolution, cfg=fits.walk_config(cfg),
+                           robot=models.build_robot(cfg.model, **fixed), model=cfg.model)
 
 
 def physics_steps_per_scenario(sim, num_steps: int) -> int:

@@ -88,7 +88,8 @@ scenarios plus the per-scenario physics metrics (:data:`ijoy_jax.sweep.PHYSICS_M
 It runs the one-step selectors (``exhaustive``, ``ordered``, ``naive``), refined or not
 (``refine``), not the lookahead.
 Its body is static, so the sweep must fit it, checked before compute: the step time
-is the controller's (``robot.step_time``: 0.8 s, the G1's 0.5 s; not swept), the footprint is the
+is the controller's (``robot.step_time``: 0.8 s, the G1's 0.5 s, or a value fixed in ``[robot]``, a whole
+number of 10 ms control periods; not swept), the footprint is the
 physical foot's (``robot.foot_length``/``foot_width`` fixed in ``[robot]``, not
 swept; the G1's own, its MJCF's, not changed), the map's cells are at least
 :data:`SIM_MIN_RESOLUTION` wide, and the robot standing at the start zone's centre
