@@ -173,18 +173,23 @@ def polygon_column_spans(corners: jax.Array, res, num_columns: int, ix0=None) ->
     dx = qx - px
     slanted = dx != 0.0
     slope = (qy - py) / jnp.where(slanted, dx, 1.0)
-    # y-extent over each slab: y of each edge at x = a and at x = b (edges that cross x), as (2, K, V) arrays,
-    # and the vertices inside the slab, (K, V); min and max over them are exact, whatever the order. Arrays,
-    # not a loop unrolled over the vertices (707e0af, for XLA:CPU then): a closed loop traces these spans at
-    # about 15 sites, and the arrays lower to a third of the ops, with the same spans and the same speed on
-    # today's CPU and GPU (docs/benchmarks_history.md, twelfth session).
-    x = jnp.stack([a, b])[:, :, None]
-    y = py + (x - px) * slope
-    ok = slanted & (x >= ex_lo) & (x <= ex_hi)
-    inside = (px >= a[:, None]) & (px <= b[:, None])
-    ylo = jnp.minimum(jnp.min(jnp.where(ok, y, jnp.inf), axis=(0, 2)), jnp.min(jnp.where(inside, py, jnp.inf), axis=1))
-    yhi = jnp.maximum(jnp.max(jnp.where(ok, y, -jnp.inf), axis=(0, 2)),
-                      jnp.max(jnp.where(inside, py, -jnp.inf), axis=1))
+    # y-extent over each slab: y of each edge at x = a and at x = b (edges that cross x), and the vertices
+    # inside the slab. Unrolled over the (static, few) vertices, so every quantity is a (K,) array that XLA fuses
+    # into one loop (min and max are exact, so the order does not matter). As (2, K, V) arrays reduced over V
+    # (0f7ce45 to 2026-12-01) the program was a third of the ops but 2D FootCost ran 3.2x slower on a CPU and
+    # 2D decisions 2.6x slower: a closed loop on rough ground then compiled 1.01x the issue-time program's
+    # time, unrolled 1.13x, side by side on one H200 (BENCHMARKS.md).
+    ylo = jnp.full(a.shape, jnp.inf, a.dtype)
+    yhi = jnp.full(a.shape, -jnp.inf, a.dtype)
+    for v in range(px.shape[0]):
+        for x in (a, b):
+            y = py[v] + (x - px[v]) * slope[v]
+            ok = slanted[v] & (x >= ex_lo[v]) & (x <= ex_hi[v])
+            ylo = jnp.minimum(ylo, jnp.where(ok, y, jnp.inf))
+            yhi = jnp.maximum(yhi, jnp.where(ok, y, -jnp.inf))
+        inside = (px[v] >= a) & (px[v] <= b)
+        ylo = jnp.minimum(ylo, jnp.where(inside, py[v], jnp.inf))
+        yhi = jnp.maximum(yhi, jnp.where(inside, py[v], -jnp.inf))
 
     touched = has_width & (yhi > ylo)
     j0 = jnp.floor(jnp.where(touched, ylo, 0.0) / res).astype(jnp.int32)
