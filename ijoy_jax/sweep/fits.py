@@ -10,8 +10,10 @@ the map's resolution, a start that stands on the map) and this host's memory (th
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,6 +22,9 @@ from ijoy_jax.limits import MAX_ACTIONS
 from ijoy_jax.sweep import models
 from ijoy_jax.sweep.expansion import HOST_MEMORY_FRACTION, MAX_SCENARIOS, table_bytes
 from ijoy_jax.sweep.schema import SIM_MIN_RESOLUTION, Checker, SweepConfig, reach_of
+
+if TYPE_CHECKING:  # the simulator (MuJoCo) loads only for a walker = "mjx" sweep
+    from ijoy_jax.sim.controller import WalkConfig
 
 __all__ = [
     "MIN_STEP_TICKS",
@@ -38,17 +43,14 @@ MIN_STEP_TICKS = 20
 lift-off, swing and landing each take a few (``WalkConfig``'s fractions of the step)."""
 
 
-def walk_config(cfg: SweepConfig):
+def walk_config(cfg: SweepConfig) -> WalkConfig:
     """The :class:`~ijoy_jax.sim.controller.WalkConfig` of a ``walker = "mjx"`` sweep: the model's own
     (:func:`ijoy_jax.sim.bodies.walk_defaults`) with the step time of ``[robot] step_time`` where the file fixes
     it (one value per sweep: the step's length in control ticks is a static shape)."""
-    import dataclasses
-
-    from ijoy_jax.sim import bodies
-    from ijoy_jax.sim.controller import WalkConfig
+    from ijoy_jax.sim import bodies, controller
     from ijoy_jax.sim.model import biped_params
 
-    walk = WalkConfig(**bodies.walk_defaults(biped_params(model=cfg.model)))
+    walk = controller.WalkConfig(**bodies.walk_defaults(biped_params(model=cfg.model)))
     if "step_time" in cfg.robot:
         walk = dataclasses.replace(walk, step_time=float(cfg.robot["step_time"]))
     return walk
