@@ -275,11 +275,14 @@ def test_bench_select_decisions_and_rollouts_with_xla_only():
     assert {r["kernel"] for r in rows} == {"xla"}
     assert {r["bench"] for r in rows} == {"select", "rollout"}
     assert {r["method"] for r in rows if r["bench"] == "select"} == {"exhaustive", "ordered"}
+    # the paper's 2D grid beside the 2.5D map, both methods on each
+    assert {(r["terrain"], r["method"]) for r in rows if r["bench"] == "select"} == {
+        (t, m) for t in ("2D", "2.5D") for m in ("exhaustive", "ordered")}
     assert all(r.get("decisions_per_s", r.get("steps_per_s", 0)) > 0 for r in rows)
     # the work a decision did, from the timed program's own output: the whole action set, or the ordered
     # search's share of it (whole chunks of 32, at least one)
     n = ijoy_jax.robots.hrp2().num_actions
-    work = {(r["method"], r["max_margin"], r["batch"]): r["actions_per_decision"]
+    work = {(r["method"], r["terrain"], r["max_margin"], r["batch"]): r["actions_per_decision"]
             for r in rows if r["bench"] == "select"}
     assert all(v == n for (method, *_), v in work.items() if method == "exhaustive"), work
     ordered = [v for (method, *_), v in work.items() if method == "ordered"]
