@@ -54,6 +54,12 @@ def workload_terrain(has_height: bool, seed: int = 0) -> ij.Terrain:
     return ij.terrain.from_arrays(h, free, RES)
 
 
+def _indexed(terrain: ij.Terrain, robot) -> footcost.TerrainIndex:
+    """``terrain``'s :class:`~ijoy_jax.footcost.TerrainIndex` for ``robot``, built by one jitted call (the robot's
+    window sizes are static, so it is closed over)."""
+    return jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
+
+
 def _posts(seed: int = 5) -> ij.Terrain:
     """The 2.5D benchmark map with 30 posts 12-25 cm tall and 2-12 cm wide: taller than the HRP-2 preset's 10 cm
     clearance, so the fused kernel's swing-corridor broad phase rarely applies and its exact walk runs."""
@@ -145,7 +151,7 @@ def bench_footcost(rows, quick: bool, chunk: int):
     sizes = [1, 16] if quick else ([1, 16, 256, 2048] if _cpu() else [1, 16, 256, 2048, 16384, 65536])
     for has_height in (False, True):
         terrain = workload_terrain(has_height)
-        index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
+        index = _indexed(terrain, robot)
 
         def one(stance, swing, terrain=terrain, index=index):
             steps = ij.action_steps(robot, stance, -1)
@@ -196,7 +202,7 @@ def bench_select(rows, quick: bool, chunk: int, kernels=None, parts=SELECT_PARTS
     robot = ij.robots.hrp2(margin=0.02)
     targets = ij.make_targets(robot)
     terrain = workload_terrain(True)
-    index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
+    index = _indexed(terrain, robot)
     if "decisions" in parts:
         _select_decisions(rows, quick, chunk, kernels, robot, targets, terrain, index)
     if "rollouts" in parts:
@@ -213,11 +219,11 @@ def _select_decisions(rows, quick, chunk, kernels, robot, targets, terrain, inde
     cases, tight = [], None
     if "xla" in kernels:
         tight = ij.robots.hrp2(margin=0.02, max_margin=0.02)
-        tight_index = jax.jit(lambda t: footcost.index_terrain(t, tight))(terrain)
+        tight_index = _indexed(terrain, tight)
         # The paper's 2D occupancy grid too (the same map's obstacles, no heights): its own code path (exact
         # coverage, no plane fit), whose 3x slowdown went unseen for days while only the 2.5D rows were re-run.
         flat = workload_terrain(False)
-        flat_index = jax.jit(lambda t: footcost.index_terrain(t, robot))(flat)
+        flat_index = _indexed(flat, robot)
         cases += [("2.5D", terrain, "exhaustive", "xla", robot, index, sizes),
                   ("2.5D", terrain, "ordered", "xla", robot, index, sizes),
                   ("2.5D", terrain, "ordered", "xla", tight, tight_index, sizes[:2]),
@@ -229,7 +235,7 @@ def _select_decisions(rows, quick, chunk, kernels, robot, targets, terrain, inde
                   ("2.5D", terrain, "ordered", "pallas", robot, index, big)]
         # Where the swing corridor's broad phase fails: the exact corridor walk runs for most blocks.
         posts = _posts()
-        posts_index = jax.jit(lambda t: footcost.index_terrain(t, robot))(posts)
+        posts_index = _indexed(posts, robot)
         cases += [("2.5D posts", posts, "exhaustive", "pallas", robot, posts_index, sizes[-2:])]
     for terrain_name, tmap, method, kernel, rb, ix, batches in cases:
         options = ij.SelectOptions(method=method, kernel=kernel)
@@ -370,7 +376,7 @@ def bench_lookahead(rows, quick: bool, chunk: int):
     cpu = _cpu()
     for has_height in (False, True):
         terrain = workload_terrain(has_height)
-        index = jax.jit(lambda t: footcost.index_terrain(t, robot))(terrain)
+        index = _indexed(terrain, robot)
         for name, kw in LOOKAHEAD_SELECTORS:
             kw = dict(kw, beam=n) if kw.get("beam") == -1 else kw
             every_pair = kw.get("beam") == n
