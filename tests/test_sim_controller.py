@@ -286,7 +286,8 @@ def test_walk_config_checks_every_field(name):
     ("preview_time", 0.0), ("preview_time", 0.005), ("com_height", 0.0), ("pelvis_height", -0.65),
     ("clearance", -0.01), ("swing_lift", 0.0), ("swing_lift", 0.6), ("leg_share", 1.0), ("leg_share", -0.1),
     ("preview_q", -1.0), ("preview_r", 0.0), ("land_gain", -0.5), ("land_ramp", 0.0), ("land_ramp", 1.5),
-    ("land_decay", 0.0), ("stance_gain", -0.1), ("ankle_damping", -150.0), ("ankle_leak", 0.0), ("cop_edge", -0.01),
+    ("land_decay", 0.0), ("ankle_delay", 0.0), ("ankle_delay", -0.01), ("stance_gain", -0.1),
+    ("ankle_damping", -150.0), ("ankle_leak", 0.0), ("cop_edge", -0.01),
     ("contact_force", 0.0), ("dcm_gain", -3.0), ("descent_drop", -0.1), ("descent_drop", 1.5),
     ("descent_drop", "0.3"), ("descent_drop", True), ("filter_passes", -1), ("filter_passes", 1.5),
     ("filter_passes", True), ("com_offset", None), ("step_time", jnp.float32(0.8)), ("capture_gain", -1.0),
@@ -599,6 +600,12 @@ def test_ankle_damping_turns_the_sole_toward_the_wanted_cop():
     np.testing.assert_allclose(out.ankle[0], cfg.control_dt * np.array([-0.05, 0.02]) * fz / cfg.ankle_damping,
                                rtol=1e-5)
     np.testing.assert_allclose(out.ankle[1], leak * np.array([0.01, -0.02]), rtol=1e-6)
+    # Through a known control delay L the same error moves the sole slower, at 1 / (1 + L / ankle_delay) of the
+    # rate: half at L = ankle_delay, a third at twice it; the unloaded foot's leak does not depend on it.
+    for latency, scale in ((cfg.ankle_delay, 0.5), (2 * cfg.ankle_delay, 1 / 3), (0.0, 1.0)):
+        late = controller.comply(params, cfg, plan, cs, zref, wrench, jnp.float32(latency))
+        np.testing.assert_allclose(late.ankle[0], scale * np.asarray(out.ankle[0]), rtol=1e-5)
+        np.testing.assert_allclose(late.ankle[1], out.ankle[1], rtol=1e-6)
 
 
 @pytest.mark.slow

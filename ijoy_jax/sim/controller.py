@@ -61,7 +61,8 @@ _POSITIVE = (0.0, _INF, False, False)
 _NON_NEGATIVE = (0.0, _INF, True, False)
 _RANGES: dict[str, tuple[float, float, bool, bool]] = {
     **dict.fromkeys(("step_time", "control_dt", "preview_time", "com_height", "pelvis_height", "preview_r",
-                     "land_decay", "land_delay", "ankle_leak", "contact_force", "capture_max"), _POSITIVE),
+                     "land_decay", "land_delay", "ankle_delay", "ankle_leak", "contact_force", "capture_max"),
+                    _POSITIVE),
     **dict.fromkeys(("clearance", "preview_q", "land_gain", "stance_gain", "ankle_damping", "cop_edge",
                      "dcm_gain"), _NON_NEGATIVE),
     "ds_fraction": (0.0, 1.0, True, False),
@@ -174,6 +175,17 @@ class WalkConfig:
         of the combination that fell least on rough ground
         (docs/benchmarks_history.md, "Walking on uneven ground in MJX", and
         docs/walk_families.md have the figures).
+      ankle_delay: the control delay (s) at which that damping control moves
+        at half its rate: with a known delay L between the controller's
+        targets and the actuators (``physics.Dynamics.latency``) the damping
+        is ``ankle_damping * (1 + L / ankle_delay)``. Through the stiff ankle
+        actuators (30 000 N m/rad) the loop's rate is about kp / damping =
+        200 /s, so one 10 ms tick of delay makes it oscillate: with no delay
+        0.4 % of robots fell under Playground-like dynamics on flat ground and
+        random commands, with 10 or 20 ms 22 %, most on low friction, where
+        the rocking soles slip. 10 ms: half the rate at 10 ms, a third at 20
+        (the figures, 1024 robots per row: docs/walk_families.md, "The
+        ankles' damping through the control delay").
       ankle_leak: time constant (s) with which those offsets return to zero.
       cop_edge: the wanted centre of pressure stays this far inside the sole's
         edges (m).
@@ -225,6 +237,7 @@ class WalkConfig:
     land_delay: float = 0.02
     stance_gain: float = 0.0
     ankle_damping: float = 150.0
+    ankle_delay: float = 0.01
     ankle_leak: float = 0.5
     cop_edge: float = 0.015
     contact_force: float = 50.0
@@ -500,7 +513,8 @@ def control_tick(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: St
     the divergent component of motion's error (:func:`dcm_error`). Without them
     the targets are the pattern's alone. ``latency`` () (s, traced) is the known
     delay before the actuators receive the targets; it lowers the stabiliser's
-    gain (``WalkConfig.land_delay``).
+    gain (``WalkConfig.land_delay``) and the ankles' damping rate
+    (``WalkConfig.ankle_delay``).
     """
     planned_com = cs.lipm[:2]  # the LIPM's CoM position and velocity at the period's start, where com is measured
     qpos, cs, zref = pattern(params, cfg, pgains, plan, cs, correction)
@@ -510,7 +524,7 @@ def control_tick(params, cfg: WalkConfig, pgains: preview.PreviewGains, plan: St
         q = q.at[:12].set(legs)
     if wrench is not None and cfg.ankle_damping > 0:
         want = zref if com is None else zref + cfg.dcm_gain * dcm_error(cfg, planned_com, com)
-        cs = comply(params, cfg, plan, cs, want, wrench)
+        cs = comply(params, cfg, plan, cs, want, wrench, latency)
         q = q.at[jnp.array([4, 5, 10, 11])].add(cs.ankle.reshape(-1))
     return q, cs, zref
 
@@ -550,15 +564,17 @@ def ground_cop(params, wrench) -> tuple[jax.Array, jax.Array]:
     return f, jnp.where((fz > 1.0)[:, None], cop, 0.0)
 
 
-def comply(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, zref, wrench) -> CtrlState:
+def comply(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, zref, wrench, latency=0.0) -> CtrlState:
     """The ankles' damping control (Kajita et al. 2010): the soles yield to the ground about the ankle.
 
     Each foot's wanted centre of pressure is the point ``zref`` (2,) (the ZMP
     reference, moved by the DCM feedback in :func:`control_tick`) brought into
     the sole (its frame, kept ``cop_edge`` inside the edges); the ankle pitch
-    and roll offsets move at ``(measured - wanted) ground moment /
-    ankle_damping`` while the foot carries load (fading in between half and the
-    whole ``contact_force``) and leak back with ``ankle_leak``. So a sole that
+    and roll offsets move at ``(measured - wanted) ground moment / damping``
+    while the foot carries load (fading in between half and the whole
+    ``contact_force``) and leak back with ``ankle_leak``; ``damping`` is
+    ``ankle_damping * (1 + latency / ankle_delay)``, slower through a control
+    delay, which would otherwise make this stiff loop oscillate. So a sole that
     lands on one edge (a tilt the plan did not expect, an early or uneven
     contact) turns flat onto the ground instead of tipping the robot about
     that edge, and a loaded foot pushes its centre of pressure toward where
@@ -567,6 +583,7 @@ def comply(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, zref, wrench)
     Args:
       zref: (2,) where the centre of pressure should be at this period (world x, y; m).
       wrench: (2, 6) measured ankle force and torque per foot (see :func:`control_tick`).
+      latency: () s, the known delay before the actuators receive the targets (0: none).
     """
     feet = foot_targets(cfg, plan, cs.t)
     f, cop = ground_cop(params, wrench)
@@ -578,7 +595,8 @@ def comply(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, zref, wrench)
     err = (cop - want) * f[:, 2:3]  # N m: the measured minus the wanted ground moment about the sole's y, x axes
     load = jnp.clip(f[:, 2] / (0.5 * cfg.contact_force) - 1.0, 0.0, 1.0)[:, None]
     # CoP too far forward (+x): lift the toe (pitch -); too far left (+y): lift the left edge (roll +)
-    rate = jnp.stack([-err[:, 0], err[:, 1]], axis=1) / cfg.ankle_damping
+    damping = cfg.ankle_damping * (1.0 + jnp.asarray(latency, jnp.float32) / cfg.ankle_delay)
+    rate = jnp.stack([-err[:, 0], err[:, 1]], axis=1) / damping
     leak = jnp.exp(-cfg.control_dt / cfg.ankle_leak)
     return cs._replace(ankle=leak * cs.ankle + cfg.control_dt * load * rate)
 
