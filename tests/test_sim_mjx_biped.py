@@ -12,6 +12,8 @@ servo's error sum already differs by 2e-5 relative when the robot stands), and t
 difference step by step; hence the tolerances below. One robot is deterministic, bit for bit.
 """
 
+import dataclasses
+
 import jax
 import numpy as np
 import pytest
@@ -218,3 +220,36 @@ def test_steps_out_of_order_are_refused(walks, sim):
     with pytest.raises(RuntimeError, match="has run all its ticks"):
         biped.tick()
     biped.end()
+
+
+def _ankle_speed(sim, terrain, robot, start, latency):
+    """RMS tick-to-tick change (rad) of the four measured ankle joints (pitch and roll, both legs) of a robot
+    standing three steps on low friction (0.45) with a control delay of ``latency`` s."""
+    biped = mjx_biped.MjxBiped(sim, terrain, robot, start, dynamics=physics.Dynamics(friction=0.45, latency=latency))
+    biped.execute(np.zeros(6, np.float32), False)  # the warm-up step
+    ankles = []
+    for _ in range(3):
+        biped.begin(np.full(6, np.nan, np.float32), False)  # stand
+        while True:
+            more = biped.tick()
+            ankles.append(biped.qpos()[[11, 12, 17, 18]])  # qpos[7:19]: each leg's 6 joints, the ankle's last two
+            if not more:
+                break
+        assert not biped.end().fallen
+    return float(np.sqrt(np.mean(np.diff(np.asarray(ankles), axis=0) ** 2)))
+
+
+@pytest.mark.slow
+def test_the_ankles_stay_steady_through_a_control_delay(walks, sim):
+    """The ankles' damping control closes through the stiff ankle actuators at about 2 per 10 ms tick: without
+    slowing it by the known delay (WalkConfig.ankle_delay, here made ineffective: the code before) a 20 ms delay
+    makes the measured ankles of a standing robot move 1.9x as fast as without a delay (the rocking that felled
+    22 % of delayed robots under Playground-like dynamics, docs/walk_families.md); slowed, 0.9x."""
+    w = walks["flat"]
+    args = (w["terrain"], w["robot"], w["start"])
+    undelayed = _ankle_speed(sim, *args, 0.0)
+    slowed = _ankle_speed(sim, *args, 0.02)
+    unslowed = _ankle_speed(W.make_sim(SHAPE, RES, robot=robots.hrp2(),
+                                       cfg=dataclasses.replace(sim.cfg, ankle_delay=1e9)), *args, 0.02)
+    assert unslowed > 1.5 * undelayed, (unslowed, undelayed)  # measured 1.86x (1.35 against 0.73 mrad a tick)
+    assert slowed < 1.15 * undelayed, (slowed, undelayed)  # measured 0.88x
