@@ -43,9 +43,9 @@ def reduce_turns(poses) -> np.ndarray:
     to ``[-pi, pi]`` (the same direction, one float64 operation); headings within it are kept as given."""
     out = np.array(poses, np.float64)
     yaw = out[..., 2]
-    with np.errstate(invalid="ignore"):  # NaN and inf stay as they are (the finite check names them)
+    with np.errstate(invalid="ignore"):  # NaN and inf stay as they are, silently (the finite check names them)
         far = np.isfinite(yaw) & (np.abs(yaw) > MAX_ANGLE)
-    out[..., 2] = np.where(far, yaw - 2.0 * np.pi * np.round(yaw / (2.0 * np.pi)), yaw)
+        out[..., 2] = np.where(far, yaw - 2.0 * np.pi * np.round(yaw / (2.0 * np.pi)), yaw)
     return out
 
 

@@ -3,6 +3,7 @@ boundary refuses where they are concrete is flagged there, and no NaN leaves the
 Headings beyond geometry.MAX_ANGLE are reduced by whole turns at the boundary, in float64."""
 
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -168,7 +169,10 @@ def test_the_rollout_and_the_server_reduce_a_heading_of_many_turns_alike(turns):
 
 
 def test_reduce_turns_keeps_small_headings_and_nan_as_given():
-    poses = np.array([[1.0, 2.0, 3.0], [0.0, 0.0, 2 * np.pi * 1e7 + 0.25], [0.0, 0.0, math.nan], [0, 0, -1e300]])
-    out = geometry.reduce_turns(poses)
-    assert out[0].tolist() == [1.0, 2.0, 3.0] and math.isnan(out[2, 2])
+    poses = np.array([[1.0, 2.0, 3.0], [0.0, 0.0, 2 * np.pi * 1e7 + 0.25], [0.0, 0.0, math.nan], [0, 0, -1e300],
+                      [0.0, 0.0, math.inf]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # NaN and inf pass without NumPy's RuntimeWarning: the finite checks name them
+        out = geometry.reduce_turns(poses)
+    assert out[0].tolist() == [1.0, 2.0, 3.0] and math.isnan(out[2, 2]) and out[4, 2] == math.inf
     assert out[1, 2] == pytest.approx(0.25, abs=1e-6) and abs(out[3, 2]) <= math.pi
