@@ -564,6 +564,14 @@ def ground_cop(params, wrench) -> tuple[jax.Array, jax.Array]:
     return f, jnp.where((fz > 1.0)[:, None], cop, 0.0)
 
 
+def _delay_slowdown(latency, half) -> jax.Array:
+    """() the factor ``1 + latency / half`` by which a feedback loop is slowed for a known control delay
+    ``latency`` (s, traced): 1 without a delay, 2 at ``half`` s (``WalkConfig.land_delay`` for the stabiliser,
+    ``ankle_delay`` for the ankles' damping). A loop of gain k through a delay L stays stable while k L is
+    bounded, so the gain falls as the delay grows."""
+    return 1.0 + jnp.asarray(latency, jnp.float32) / half
+
+
 def comply(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, zref, wrench, latency=0.0) -> CtrlState:
     """The ankles' damping control (Kajita et al. 2010): the soles yield to the ground about the ankle.
 
@@ -595,7 +603,7 @@ def comply(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, zref, wrench,
     err = (cop - want) * f[:, 2:3]  # N m: the measured minus the wanted ground moment about the sole's y, x axes
     load = jnp.clip(f[:, 2] / (0.5 * cfg.contact_force) - 1.0, 0.0, 1.0)[:, None]
     # CoP too far forward (+x): lift the toe (pitch -); too far left (+y): lift the left edge (roll +)
-    damping = cfg.ankle_damping * (1.0 + jnp.asarray(latency, jnp.float32) / cfg.ankle_delay)
+    damping = cfg.ankle_damping * _delay_slowdown(latency, cfg.ankle_delay)
     rate = jnp.stack([-err[:, 0], err[:, 1]], axis=1) / damping
     leak = jnp.exp(-cfg.control_dt / cfg.ankle_leak)
     return cs._replace(ankle=leak * cs.ankle + cfg.control_dt * load * rate)
@@ -635,7 +643,7 @@ def stabilize(params, cfg: WalkConfig, plan: StepPlan, cs: CtrlState, qpos, base
     q_meas = legs_ik(params, pos, rot, feet)
     q_plan = qpos[7:19]
     s = swing_phase(cfg, cs.t)
-    delta = (q_meas - q_plan) / (1.0 + jnp.asarray(latency, jnp.float32) / cfg.land_delay)
+    delta = (q_meas - q_plan) / _delay_slowdown(latency, cfg.land_delay)
     w = cfg.stance_gain + (cfg.land_gain - cfg.stance_gain) * jnp.clip(s / cfg.land_ramp, 0.0, 1.0)
     swinging = jnp.repeat(jnp.stack([plan.swing_side > 0, plan.swing_side < 0]), 6)
     decay = jnp.exp(-cfg.control_dt / cfg.land_decay)
