@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import ijoy_jax as ij
+import ijoy_jax.sim.model  # noqa: F401  (ij.sim.model)
 import ijoy_jax.sim.physics  # noqa: F401  (ij.sim.physics)
 from ijoy_jax import sweep
 
