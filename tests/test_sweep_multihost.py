@@ -25,6 +25,11 @@ from _sweep_util import kill_after_first_part  # tests/ is on sys.path (pytest r
 from ijoy_jax import sweep
 from ijoy_jax.apps import cli
 
+# The children are started with a preexec_fn (_terminal_ctrl_c), which makes subprocess run the interpreter's
+# fork hooks, and JAX's hook warns that os.fork() and threads deadlock. The child execs a fresh Python at once
+# and touches no lock of ours before it, so the warning does not apply to these launches.
+pytestmark = pytest.mark.filterwarnings("ignore:os.fork\\(\\) was called:RuntimeWarning")
+
 TINY = """
 [sweep]
 name = "tiny_mh"
